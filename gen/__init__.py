@@ -1,0 +1,1 @@
+"""rosgate generators: configs and messages in, Verilog, TCL, cores and reports out."""

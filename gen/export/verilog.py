@@ -1,0 +1,145 @@
+"""Verilog export of Amaranth components as Vivado-facing tops.
+
+The exported module has an ``aclk`` clock and an active-low synchronous ``aresetn`` (AMBA
+convention) and flat ports with single-underscore AMBA names (``s0_axis_tdata``) so that Vivado's
+interface inference and cocotbext-axi recognise them (toolchain.md pitfalls 5 and 7). The text
+is stable: no source locations, no internal attributes, no host paths (pitfall 8). Yosys'
+``always @*`` trigger registers are initialised in an ``initial`` block so that Icarus evaluates
+combinational logic at t=0 (pitfall 3).
+"""
+
+import json
+import re
+from pathlib import Path
+
+from amaranth.back import verilog
+from amaranth.hdl import (ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal,
+                          ValueCastable)
+from amaranth.lib import wiring
+
+__all__ = ["VivadoTop", "export_verilog", "port_name", "write_if_changed", "fix_icarus_t0"]
+
+
+def port_name(path):
+    """Flat port name for a signature member path.
+
+    Names are joined with ``_``; an array index is appended to the name before it, and for a
+    stream member named ``<x>_axis`` goes before the ``_axis`` suffix (Xilinx ``s0_axis``).
+
+    >>> port_name(("s_axis", 2, "tdata"))
+    's2_axis_tdata'
+    >>> port_name(("monitor", "pub", 0, "beats"))
+    'monitor_pub0_beats'
+    """
+    parts = []
+    for item in path:
+        if isinstance(item, int):
+            if parts and parts[-1].endswith("_axis"):
+                parts[-1] = f"{parts[-1][:-len('_axis')]}{item}_axis"
+            elif parts:
+                parts[-1] = f"{parts[-1]}{item}"
+            else:
+                parts.append(str(item))
+        else:
+            parts.append(str(item))
+    return "_".join(parts)
+
+
+class VivadoTop(Elaboratable):
+    """Wraps a component whose logic runs in the ``sync`` domain as a flat AXI-style top.
+
+    Parameters
+    ----------
+    component : wiring.Component
+        The design; every member of its signature becomes a top-level port named by
+        :func:`port_name`.
+    clock, reset : str
+        Names of the clock and the active-low synchronous reset ports.
+    """
+
+    def __init__(self, component, *, clock="aclk", reset="aresetn"):
+        self.component = component
+        self.clock = Signal(name=clock)
+        self.reset_n = Signal(name=reset, init=1)
+        self.ports = {}  # name -> (top signal, inner value, flow)
+        for path, member, value in component.signature.flatten(component):
+            if isinstance(value, ValueCastable):
+                value = value.as_value()
+            name = port_name(path)
+            if name in self.ports or name in (clock, reset):
+                raise ValueError(f"port name {name!r} of member {path} is not unique")
+            top = Signal(len(value), name=name)
+            self.ports[name] = (top, value, member.flow)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.sync = ClockDomain("sync")
+        m.d.comb += [ClockSignal("sync").eq(self.clock), ResetSignal("sync").eq(~self.reset_n)]
+        m.submodules.core = self.component
+        for top, value, flow in self.ports.values():
+            if flow == wiring.In:
+                m.d.comb += value.eq(top)
+            else:
+                m.d.comb += top.eq(value)
+        return m
+
+    def port_list(self):
+        """Ports for :func:`amaranth.back.verilog.convert`, clock and reset first."""
+        return [self.clock, self.reset_n] + [top for top, _, _ in self.ports.values()]
+
+    def manifest_ports(self):
+        """Port descriptions for a JSON manifest: name, direction, width."""
+        ports = [{"name": self.clock.name, "direction": "input", "width": 1, "role": "clock"},
+                 {"name": self.reset_n.name, "direction": "input", "width": 1,
+                  "role": "reset_active_low"}]
+        for name, (top, _, flow) in self.ports.items():
+            ports.append({"name": name, "direction": "input" if flow == wiring.In else "output",
+                          "width": len(top)})
+        return ports
+
+
+_AUTO_REG = re.compile(r"^(\s*)reg (\\\$auto\$\S+)\s+= (\S+);$", re.MULTILINE)
+
+
+def fix_icarus_t0(text):
+    """Move Yosys' ``reg \\$auto... = 0;`` initialisers into ``initial`` blocks (pitfall 3)."""
+    return _AUTO_REG.sub(lambda mo: (f"{mo.group(1)}reg {mo.group(2)} ;\n"
+                                     f"{mo.group(1)}initial {mo.group(2)} = {mo.group(3)};"),
+                         text)
+
+
+def export_verilog(component, name, *, clock="aclk", reset="aresetn"):
+    """Return ``(verilog_text, top)`` for ``component`` wrapped in a :class:`VivadoTop`."""
+    top = VivadoTop(component, clock=clock, reset=reset)
+    text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
+                           strip_internal_attrs=True)
+    return fix_icarus_t0(text), top
+
+
+def write_if_changed(path, text):
+    """Write ``text`` to ``path`` unless it already holds exactly that; return whether written.
+
+    Keeping the timestamp of an unchanged file lets incremental Verilator builds skip work.
+    """
+    path = Path(path)
+    if path.exists() and path.read_text() == text:
+        return False
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return True
+
+
+def write_manifest(path, *, module, component, top, extra=None):
+    """Write a JSON manifest describing an exported top."""
+    data = {
+        "module": module,
+        "component": f"{type(component).__module__}.{type(component).__qualname__}",
+        "clock": top.clock.name,
+        "reset": top.reset_n.name,
+        "parameters": getattr(component, "parameters", {}),
+        "ports": top.manifest_ports(),
+    }
+    if extra:
+        data.update(extra)
+    write_if_changed(path, json.dumps(data, indent=2) + "\n")
+    return data

@@ -1,0 +1,4 @@
+"""rosgate hardware components (Amaranth).
+
+One package per concern. Nothing in here imports a simulator.
+"""

@@ -1,0 +1,11 @@
+"""Hardware-mapped topics (fpgaDDS): AXI4-Stream fabrics that carry ROS topics between nodes.
+
+Spec: ``shared/spec/hmt.md``.
+"""
+
+from .arbiter import TopicArbiter
+from .broadcast import TopicBroadcast
+from .topic import Topic, TopicMonitorSignature, QOS_POLICIES, MAX_ENDPOINTS
+
+__all__ = ["TopicArbiter", "TopicBroadcast", "Topic", "TopicMonitorSignature", "QOS_POLICIES",
+           "MAX_ENDPOINTS"]

@@ -1,0 +1,13 @@
+"""AXI4-Stream library: signature, register slice, FIFOs."""
+
+from .signature import AXIStreamSignature, PAYLOAD_MEMBERS
+from .skid import RegisterSlice
+from .fifo import StreamFIFO, AsyncStreamFIFO, OVERFLOW_POLICIES
+from .message_fifo import MessageFIFO
+
+__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "RegisterSlice", "StreamFIFO",
+           "AsyncStreamFIFO", "OVERFLOW_POLICIES", "MessageFIFO"]
+
+from .monitor import StreamMonitorSignature, StreamMonitor
+
+__all__ += ["StreamMonitorSignature", "StreamMonitor"]

@@ -1,0 +1,1 @@
+"""rosgate test benches (cocotb on Icarus and Verilator, amaranth.sim unit tests)."""

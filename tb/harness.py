@@ -1,0 +1,152 @@
+"""The one simulation harness every cocotb bench uses.
+
+A bench module (``tb/test_<top>.py``) holds cocotb tests and one line::
+
+    test_topic = cocotb_bench("topic", CONFIGS)
+
+which makes a pytest test parametrised over the configurations and both simulators. Each
+item exports the top (through :mod:`gen.tops`, exactly what ``rosgate export`` writes) into
+``sim_build/<top>-<config>-<sim>/``, builds it (a Verilator build is reused while the Verilog is
+unchanged), and runs every cocotb test of the module in one simulation. The cocotb side reads
+its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
+"""
+
+import json
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from gen.export.verilog import export_verilog, write_if_changed, write_manifest
+from gen.tops import build_top
+
+from .toolchain import SIM_BUILD, put_verilator_on_path
+
+__all__ = ["SIMULATORS", "cocotb_bench", "run_bench", "bench_params", "bench_manifest"]
+
+SIMULATORS = ("icarus", "verilator")
+
+VERILATOR_SIM_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", "--x-assign", "unique",
+                      "--x-initial", "unique"]
+
+
+def _waves():
+    return os.environ.get("WAVES", "0") not in ("", "0")
+
+
+def export_bench_top(top, params, build_dir):
+    """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path."""
+    component = build_top(top, **params)
+    text, vtop = export_verilog(component, top)
+    vfile = Path(build_dir) / f"{top}.v"
+    write_if_changed(vfile, text)
+    write_manifest(Path(build_dir) / f"{top}.json", module=top, component=component, top=vtop)
+    return vfile
+
+
+def failed_tests(results_xml):
+    """Names of the failed test cases in a cocotb results file."""
+    tree = ET.parse(results_xml)
+    return [case.get("name") for case in tree.iter("testcase")
+            if case.find("failure") is not None or case.find("error") is not None]
+
+
+def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None):
+    """Export, build and run the cocotb tests of ``module`` against ``top``; raise on failure."""
+    from cocotb_tools.runner import get_runner
+
+    if sim == "verilator":
+        put_verilator_on_path()
+    build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}"
+    build_dir.mkdir(parents=True, exist_ok=True)
+    vfile = export_bench_top(top, params, build_dir)
+    waves = _waves()
+    runner = get_runner(sim)
+    build_args = []
+    test_args = []
+    if sim == "verilator":
+        build_args = list(VERILATOR_SIM_ARGS)
+        if waves:
+            build_args.append("--trace-fst")
+            test_args = ["--trace-file", str(build_dir / f"{top}.fst")]
+        build_dir_v = build_dir / ("obj_fst" if waves else "obj")
+    else:
+        build_dir_v = build_dir
+    runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
+                 build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                 log_file=build_dir / "build.log")
+    results = build_dir / "results.xml"
+    env = {
+        "ROSGATE_PARAMS": json.dumps(params),
+        "ROSGATE_MANIFEST": str(build_dir / f"{top}.json"),
+        "ROSGATE_CONFIG": config_id,
+        "ROSGATE_SIM": sim,
+        # cocotbext 0.1.28 uses cocotb 1.x spellings; their warnings drown the bench's log.
+        "PYTHONWARNINGS": "ignore::DeprecationWarning",
+    }
+    try:
+        runner.test(test_module=module, hdl_toplevel=top, build_dir=build_dir_v,
+                    test_dir=build_dir, results_xml=str(results), extra_env=env,
+                    waves=waves, test_args=test_args, testcase=testcase, seed=seed,
+                    timescale=("1ns", "1ps"), log_file=None)
+    except SystemExit as exc:
+        if not results.exists():
+            raise AssertionError(f"{top} [{config_id}, {sim}]: simulator exited with "
+                                 f"{exc.code} and wrote no results") from None
+    if not results.exists():
+        raise AssertionError(f"{top} [{config_id}, {sim}]: no results file")
+    failed = failed_tests(results)
+    total = sum(1 for _ in ET.parse(results).iter("testcase"))
+    if total == 0:
+        raise AssertionError(f"{top} [{config_id}, {sim}]: no cocotb test ran")
+    if failed:
+        raise AssertionError(f"{top} [{config_id}, {sim}]: {len(failed)} of {total} cocotb "
+                             f"tests failed: {', '.join(failed)} (log above, results in "
+                             f"{results})")
+    return results
+
+
+def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
+    """Return a pytest test running this module's cocotb tests on every config and simulator.
+
+    Parameters
+    ----------
+    top : str
+        Name of the top in :data:`gen.tops.TOPS`.
+    configs : dict[str, dict]
+        Configuration id -> builder parameters. A value may be wrapped in ``pytest.param(...,
+        marks=...)`` to mark it (for example ``pytest.mark.full`` for the long matrix).
+    module : str or None
+        Dotted name of the cocotb test module; default: the calling module.
+    """
+    import inspect
+    if module is None:
+        module = inspect.stack()[1].frame.f_globals["__name__"]
+
+    cases = []
+    for config_id, params in configs.items():
+        marks = ()
+        if isinstance(params, type(pytest.param(None))):
+            marks = params.marks
+            params = params.values[0]
+        for sim in simulators:
+            cases.append(pytest.param(config_id, params, sim, id=f"{config_id}-{sim}",
+                                      marks=marks))
+
+    @pytest.mark.parametrize("config_id,params,sim", cases)
+    def bench(config_id, params, sim):
+        run_bench(module, top, config_id, params, sim)
+
+    bench.__name__ = f"test_{top}"
+    return bench
+
+
+def bench_params():
+    """Inside a cocotb test: the builder parameters of the top under test."""
+    return json.loads(os.environ["ROSGATE_PARAMS"])
+
+
+def bench_manifest():
+    """Inside a cocotb test: the manifest written next to the exported Verilog."""
+    return json.loads(Path(os.environ["ROSGATE_MANIFEST"]).read_text())

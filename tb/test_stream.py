@@ -1,0 +1,269 @@
+"""Unit tests of hdl.stream (amaranth.sim): signature, register slice, FIFOs, monitor."""
+
+import random
+
+import pytest
+from amaranth.hdl import ClockDomain, Module
+
+from hdl.params import ParameterError
+from hdl.stream import (AsyncStreamFIFO, AXIStreamSignature, MessageFIFO, RegisterSlice,
+                        StreamFIFO)
+from tb.streamsim import (StreamSink, StreamSource, beats_to_messages, messages_to_beats,
+                          simulate)
+
+
+def random_messages(rng, count, *, max_len=12, width=8):
+    return [[rng.getrandbits(width) for _ in range(rng.randint(1, max_len))]
+            for _ in range(count)]
+
+
+# Signature -----------------------------------------------------------------------------------
+
+def test_signature_members_and_equality():
+    sig = AXIStreamSignature(64, user_width=1, id_width=2)
+    assert list(sig.members) == ["tdata", "tkeep", "tlast", "tuser", "tid", "tvalid", "tready"]
+    assert sig.payload_width == 64 + 8 + 1 + 1 + 2
+    assert sig == AXIStreamSignature(64, user_width=1, id_width=2)
+    assert sig != AXIStreamSignature(64, user_width=1)
+    assert repr(sig) == "AXIStreamSignature(64, user_width=1, id_width=2)"
+    assert "tkeep" not in AXIStreamSignature(8, keep=False).members
+
+
+@pytest.mark.parametrize("width", [0, 4, 12, 1032, "64"])
+def test_signature_rejects_bad_width(width):
+    with pytest.raises(ParameterError, match=r"data_width must be an integer in 8\.\.1024 "
+                                             r"and a multiple of 8, not"):
+        AXIStreamSignature(width)
+
+
+def test_fifo_rejects_bad_depth():
+    with pytest.raises(ParameterError, match="depth must be a power of two in 2..1048576, not 48"):
+        StreamFIFO(AXIStreamSignature(8), 48)
+    with pytest.raises(ValueError, match="drop_new.*needs packet=True"):
+        StreamFIFO(AXIStreamSignature(8), 16, overflow="drop_new")
+
+
+# Lossless stages under random idle and backpressure ---------------------------------------
+
+def run_lossless(dut, messages, *, idle, backpressure, seed):
+    beats = messages_to_beats(messages)
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=seed)
+    sink = StreamSink(dut.m_axis, backpressure=backpressure, seed=seed + 1)
+
+    async def drain(ctx):
+        await source.run(ctx)
+        for _ in range(2000):
+            if len(sink.beats) == len(beats):
+                break
+            await ctx.tick()
+
+    simulate(dut, drain, background=[sink.run])
+    assert sink.beats == beats
+
+
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.4, 0.6)])
+def test_register_slice_random(idle, backpressure):
+    rng = random.Random(3)
+    run_lossless(RegisterSlice(AXIStreamSignature(8)), random_messages(rng, 40),
+                 idle=idle, backpressure=backpressure, seed=11)
+
+
+def test_register_slice_full_throughput():
+    dut = RegisterSlice(AXIStreamSignature(8))
+    beats = [(i & 0xFF, int(i % 5 == 4)) for i in range(100)]
+    source = StreamSource(dut.s_axis, beats)
+    sink = StreamSink(dut.m_axis)
+    cycles = []
+
+    async def bench(ctx):
+        await source.run(ctx)
+        for _ in range(5):
+            await ctx.tick()
+
+    async def count(ctx):
+        n = 0
+        while True:
+            await ctx.tick()
+            n += 1
+            cycles.append((n, len(sink.beats)))
+
+    simulate(dut, bench, background=[sink.run, count])
+    assert sink.beats == beats
+    first = next(n for n, got in cycles if got)
+    last = next(n for n, got in cycles if got == len(beats))
+    assert last - first + 1 == len(beats)
+
+
+@pytest.mark.parametrize("depth", [2, 4, 16])
+@pytest.mark.parametrize("packet", [False, True])
+@pytest.mark.parametrize("idle,backpressure", [(0.3, 0.0), (0.0, 0.6), (0.5, 0.5)])
+def test_stream_fifo_random(depth, packet, idle, backpressure):
+    rng = random.Random(depth * 7 + packet)
+    run_lossless(StreamFIFO(AXIStreamSignature(8), depth, packet=packet),
+                 random_messages(rng, 30, max_len=3 * depth), idle=idle,
+                 backpressure=backpressure, seed=depth)
+
+
+def test_packet_fifo_stores_and_forwards():
+    dut = StreamFIFO(AXIStreamSignature(8), 16, packet=True)
+    message = list(range(1, 11))
+    source = StreamSource(dut.s_axis, messages_to_beats([message]), idle=0.5, seed=2)
+    sink = StreamSink(dut.m_axis)
+    early = []
+
+    async def bench(ctx):
+        await source.run(ctx)
+        for _ in range(20):
+            await ctx.tick()
+
+    async def watch(ctx):
+        while True:
+            *_, valid = await ctx.tick().sample(dut.m_axis.tvalid)
+            if valid and source.sent < len(message):
+                early.append(source.sent)
+
+    simulate(dut, bench, background=[sink.run, watch])
+    assert not early, f"output before the message was complete (after {early[0]} beats)"
+    assert sink.beats == messages_to_beats([message])
+
+
+def test_packet_fifo_passes_oversize_message():
+    """A message longer than the FIFO is cut through instead of deadlocking."""
+    rng = random.Random(5)
+    messages = [[rng.getrandbits(8) for _ in range(40)], [1, 2, 3]]
+    run_lossless(StreamFIFO(AXIStreamSignature(8), 8, packet=True), messages,
+                 idle=0.2, backpressure=0.5, seed=4)
+
+
+def test_stream_fifo_level():
+    dut = StreamFIFO(AXIStreamSignature(8), 8)
+    levels = []
+
+    async def bench(ctx):
+        ctx.set(dut.m_axis.tready, 0)
+        for i in range(10):
+            ctx.set(dut.s_axis.tdata, i)
+            ctx.set(dut.s_axis.tvalid, 1)
+            *_, ready = await ctx.tick().sample(dut.s_axis.tready)
+            levels.append(ready)
+        ctx.set(dut.s_axis.tvalid, 0)
+        await ctx.tick()
+        levels.append(ctx.get(dut.level))
+
+    simulate(dut, bench)
+    # 8 memory entries + 1 in the output register, then tready falls.
+    assert levels[:9] == [1] * 9 and levels[9] == 0 and levels[10] == 9
+
+
+# Drop policies --------------------------------------------------------------------------
+
+def run_lossy(dut, messages, *, stall_cycles, idle=0.0, seed=0):
+    beats = messages_to_beats(messages)
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=seed)
+    sink = StreamSink(dut.m_axis)
+    sink.paused = True
+
+    async def bench(ctx):
+        await source.run(ctx)
+        for _ in range(stall_cycles):
+            await ctx.tick()
+        sink.paused = False
+        for _ in range(400):
+            await ctx.tick()
+        return
+
+    result = {}
+
+    async def final(ctx):
+        await bench(ctx)
+        result["drops"] = ctx.get(dut.drops)
+
+    simulate(dut, final, background=[sink.run])
+    got, partial = beats_to_messages(sink.beats)
+    assert partial == [], "a partial message came out"
+    return got, result["drops"]
+
+
+def is_subsequence(got, sent):
+    it = iter(sent)
+    return all(any(g == s for s in it) for g in got)
+
+
+def test_drop_new_keeps_first_messages_and_counts():
+    rng = random.Random(9)
+    messages = [[i] + [rng.getrandbits(8) for _ in range(4)] for i in range(12)]
+    dut = StreamFIFO(AXIStreamSignature(8), 16, packet=True, overflow="drop_new")
+    got, drops = run_lossy(dut, messages, stall_cycles=20)
+    assert is_subsequence(got, messages)
+    assert drops == len(messages) - len(got)
+    # 16 entries + output register: the first three 5-beat messages fit, the 4th is cut at 16.
+    assert got == messages[:3]
+
+
+def test_drop_new_oversize_then_good():
+    messages = [list(range(30)), [7, 8, 9]]
+    dut = StreamFIFO(AXIStreamSignature(8), 16, packet=True, overflow="drop_new")
+    got, drops = run_lossy(dut, messages, stall_cycles=0)
+    assert got == [[7, 8, 9]] and drops == 1
+
+
+@pytest.mark.parametrize("slots", [2, 4, 8])
+def test_message_fifo_keeps_newest(slots):
+    rng = random.Random(slots)
+    messages = [[i] + [rng.getrandbits(8) for _ in range(rng.randint(0, 6))] for i in range(20)]
+    dut = MessageFIFO(AXIStreamSignature(8), slots, 8)
+    got, drops = run_lossy(dut, messages, stall_cycles=10)
+    # The first message is in delivery from the start; the newest slots-1 are kept.
+    assert got == [messages[0]] + messages[-(slots - 1):]
+    assert drops == len(messages) - len(got)
+
+
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.3, 0.0), (0.0, 0.3)])
+def test_message_fifo_lossless_when_reader_keeps_up(idle, backpressure):
+    """Equal-length messages and a reader as fast as the writer: KEEP_LAST loses nothing.
+
+    (Store and forward makes the reader lag one message, so a long message followed by many
+    short ones can legitimately fill the slots; that case is a drop, tested elsewhere.)
+    """
+    rng = random.Random(21)
+    messages = [[rng.getrandbits(8) for _ in range(5)] for _ in range(60)]
+    dut = MessageFIFO(AXIStreamSignature(8), 4, 8)
+    if backpressure:
+        idle = 0.6  # the writer must be slower than the reader for no loss
+    run_lossless(dut, messages, idle=idle, backpressure=backpressure, seed=8)
+
+
+def test_message_fifo_oversize_dropped_whole():
+    messages = [[1, 2], list(range(20)), [3, 4, 5]]
+    dut = MessageFIFO(AXIStreamSignature(8), 4, 8)
+    got, drops = run_lossy(dut, messages, stall_cycles=0)
+    assert got == [[1, 2], [3, 4, 5]] and drops == 1
+
+
+# Asynchronous FIFO -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("w_period,r_period", [(10e-9, 17e-9), (23e-9, 7e-9)])
+def test_async_fifo_crosses_domains(w_period, r_period):
+    rng = random.Random(4)
+    messages = random_messages(rng, 25)
+    beats = messages_to_beats(messages)
+    fifo = AsyncStreamFIFO(AXIStreamSignature(8), 8, w_domain="write", r_domain="read")
+    m = Module()
+    m.domains.write = ClockDomain("write")
+    m.domains.read = ClockDomain("read")
+    m.submodules.fifo = fifo
+    source = StreamSource(fifo.s_axis, beats, idle=0.3, seed=1)
+    sink = StreamSink(fifo.m_axis, backpressure=0.4, seed=2)
+
+    async def send(ctx):
+        source.tick = lambda: ctx.tick("write")
+        await source.run(ctx)
+        for _ in range(400):
+            await ctx.tick("write")
+
+    async def receive(ctx):
+        sink.tick = lambda: ctx.tick("read")
+        await sink.run(ctx)
+
+    simulate(m, send, background=[receive], clocks={"write": w_period, "read": r_period})
+    assert sink.beats == beats
