@@ -1,0 +1,105 @@
+"""The rosgate command line: export topic, its manifest, lint, and bad parameters."""
+
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+from gen.cli import main
+from gen.export.lint import lint_verilog
+from hdl.dds import Topic
+from hdl.params import ParameterError
+
+
+def verilog_ports(text, module):
+    """(direction, width, name) of every port declared in ``module``."""
+    body = text[text.index(f"module {module}("):]
+    body = body[:body.index("endmodule")]
+    ports = {}
+    for direction, width, name in re.findall(r"^\s*(input|output)\s+(?:\[(\d+):0\]\s+)?(\w+);",
+                                             body, re.MULTILINE):
+        ports[name] = (direction, int(width) + 1 if width else 1)
+    return ports
+
+
+@pytest.mark.parametrize("args", [
+    ["--pubs", "4", "--subs", "4", "--width", "64"],
+    ["--pubs", "1", "--subs", "1", "--width", "8"],
+    ["--pubs", "3", "--subs", "2", "--width", "512", "--fifo-depth", "64", "--qos",
+     "best_effort"],
+    ["--pubs", "2", "--subs", "3", "--width", "32", "--fifo-depth", "256", "--qos", "keep_last",
+     "--history", "8", "--user-width", "1", "--id-width", "2", "--dest-width", "1"],
+])
+def test_export_topic_writes_lint_clean_verilog_and_manifest(tmp_path, args, capsys):
+    assert main(["export", "topic", *args, "-o", str(tmp_path)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    text = (tmp_path / "topic.v").read_text()
+    manifest = json.loads((tmp_path / "topic.json").read_text())
+    assert manifest["module"] == "topic"
+    ports = verilog_ports(text, "topic")
+    declared = {p["name"]: (p["direction"], p["width"]) for p in manifest["ports"]}
+    assert ports == declared
+    pubs, subs = manifest["parameters"]["pubs"], manifest["parameters"]["subs"]
+    width = manifest["parameters"]["data_width"]
+    assert ports["aclk"] == ("input", 1) and ports["aresetn"] == ("input", 1)
+    for i in range(pubs):
+        assert ports[f"s{i}_axis_tdata"] == ("input", width)
+        assert ports[f"s{i}_axis_tkeep"] == ("input", width // 8)
+        assert ports[f"s{i}_axis_tready"] == ("output", 1)
+    for j in range(subs):
+        assert ports[f"m{j}_axis_tvalid"] == ("output", 1)
+        assert ports[f"m{j}_axis_tready"] == ("input", 1)
+    assert "/work/" not in text and "/home/" not in text, "host path in the Verilog"
+    assert lint_verilog(tmp_path / "topic.v", "topic") == ""
+
+
+def test_export_is_deterministic(tmp_path):
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        assert main(["export", "topic", "--pubs", "2", "--subs", "2", "--width", "16",
+                     "-o", str(out)]) == 0
+    assert (a / "topic.v").read_text() == (b / "topic.v").read_text()
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--pubs", "0", "--subs", "1", "--width", "8"], "--pubs must be an integer in 1..16, not 0"),
+    (["--pubs", "1", "--subs", "17", "--width", "8"],
+     "--subs must be an integer in 1..16, not 17"),
+    (["--pubs", "1", "--subs", "1", "--width", "12"],
+     "--width must be an integer in 8..1024 and a multiple of 8, not 12"),
+    (["--pubs", "1", "--subs", "1", "--width", "2048"], "--width must be an integer in 8..1024"),
+    (["--pubs", "1", "--subs", "1", "--width", "8", "--fifo-depth", "100"],
+     "--fifo-depth must be 0 (no FIFO) or a power of two in 2..65536, not 100"),
+    (["--pubs", "1", "--subs", "1", "--width", "8", "--qos", "reliable"],
+     "--qos must be one of 'keep_all', 'keep_last', 'best_effort', not 'reliable'"),
+    (["--pubs", "1", "--subs", "1", "--width", "8", "--qos", "best_effort"],
+     "--fifo-depth must be a power of two in 2..65536 with qos='best_effort'"),
+    (["--pubs", "1", "--subs", "1", "--width", "8", "--fifo-depth", "16", "--qos",
+      "keep_last", "--history", "3"], "--history must be a power of two in 2..16"),
+    (["--pubs", "x", "--subs", "1", "--width", "8"], "argument --pubs: invalid int value: 'x'"),
+])
+def test_export_topic_rejects_bad_parameters(tmp_path, args, message):
+    result = subprocess.run([sys.executable, "-m", "gen.cli", "export", "topic", *args,
+                             "-o", str(tmp_path / "out")], capture_output=True, text=True)
+    assert result.returncode == 2
+    assert message in result.stderr, result.stderr
+    assert not (tmp_path / "out").exists(), "nothing may be written on a bad parameter"
+
+
+def test_topic_parameter_errors_name_the_parameter():
+    with pytest.raises(ParameterError) as info:
+        Topic(2, 2, 64, fifo_depth=3)
+    assert info.value.name == "fifo_depth" and info.value.value == 3
+    with pytest.raises(ParameterError, match="history must be None unless qos='keep_last'"):
+        Topic(2, 2, 64, fifo_depth=8, history=4)
+
+
+def test_help_documents_every_option():
+    result = subprocess.run([sys.executable, "-m", "gen.cli", "export", "topic", "--help"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0
+    for option in ("--pubs", "--subs", "--width", "--fifo-depth", "--qos", "--history",
+                   "--no-monitor", "-o"):
+        assert option in result.stdout
