@@ -35,9 +35,12 @@ def _waves():
     return os.environ.get("WAVES", "0") not in ("", "0")
 
 
-def export_bench_top(top, params, build_dir):
-    """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path."""
-    component = build_top(top, **params)
+def export_bench_top(top, params, build_dir, *, build=None):
+    """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path.
+
+    ``build`` makes the component (default: the :data:`gen.tops.TOPS` builder of ``top``).
+    """
+    component = (build or (lambda **p: build_top(top, **p)))(**params)
     text, vtop = export_verilog(component, top)
     vfile = Path(build_dir) / f"{top}.v"
     write_if_changed(vfile, text)
@@ -52,15 +55,20 @@ def failed_tests(results_xml):
             if case.find("failure") is not None or case.find("error") is not None]
 
 
-def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None):
-    """Export, build and run the cocotb tests of ``module`` against ``top``; raise on failure."""
+def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
+              extra_env=None, quiet=False):
+    """Export, build and run the cocotb tests of ``module`` against ``top``; raise on failure.
+
+    ``build`` and ``extra_env`` serve benchmark tops that are not in :data:`gen.tops.TOPS`;
+    ``quiet`` sends the simulator's log to ``sim.log`` in the build folder.
+    """
     from cocotb_tools.runner import get_runner
 
     if sim == "verilator":
         put_verilator_on_path()
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}"
     build_dir.mkdir(parents=True, exist_ok=True)
-    vfile = export_bench_top(top, params, build_dir)
+    vfile = export_bench_top(top, params, build_dir, build=build)
     waves = _waves()
     runner = get_runner(sim)
     build_args = []
@@ -84,12 +92,14 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None):
         "ROSGATE_SIM": sim,
         # cocotbext 0.1.28 uses cocotb 1.x spellings; their warnings drown the bench's log.
         "PYTHONWARNINGS": "ignore::DeprecationWarning",
+        **(extra_env or {}),
     }
     try:
         runner.test(test_module=module, hdl_toplevel=top, build_dir=build_dir_v,
                     test_dir=build_dir, results_xml=str(results), extra_env=env,
                     waves=waves, test_args=test_args, testcase=testcase, seed=seed,
-                    timescale=("1ns", "1ps"), log_file=None)
+                    timescale=("1ns", "1ps"),
+                    log_file=build_dir / "sim.log" if quiet else None)
     except SystemExit as exc:
         if not results.exists():
             raise AssertionError(f"{top} [{config_id}, {sim}]: simulator exited with "
@@ -105,6 +115,13 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None):
                              f"tests failed: {', '.join(failed)} (log above, results in "
                              f"{results})")
     return results
+
+
+def config_params(value):
+    """``(params, marks)`` of a configuration value, plain or wrapped in ``pytest.param``."""
+    if isinstance(value, dict):
+        return value, ()
+    return value.values[0], value.marks
 
 
 def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
@@ -126,10 +143,7 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
 
     cases = []
     for config_id, params in configs.items():
-        marks = ()
-        if isinstance(params, type(pytest.param(None))):
-            marks = params.marks
-            params = params.values[0]
+        params, marks = config_params(params)
         for sim in simulators:
             cases.append(pytest.param(config_id, params, sim, id=f"{config_id}-{sim}",
                                       marks=marks))

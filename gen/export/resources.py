@@ -1,0 +1,46 @@
+"""FPGA resource estimates with Debian's Yosys: ``synth_xilinx -flatten -family xc7``.
+
+Estimates for trends and comparisons, not Vivado's numbers (toolchain.md, Vivado-free checks).
+"""
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+__all__ = ["estimate_resources", "YOSYS_COMMAND"]
+
+YOSYS_COMMAND = "synth_xilinx -flatten -family xc7"
+
+
+def estimate_resources(verilog, top):
+    """Return ``{"LUT", "FF", "LUTRAM", "BRAM36", "BRAM18", "DSP", "cells"}`` for ``top``.
+
+    LUT counts LUT1..LUT6 and INV cells (an inverter costs a LUT1 in Vivado), FF every FD* flip-flop, LUTRAM the RAM*/SRL* cells, BRAM18 and
+    BRAM36 the block RAM primitives (an RAMB36 counts as two BRAM18 in ``BRAM18_equiv``).
+    """
+    yosys = shutil.which("yosys")
+    if yosys is None:
+        raise RuntimeError("yosys not found: install Debian's yosys (make setup does)")
+    script = f"read_verilog -sv {Path(verilog)}; {YOSYS_COMMAND} -top {top}; stat"
+    result = subprocess.run([yosys, "-q", "-p", script, "-l", "/dev/stdout"],
+                            capture_output=True, text=True)
+    if result.returncode:
+        raise RuntimeError(f"yosys failed on {verilog}:\n{result.stderr[-2000:]}")
+    text = result.stdout
+    stat = text[text.rindex("Printing statistics"):] if "Printing statistics" in text else text
+    cells = {name: int(n) for name, n in re.findall(r"^\s+(\w+)\s+(\d+)\s*$", stat, re.M)}
+    total = lambda pred: sum(n for name, n in cells.items() if pred(name))  # noqa: E731
+    res = {
+        "LUT": total(lambda c: re.fullmatch(r"LUT[1-6]|INV", c) is not None),
+        "FF": total(lambda c: c.startswith("FD")),
+        "LUTRAM": total(lambda c: c.startswith("RAM") and not c.startswith("RAMB")
+                        or c.startswith("SRL")),
+        "BRAM36": total(lambda c: c.startswith("RAMB36")),
+        "BRAM18": total(lambda c: c.startswith("RAMB18")),
+        "DSP": total(lambda c: c.startswith("DSP")),
+        "CARRY4": total(lambda c: c.startswith("CARRY")),
+        "cells": cells,
+    }
+    res["BRAM18_equiv"] = res["BRAM18"] + 2 * res["BRAM36"]
+    return res

@@ -1,0 +1,34 @@
+"""``make lint``: export every top of every bench configuration and lint it."""
+
+import importlib
+import sys
+
+from gen.export.lint import WAIVERS, lint_verilog
+from tb.harness import config_params, export_bench_top
+from tb.toolchain import SIM_BUILD
+
+#: bench module -> top name
+BENCHES = {"tb.test_topic": "topic"}
+
+
+def main():
+    failed = 0
+    count = 0
+    for module_name, top in BENCHES.items():
+        module = importlib.import_module(module_name)
+        for config_id, params in module.CONFIGS.items():
+            params, _ = config_params(params)
+            vfile = export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}")
+            report = lint_verilog(vfile, top)
+            count += 1
+            print(f"lint {top} [{config_id}]: {'clean' if not report else 'WARNINGS'}")
+            if report:
+                print(report)
+                failed += 1
+    print(f"{count - failed} of {count} tops lint-clean (verilator --lint-only -Wall, waived: "
+          f"{', '.join(WAIVERS)})")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
