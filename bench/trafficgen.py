@@ -57,10 +57,13 @@ class TopicTrafficBench(wiring.Component):
         m.submodules.topic = topic = self.topic
         pubs, subs, width = self._pubs, self._subs, self._width
         running = Signal()
+        finished = Signal()
         with m.If(self.start):
             m.d.sync += [running.eq(1), self.cycle.eq(0)]
         with m.Elif(running):
             m.d.sync += self.cycle.eq(self.cycle + 1)
+            with m.If(finished):
+                m.d.sync += running.eq(0)  # inputs may change only after the case ends
 
         total = Signal(32)
         m.d.comb += total.eq(sum(self.count[i] for i in range(pubs)))
@@ -76,7 +79,7 @@ class TopicTrafficBench(wiring.Component):
                 port.tdata.eq(Cat(*([word] * (width // 32)))),
                 port.tkeep.eq(-1),
                 port.tlast.eq(pos + 1 == self.beats[i]),
-                port.tvalid.eq(running & (sent != self.count[i])),
+                port.tvalid.eq(running & ~self.start & (sent != self.count[i])),
             ]
             with m.If(self.start):
                 m.d.sync += [sent.eq(0), pos.eq(0), seq.eq(0), started.eq(0)]
@@ -95,18 +98,19 @@ class TopicTrafficBench(wiring.Component):
             m.d.comb += port.tready.eq(1)
             expect = Array(Signal(SEQ_BITS, name=f"expect{j}_{i}") for i in range(pubs))
             pos = Array(Signal(32, name=f"pos{j}_{i}") for i in range(pubs))
-            current = Signal(range(pubs))
+            index_bits = max(1, (pubs - 1).bit_length())
+            current = Signal(index_bits)
             inside = Signal()
             word = port.tdata[:32]
             pub = word[SEQ_BITS:]
             seq = word[:SEQ_BITS]
+            index = pub[:index_bits]
+            beats = Array(self.beats)
             bad = Signal()
+            lanes_differ = (port.tdata != Cat(*([word] * (width // 32)))) if width > 32 else 0
             m.d.comb += bad.eq((pub >= pubs) | (inside & (pub != current)) |
-                               (seq != expect[pub[:len(current)]]) |
-                               (port.tlast != (pos[pub[:len(current)]] + 1 ==
-                                               self.beats[pub[:len(current)]])))
-            if width > 32:
-                m.d.comb += bad.eq(bad | (port.tdata != Cat(*([word] * (width // 32)))))
+                               (seq != expect[index]) | lanes_differ |
+                               (port.tlast != (pos[index] + 1 == beats[index])))
             done = Signal()
             all_done.append(done)
             m.d.comb += done.eq(self.sub_messages[j] == total)
@@ -116,7 +120,6 @@ class TopicTrafficBench(wiring.Component):
                 for i in range(pubs):
                     m.d.sync += [expect[i].eq(0), pos[i].eq(0)]
             with m.Elif(port.tvalid):
-                index = pub[:len(current)]
                 m.d.sync += [self.sub_beats[j].eq(self.sub_beats[j] + 1),
                              self.sub_last[j].eq(self.cycle),
                              expect[index].eq(seq + 1), current.eq(index),
@@ -130,5 +133,11 @@ class TopicTrafficBench(wiring.Component):
                     m.d.sync += pos[index].eq(pos[index] + 1)
                 with m.If(bad):
                     m.d.sync += self.sub_errors[j].eq(self.sub_errors[j] + 1)
-        m.d.comb += self.done.eq(running & Cat(*all_done).all())
+        m.d.comb += finished.eq(Cat(*all_done).all())
+        done = Signal()
+        with m.If(self.start):
+            m.d.sync += done.eq(0)
+        with m.Elif(running & finished):
+            m.d.sync += done.eq(1)
+        m.d.comb += self.done.eq(done)
         return m

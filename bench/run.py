@@ -1,0 +1,27 @@
+"""``make bench``: every benchmark, results to bench/results/ (JSON + Markdown)."""
+
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench import hmt  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def main():
+    start = time.monotonic()
+    print("rosgate bench: hardware-mapped topics")
+    results = hmt.measure()
+    resources = hmt.measure_resources()
+    text = hmt.write_results(results, resources, RESULTS)
+    print(text)
+    print(f"wrote {RESULTS / 'hmt.json'} and {RESULTS / 'hmt.md'} "
+          f"({time.monotonic() - start:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
