@@ -98,14 +98,18 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     runner = get_runner(sim)
     build_args = []
     test_args = []
+    plusargs = []
+    fst = build_dir / f"{top}.fst"
+    # Waveform builds differ from plain ones: they get their own object folder, so switching
+    # WAVES never reuses a build of the other kind.
+    build_dir_v = build_dir / ("obj_fst" if waves else "obj")
     if sim == "verilator":
         build_args = list(VERILATOR_SIM_ARGS)
         if waves:
             build_args.append("--trace-fst")
-            test_args = ["--trace-file", str(build_dir / f"{top}.fst")]
-        build_dir_v = build_dir / ("obj_fst" if waves else "obj")
-    else:
-        build_dir_v = build_dir
+            test_args = ["--trace-file", str(fst)]
+    elif waves:
+        plusargs = [f"+dumpfile_path={fst}"]
     with _verilator_make_fix(sim):
         runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
                      build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
@@ -123,7 +127,8 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     try:
         runner.test(test_module=module, hdl_toplevel=top, build_dir=build_dir_v,
                     test_dir=build_dir, results_xml=str(results), extra_env=env,
-                    waves=waves, test_args=test_args, testcase=testcase, seed=seed,
+                    waves=waves, test_args=test_args, plusargs=plusargs, testcase=testcase,
+                    seed=seed,
                     timescale=("1ns", "1ps"),
                     log_file=build_dir / "sim.log" if quiet else None)
     except SystemExit as exc:

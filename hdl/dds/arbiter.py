@@ -5,7 +5,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
-from ..stream import AXIStreamSignature
+from ..stream import AXIStreamSignature, check_stream_signature
 
 __all__ = ["TopicArbiter"]
 
@@ -42,8 +42,7 @@ class TopicArbiter(wiring.Component):
     """
 
     def __init__(self, signature, pubs):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         check_int("pubs", pubs, 2, 16)
         self._stream = signature
         self._pubs = pubs

@@ -5,7 +5,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
-from ..stream import AXIStreamSignature
+from ..stream import AXIStreamSignature, check_stream_signature
 
 __all__ = ["TopicBroadcast"]
 
@@ -35,8 +35,7 @@ class TopicBroadcast(wiring.Component):
     """
 
     def __init__(self, signature, subs):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         check_int("subs", subs, 2, 16)
         self._stream = signature
         self._subs = subs

@@ -1,11 +1,11 @@
 """AXI4-Stream library: signature, register slice, FIFOs."""
 
-from .signature import AXIStreamSignature, PAYLOAD_MEMBERS
+from .signature import AXIStreamSignature, PAYLOAD_MEMBERS, check_stream_signature
 from .skid import RegisterSlice
 from .fifo import StreamFIFO, AsyncStreamFIFO, OVERFLOW_POLICIES
 from .message_fifo import MessageFIFO
 
-__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "RegisterSlice", "StreamFIFO",
+__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "check_stream_signature", "RegisterSlice", "StreamFIFO",
            "AsyncStreamFIFO", "OVERFLOW_POLICIES", "MessageFIFO"]
 
 from .monitor import StreamMonitorSignature, StreamMonitor

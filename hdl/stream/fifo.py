@@ -7,7 +7,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_choice, check_int, check_power_of_two
-from .signature import AXIStreamSignature
+from .signature import AXIStreamSignature, check_stream_signature
 
 __all__ = ["StreamFIFO", "AsyncStreamFIFO", "OVERFLOW_POLICIES"]
 
@@ -61,8 +61,7 @@ class StreamFIFO(wiring.Component):
     """
 
     def __init__(self, signature, depth, *, packet=False, overflow="block", counter_width=32):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         check_power_of_two("depth", depth, 2, MAX_DEPTH)
         check_choice("overflow", overflow, OVERFLOW_POLICIES)
         check_int("counter_width", counter_width, 1, 64)
@@ -195,8 +194,7 @@ class AsyncStreamFIFO(wiring.Component):
     """
 
     def __init__(self, signature, depth, *, w_domain="write", r_domain="read"):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         check_power_of_two("depth", depth, 4, MAX_DEPTH)
         self._stream = signature
         self._depth = depth

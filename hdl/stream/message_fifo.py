@@ -6,7 +6,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int, check_power_of_two
-from .signature import AXIStreamSignature
+from .signature import AXIStreamSignature, check_stream_signature
 
 __all__ = ["MessageFIFO"]
 
@@ -47,8 +47,7 @@ class MessageFIFO(wiring.Component):
     """
 
     def __init__(self, signature, slots, slot_depth, *, counter_width=32):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         check_power_of_two("slots", slots, 2, 64)
         check_power_of_two("slot_depth", slot_depth, 1, 1 << 20)
         check_int("counter_width", counter_width, 1, 64)

@@ -6,7 +6,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
 
-__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS"]
+__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "check_stream_signature"]
 
 
 #: Members that travel with a beat, in the order they are packed into a storage word.
@@ -123,3 +123,10 @@ class AXIStreamSignature(wiring.Signature):
             if getattr(self, name):
                 args.append(f"{name}={getattr(self, name)}")
         return f"AXIStreamSignature({', '.join(args)})"
+
+
+def check_stream_signature(signature):
+    """Return ``signature`` if it is an :class:`AXIStreamSignature`, else raise ``TypeError``."""
+    if not isinstance(signature, AXIStreamSignature):
+        raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+    return signature

@@ -4,7 +4,7 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from .signature import AXIStreamSignature
+from .signature import AXIStreamSignature, check_stream_signature
 
 __all__ = ["RegisterSlice"]
 
@@ -30,8 +30,7 @@ class RegisterSlice(wiring.Component):
     """
 
     def __init__(self, signature):
-        if not isinstance(signature, AXIStreamSignature):
-            raise TypeError(f"signature must be an AXIStreamSignature, not {signature!r}")
+        check_stream_signature(signature)
         self._stream = signature
         super().__init__({"s_axis": In(signature), "m_axis": Out(signature)})
 
