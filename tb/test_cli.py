@@ -103,3 +103,43 @@ def test_help_documents_every_option():
     for option in ("--pubs", "--subs", "--width", "--fifo-depth", "--qos", "--history",
                    "--no-monitor", "-o"):
         assert option in result.stdout
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "gen.cli", *args], capture_output=True,
+                          text=True)
+
+
+def test_msg_layout_prints_spec_offsets():
+    result = run_cli("msg", "layout", "sensor_msgs/Image", "--arch", "arm32")
+    assert result.returncode == 0, result.stderr
+    assert "sizeof 60" in result.stdout
+    assert re.search(r"^\s+48\s+4\s+pointer\s+data\.data$", result.stdout, re.MULTILINE)
+
+
+def test_msg_show_project_action_type():
+    result = run_cli("msg", "show", "sorter_msgs/action/Sort_GetResult_Response",
+                     "--msg-dir", "examples/messages")
+    assert result.returncode == 0, result.stderr
+    assert "int8 status" in result.stdout and "sorter_msgs/action/Sort_Result result" in \
+        result.stdout
+
+
+def test_msg_export_c_writes_header(tmp_path):
+    out = tmp_path / "image.h"
+    result = run_cli("msg", "export-c", "sensor_msgs/Image", "-o", str(out))
+    assert result.returncode == 0, result.stderr
+    text = out.read_text()
+    assert "typedef struct sensor_msgs__msg__Image {" in text
+    assert "#define ROSGATE_OFFSET__sensor_msgs__msg__Image__data__data 72" in text
+
+
+def test_msg_errors_exit_2_with_location(tmp_path):
+    result = run_cli("msg", "show", "nope/Type")
+    assert result.returncode == 2 and "unknown message type 'nope/Type'" in result.stderr
+    bad = tmp_path / "bad_msgs" / "msg"
+    bad.mkdir(parents=True)
+    (bad / "Bad.msg").write_text("uint8 ok\nuint8[0] broken\n")
+    result = run_cli("msg", "show", "bad_msgs/Bad", "--msg-dir", str(tmp_path))
+    assert result.returncode == 2
+    assert "Bad.msg:2: bad array bound: fixed arrays need N >= 1 ('uint8[0]')" in result.stderr
