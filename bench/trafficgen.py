@@ -11,7 +11,7 @@ are always ready.
 
 from amaranth.hdl import Array, Cat, Const, Module, Signal
 from amaranth.lib import wiring
-from amaranth.lib.wiring import In, Out, flipped
+from amaranth.lib.wiring import In, Out
 
 from hdl.dds import Topic
 

@@ -18,7 +18,7 @@ from amaranth.asserts import AnyConst, AnySeq, Initial
 from amaranth.back import rtlil
 from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, ResetSignal, Signal
 
-from hdl.stream import AXIStreamSignature, MessageFIFO, RegisterSlice, StreamFIFO
+from hdl.stream import AXIStreamSignature, RegisterSlice, StreamFIFO
 from tb.toolchain import SIM_BUILD
 
 pytestmark = pytest.mark.formal

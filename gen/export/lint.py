@@ -8,7 +8,6 @@ a default assignment before it), UNSIGNED (``x >= 0`` comparisons from range che
 """
 
 import argparse
-import shutil
 import subprocess
 import sys
 from pathlib import Path

@@ -2,7 +2,7 @@
 for hardware-thread authors coming from ReconROS (``rosgate msg export-c``)."""
 
 from .layout import ARCHES, CLayout, c_identifier, c_type_name
-from .model import Array, Named, Primitive, Sequence
+from .model import Array, Primitive, Sequence
 
 __all__ = ["c_header", "offset_macro"]
 
@@ -26,12 +26,7 @@ def _sequence_structs(library, names):
             needed[c_type_name(type_)] = element
         elif isinstance(type_, Sequence):
             note(type_.element)
-            element = type_.element
-            if isinstance(element, Primitive) and element.is_string:
-                inner = c_type_name(element)
-            else:
-                inner = c_type_name(element)
-            needed[c_type_name(type_)] = inner
+            needed[c_type_name(type_)] = c_type_name(type_.element)
         elif isinstance(type_, Array):
             note(type_.element)
 

@@ -5,7 +5,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
-from ..stream import AXIStreamSignature, check_stream_signature
+from ..stream import check_stream_signature
 
 __all__ = ["TopicBroadcast"]
 

@@ -1,13 +1,13 @@
 """Stream FIFOs: synchronous (with packet mode and drop policies) and asynchronous."""
 
-from amaranth.hdl import Module, Signal, Mux
+from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.fifo import AsyncFIFOBuffered
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_choice, check_int, check_power_of_two
-from .signature import AXIStreamSignature, check_stream_signature
+from .signature import check_stream_signature
 
 __all__ = ["StreamFIFO", "AsyncStreamFIFO", "OVERFLOW_POLICIES"]
 

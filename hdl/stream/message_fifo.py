@@ -6,7 +6,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int, check_power_of_two
-from .signature import AXIStreamSignature, check_stream_signature
+from .signature import check_stream_signature
 
 __all__ = ["MessageFIFO"]
 

@@ -4,7 +4,7 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from .signature import AXIStreamSignature, check_stream_signature
+from .signature import check_stream_signature
 
 __all__ = ["RegisterSlice"]
 

@@ -6,7 +6,6 @@ names its publisher. The model checks, per subscriber, that each received messag
 that nothing is missing (``keep_all``) or that every missing message is counted as a drop.
 """
 
-import random
 
 __all__ = ["tagged_message", "message_publisher", "TopicScoreboard", "ScoreboardError"]
 
