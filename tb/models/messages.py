@@ -1,0 +1,102 @@
+"""rosbags as the golden model of message encodings, and random message values.
+
+The rosbags type store parses the project's .msg/.srv files with rosbags' own parser, so the
+golden bytes depend on rosgate's parser nowhere.
+"""
+
+import struct
+from pathlib import Path
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+from gen.msg.model import Array, Named, Primitive, Sequence
+
+__all__ = ["golden_store", "random_value", "to_rosbags"]
+
+# rosbags reads `byte` as int8 (ROS 1's meaning); rosidl (ROS 2) makes it an unsigned octet.
+# The byte on the wire is the same, so only the Python representation is converted.
+_NUMPY = {"bool": np.bool_, "byte": np.int8, "char": np.uint8, "int8": np.int8,
+          "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
+          "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64, "float32": np.float32,
+          "float64": np.float64}
+
+
+def golden_store(store, folders=()):
+    """A rosbags type store with the project's .msg and .srv types registered."""
+    ts = get_typestore(Stores(store))
+    types = {}
+    for folder in folders:
+        for path in sorted(Path(folder).rglob("*")):
+            package = path.parent.parent.name
+            if path.suffix == ".msg":
+                types.update(get_types_from_msg(path.read_text(),
+                                                f"{package}/msg/{path.stem}"))
+            elif path.suffix == ".srv":
+                request, response = path.read_text().split("---\n")
+                for part, suffix in ((request, "Request"), (response, "Response")):
+                    name = f"{package}/srv/{path.stem}_{suffix}"
+                    parsed = get_types_from_msg(part, name)
+                    types.update({name: value for value in parsed.values()})
+    ts.register(types)
+    return ts
+
+
+def _random_primitive(name, rng, bound=0):
+    if name == "bool":
+        return rng.random() < 0.5
+    if name in ("string",):
+        n = rng.randint(0, bound or 12)
+        return "".join(rng.choice("abcxyz019_ #=") for _ in range(n))
+    if name == "float32":
+        return struct.unpack("<f", struct.pack("<f", rng.uniform(-1e6, 1e6)))[0]
+    if name == "float64":
+        return rng.uniform(-1e12, 1e12)
+    bits = {"byte": 8, "char": 8, "int8": 8, "uint8": 8, "int16": 16, "uint16": 16,
+            "int32": 32, "uint32": 32, "int64": 64, "uint64": 64}[name]
+    if name.startswith("int"):
+        return rng.randint(-(1 << (bits - 1)), (1 << (bits - 1)) - 1)
+    return rng.randint(0, (1 << bits) - 1)
+
+
+def random_value(library, typename, rng, max_len=6):
+    """A random value (dicts) of ``typename``; uint8/byte/char arrays as ``bytes``."""
+    def value(type_):
+        if isinstance(type_, Primitive):
+            return _random_primitive(type_.name, rng, type_.bound)
+        if isinstance(type_, Named):
+            return random_value(library, type_.typename, rng, max_len)
+        if isinstance(type_, Array):
+            n = type_.length
+        else:
+            n = rng.randint(0, type_.bound or max_len)
+        element = type_.element
+        if isinstance(element, Primitive) and element.name in ("uint8", "byte", "char"):
+            return rng.randbytes(n)
+        return [value(element) for _ in range(n)]
+
+    return {f.name: value(f.type) for f in library[typename].fields}
+
+
+def to_rosbags(ts, library, typename, value):
+    """Build the rosbags message object holding ``value``."""
+    definition = library[typename]
+    cls = ts.types[definition.name]
+
+    def convert(type_, item):
+        if isinstance(type_, Named):
+            return to_rosbags(ts, library, type_.typename, item)
+        if isinstance(type_, (Array, Sequence)):
+            element = type_.element
+            if isinstance(element, Primitive) and not element.is_string:
+                if isinstance(item, (bytes, bytearray)):
+                    return np.frombuffer(bytes(item), dtype=_NUMPY[element.name]).copy()
+                return np.array(item, dtype=_NUMPY[element.name])
+            return [convert(element, x) for x in item]
+        if isinstance(type_, Primitive) and type_.name == "byte":
+            return item - 256 if item > 127 else item
+        return item
+
+    if not definition.fields:
+        return cls()
+    return cls(**{f.name: convert(f.type, value[f.name]) for f in definition.fields})
