@@ -3,7 +3,8 @@ project's own ``.msg``/``.srv``/``.action`` files."""
 
 from pathlib import Path
 
-from .model import Array, MessageDef, MessageDefinitionError, Named, Primitive, Sequence, Field
+from .model import (Array, Constant, Field, MessageDef, MessageDefinitionError, Named, Primitive,
+                    Sequence)
 from .parser import parse_file
 
 __all__ = ["MessageLibrary", "normalize_name"]
@@ -46,9 +47,12 @@ class MessageLibrary:
         self.typestore = get_typestore(Stores(store))
         self.types = {}
         for name, (consts, fields) in self.typestore.fielddefs.items():
+            if [f[0] for f in fields] == ["structure_needs_at_least_one_member"]:
+                fields = []  # rosbags' placeholder for an empty message (rosidl adds it back)
             self.types[name] = MessageDef(
                 name, [Field(fname, _from_rosbags(node)) for fname, node in fields],
-                [], f"<rosbags {store}>")
+                [Constant(cname, Primitive(ctype), value) for cname, ctype, value in consts],
+                f"<rosbags {store}>")
         self.project_types = []
         for folder in folders:
             for path in sorted(Path(folder).rglob("*")):

@@ -1,0 +1,61 @@
+"""ROS 1 type identity: the md5sum TCPROS headers carry (genmsg ``compute_md5_text``,
+ros_wire.md §1.3).
+
+md5 text of a message: one line per constant ``TYPE NAME=VALUE``, then one line per field:
+``TYPE NAME`` for built-in types (primitives, ``time``, ``duration``, with their array suffix),
+``MD5 NAME`` for a nested message (the nested type's md5, array suffix dropped); lines joined
+by newlines, no trailing newline. A service's md5 is the md5 of the request's md5 text
+followed directly by the response's.
+"""
+
+import hashlib
+
+from .model import Array, Named, Primitive, Sequence
+
+__all__ = ["md5_text", "md5sum", "service_md5sum"]
+
+_BUILTIN_NAMED = {"builtin_interfaces/msg/Time": "time",
+                  "builtin_interfaces/msg/Duration": "duration"}
+
+
+def _ros1_type(type_):
+    if isinstance(type_, Primitive):
+        return f"{type_.name}<={type_.bound}" if type_.bound else type_.name
+    if isinstance(type_, Named):
+        return _BUILTIN_NAMED.get(type_.typename, type_.typename)
+    suffix = f"[{type_.length}]" if isinstance(type_, Array) else \
+        (f"[<={type_.bound}]" if type_.bound else "[]")
+    return _ros1_type(type_.element) + suffix
+
+
+def _constant_text(const):
+    value = const.value
+    if isinstance(value, bool):
+        value = int(value)
+    return f"{const.type.name} {const.name}={value}"
+
+
+def md5_text(library, typename):
+    """The text whose md5 is the ROS 1 md5sum of ``typename``."""
+    definition = library[typename]
+    lines = [_constant_text(c) for c in definition.constants]
+    for field in definition.fields:
+        base = field.type
+        while isinstance(base, (Array, Sequence)):
+            base = base.element
+        if isinstance(base, Named) and base.typename not in _BUILTIN_NAMED:
+            lines.append(f"{md5sum(library, base.typename)} {field.name}")
+        else:
+            lines.append(f"{_ros1_type(field.type)} {field.name}")
+    return "\n".join(lines)
+
+
+def md5sum(library, typename):
+    """ROS 1 md5sum of message type ``typename`` (use a library on the ROS 1 store)."""
+    return hashlib.md5(md5_text(library, typename).encode()).hexdigest()
+
+
+def service_md5sum(library, request, response):
+    """ROS 1 md5sum of a service from its request and response types."""
+    text = md5_text(library, request) + md5_text(library, response)
+    return hashlib.md5(text.encode()).hexdigest()

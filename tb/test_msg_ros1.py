@@ -1,0 +1,57 @@
+"""ROS 1 md5sums (gen.msg.ros1) against ros_wire.md §1.3 and rosbags' independent generator."""
+
+import pytest
+from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+
+from gen.msg import MessageLibrary, parse_msg, parse_srv
+from gen.msg.ros1 import md5_text, md5sum, service_md5sum
+
+SPEC_MD5 = {
+    "sensor_msgs/msg/Image": "060021388200f6f0f447d0fcd9c64743",
+    "std_msgs/msg/String": "992ce8a1687cec8c8bd883ec73ca41d1",
+    "std_msgs/msg/Header": "2176decaecbce78abc3b96ef049fabed",
+    "geometry_msgs/msg/Twist": "9f195f881246fdfa2798d1d3eebca84a",
+}
+
+
+@pytest.fixture(scope="module")
+def ros1():
+    return MessageLibrary(store="ros1_noetic"), get_typestore(Stores.ROS1_NOETIC)
+
+
+@pytest.mark.parametrize("typename", list(SPEC_MD5))
+def test_md5_matches_spec_table(ros1, typename):
+    assert md5sum(ros1[0], typename) == SPEC_MD5[typename]
+
+
+def test_service_md5_matches_spec(ros1):
+    library = MessageLibrary(store="ros1_noetic")
+    for definition in parse_srv("bool data\n---\nbool success\nstring message\n",
+                                "std_srvs/srv/SetBool"):
+        library.add(definition)
+    assert md5sum(library, "std_srvs/srv/SetBool_Request").startswith("8b94c1b5")
+    assert md5sum(library, "std_srvs/srv/SetBool_Response").startswith("937c9679")
+    assert service_md5sum(library, "std_srvs/srv/SetBool_Request",
+                          "std_srvs/srv/SetBool_Response") == "09fb03525b03e7ea1fd3992bafd87e16"
+
+
+def test_md5_equals_rosbags_for_every_ros1_type(ros1):
+    library, ts = ros1
+    wrong = [(t, md5sum(library, t), ts.generate_msgdef(t)[1]) for t in ts.fielddefs
+             if md5sum(library, t) != ts.generate_msgdef(t)[1]]
+    assert len(ts.fielddefs) > 100
+    assert not wrong, wrong[:5]
+
+
+def test_md5_of_parsed_message_with_constants_and_nesting(ros1):
+    text = ("int32 MAX=10\nstring NAME=hello\nHeader header\nuint8[] data\n"
+            "geometry_msgs/Point[3] corners\ntime when\n")
+    library = MessageLibrary(store="ros1_noetic")
+    library.add(parse_msg(text, "my_msgs/msg/Thing"))
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    ts.register(get_types_from_msg(text, "my_msgs/msg/Thing"))
+    assert md5sum(library, "my_msgs/msg/Thing") == ts.generate_msgdef("my_msgs/msg/Thing")[1]
+    text_lines = md5_text(library, "my_msgs/msg/Thing").splitlines()
+    assert text_lines[:2] == ["int32 MAX=10", "string NAME=hello"]
+    assert text_lines[2] == "2176decaecbce78abc3b96ef049fabed header"
+    assert text_lines[-1] == "time when"
