@@ -11,7 +11,7 @@ strings without NUL, and nothing for an empty message.
 
 import struct
 
-from .model import Array, Named, Primitive, Sequence
+from .model import Array, Named, Primitive
 
 __all__ = ["WireError", "encode_cdr", "decode_cdr", "encode_ros1", "decode_ros1",
            "CDR_LE_HEADER"]
