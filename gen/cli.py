@@ -125,21 +125,18 @@ def _add_msg(commands):
         p.set_defaults(func=func, options={}, parser=p)
 
 
-def _library(args):
+def _definition(args):
+    """The message library of ``--msg-dir`` and the definition of ``args.type`` in it."""
     from gen.msg import MessageLibrary
-    return MessageLibrary(args.msg_dir)
-
-
-def _lookup(args, library):
+    library = MessageLibrary(args.msg_dir)
     if args.type not in library:
         args.parser.error(f"unknown message type {args.type!r} (standard interfaces and "
                           f"--msg-dir {', '.join(map(str, args.msg_dir)) or '(none)'})")
-    return library[args.type]
+    return library, library[args.type]
 
 
 def _run_msg_show(args):
-    library = _library(args)
-    definition = _lookup(args, library)
+    library, definition = _definition(args)
     print(f"{definition.name}  ({definition.source})")
     for const in definition.constants:
         print(f"  {const.type} {const.name}={const.value!r}")
@@ -151,8 +148,7 @@ def _run_msg_show(args):
 
 def _run_msg_layout(args):
     from gen.msg.layout import CLayout
-    library = _library(args)
-    definition = _lookup(args, library)
+    library, definition = _definition(args)
     layout = CLayout(library, args.arch)
     struct = layout.struct(definition.name)
     print(f"{definition.name} on {args.arch}: sizeof {struct.size}, align {struct.align}")
@@ -164,8 +160,7 @@ def _run_msg_layout(args):
 
 def _run_msg_export_c(args):
     from gen.msg.cheader import c_header
-    library = _library(args)
-    definition = _lookup(args, library)
+    library, definition = _definition(args)
     text = c_header(library, definition.name)
     if args.output is None:
         sys.stdout.write(text)

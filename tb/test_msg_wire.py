@@ -57,26 +57,26 @@ def test_ros1_image_example_from_spec(ros1):
     assert decode_ros1(library, "sensor_msgs/Image", expected) == value
 
 
+def check_against_rosbags(library, ts, typename, seed, encode, decode, serialize):
+    value = random_value(library, typename, random.Random(seed))
+    golden = bytes(serialize(to_rosbags(ts, library, typename, value), typename))
+    assert encode(library, typename, value) == golden
+    assert decode(library, typename, golden) == value
+
+
 @settings(max_examples=150, deadline=None)
 @given(typename=st.sampled_from(ROS2_TYPES), seed=st.integers(0, 2 ** 32 - 1))
 def test_cdr_equals_rosbags(ros2, typename, seed):
     library, ts = ros2
-    value = random_value(library, typename, random.Random(seed))
-    ours = encode_cdr(library, typename, value)
-    golden = bytes(ts.serialize_cdr(to_rosbags(ts, library, typename, value), typename))
-    assert ours == golden
-    assert decode_cdr(library, typename, golden) == value
+    check_against_rosbags(library, ts, typename, seed, encode_cdr, decode_cdr, ts.serialize_cdr)
 
 
 @settings(max_examples=100, deadline=None)
 @given(typename=st.sampled_from(ROS1_TYPES), seed=st.integers(0, 2 ** 32 - 1))
 def test_ros1_equals_rosbags(ros1, typename, seed):
     library, ts = ros1
-    value = random_value(library, typename, random.Random(seed))
-    ours = encode_ros1(library, typename, value)
-    golden = bytes(ts.serialize_ros1(to_rosbags(ts, library, typename, value), typename))
-    assert ours == golden
-    assert decode_ros1(library, typename, golden) == value
+    check_against_rosbags(library, ts, typename, seed, encode_ros1, decode_ros1,
+                          ts.serialize_ros1)
 
 
 def test_encode_errors_name_the_field(ros2):

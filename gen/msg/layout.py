@@ -10,7 +10,7 @@ is its largest member's and its size is rounded up to it; an empty message gets 
 
 from dataclasses import dataclass
 
-from .model import Array, Named, Primitive, Sequence
+from .model import PRIMITIVES, Array, Named, Primitive, Sequence
 
 __all__ = ["ARCHES", "CLayout", "Member", "StructLayout", "c_identifier", "c_type_name"]
 
@@ -22,8 +22,6 @@ _C_PRIMITIVE = {
     "int16": "int16_t", "uint16": "uint16_t", "int32": "int32_t", "uint32": "uint32_t",
     "int64": "int64_t", "uint64": "uint64_t", "float32": "float", "float64": "double",
 }
-_SIZE = {"bool": 1, "byte": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2,
-         "int32": 4, "uint32": 4, "int64": 8, "uint64": 8, "float32": 4, "float64": 8}
 
 
 def c_identifier(typename):
@@ -90,7 +88,7 @@ class CLayout:
         if isinstance(type_, Primitive):
             if type_.is_string:
                 return 3 * self.pointer, self.pointer
-            return self._scalar(_SIZE[type_.name])
+            return self._scalar(PRIMITIVES[type_.name])
         if isinstance(type_, Named):
             layout = self.struct(type_.typename)
             return layout.size, layout.align
