@@ -1,0 +1,179 @@
+"""Byte-granular stream realignment: pack chunks of 0..W/8 bytes into full AXI4-Stream beats,
+and present a beat stream as a window from which any 0..W/8 bytes can be taken per cycle."""
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int
+from ..stream import AXIStreamSignature
+
+__all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask", "keep_count"]
+
+
+def byte_mask(value, nbytes, count):
+    """``value`` (``nbytes`` bytes) with every byte at index ``>= count`` cleared."""
+    return Cat(*(Mux(count > i, value.word_select(i, 8), 0) for i in range(nbytes)))
+
+
+def keep_count(tkeep):
+    """Number of set bits of a contiguous-from-bit-0 ``tkeep``."""
+    count = Const(0, range(len(tkeep) + 1))
+    for i in range(len(tkeep)):
+        count = Mux(tkeep[i], i + 1, count)
+    return count
+
+
+class ChunkSignature(wiring.Signature):
+    """A chunk of ``0..data_width // 8`` bytes, seen from the producer (``Out``).
+
+    Members
+    -------
+    data : Out(data_width)
+        The bytes, byte 0 in bits 7..0; bytes at ``len`` and above are ignored.
+    len : Out(range(data_width // 8 + 1))
+        Number of bytes; 0 is a legal, empty chunk.
+    last : Out(1)
+        The last chunk of a message.
+    valid, ready
+        Handshake with AXI4-Stream rules (``valid`` does not wait for ``ready``).
+    """
+
+    def __init__(self, data_width):
+        check_int("data_width", data_width, 8, 1024, multiple_of=8)
+        self._data_width = data_width
+        super().__init__({"data": Out(data_width), "len": Out(range(data_width // 8 + 1)),
+                          "last": Out(1), "valid": Out(1), "ready": In(1)})
+
+    data_width = property(lambda self: self._data_width)
+
+    def __eq__(self, other):
+        return type(other) is type(self) and other._data_width == self._data_width
+
+    def __hash__(self):
+        return hash((type(self), self._data_width))
+
+
+class BytePacker(wiring.Component):
+    """Packs chunks into AXI4-Stream beats: every beat full except the last of a message.
+
+    Takes one chunk per cycle and gives one beat per cycle in steady state, whatever the chunk
+    sizes; a full chunk passes in one cycle of latency. ``first`` marks the first beat of a
+    message (ReconROS' ``TUSER`` is its complement except on the last beat).
+
+    Members
+    -------
+    chunk : In(ChunkSignature(data_width))
+    m_axis : Out(AXIStreamSignature(data_width))
+        ``tkeep`` is all ones except on a message's last beat.
+    first : Out(1)
+        The beat on ``m_axis`` is the first of its message.
+    """
+
+    def __init__(self, data_width):
+        super().__init__({"chunk": In(ChunkSignature(data_width)),
+                          "m_axis": Out(AXIStreamSignature(data_width)),
+                          "first": Out(1)})
+        self._width = data_width
+
+    def elaborate(self, platform):
+        m = Module()
+        W, B = self._width, self._width // 8
+        buf = Signal(2 * W)
+        count = Signal(range(2 * B + 1))
+        final = Signal()       # the message's last chunk is in buf
+        first = Signal(init=1)
+        out, chunk = self.m_axis, self.chunk
+
+        m.d.comb += [
+            out.tvalid.eq((count >= B) | (final & (count != 0))),
+            out.tdata.eq(buf[:W]),
+            out.tlast.eq(final & (count <= B)),
+            out.tkeep.eq(Mux(count >= B, (1 << B) - 1,
+                             Cat(*(count > i for i in range(B))))),
+            self.first.eq(first),
+        ]
+        taken = Signal(range(B + 1))
+        with m.If(out.tvalid & out.tready):
+            m.d.comb += taken.eq(Mux(count >= B, B, count))
+            m.d.sync += first.eq(out.tlast)
+        left = Signal(range(2 * B + 1))
+        final_left = Signal()
+        m.d.comb += [left.eq(count - taken),
+                     final_left.eq(final & ~(out.tvalid & out.tready & out.tlast)),
+                     chunk.ready.eq((left <= B) & ~final_left)]
+        shifted = Signal(2 * W)
+        m.d.comb += shifted.eq(buf >> (taken * 8))
+        with m.If(chunk.valid & chunk.ready):
+            data = byte_mask(chunk.data, B, chunk.len)
+            m.d.sync += [buf.eq(shifted | (Cat(data, Const(0, W)) << (left * 8))),
+                         count.eq(left + chunk.len),
+                         final.eq(chunk.last)]
+        with m.Else():
+            m.d.sync += [buf.eq(shifted), count.eq(left), final.eq(final_left)]
+        return m
+
+
+class ByteUnpacker(wiring.Component):
+    """Presents an AXI4-Stream message as a byte window: take 0..W/8 bytes per cycle.
+
+    One message at a time: after a beat with ``tlast`` is absorbed, ``ended`` is set and no
+    further beat is accepted until ``flush``. ``flush`` discards the window and, if the
+    message's ``tlast`` has not been seen, every input beat up to and including it.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(data_width))
+        ``tkeep`` must be contiguous from byte 0 (all ones but on a last beat).
+    window : Out(data_width)
+        The next ``avail`` bytes of the message (higher bytes zero).
+    avail : Out(range(2 * data_width // 8 + 1))
+        Bytes in the window; may exceed ``data_width // 8`` (only the first W/8 are shown).
+    ended : Out(1)
+        The message's last beat has been absorbed: ``avail`` bytes are all that is left.
+    take : In(range(data_width // 8 + 1))
+        Bytes consumed this cycle; at most ``avail``.
+    flush : In(1)
+        Drop the rest of the message (window and input up to ``tlast``); ``take`` is ignored.
+    dropping : Out(1)
+        Discarding input beats after a ``flush``.
+    """
+
+    def __init__(self, data_width):
+        B = data_width // 8
+        super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
+                          "window": Out(data_width), "avail": Out(range(2 * B + 1)),
+                          "ended": Out(1), "take": In(range(B + 1)), "flush": In(1),
+                          "dropping": Out(1)})
+        self._width = data_width
+
+    def elaborate(self, platform):
+        m = Module()
+        W, B = self._width, self._width // 8
+        buf = Signal(2 * W)
+        count = Signal(range(2 * B + 1))
+        ended = Signal()
+        dropping = Signal()
+        s = self.s_axis
+        m.d.comb += [self.window.eq(buf[:W]), self.avail.eq(count), self.ended.eq(ended),
+                     self.dropping.eq(dropping)]
+
+        left = Signal(range(2 * B + 1))
+        m.d.comb += left.eq(count - self.take)
+        with m.If(dropping):
+            m.d.comb += s.tready.eq(1)
+            with m.If(s.tvalid & s.tlast):
+                m.d.sync += dropping.eq(0)
+        with m.Elif(self.flush):
+            m.d.sync += [count.eq(0), buf.eq(0), ended.eq(0), dropping.eq(~ended)]
+        with m.Else():
+            m.d.comb += s.tready.eq(~ended & (left <= B))
+            shifted = buf >> (self.take * 8)
+            with m.If(s.tvalid & s.tready):
+                n = keep_count(s.tkeep)
+                data = byte_mask(s.tdata, B, n)
+                m.d.sync += [buf.eq(shifted | (Cat(data, Const(0, W)) << (left * 8))),
+                             count.eq(left + n), ended.eq(s.tlast)]
+            with m.Else():
+                m.d.sync += [buf.eq(shifted), count.eq(left)]
+        return m

@@ -1,0 +1,281 @@
+"""Message deserializer generated from a stream plan (``gen.msg.plan``)."""
+
+import enum
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int
+from ..stream import AXIStreamSignature
+from .bytes import ByteUnpacker, byte_mask
+from .serializer import ErrorSignature, check_plan_width, payload_port
+
+__all__ = ["Deserializer", "DeserializerError"]
+
+
+class DeserializerError(enum.IntEnum):
+    """Reason codes of :class:`Deserializer` ``error.code``."""
+    #: an element count above the field's bound or the configured ``max_count``
+    LENGTH = 1
+    #: the input message ended (``tlast``) before the plan did
+    EARLY_END = 2
+    #: the plan ended but the input message did not: the rest is dropped up to ``tlast``
+    LATE_END = 3
+    #: non-zero CDR alignment padding
+    PADDING = 4
+    #: malformed framing: CDR encapsulation not little-endian CDR, a CDR string count of 0 or a
+    #: missing NUL, a ROS 1 length prefix that disagrees with the body
+    FORMAT = 5
+
+
+class Deserializer(wiring.Component):
+    """Deserializes AXI4-Stream messages of one type in one framing.
+
+    Nothing is buffered beyond two beats: each variable-length field streams out as it arrives.
+
+    Parameters
+    ----------
+    plan : gen.msg.plan.StreamPlan
+        The type and framing (see :class:`~hdl.msg.Serializer`).
+    data_width : int
+        Width of every stream in bits: a multiple of 8 in 8..512 (``reconros``: 64).
+    max_count : int
+        Largest accepted element count of an unbounded variable-length field (a bounded one
+        uses its bound). Default 2**24.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(data_width))
+        Messages, one packet each; ``tkeep`` contiguous from byte 0 (all ones but on the last
+        beat).
+    fields : Out(amaranth.lib.stream.Signature(plan.layout))
+        The fixed part of the current message, offered as soon as its last member has been
+        read (a message that fails before that offers nothing) and held until ``ready``; the
+        next message is not read before. Counts are element counts (strings without NUL).
+    m_<field>_axis : Out(AXIStreamSignature(data_width, user_width=1))
+        One per variable-length field, in stream order: exactly one packet per message with the
+        field's bytes, never more than its count, full beats but the last, ``tuser`` set on the
+        first beat; an empty field is one beat with ``tkeep`` 0 and ``tlast``. If the message
+        ends early inside the field, the packet ends there; fields after an error get no
+        packet.
+    error : Out(ErrorSignature())
+        A pulse with a :class:`DeserializerError` code per bad message; the rest of the message
+        is dropped up to ``tlast`` and the next one is read normally.
+    """
+
+    def __init__(self, plan, data_width=64, *, max_count=1 << 24):
+        check_plan_width(plan, data_width)
+        check_int("max_count", max_count, 1, (1 << 32) - 2)
+        self.plan = plan
+        self._width = data_width
+        self._max_count = max_count
+        members = {"s_axis": In(AXIStreamSignature(data_width)),
+                   "fields": Out(stream.Signature(plan.layout))}
+        for v in plan.variables:
+            members[payload_port(v, "m")] = Out(AXIStreamSignature(data_width, user_width=1))
+        members["error"] = Out(ErrorSignature())
+        super().__init__(members)
+
+    @property
+    def parameters(self):
+        return {"type": self.plan.typename, "framing": self.plan.framing,
+                "data_width": self._width, "max_count": self._max_count}
+
+    def elaborate(self, platform):
+        m = Module()
+        plan, W, B = self.plan, self._width, self._width // 8
+        steps = plan.steps
+        reconros = plan.framing == "reconros"
+        m.submodules.unpacker = unpacker = ByteUnpacker(W)
+        wiring.connect(m, wiring.flipped(self.s_axis), unpacker.s_axis)
+        window, avail, ended = unpacker.window, unpacker.avail, unpacker.ended
+
+        # Registers hold the wire values; the output shows element counts (a CDR string count
+        # includes the NUL) and the ReconROS publisher id (beat 0 is id + 1000).
+        fields = Signal(plan.layout.size)
+        shown = Signal(plan.layout.size)
+        m.d.comb += shown.eq(fields)
+        for v in plan.variables:
+            if v.string and plan.framing == "cdr":
+                leaf = v.count
+                m.d.comb += shown[leaf.offset:leaf.offset + 32].eq(
+                    fields[leaf.offset:leaf.offset + 32] - 1)
+        if reconros:
+            m.d.comb += shown[:32].eq(fields[:32] - 1000)
+        m.d.comb += self.fields.payload.eq(shown)
+        count_width = 64 if reconros else 32
+        counts = [Signal(count_width, name=f"count{v.index}") for v in plan.variables]
+        nul = [int(v.string and plan.framing == "cdr") for v in plan.variables]
+        ports = [getattr(self, payload_port(v, "m")) for v in plan.variables]
+        length_prefix = Signal(32)
+
+        op = Signal(range(len(steps) + 2))
+        END, WAIT = len(steps), len(steps) + 1
+        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [1])
+        step = Signal(range(max_steps + 1))
+        remaining = Signal(count_width + 3)
+        pos = Signal(32)
+        offered = Signal()     # fields offered for this message (until accepted)
+        with m.If(self.fields.valid & self.fields.ready):
+            m.d.sync += offered.eq(0)
+        m.d.comb += self.fields.valid.eq(offered)
+
+        last_writer = max([i for i, s in enumerate(steps)
+                           if any(p.kind in ("field", "extend", "publisher", "count")
+                                  for p in s.parts)]
+                          + [-1])
+
+        error_code = Signal(3)
+        m.d.comb += self.error.code.eq(error_code)
+
+        def fail(code):
+            m.d.comb += [self.error.valid.eq(1), unpacker.flush.eq(1)]
+            m.d.sync += [error_code.eq(code), self.error.count.eq(self.error.count + 1),
+                         op.eq(WAIT), step.eq(0)]
+
+        def take(n):
+            m.d.comb += unpacker.take.eq(n)
+            m.d.sync += pos.eq(pos + n)
+
+        def next_op(i):
+            m.d.sync += [op.eq(i + 1), step.eq(0)]
+            if i == last_writer:
+                m.d.sync += offered.eq(1)
+
+        with m.Switch(op):
+            for i, s in enumerate(steps):
+                with m.Case(i):
+                    if s.kind == "run":
+                        self._run(m, s, i, window, avail, ended, fields, counts, length_prefix,
+                                  step, take, fail, next_op)
+                        continue
+                    if s.kind == "pad":
+                        length = (Const(plan.origin, 32) - pos)[:32] & (s.align - 1)
+                        if s.var is not None:
+                            length = Mux(counts[s.var] == 0, 0, length)
+                    else:
+                        v = plan.variables[s.var]
+                        shift = v.element_bytes.bit_length() - 1
+                        length = ((counts[s.var] - nul[s.var]) << shift)[:count_width + 3]
+                    left = Signal(count_width + 3, name=f"left{i}")
+                    m.d.comb += left.eq(Mux(step != 0, remaining, length))
+                    k = Signal(range(B + 1), name=f"k{i}")
+                    m.d.comb += k.eq(Mux(left >= B, B, left))
+                    final = left <= B
+                    have = avail >= k
+                    short = ~have & ended
+
+                    def advance():
+                        with m.If(final):
+                            next_op(i)
+                        with m.Else():
+                            m.d.sync += [remaining.eq(left - B), step.eq(1)]
+
+                    if s.kind == "pad":
+                        with m.If(have):
+                            bad = (byte_mask(window, B, k) != 0) if s.check else Const(0)
+                            with m.If(bad):
+                                fail(DeserializerError.PADDING)
+                            with m.Else():
+                                take(k)
+                                advance()
+                        with m.Elif(short):
+                            fail(DeserializerError.EARLY_END)
+                        continue
+                    v = plan.variables[s.var]
+                    bound = v.bound or self._max_count
+                    port = ports[s.var]
+                    element_count = counts[s.var] - nul[s.var]
+                    bad_count = (element_count > bound) if not nul[s.var] else \
+                        ((counts[s.var] == 0) | (element_count > bound))
+                    with m.If((step == 0) & bad_count):
+                        if nul[s.var]:
+                            fail(Mux(counts[s.var] == 0, DeserializerError.FORMAT,
+                                     DeserializerError.LENGTH))
+                        else:
+                            fail(DeserializerError.LENGTH)
+                    with m.Else():
+                        n = Mux(short, avail, k)
+                        m.d.comb += [
+                            port.tdata.eq(byte_mask(window, B, n)),
+                            port.tkeep.eq(Cat(*(n > j for j in range(B)))),
+                            port.tlast.eq(final | short),
+                            port.tuser.eq(step == 0),
+                            port.tvalid.eq(have | ended),
+                        ]
+                        with m.If(port.tvalid & port.tready):
+                            take(n)
+                            with m.If(short):
+                                fail(DeserializerError.EARLY_END)
+                            with m.Else():
+                                advance()
+            with m.Case(END):
+                ok = ended & (avail == 0)
+                if plan.framing == "ros1":
+                    ok = ok & (pos - 4 == length_prefix)
+                with m.If(ok):
+                    m.d.comb += unpacker.flush.eq(1)
+                    m.d.sync += op.eq(WAIT)
+                    if last_writer < 0:
+                        m.d.sync += offered.eq(1)
+                with m.Elif(ended & (avail == 0)):
+                    fail(DeserializerError.FORMAT)
+                with m.Else():
+                    fail(DeserializerError.LATE_END)
+            with m.Case(WAIT):
+                with m.If(~unpacker.dropping & (~offered | self.fields.ready)):
+                    m.d.sync += [op.eq(0), step.eq(0), pos.eq(0)]
+        return m
+
+    def _run(self, m, s, i, window, avail, ended, fields, counts, length_prefix, step, take,
+             fail, next_op):
+        """One ``run`` step: static byte ranges land in fixed registers, checks per byte."""
+        W, B = self._width, self._width // 8
+        nsteps = -(-s.nbytes // B)
+        with m.Switch(step):
+            for j in range(nsteps):
+                k = min(B, s.nbytes - j * B)
+                with m.Case(j):
+                    bad_padding, bad_format = [], []
+                    writes = []
+                    start = 0
+                    for part in s.parts:
+                        lo, hi = max(start, j * B), min(start + part.nbytes, j * B + k)
+                        for x in range(lo, hi):
+                            byte = window.word_select(x - j * B, 8)
+                            index = x - start
+                            if part.kind in ("field", "extend", "publisher"):
+                                if index < part.leaf.width // 8:
+                                    writes.append(fields.word_select(
+                                        part.leaf.offset // 8 + index, 8).eq(byte))
+                            elif part.kind == "count":
+                                writes.append(counts[part.var].word_select(index, 8).eq(byte))
+                                if index < 4:
+                                    offset = self.plan.variables[part.var].count.offset
+                                    writes.append(fields.word_select(offset // 8 + index, 8)
+                                                  .eq(byte))
+                            elif part.kind == "length":
+                                writes.append(length_prefix.word_select(index, 8).eq(byte))
+                            elif part.kind == "zero":
+                                bad_padding.append(byte != 0)
+                            elif part.kind == "nul":
+                                bad_format.append(byte != 0)
+                            elif part.kind == "const" and part.mask[index]:
+                                bad_format.append(
+                                    (byte & part.mask[index]) != part.value[index])
+                        start += part.nbytes
+                    with m.If(avail >= k):
+                        with m.If(Cat(*bad_format, Const(0, 1)).any()):
+                            fail(DeserializerError.FORMAT)
+                        with m.Elif(Cat(*bad_padding, Const(0, 1)).any()):
+                            fail(DeserializerError.PADDING)
+                        with m.Else():
+                            m.d.sync += writes
+                            take(k)
+                            if j == nsteps - 1:
+                                next_op(i)
+                            else:
+                                m.d.sync += step.eq(j + 1)
+                    with m.Elif(ended):
+                        fail(DeserializerError.EARLY_END)

@@ -1,0 +1,134 @@
+"""What the hardware (de)serializer ports carry for a message value, from its stream plan.
+
+The fixed part is the plan's struct layout filled from the value (little-endian bit packing,
+floats as IEEE-754 bits, bool/byte/char as octets); each variable-length field is its raw
+bytes (strings without NUL, elements little endian). The golden wire bytes come from rosbags
+(CDR, ROS 1) or :func:`reconros_beats` (hmt.md §5.2 with the §5.4 fixes), never from the RTL.
+"""
+
+import re
+import struct
+
+from gen.msg.model import PRIMITIVES, Array, Named, Primitive
+from gen.msg.plan import RECONROS_ID_OFFSET
+
+__all__ = ["fixed_part", "variable_bytes", "leaf_values", "expected_fields", "reconros_beats",
+           "value_at", "reconros_fields"]
+
+_FORMAT = {"bool": "B", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
+           "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
+           "float32": "f", "float64": "d"}
+
+
+def value_at(value, path):
+    """``value_at(v, "pair[1].b")`` -> ``v["pair"][1]["b"]``."""
+    for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", path):
+        value = value[name] if name else value[int(index)]
+    return value
+
+
+def _element_bytes(element, items):
+    if isinstance(items, (bytes, bytearray)):
+        return bytes(items)
+    fmt = _FORMAT[element]
+    return b"".join(struct.pack("<" + fmt, int(x) if fmt in "B" and element == "bool" else x)
+                    for x in items)
+
+
+def _raw(value):
+    return value.encode() if isinstance(value, str) else bytes(value)
+
+
+def variable_bytes(plan, value):
+    """The bytes of every variable-length field, in ``plan.variables`` order."""
+    out = []
+    for v in plan.variables:
+        item = value_at(value, v.path)
+        out.append(_raw(item) if v.string else _element_bytes(v.element, item))
+    return out
+
+
+def fixed_part(plan, value, publisher=0):
+    """The fixed part as an integer (bit 0 = struct bit 0)."""
+    bits = 0
+    for leaf in plan.leaves:
+        if leaf.type == "publisher":
+            raw = publisher.to_bytes(4, "little")
+        elif leaf.type == "count":
+            item = value_at(value, leaf.path)
+            v = next(x for x in plan.variables if x.path == leaf.path)
+            n = len(_raw(item)) if v.string else len(item)
+            raw = n.to_bytes(4, "little")
+        else:
+            item = value_at(value, leaf.path)
+            items = item if leaf.length > 1 else [item]
+            raw = _element_bytes(leaf.type, items)
+        bits |= int.from_bytes(raw, "little") << leaf.offset
+    return bits
+
+
+def leaf_values(plan, bits):
+    """Split a fixed-part integer into ``{path: raw bytes}``."""
+    return {leaf.path: ((bits >> leaf.offset) & ((1 << leaf.width) - 1)).to_bytes(
+        leaf.width // 8, "little") for leaf in plan.leaves}
+
+
+def expected_fields(plan, value, publisher=0):
+    """``{path: raw bytes}`` the deserializer must show for ``value``."""
+    return leaf_values(plan, fixed_part(plan, value, publisher))
+
+
+def reconros_fields(library, typename):
+    """``[(path, type)]`` in ReconROS' flattening order (hmt.md §5.1; ReconROS
+    ``msg_parsing._deep_replace``): per round, nested messages are replaced by their fields
+    appended at the end, then fixed arrays of messages by their elements' fields."""
+    items = [(f.name, f.type) for f in library[typename].fields]
+
+    def nested(t):
+        return isinstance(t, Named)
+
+    def message_array(t):
+        return isinstance(t, Array) and isinstance(t.element, Named)
+
+    while any(nested(t) or message_array(t) for _, t in items):
+        out = [(k, t) for k, t in items if not nested(t)]
+        for k, t in items:
+            if nested(t):
+                out += [(f"{k}.{f.name}", f.type) for f in library[t.typename].fields]
+        items = out
+        out = [(k, t) for k, t in items if not message_array(t)]
+        for k, t in items:
+            if message_array(t):
+                for i in range(t.length):
+                    out += [(f"{k}[{i}].{f.name}", f.type)
+                            for f in library[t.element.typename].fields]
+        items = out
+    return items
+
+
+def reconros_beats(library, typename, value, publisher):
+    """ReconROS framing (hmt.md §5.2, with D2-D5 fixed as in §5.4) of ``value``:
+    a list of ``(tdata, tuser, tlast)`` 64-bit beats, written from the spec."""
+    beats = [publisher + RECONROS_ID_OFFSET] * 2
+    arrays = {1: [], 2: [], 4: [], 8: []}
+    for path, type_ in reconros_fields(library, typename):
+        item = value_at(value, path)
+        if isinstance(type_, Primitive) and not type_.is_string:
+            raw = _element_bytes(type_.name, [item])
+            number = int.from_bytes(raw, "little")
+            if type_.name.startswith("int") and number >> (8 * len(raw) - 1):
+                number |= ((1 << 64) - 1) ^ ((1 << 8 * len(raw)) - 1)  # sign-extend
+            beats.append(number)
+        elif isinstance(type_, Primitive):
+            arrays[1].append((len(_raw(item)), _raw(item)))
+        else:
+            name = type_.element.name
+            arrays[PRIMITIVES[name]].append((len(item), _element_bytes(name, item)))
+    for size in (1, 2, 4, 8):
+        for count, raw in arrays[size]:
+            beats += [count, count]
+            raw += b"\x00" * (-len(raw) % 8)
+            beats += [int.from_bytes(raw[i:i + 8], "little") for i in range(0, len(raw), 8)]
+    beats.append(beats[-1])
+    n = len(beats)
+    return [(data, int(0 < i < n - 1), int(i == n - 1)) for i, data in enumerate(beats)]
