@@ -110,7 +110,9 @@ def _add_msg(commands):
             ("show", "print a type's fields and constants", _run_msg_show),
             ("layout", "print the rosidl C layout (offsets for OFFSETOF)", _run_msg_layout),
             ("export-c", "write a C header with rosidl structs and offset constants",
-             _run_msg_export_c)):
+             _run_msg_export_c),
+            ("plan", "print the stream plan: what a hardware (de)serializer moves, in order",
+             _run_msg_plan)):
         p = sub.add_parser(name, help=helptext, description=helptext)
         p.add_argument("type", help="message type, e.g. sensor_msgs/Image or "
                                     "sorter_msgs/srv/Sort_Request")
@@ -120,15 +122,19 @@ def _add_msg(commands):
             p.add_argument("--arch", default="arm64", choices=["arm32", "arm64", "x86_64"],
                            help="ABI: arm32 (ILP32, Zynq-7000) or arm64/x86_64 (LP64); "
                                 "default arm64")
+        if name == "plan":
+            p.add_argument("--framing", default="cdr", choices=["cdr", "ros1", "reconros"],
+                           help="cdr (ROS 2 XCDR1, default), ros1 (TCPROS message; ROS 1 types"
+                                ", Header with seq) or reconros (ReconROS hardware topics)")
         if name == "export-c":
             p.add_argument("-o", "--output", type=Path, help="header file (default: stdout)")
         p.set_defaults(func=func, options={}, parser=p)
 
 
-def _definition(args):
+def _definition(args, store="ros2_humble"):
     """The message library of ``--msg-dir`` and the definition of ``args.type`` in it."""
     from gen.msg import MessageLibrary
-    library = MessageLibrary(args.msg_dir)
+    library = MessageLibrary(args.msg_dir, store=store)
     if args.type not in library:
         args.parser.error(f"unknown message type {args.type!r} (standard interfaces and "
                           f"--msg-dir {', '.join(map(str, args.msg_dir)) or '(none)'})")
@@ -177,6 +183,20 @@ def _run_msg_export_c(args):
     return 0
 
 
+def _run_msg_plan(args):
+    from gen.msg.plan import stream_plan
+    from gen.msg.ros1 import md5sum, message_definition, ros1_name
+    store = "ros1_noetic" if args.framing == "ros1" else "ros2_humble"
+    library, definition = _definition(args, store)
+    plan = stream_plan(library, definition.name, args.framing)
+    print(plan.describe())
+    if args.framing == "ros1":
+        print(f"TCPROS type {ros1_name(definition.name)}, md5sum "
+              f"{md5sum(library, definition.name)}; message_definition:")
+        print("  " + message_definition(library, definition.name).replace("\n", "\n  "))
+    return 0
+
+
 # main --------------------------------------------------------------------------------------
 
 def build_parser():
@@ -200,7 +220,7 @@ def main(argv=None):
     except ParameterError as exc:
         option = args.options.get(exc.name, exc.name)
         args.parser.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
-    except MessageDefinitionError as exc:
+    except (MessageDefinitionError, KeyError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

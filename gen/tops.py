@@ -4,7 +4,10 @@ A builder takes keyword parameters (the same names as the component's) and retur
 component; the exported Verilog module is named after the top.
 """
 
+from pathlib import Path
+
 from hdl.dds import Topic
+from hdl.msg import MessageCodec
 
 __all__ = ["TOPS", "build_top"]
 
@@ -14,9 +17,28 @@ def build_topic(**params):
     return Topic(params.pop("pubs"), params.pop("subs"), params.pop("data_width"), **params)
 
 
+def message_plan(type, framing="cdr", msg_dirs=()):
+    """The stream plan of ``type`` with the project message folders ``msg_dirs`` (ROS 1 store
+    for the ``ros1`` framing)."""
+    from gen.msg import MessageLibrary
+    from gen.msg.plan import stream_plan
+    store = "ros1_noetic" if framing == "ros1" else "ros2_humble"
+    library = MessageLibrary([Path(d) for d in msg_dirs], store=store)
+    return stream_plan(library, type, framing)
+
+
+def build_msg_codec(**params):
+    """A :class:`hdl.msg.MessageCodec`: ``type``, ``framing``, ``data_width``, ``msg_dirs``,
+    ``max_count``."""
+    plan = message_plan(params.pop("type"), params.pop("framing", "cdr"),
+                        params.pop("msg_dirs", ()))
+    return MessageCodec(plan, params.pop("data_width", 64), **params)
+
+
 #: name -> builder
 TOPS = {
     "topic": build_topic,
+    "msg_codec": build_msg_codec,
 }
 
 

@@ -120,6 +120,8 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         "ROSGATE_MANIFEST": str(build_dir / f"{top}.json"),
         "ROSGATE_CONFIG": config_id,
         "ROSGATE_SIM": sim,
+        # relative paths in the parameters (message folders) are relative to the repository
+        "ROSGATE_ROOT": str(Path(__file__).resolve().parents[1]),
         # cocotbext 0.1.28 uses cocotb 1.x spellings; their warnings drown the bench's log.
         "PYTHONWARNINGS": "ignore::DeprecationWarning",
         **(extra_env or {}),

@@ -1,10 +1,11 @@
-"""ROS 1 md5sums (gen.msg.ros1) against ros_wire.md §1.3 and rosbags' independent generator."""
+"""ROS 1 md5sums and message definitions (gen.msg.ros1) against ros_wire.md §1.3 and rosbags'
+independent generator."""
 
 import pytest
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from gen.msg import MessageLibrary, parse_msg, parse_srv
-from gen.msg.ros1 import md5_text, md5sum, service_md5sum
+from gen.msg.ros1 import md5_text, md5sum, message_definition, service_md5sum
 
 SPEC_MD5 = {
     "sensor_msgs/msg/Image": "060021388200f6f0f447d0fcd9c64743",
@@ -55,3 +56,28 @@ def test_md5_of_parsed_message_with_constants_and_nesting(ros1):
     assert text_lines[:2] == ["int32 MAX=10", "string NAME=hello"]
     assert text_lines[2] == "2176decaecbce78abc3b96ef049fabed header"
     assert text_lines[-1] == "time when"
+
+
+def test_message_definition_of_image_matches_spec(ros1):
+    text = message_definition(ros1[0], "sensor_msgs/msg/Image")
+    assert text.startswith("std_msgs/Header header\nuint32 height\n")
+    assert text.endswith("=" * 80 + "\nMSG: std_msgs/Header\nuint32 seq\ntime stamp\n"
+                         "string frame_id\n")
+
+
+def test_message_definition_equals_rosbags_for_every_ros1_type(ros1):
+    library, ts = ros1
+    wrong = [t for t in ts.fielddefs
+             if message_definition(library, t) != ts.generate_msgdef(t)[0]]
+    assert not wrong, wrong[:5]
+
+
+def test_message_definition_of_parsed_message(ros1):
+    text = ("int32 MAX=10\nHeader header\ngeometry_msgs/PoseStamped[2] poses\n"
+            "geometry_msgs/Point p\ntime when\n")
+    library = MessageLibrary(store="ros1_noetic")
+    library.add(parse_msg(text, "my_msgs/msg/Thing"))
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    ts.register(get_types_from_msg(text, "my_msgs/msg/Thing"))
+    assert message_definition(library, "my_msgs/msg/Thing") == \
+        ts.generate_msgdef("my_msgs/msg/Thing")[0]

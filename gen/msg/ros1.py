@@ -12,20 +12,27 @@ import hashlib
 
 from .model import Array, Named, Primitive, Sequence
 
-__all__ = ["md5_text", "md5sum", "service_md5sum"]
+__all__ = ["md5_text", "md5sum", "service_md5sum", "message_definition", "ros1_name"]
 
 _BUILTIN_NAMED = {"builtin_interfaces/msg/Time": "time",
                   "builtin_interfaces/msg/Duration": "duration"}
 
 
-def _ros1_type(type_):
+def ros1_name(typename):
+    """``pkg/msg/Type`` -> ``pkg/Type`` (the spelling of TCPROS ``type`` and definitions)."""
+    parts = typename.split("/")
+    return f"{parts[0]}/{parts[-1]}" if len(parts) == 3 and parts[1] == "msg" else typename
+
+
+def _ros1_type(type_, short=False):
     if isinstance(type_, Primitive):
         return f"{type_.name}<={type_.bound}" if type_.bound else type_.name
     if isinstance(type_, Named):
-        return _BUILTIN_NAMED.get(type_.typename, type_.typename)
+        name = _BUILTIN_NAMED.get(type_.typename, type_.typename)
+        return ros1_name(name) if short else name
     suffix = f"[{type_.length}]" if isinstance(type_, Array) else \
         (f"[<={type_.bound}]" if type_.bound else "[]")
-    return _ros1_type(type_.element) + suffix
+    return _ros1_type(type_.element, short) + suffix
 
 
 def _constant_text(const):
@@ -59,3 +66,37 @@ def service_md5sum(library, request, response):
     """ROS 1 md5sum of a service from its request and response types."""
     text = md5_text(library, request) + md5_text(library, response)
     return hashlib.md5(text.encode()).hexdigest()
+
+
+_SEPARATOR = "=" * 80
+
+
+def _definition_text(library, typename):
+    definition = library[typename]
+    lines = [_constant_text(c) for c in definition.constants]
+    lines += [f"{_ros1_type(f.type, short=True)} {f.name}" for f in definition.fields]
+    return "".join(line + "\n" for line in lines)
+
+
+def message_definition(library, typename):
+    """The ``message_definition`` a TCPROS connection header carries (gendeps style): the
+    type's constants and fields, then each nested type once, in order of first use, after a
+    line of 80 ``=`` and ``MSG: pkg/Type``."""
+    order, seen = [], set()
+
+    def visit(name):
+        for field in library[name].fields:
+            base = field.type
+            while isinstance(base, (Array, Sequence)):
+                base = base.element
+            if isinstance(base, Named) and base.typename not in _BUILTIN_NAMED \
+                    and base.typename not in seen:
+                seen.add(base.typename)
+                order.append(base.typename)
+                visit(base.typename)
+
+    visit(library[typename].name)
+    text = _definition_text(library, typename)
+    for name in order:
+        text += f"{_SEPARATOR}\nMSG: {ros1_name(name)}\n{_definition_text(library, name)}"
+    return text

@@ -58,7 +58,8 @@ class BytePacker(wiring.Component):
     """Packs chunks into AXI4-Stream beats: every beat full except the last of a message.
 
     Takes one chunk per cycle and gives one beat per cycle in steady state, whatever the chunk
-    sizes; a full chunk passes in one cycle of latency. ``first`` marks the first beat of a
+    sizes (a message may end with an empty chunk); a full beat leaves once the next byte or the
+    end of the message is known, so latency is one to two cycles. ``first`` marks the first beat of a
     message (ReconROS' ``TUSER`` is its complement except on the last beat).
 
     Members
@@ -86,7 +87,9 @@ class BytePacker(wiring.Component):
         out, chunk = self.m_axis, self.chunk
 
         m.d.comb += [
-            out.tvalid.eq((count >= B) | (final & (count != 0))),
+            # A full beat waits for one more byte (or the end of the message): the message's
+            # last chunk may be empty, and tlast must still land on its last byte.
+            out.tvalid.eq((count > B) | (final & (count != 0))),
             out.tdata.eq(buf[:W]),
             out.tlast.eq(final & (count <= B)),
             out.tkeep.eq(Mux(count >= B, (1 << B) - 1,

@@ -126,11 +126,12 @@ class Deserializer(wiring.Component):
                                   for p in s.parts)]
                           + [-1])
 
-        error_code = Signal(3)
-        m.d.comb += self.error.code.eq(error_code)
+        error_code = Signal(3)     # the last reported code
+        code_now = Signal(3)
+        m.d.comb += self.error.code.eq(Mux(self.error.valid, code_now, error_code))
 
         def fail(code):
-            m.d.comb += [self.error.valid.eq(1), unpacker.flush.eq(1)]
+            m.d.comb += [self.error.valid.eq(1), code_now.eq(code), unpacker.flush.eq(1)]
             m.d.sync += [error_code.eq(code), self.error.count.eq(self.error.count + 1),
                          op.eq(WAIT), step.eq(0)]
 

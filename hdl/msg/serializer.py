@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
-from .bytes import BytePacker, byte_mask
+from .bytes import BytePacker, byte_mask, keep_count
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
 
@@ -84,9 +84,9 @@ class Serializer(wiring.Component):
         One per variable-length field (``plan.variables``), read when the message reaches the
         field: exactly one packet per message with the field's bytes (count times element size,
         little endian; strings without NUL) in full beats, ``tlast`` on the last. An empty field
-        is one beat with ``tlast`` (its data is ignored). ``tkeep`` is not inspected: the count
-        in ``fields`` decides. A packet that ends early is completed with zero bytes, one that
-        goes on is cut and drained up to its ``tlast``; both are reported on ``error``.
+        is one beat with ``tlast`` (its data is ignored). ``tkeep`` counts on the last beat
+        only. A packet that ends early is completed with zero bytes, one that goes on is cut
+        and drained up to its ``tlast``; both are reported on ``error``.
     m_axis : Out(AXIStreamSignature(data_width[, user_width=1]))
         The messages, one packet each, ``tkeep`` all ones but on the last beat. ReconROS
         framing: ``tuser`` is 0 on the first and the last beat and 1 between (hmt.md §5.2).
@@ -142,11 +142,12 @@ class Serializer(wiring.Component):
         drain = Signal()
         recent = Signal(64)
 
-        error_code = Signal(3)
-        m.d.comb += self.error.code.eq(error_code)
+        error_code = Signal(3)     # the last reported code
+        code_now = Signal(3)
+        m.d.comb += self.error.code.eq(Mux(self.error.valid, code_now, error_code))
 
         def report(code):
-            m.d.comb += self.error.valid.eq(1)
+            m.d.comb += [self.error.valid.eq(1), code_now.eq(code)]
             m.d.sync += [error_code.eq(code), self.error.count.eq(self.error.count + 1)]
 
         def next_op(i):
@@ -251,17 +252,22 @@ class Serializer(wiring.Component):
                             with m.If(chunk.ready):
                                 advance()
                         with m.Else():
+                            supplied = Signal(range(B + 1), name=f"supplied{i}")
+                            m.d.comb += supplied.eq(Mux(port.tlast, keep_count(port.tkeep), B))
+                            short = port.tlast & ((supplied < k) | ~final)
                             m.d.comb += [chunk.valid.eq(port.tvalid), chunk.data.eq(port.tdata),
-                                         chunk.last.eq(last_op & final),
+                                         chunk.len.eq(Mux(supplied < k, supplied, k)),
+                                         chunk.last.eq(last_op & final & ~short),
                                          port.tready.eq(chunk.ready)]
                             with m.If(port.tvalid & chunk.ready):
                                 with m.If(final & ~port.tlast):
                                     report(SerializerError.PAYLOAD_LONG)
                                     m.d.sync += drain.eq(1)
-                                with m.Elif(~final & port.tlast):
+                                with m.Elif(short):
                                     report(SerializerError.PAYLOAD_SHORT)
-                                    m.d.sync += [fill.eq(1), remaining.eq(left - B),
-                                                 step.eq(1)]
+                                    m.d.sync += [fill.eq(1), step.eq(1),
+                                                 remaining.eq(left - Mux(supplied < k, supplied,
+                                                                         k))]
                                 with m.Else():
                                     advance()
         return m

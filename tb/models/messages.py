@@ -12,7 +12,7 @@ from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from gen.msg.model import Array, Named, Primitive, Sequence
 
-__all__ = ["golden_store", "random_value", "to_rosbags"]
+__all__ = ["golden_store", "random_value", "random_primitive", "to_rosbags"]
 
 # rosbags reads `byte` as int8 (ROS 1's meaning); rosidl (ROS 2) makes it an unsigned octet.
 # The byte on the wire is the same, so only the Python representation is converted.
@@ -42,7 +42,7 @@ def golden_store(store, folders=()):
     return ts
 
 
-def _random_primitive(name, rng, bound=0):
+def random_primitive(name, rng, bound=0):
     if name == "bool":
         return rng.random() < 0.5
     if name in ("string",):
@@ -63,7 +63,7 @@ def random_value(library, typename, rng, max_len=6):
     """A random value (dicts) of ``typename``; uint8/byte/char arrays as ``bytes``."""
     def value(type_):
         if isinstance(type_, Primitive):
-            return _random_primitive(type_.name, rng, type_.bound)
+            return random_primitive(type_.name, rng, type_.bound)
         if isinstance(type_, Named):
             return random_value(library, type_.typename, rng, max_len)
         if isinstance(type_, Array):

@@ -1,0 +1,130 @@
+"""Small cocotb port drivers the cocotbext-axi models do not cover: beats with ``tkeep`` 0
+and ``tuser`` flags (:class:`PacketSink`), and a plain valid/ready payload port
+(:class:`HandshakeSource`, :class:`HandshakeSink`)."""
+
+import random
+
+import cocotb
+from cocotb.triggers import RisingEdge
+
+__all__ = ["random_pauses", "bursty_pauses", "PacketSink", "HandshakeSource", "HandshakeSink",
+           "Packet"]
+
+
+def random_pauses(rng, probability):
+    """Pause generator: ``True`` (pause this cycle) with the given probability."""
+    while True:
+        yield rng.random() < probability
+
+
+def bursty_pauses(rng, probability, max_run=24):
+    """Pause generator with runs: long stalls and long bursts."""
+    while True:
+        value = rng.random() < probability
+        for _ in range(rng.randint(1, max_run)):
+            yield value
+
+
+class Packet:
+    """A received packet: its bytes (by ``tkeep``), its beats, and the cycle of each beat."""
+
+    def __init__(self):
+        self.data = bytearray()
+        self.beats = []       # (tdata, tkeep, tuser)
+        self.cycles = []
+
+    def __repr__(self):
+        return f"Packet({bytes(self.data)!r}, {len(self.beats)} beats)"
+
+
+class PacketSink:
+    """Receives packets on an AXI4-Stream port ``<prefix>_t*`` with random backpressure."""
+
+    def __init__(self, dut, prefix, clock, *, seed=0):
+        self.clock = clock
+        self.tdata = getattr(dut, f"{prefix}_tdata")
+        self.tkeep = getattr(dut, f"{prefix}_tkeep")
+        self.tlast = getattr(dut, f"{prefix}_tlast")
+        self.tvalid = getattr(dut, f"{prefix}_tvalid")
+        self.tready = getattr(dut, f"{prefix}_tready")
+        self.tuser = getattr(dut, f"{prefix}_tuser", None)
+        self.bytes = len(self.tkeep)
+        self.pauses = None
+        self.rng = random.Random(seed)
+        self.packets = []
+        self.current = Packet()
+        self.cycle = 0
+        self.tready.value = 0
+        cocotb.start_soon(self._run())
+
+    def set_pause_generator(self, generator=None):
+        self.pauses = generator
+
+    async def _run(self):
+        while True:
+            ready = not (self.pauses and next(self.pauses))
+            self.tready.value = int(ready)
+            await RisingEdge(self.clock)
+            self.cycle += 1
+            if ready and self.tvalid.value == 1:
+                keep = int(self.tkeep.value)
+                data = int(self.tdata.value).to_bytes(self.bytes, "little")
+                user = int(self.tuser.value) if self.tuser is not None else 0
+                self.current.data += bytes(d for i, d in enumerate(data) if keep >> i & 1)
+                self.current.beats.append((int(self.tdata.value), keep, user))
+                self.current.cycles.append(self.cycle)
+                if self.tlast.value == 1:
+                    self.packets.append(self.current)
+                    self.current = Packet()
+
+
+class HandshakeSource:
+    """Drives ``<prefix>_payload/_valid`` and waits for ``_ready``, with random idle."""
+
+    def __init__(self, dut, prefix, clock):
+        self.clock = clock
+        self.payload = getattr(dut, f"{prefix}_payload")
+        self.valid = getattr(dut, f"{prefix}_valid")
+        self.ready = getattr(dut, f"{prefix}_ready")
+        self.pauses = None
+        self.valid.value = 0
+
+    def set_pause_generator(self, generator=None):
+        self.pauses = generator
+
+    async def send(self, value):
+        while self.pauses and next(self.pauses):
+            self.valid.value = 0
+            await RisingEdge(self.clock)
+        self.payload.value = value
+        self.valid.value = 1
+        while True:
+            await RisingEdge(self.clock)
+            if self.ready.value == 1:
+                break
+        self.valid.value = 0
+
+
+class HandshakeSink:
+    """Accepts ``<prefix>_payload`` values with random backpressure; records each value."""
+
+    def __init__(self, dut, prefix, clock):
+        self.clock = clock
+        self.payload = getattr(dut, f"{prefix}_payload")
+        self.valid = getattr(dut, f"{prefix}_valid")
+        self.ready = getattr(dut, f"{prefix}_ready")
+        self.pauses = None
+        self.values = []
+        self.ready.value = 0
+        cocotb.start_soon(self._run())
+
+    def set_pause_generator(self, generator=None):
+        self.pauses = generator
+
+    async def _run(self):
+        while True:
+            ready = not (self.pauses and next(self.pauses))
+            self.ready.value = int(ready)
+            await RisingEdge(self.clock)
+            if ready and self.valid.value == 1:
+                self.values.append(int(self.payload.value))
