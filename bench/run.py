@@ -6,7 +6,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import hmt  # noqa: E402
+from bench import hmt, msg  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -19,6 +19,13 @@ def main():
     text = hmt.write_results(results, resources, RESULTS)
     print(text)
     print(f"wrote {RESULTS / 'hmt.json'} and {RESULTS / 'hmt.md'} "
+          f"({time.monotonic() - start:.0f} s)")
+    start = time.monotonic()
+    print("rosgate bench: message serializers and deserializers")
+    results = msg.measure()
+    resources = msg.measure_resources()
+    print(msg.write_results(results, resources, RESULTS))
+    print(f"wrote {RESULTS / 'msg.json'} and {RESULTS / 'msg.md'} "
           f"({time.monotonic() - start:.0f} s)")
     return 0
 

@@ -143,3 +143,25 @@ def test_msg_errors_exit_2_with_location(tmp_path):
     result = run_cli("msg", "show", "bad_msgs/Bad", "--msg-dir", str(tmp_path))
     assert result.returncode == 2
     assert "Bad.msg:2: bad array bound: fixed arrays need N >= 1 ('uint8[0]')" in result.stderr
+
+
+def test_msg_plan_per_framing():
+    result = run_cli("msg", "plan", "sensor_msgs/Image")
+    assert result.returncode == 0, result.stderr
+    assert "framing cdr: 10 steps" in result.stdout
+    assert "run 16 B: const 00 01 00 00 | field header.stamp.sec int32 4 B" in result.stdout
+    result = run_cli("msg", "plan", "sensor_msgs/Image", "--framing", "ros1")
+    assert result.returncode == 0, result.stderr
+    assert "field header.seq uint32 4 B" in result.stdout
+    assert "md5sum 060021388200f6f0f447d0fcd9c64743" in result.stdout
+    assert "MSG: std_msgs/Header" in result.stdout
+    result = run_cli("msg", "plan", "sensor_msgs/Image", "--framing", "reconros")
+    assert result.returncode == 0, result.stderr
+    assert "publisher 8 B beat 0 | publisher 8 B beat 1 | extend height uint32 8 B" in \
+        result.stdout
+
+
+def test_msg_plan_rejects_unstreamable_type():
+    result = run_cli("msg", "plan", "sensor_msgs/PointCloud2")
+    assert result.returncode == 2
+    assert "fields is sensor_msgs/msg/PointField[]" in result.stderr

@@ -1,0 +1,123 @@
+"""Message (de)serializer benchmark (issue: ROS messages in hardware §6; specs ros_wire.md §2,
+hmt.md §5.2).
+
+Simulated cycles of the generated :class:`hdl.msg.Serializer` / :class:`hdl.msg.Deserializer`
+RTL under Verilator at full rate (no idle, no backpressure), each output checked against
+rosbags (or the ReconROS model), converted to time at 100 MHz. Resources come from Debian's
+Yosys ``synth_xilinx -flatten -family xc7``.
+"""
+
+import json
+from pathlib import Path
+
+from gen.export.resources import YOSYS_COMMAND, estimate_resources
+from gen.export.verilog import export_verilog, write_if_changed
+from gen.tops import message_plan
+from hdl.msg import Deserializer, Serializer
+from tb.harness import run_bench
+from tb.toolchain import SIM_BUILD
+
+CLOCK_MHZ = 100
+IMAGE = "sensor_msgs/msg/Image"
+SORTDATA = "sorter_msgs/msg/Sortdata"
+DIRS = {IMAGE: ["examples/messages/rosgate_test_msgs"],
+        SORTDATA: ["examples/messages/sorter_msgs"]}
+IMAGE_640 = {"height": 480, "width": 640, "step": 1920, "encoding": "bgr8",
+             "header.frame_id": "cam", "data": {"bytes": 640 * 480 * 3}}
+SEQ_2048 = {"sortdata": {"elements": 2048}}
+
+#: (label, type, framing, width, field values)
+CASES = [
+    ("Image 640x480 bgr8", IMAGE, "cdr", 64, IMAGE_640),
+    ("Image 640x480 bgr8", IMAGE, "cdr", 512, IMAGE_640),
+    ("Image 640x480 bgr8", IMAGE, "reconros", 64, IMAGE_640),
+    ("uint32[2048]", SORTDATA, "cdr", 64, SEQ_2048),
+    ("uint32[2048]", SORTDATA, "cdr", 512, SEQ_2048),
+    ("uint32[2048]", SORTDATA, "reconros", 64, SEQ_2048),
+]
+
+#: hmt.md §5.2 [derived]: ReconROS 640x480 bgr8 Image = 115 217 beats = 1.152 ms at 100 MHz
+RECONROS_IMAGE_BEATS = 115217
+
+
+def run_case(label, typename, framing, width, values, *, sim="verilator"):
+    config_id = f"bench-{typename.split('/')[-1].lower()}_{framing}_w{width}"
+    out = SIM_BUILD / f"msg_codec-{config_id}-{sim}" / "record.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    params = dict(type=typename, framing=framing, data_width=width, msg_dirs=DIRS[typename],
+                  max_count=1 << 21)
+    run_bench("bench.msg_bench", "msg_codec", config_id, params, sim,
+              extra_env={"ROSGATE_BENCH_CASE": json.dumps({"set": values}),
+                         "ROSGATE_BENCH_OUT": str(out)}, quiet=True)
+    record = json.loads(out.read_text())
+    limit = width // 8
+    record.update(
+        label=label, type=typename, framing=framing, width=width, limit_bytes_per_cycle=limit,
+        serialize_bytes_per_cycle=record["wire_bytes"] / record["serialize_cycles"],
+        deserialize_bytes_per_cycle=record["wire_bytes"] / record["deserialize_cycles"],
+        payload_bytes_per_cycle=record["payload_bytes"] / record["payload_cycles"],
+        serialize_ms=record["serialize_cycles"] / (CLOCK_MHZ * 1e3),
+        deserialize_ms=record["deserialize_cycles"] / (CLOCK_MHZ * 1e3))
+    return record
+
+
+def measure(log=print):
+    runs = []
+    for case in CASES:
+        log(f"  simulating {case[0]} {case[2]} at {case[3]} bits (Verilator)...")
+        runs.append(run_case(*case))
+    return {"clock_mhz": CLOCK_MHZ, "runs": runs}
+
+
+def measure_resources(log=print):
+    rows = []
+    for kind, cls, width in (("Deserializer", Deserializer, 64), ("Serializer", Serializer, 64),
+                             ("Deserializer", Deserializer, 512)):
+        log(f"  yosys {YOSYS_COMMAND}: Image {kind} (CDR, {width} bit)...")
+        plan = message_plan(IMAGE, "cdr", DIRS[IMAGE])
+        text, _ = export_verilog(cls(plan, width), "msg_block")
+        vfile = SIM_BUILD / "bench-resources" / f"image-{kind.lower()}-w{width}.v"
+        write_if_changed(vfile, text)
+        res = estimate_resources(vfile, "msg_block")
+        rows.append({"config": f"sensor_msgs/Image {kind}, CDR, {width} bit",
+                     **{k: v for k, v in res.items() if k != "cells"}})
+    return rows
+
+
+def markdown(results, resources):
+    lines = ["# Message (de)serializer benchmark", "",
+             f"Simulated cycles of the generated RTL (Verilator), time at {CLOCK_MHZ} MHz, full "
+             "rate (no idle, no backpressure), every output checked against rosbags or the "
+             "ReconROS model. Serialize: first cycle the fields are offered to the last output "
+             "beat. Deserialize: first input beat to the last payload beat. Payload: the "
+             "largest field's packet, first to last beat.", "",
+             "| message | framing | width | wire bytes | serialize cycles (ms) | B/cycle | "
+             "deserialize cycles (ms) | B/cycle | payload B/cycle | W/8 |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results["runs"]:
+        lines.append(
+            f"| {r['label']} | {r['framing']} | {r['width']} | {r['wire_bytes']} | "
+            f"{r['serialize_cycles']} ({r['serialize_ms']:.4f}) | "
+            f"{r['serialize_bytes_per_cycle']:.3f} | {r['deserialize_cycles']} "
+            f"({r['deserialize_ms']:.4f}) | {r['deserialize_bytes_per_cycle']:.3f} | "
+            f"{r['payload_bytes_per_cycle']:.3f} | {r['limit_bytes_per_cycle']} |")
+    lines += ["", f"ReconROS framing (one 64-bit beat per primitive, hmt.md §5.2): the spec "
+              f"derives {RECONROS_IMAGE_BEATS} beats = "
+              f"{RECONROS_IMAGE_BEATS / (CLOCK_MHZ * 1e3):.3f} ms for the 640x480 bgr8 Image.",
+              "", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`; LUT includes INV cells)", "",
+              "| block | LUT | FF | BRAM18 eq. | CARRY4 |", "|---|---|---|---|---|"]
+    for r in resources:
+        lines.append(f"| {r['config']} | {r['LUT']} | {r['FF']} | {r['BRAM18_equiv']} | "
+                     f"{r['CARRY4']} |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+def write_results(results, resources, folder):
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    data = dict(results, resources=resources, reconros_image_beats=RECONROS_IMAGE_BEATS)
+    (folder / "msg.json").write_text(json.dumps(data, indent=1) + "\n")
+    text = markdown(results, resources)
+    (folder / "msg.md").write_text(text)
+    return text
