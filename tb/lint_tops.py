@@ -8,7 +8,7 @@ from tb.harness import config_params, export_bench_top
 from tb.toolchain import SIM_BUILD
 
 #: bench module -> top name
-BENCHES = {"tb.test_topic": "topic"}
+BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec"}
 
 
 def main():
