@@ -18,7 +18,6 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 import pytest
 
 from gen.msg import MessageLibrary
-from gen.msg.model import Array, Primitive, Sequence
 from gen.msg.wire import decode_cdr
 from gen.msg.wire import WireError
 from gen.tops import message_plan

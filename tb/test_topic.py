@@ -17,6 +17,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 
 from tb.harness import bench_params, cocotb_bench
 from tb.models.topic import TopicScoreboard, random_lengths, tagged_message
+from tb.streams import bursty_pauses, random_pauses
 
 CLOCK_NS = 10
 
@@ -54,20 +55,6 @@ test_topic = cocotb_bench("topic", CONFIGS)
 PARAMS = bench_params() if "ROSGATE_PARAMS" in os.environ else {}
 ONE_PUBLISHER = PARAMS.get("pubs", 2) == 1
 LOSSY = PARAMS.get("qos", "keep_all") != "keep_all"
-
-
-def random_pauses(rng, probability):
-    """Pause generator: ``True`` (pause this cycle) with the given probability."""
-    while True:
-        yield rng.random() < probability
-
-
-def bursty_pauses(rng, probability, max_run=24):
-    """Pause generator with runs: long stalls and long bursts, for FIFO and drop paths."""
-    while True:
-        value = rng.random() < probability
-        for _ in range(rng.randint(1, max_run)):
-            yield value
 
 
 class PortWatch:

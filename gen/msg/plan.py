@@ -42,7 +42,7 @@ from amaranth.lib import data
 
 from hdl.params import ParameterError, check_choice
 
-from .model import PRIMITIVES, Array, Named, Primitive, Sequence
+from .model import PRIMITIVES, Named, Primitive, Sequence
 
 __all__ = ["FRAMINGS", "Leaf", "Variable", "Part", "Step", "StreamPlan", "stream_plan",
            "CDR_HEADER", "RECONROS_ID_OFFSET"]

@@ -232,7 +232,7 @@ class Deserializer(wiring.Component):
     def _run(self, m, s, i, window, avail, ended, fields, counts, length_prefix, step, take,
              fail, next_op):
         """One ``run`` step: static byte ranges land in fixed registers, checks per byte."""
-        W, B = self._width, self._width // 8
+        B = self._width // 8
         nsteps = -(-s.nbytes // B)
         with m.Switch(step):
             for j in range(nsteps):
