@@ -84,6 +84,10 @@ def measure_resources(log=print):
     return rows
 
 
+def pct(record, what):
+    return f"{100 * record[f'{what}_bytes_per_cycle'] / record['limit_bytes_per_cycle']:.2f} %"
+
+
 def markdown(results, resources):
     lines = ["# Message (de)serializer benchmark", "",
              f"Simulated cycles of the generated RTL (Verilator), time at {CLOCK_MHZ} MHz, full "
@@ -98,8 +102,9 @@ def markdown(results, resources):
         lines.append(
             f"| {r['label']} | {r['framing']} | {r['width']} | {r['wire_bytes']} | "
             f"{r['serialize_cycles']} ({r['serialize_ms']:.4f}) | "
-            f"{r['serialize_bytes_per_cycle']:.3f} | {r['deserialize_cycles']} "
-            f"({r['deserialize_ms']:.4f}) | {r['deserialize_bytes_per_cycle']:.3f} | "
+            f"{r['serialize_bytes_per_cycle']:.3f} ({pct(r, 'serialize')}) | "
+            f"{r['deserialize_cycles']} ({r['deserialize_ms']:.4f}) | "
+            f"{r['deserialize_bytes_per_cycle']:.3f} ({pct(r, 'deserialize')}) | "
             f"{r['payload_bytes_per_cycle']:.3f} | {r['limit_bytes_per_cycle']} |")
     lines += ["", f"ReconROS framing (one 64-bit beat per primitive, hmt.md §5.2): the spec "
               f"derives {RECONROS_IMAGE_BEATS} beats = "
