@@ -83,6 +83,8 @@ class MsgCodecTB:
         self.width = self.params["data_width"]
         self.bytes_per_beat = self.width // 8
         self.max_count = self.params["max_count"]
+        #: elements of a "big" sequence in the random tests (fewer on byte-wide streams)
+        self.big_elements = 1500 if self.bytes_per_beat >= 8 else 400
         folders = [os.path.join(os.environ.get("ROSGATE_ROOT", os.getcwd()), d)
                    for d in self.params["msg_dirs"]]
         self.plan = message_plan(self.typename, self.framing, folders)
@@ -260,13 +262,15 @@ def skip_unless(*framings):
 
 @cocotb.test()
 async def serializer_random_messages(dut):
-    """Random messages (small and up to ~1.5k elements) under random idle and backpressure
+    """Random messages (small, and big ones up to 1500 elements, 400 on 8-bit streams) under
+    random idle and backpressure
     equal rosbags' bytes (CDR, ROS 1) or the ReconROS model, tuser included."""
     tb = MsgCodecTB(dut)
     await tb.reset()
     tb.set_idle(0.3)
     tb.set_backpressure(0.35)
-    values = [tb.random_message(big=1500 if i % 4 == 3 else 0) for i in range(24)]
+    values = [tb.random_message(big=tb.big_elements if i % 4 == 3 else 0)
+              for i in range(24)]
     values[1] = tb.empty_fields(values[1])   # the message ends with an empty field
     await tb.run_serializer(values)
     assert not tb.errors["ser"], tb.errors
@@ -280,7 +284,8 @@ async def deserializer_random_messages(dut):
     await tb.reset()
     tb.set_idle(0.3)
     tb.set_backpressure(0.35)
-    values = [tb.random_message(big=1500 if i % 4 == 3 else 0) for i in range(24)]
+    values = [tb.random_message(big=tb.big_elements if i % 4 == 3 else 0)
+              for i in range(24)]
     values[1] = tb.empty_fields(values[1])
     await tb.run_deserializer(values)
 
