@@ -8,7 +8,8 @@ import cocotb
 from cocotb.triggers import RisingEdge, with_timeout
 
 from tb.models.messages import random_primitive
-from tb.test_msg_codec import MsgCodecTB, set_at
+from tb.models.msgstream import set_at
+from tb.test_msg_codec import MsgCodecTB
 
 
 class EdgeWatch:

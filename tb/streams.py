@@ -2,7 +2,6 @@
 and ``tuser`` flags (:class:`PacketSink`), and a plain valid/ready payload port
 (:class:`HandshakeSource`, :class:`HandshakeSink`)."""
 
-import random
 
 import cocotb
 from cocotb.triggers import RisingEdge
@@ -37,10 +36,23 @@ class Packet:
         return f"Packet({bytes(self.data)!r}, {len(self.beats)} beats)"
 
 
-class PacketSink:
+class _Pausable:
+    """A port driver whose idle or backpressure cycles come from a pause generator."""
+
+    pauses = None
+
+    def set_pause_generator(self, generator=None):
+        self.pauses = generator
+
+    def paused(self):
+        """Consume one cycle of the generator: whether to pause this cycle."""
+        return bool(self.pauses and next(self.pauses))
+
+
+class PacketSink(_Pausable):
     """Receives packets on an AXI4-Stream port ``<prefix>_t*`` with random backpressure."""
 
-    def __init__(self, dut, prefix, clock, *, seed=0):
+    def __init__(self, dut, prefix, clock):
         self.clock = clock
         self.tdata = getattr(dut, f"{prefix}_tdata")
         self.tkeep = getattr(dut, f"{prefix}_tkeep")
@@ -49,20 +61,15 @@ class PacketSink:
         self.tready = getattr(dut, f"{prefix}_tready")
         self.tuser = getattr(dut, f"{prefix}_tuser", None)
         self.bytes = len(self.tkeep)
-        self.pauses = None
-        self.rng = random.Random(seed)
         self.packets = []
         self.current = Packet()
         self.cycle = 0
         self.tready.value = 0
         cocotb.start_soon(self._run())
 
-    def set_pause_generator(self, generator=None):
-        self.pauses = generator
-
     async def _run(self):
         while True:
-            ready = not (self.pauses and next(self.pauses))
+            ready = not self.paused()
             self.tready.value = int(ready)
             await RisingEdge(self.clock)
             self.cycle += 1
@@ -78,7 +85,7 @@ class PacketSink:
                     self.current = Packet()
 
 
-class HandshakeSource:
+class HandshakeSource(_Pausable):
     """Drives ``<prefix>_payload/_valid`` and waits for ``_ready``, with random idle."""
 
     def __init__(self, dut, prefix, clock):
@@ -86,14 +93,10 @@ class HandshakeSource:
         self.payload = getattr(dut, f"{prefix}_payload")
         self.valid = getattr(dut, f"{prefix}_valid")
         self.ready = getattr(dut, f"{prefix}_ready")
-        self.pauses = None
         self.valid.value = 0
 
-    def set_pause_generator(self, generator=None):
-        self.pauses = generator
-
     async def send(self, value):
-        while self.pauses and next(self.pauses):
+        while self.paused():
             self.valid.value = 0
             await RisingEdge(self.clock)
         self.payload.value = value
@@ -105,7 +108,7 @@ class HandshakeSource:
         self.valid.value = 0
 
 
-class HandshakeSink:
+class HandshakeSink(_Pausable):
     """Accepts ``<prefix>_payload`` values with random backpressure; records each value."""
 
     def __init__(self, dut, prefix, clock):
@@ -113,17 +116,13 @@ class HandshakeSink:
         self.payload = getattr(dut, f"{prefix}_payload")
         self.valid = getattr(dut, f"{prefix}_valid")
         self.ready = getattr(dut, f"{prefix}_ready")
-        self.pauses = None
         self.values = []
         self.ready.value = 0
         cocotb.start_soon(self._run())
 
-    def set_pause_generator(self, generator=None):
-        self.pauses = generator
-
     async def _run(self):
         while True:
-            ready = not (self.pauses and next(self.pauses))
+            ready = not self.paused()
             self.ready.value = int(ready)
             await RisingEdge(self.clock)
             if ready and self.valid.value == 1:

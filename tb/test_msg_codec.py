@@ -10,6 +10,7 @@ backpressure.
 import logging
 import os
 import random
+import struct
 
 import cocotb
 from cocotb.clock import Clock
@@ -18,14 +19,13 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 import pytest
 
 from gen.msg import MessageLibrary
-from gen.msg.wire import decode_cdr
-from gen.msg.wire import WireError
+from gen.msg.wire import STRUCT_FORMAT, WireError, decode_cdr
 from gen.tops import message_plan
 from hdl.msg import DeserializerError, SerializerError, payload_port
 from tb.harness import bench_params, cocotb_bench
 from tb.models.messages import golden_store, random_primitive, random_value, to_rosbags
 from tb.models.msgstream import (expected_fields, fixed_part, leaf_values, reconros_beats,
-                                 value_at, variable_bytes)
+                                 set_at, value_at, variable_bytes)
 from tb.streams import HandshakeSink, HandshakeSource, PacketSink, bursty_pauses, random_pauses
 
 CLOCK_NS = 10
@@ -62,16 +62,6 @@ test_msg_codec = cocotb_bench("msg_codec", CONFIGS)
 
 PARAMS = bench_params() if "ROSGATE_PARAMS" in os.environ else {}
 PUBLISHER = 5
-
-
-def set_at(value, path, item):
-    *head, last = path.replace("[", ".").replace("]", "").split(".")
-    for name in head:
-        value = value[int(name)] if name.isdigit() else value[name]
-    if last.isdigit():
-        value[int(last)] = item
-    else:
-        value[last] = item
 
 
 class MsgCodecTB:
@@ -480,8 +470,5 @@ async def serializer_bad_payload_recovers(dut):
 
 
 def decode_elements(variable, raw):
-    import struct
-    fmt = {"bool": "B", "int8": "b", "uint8": "B", "int16": "h", "uint16": "H", "int32": "i",
-           "uint32": "I", "int64": "q", "uint64": "Q", "float32": "f", "float64": "d",
-           "byte": "B", "char": "B"}[variable.element]
+    fmt = STRUCT_FORMAT[variable.element]
     return list(struct.unpack(f"<{len(raw) // variable.element_bytes}{fmt}", raw))

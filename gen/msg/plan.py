@@ -88,6 +88,7 @@ class Variable:
     string: bool
     bound: int            #: declared bound (0: unbounded)
     count: Leaf           #: where the fixed part holds its element count
+    nul: bool = False     #: the count on the wire includes a terminating NUL (CDR strings)
 
     @property
     def port_name(self):
@@ -156,6 +157,11 @@ class StreamPlan:
     def origin(self):
         """Byte position alignment is counted from (after the CDR header)."""
         return 4 if self.framing == "cdr" else 0
+
+    @property
+    def publisher_offset(self):
+        """ReconROS: beat 0 carries the publisher id plus this."""
+        return RECONROS_ID_OFFSET
 
     @property
     def data_width(self):
@@ -270,7 +276,8 @@ class _Builder:
                                               False, type_.bound)
         leaf = Leaf(path, offset, 32, "count")
         self.leaves.append(leaf)
-        var = Variable(len(self.variables), path, element, nbytes, string, bound, leaf)
+        var = Variable(len(self.variables), path, element, nbytes, string, bound, leaf,
+                       nul=string and self.framing == "cdr")
         self.variables.append(var)
         return _Node("var", path, var=var)
 
@@ -295,7 +302,7 @@ class _Runs:
             self.parts = []
 
 
-def _cdr(nodes, variables):
+def _cdr(nodes):
     runs = _Runs()
     runs.part(Part("const", 4, value=CDR_HEADER, mask=CDR_HEADER_MASK, path="encapsulation"))
     state = {"align": 8, "offset": 0}  # position mod align is known statically
@@ -343,7 +350,7 @@ def _cdr(nodes, variables):
     return runs.steps
 
 
-def _ros1(nodes, variables):
+def _ros1(nodes):
     runs = _Runs()
     runs.part(Part("length", 4, path="message length"))
 
@@ -379,7 +386,7 @@ def reconros_order(nodes):
     return [n for n in items if n.kind != "empty"]
 
 
-def _reconros(nodes, variables, publisher):
+def _reconros(nodes, publisher):
     runs = _Runs()
     runs.part(Part("publisher", 8, leaf=publisher, path="beat 0"))
     runs.part(Part("publisher", 8, leaf=publisher, path="beat 1"))
@@ -433,8 +440,7 @@ def stream_plan(library, typename, framing="cdr"):
                                     **{name: m.shape for name, m in inner}})
     else:
         layout, nodes = builder.struct(builder.typename, "", 0)
-    steps = {"cdr": lambda: _cdr(nodes, builder.variables),
-             "ros1": lambda: _ros1(nodes, builder.variables),
-             "reconros": lambda: _reconros(nodes, builder.variables, publisher)}[framing]()
+    steps = {"cdr": lambda: _cdr(nodes), "ros1": lambda: _ros1(nodes),
+             "reconros": lambda: _reconros(nodes, publisher)}[framing]()
     return StreamPlan(builder.typename, framing, layout, builder.leaves, builder.variables,
                       steps)

@@ -13,12 +13,13 @@ import struct
 
 from .model import Array, Named, Primitive
 
-__all__ = ["WireError", "encode_cdr", "decode_cdr", "encode_ros1", "decode_ros1",
+__all__ = ["STRUCT_FORMAT", "WireError", "encode_cdr", "decode_cdr", "encode_ros1", "decode_ros1",
            "CDR_LE_HEADER"]
 
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
 
-_FORMAT = {"bool": "?", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
+#: ROS primitive -> Python ``struct`` format character (little endian when prefixed ``<``)
+STRUCT_FORMAT = {"bool": "?", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
            "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
            "float32": "f", "float64": "d"}
 
@@ -68,10 +69,10 @@ class _Codec:
             if type_.is_string:
                 self._string(out, type_, item, path)
             else:
-                size = struct.calcsize(_FORMAT[type_.name])
+                size = struct.calcsize(STRUCT_FORMAT[type_.name])
                 self._pad(out, size)
                 try:
-                    out.extend(struct.pack("<" + _FORMAT[type_.name], item))
+                    out.extend(struct.pack("<" + STRUCT_FORMAT[type_.name], item))
                 except struct.error as exc:
                     raise WireError(f"{path}: {item!r} does not fit {type_.name} ({exc})") \
                         from None
@@ -155,7 +156,7 @@ class _Codec:
                         raise WireError(f"{path}: string without its NUL terminator")
                     raw = raw[:-1]
                 return raw.decode("utf-8")
-            fmt = _FORMAT[type_.name]
+            fmt = STRUCT_FORMAT[type_.name]
             size = struct.calcsize(fmt)
             self._skip_pad(size, path)
             return struct.unpack("<" + fmt, self._take(size, path))[0]

@@ -10,6 +10,7 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import ByteUnpacker, byte_mask
 from .serializer import ErrorSignature, check_plan_width, payload_port
+from .steps import RuntimeStep, pad_bytes, payload_bytes
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -97,16 +98,15 @@ class Deserializer(wiring.Component):
         shown = Signal(plan.layout.size)
         m.d.comb += shown.eq(fields)
         for v in plan.variables:
-            if v.string and plan.framing == "cdr":
+            if v.nul:
                 leaf = v.count
                 m.d.comb += shown[leaf.offset:leaf.offset + 32].eq(
                     fields[leaf.offset:leaf.offset + 32] - 1)
         if reconros:
-            m.d.comb += shown[:32].eq(fields[:32] - 1000)
+            m.d.comb += shown[:32].eq(fields[:32] - plan.publisher_offset)
         m.d.comb += self.fields.payload.eq(shown)
         count_width = 64 if reconros else 32
         counts = [Signal(count_width, name=f"count{v.index}") for v in plan.variables]
-        nul = [int(v.string and plan.framing == "cdr") for v in plan.variables]
         ports = [getattr(self, payload_port(v, "m")) for v in plan.variables]
         length_prefix = Signal(32)
 
@@ -152,26 +152,15 @@ class Deserializer(wiring.Component):
                                   step, take, fail, next_op)
                         continue
                     if s.kind == "pad":
-                        length = (Const(plan.origin, 32) - pos)[:32] & (s.align - 1)
-                        if s.var is not None:
-                            length = Mux(counts[s.var] == 0, 0, length)
+                        length = pad_bytes(plan, s, pos, counts)
                     else:
                         v = plan.variables[s.var]
-                        shift = v.element_bytes.bit_length() - 1
-                        length = ((counts[s.var] - nul[s.var]) << shift)[:count_width + 3]
-                    left = Signal(count_width + 3, name=f"left{i}")
-                    m.d.comb += left.eq(Mux(step != 0, remaining, length))
-                    k = Signal(range(B + 1), name=f"k{i}")
-                    m.d.comb += k.eq(Mux(left >= B, B, left))
-                    final = left <= B
+                        length = payload_bytes(v, counts[s.var] - int(v.nul))[:count_width + 3]
+                    walk = RuntimeStep(m, i, B, step=step, remaining=remaining, length=length,
+                                       next_step=next_op)
+                    k, final, advance = walk.k, walk.final, walk.advance
                     have = avail >= k
                     short = ~have & ended
-
-                    def advance():
-                        with m.If(final):
-                            next_op(i)
-                        with m.Else():
-                            m.d.sync += [remaining.eq(left - B), step.eq(1)]
 
                     if s.kind == "pad":
                         with m.If(have):
@@ -187,11 +176,11 @@ class Deserializer(wiring.Component):
                     v = plan.variables[s.var]
                     bound = v.bound or self._max_count
                     port = ports[s.var]
-                    element_count = counts[s.var] - nul[s.var]
-                    bad_count = (element_count > bound) if not nul[s.var] else \
+                    element_count = counts[s.var] - int(v.nul)
+                    bad_count = (element_count > bound) if not v.nul else \
                         ((counts[s.var] == 0) | (element_count > bound))
                     with m.If((step == 0) & bad_count):
-                        if nul[s.var]:
+                        if v.nul:
                             fail(Mux(counts[s.var] == 0, DeserializerError.FORMAT,
                                      DeserializerError.LENGTH))
                         else:

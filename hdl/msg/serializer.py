@@ -9,6 +9,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, byte_mask, keep_count
+from .steps import RuntimeStep, pad_bytes, payload_bytes
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
 
@@ -56,11 +57,6 @@ def check_plan_width(plan, data_width):
     if plan.data_width is not None and data_width != plan.data_width:
         raise ParameterError("data_width", data_width,
                              f"{plan.data_width} for framing {plan.framing!r}")
-
-
-def field_bits(plan, fields):
-    """The flat bits of a fixed-part view."""
-    return fields.as_value() if hasattr(fields, "as_value") else fields
 
 
 class Serializer(wiring.Component):
@@ -126,12 +122,11 @@ class Serializer(wiring.Component):
         if self._reconros:
             m.d.comb += self.m_axis.tuser.eq(~packer.first & ~packer.m_axis.tlast)
 
-        fv = field_bits(plan, self.fields.payload)
+        fv = self.fields.payload.as_value()
         chunk = packer.chunk
         ports = [getattr(self, payload_port(v, "s")) for v in plan.variables]
         counts = [fv[v.count.offset:v.count.offset + 32] for v in plan.variables]
-        nul = [int(v.string and plan.framing == "cdr") for v in plan.variables]
-        lengths = [c << (v.element_bytes.bit_length() - 1) for c, v in zip(counts, plan.variables)]
+        lengths = [payload_bytes(v, c) for c, v in zip(counts, plan.variables)]
 
         op = Signal(range(max(len(steps), 2)))
         max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [1])
@@ -180,12 +175,13 @@ class Serializer(wiring.Component):
                 value = fv[part.leaf.offset:part.leaf.offset + part.leaf.width]
                 return _extend(value.as_signed() if part.leaf.signed else value, 64)
             if part.kind in ("count", "capacity"):
-                count = counts[part.var] + (nul[part.var] if part.kind == "count" else 0)
+                count = counts[part.var] + int(part.kind == "count" and
+                                               plan.variables[part.var].nul)
                 return _extend(count[:32], 8 * part.nbytes)
             if part.kind == "length":
                 return body
             if part.kind == "publisher":
-                return Cat((fv[:32] + 1000)[:32], Const(0, 32))
+                return Cat((fv[:32] + plan.publisher_offset)[:32], Const(0, 32))
             if part.kind == "trailer":
                 if run_bits:
                     return Cat(*run_bits)[-64:]
@@ -217,24 +213,12 @@ class Serializer(wiring.Component):
                                             else:
                                                 m.d.sync += step.eq(j + 1)
                             continue
-                        if s.kind == "pad":
-                            length = (Const(plan.origin, 32) - pos)[:32] & (s.align - 1)
-                            if s.var is not None:
-                                length = Mux(counts[s.var] == 0, 0, length)
-                        else:
-                            length = lengths[s.var]
-                        left = Signal(32, name=f"left{i}")
-                        m.d.comb += left.eq(Mux(step != 0, remaining, length))
-                        k = Signal(range(B + 1), name=f"k{i}")
-                        m.d.comb += k.eq(Mux(left >= B, B, left))
-                        final = left <= B
+                        length = pad_bytes(plan, s, pos, counts) if s.kind == "pad" \
+                            else lengths[s.var]
+                        walk = RuntimeStep(m, i, B, step=step, remaining=remaining,
+                                           length=length, next_step=next_op)
+                        left, k, final, advance = walk.left, walk.k, walk.final, walk.advance
                         m.d.comb += chunk.len.eq(k)
-
-                        def advance():
-                            with m.If(final):
-                                next_op(i)
-                            with m.Else():
-                                m.d.sync += [remaining.eq(left - B), step.eq(1)]
 
                         if s.kind == "pad":
                             m.d.comb += [chunk.valid.eq(1), chunk.last.eq(last_op & final)]

@@ -11,28 +11,37 @@ import struct
 
 from gen.msg.model import PRIMITIVES, Array, Named, Primitive
 from gen.msg.plan import RECONROS_ID_OFFSET
+from gen.msg.wire import STRUCT_FORMAT
 
 __all__ = ["fixed_part", "variable_bytes", "leaf_values", "expected_fields", "reconros_beats",
-           "value_at", "reconros_fields", "plan_encode"]
+           "value_at", "set_at", "reconros_fields", "plan_encode"]
 
-_FORMAT = {"bool": "B", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
-           "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
-           "float32": "f", "float64": "d"}
+
+def _keys(path):
+    """``"pair[1].b"`` -> ``["pair", 1, "b"]``."""
+    return [name or int(index) for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", path)]
 
 
 def value_at(value, path):
     """``value_at(v, "pair[1].b")`` -> ``v["pair"][1]["b"]``."""
-    for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", path):
-        value = value[name] if name else value[int(index)]
+    for key in _keys(path):
+        value = value[key]
     return value
+
+
+def set_at(value, path, item):
+    """Set the member of ``value`` at ``path`` (as :func:`value_at` reads it) to ``item``."""
+    *head, last = _keys(path)
+    target = value
+    for key in head:
+        target = target[key]
+    target[last] = item
 
 
 def _element_bytes(element, items):
     if isinstance(items, (bytes, bytearray)):
         return bytes(items)
-    fmt = _FORMAT[element]
-    return b"".join(struct.pack("<" + fmt, int(x) if fmt in "B" and element == "bool" else x)
-                    for x in items)
+    return b"".join(struct.pack("<" + STRUCT_FORMAT[element], x) for x in items)
 
 
 def _raw(value):
@@ -168,8 +177,7 @@ def _part_bytes(plan, part, bits, counts, body, publisher, out):
             raw -= 1 << leaf.width
         return (raw % (1 << 8 * n)).to_bytes(n, "little")
     if part.kind == "count":
-        nul = int(plan.variables[part.var].string and plan.framing == "cdr")
-        return (counts[part.var] + nul).to_bytes(n, "little")
+        return (counts[part.var] + plan.variables[part.var].nul).to_bytes(n, "little")
     if part.kind == "capacity":
         return counts[part.var].to_bytes(n, "little")
     if part.kind == "length":

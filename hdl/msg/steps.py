@@ -1,0 +1,47 @@
+"""Step arithmetic shared by the serializer and the deserializer: how many bytes a runtime
+step (``pad``, ``payload``) moves, and how a step is cut into chunks of at most W/8 bytes."""
+
+from amaranth.hdl import Const, Mux, Signal
+
+__all__ = ["payload_bytes", "pad_bytes", "RuntimeStep"]
+
+
+def payload_bytes(variable, element_count):
+    """Bytes of a variable-length field of ``element_count`` elements (NUL not included)."""
+    return element_count << (variable.element_bytes.bit_length() - 1)
+
+
+def pad_bytes(plan, step, pos, counts):
+    """Zero bytes of a ``pad`` step at byte position ``pos`` of the message: up to the step's
+    alignment counted from ``plan.origin``; none before the elements of an empty sequence."""
+    length = (Const(plan.origin, 32) - pos)[:32] & (step.align - 1)
+    if step.var is not None:
+        length = Mux(counts[step.var] == 0, 0, length)
+    return length
+
+
+class RuntimeStep:
+    """One runtime step cut into chunks: ``left`` bytes to go (``length`` in its first cycle,
+    then the ``remaining`` register), ``k`` bytes this cycle, ``final`` on the last chunk.
+
+    ``advance()`` (inside the condition that the chunk moved) goes to the next step through
+    ``next_step`` or keeps counting.
+    """
+
+    def __init__(self, m, index, bytes_per_beat, *, step, remaining, length, next_step):
+        B = bytes_per_beat
+        self._m, self._B = m, B
+        self._step, self._remaining, self._next = step, remaining, next_step
+        self.index = index
+        self.left = Signal(len(remaining), name=f"left{index}")
+        self.k = Signal(range(B + 1), name=f"k{index}")
+        m.d.comb += [self.left.eq(Mux(step != 0, remaining, length)),
+                     self.k.eq(Mux(self.left >= B, B, self.left))]
+        self.final = self.left <= B
+
+    def advance(self):
+        m = self._m
+        with m.If(self.final):
+            self._next(self.index)
+        with m.Else():
+            m.d.sync += [self._remaining.eq(self.left - self._B), self._step.eq(1)]
