@@ -35,10 +35,35 @@ def build_msg_codec(**params):
     return MessageCodec(plan, params.pop("data_width", 64), **params)
 
 
+#: hardware-thread kinds of the ``reconos`` top -> thread class
+def _thread_classes():
+    from hdl.reconos import CallSequenceThread, CopyThread, EchoThread
+    return {"echo": EchoThread, "copy": CopyThread, "calls": CallSequenceThread}
+
+
+def build_reconos(**params):
+    """A :class:`hdl.reconos.ReconosSystem`: ``arch``, ``threads`` (a list of ``{"kind":
+    "echo"|"copy"|"calls", ...thread parameters}``), ``tlb_entries``, ``osif_depth``,
+    ``memif_depth``."""
+    from hdl.reconos import ReconosSystem
+    arch = params.pop("arch", "r64")
+    classes = _thread_classes()
+    threads = []
+    for i, spec in enumerate(params.pop("threads")):
+        spec = dict(spec)
+        kind = spec.pop("kind")
+        if kind not in classes:
+            raise ValueError(f"threads[{i}]: unknown thread kind {kind!r}; known: "
+                             f"{', '.join(sorted(classes))}")
+        threads.append(classes[kind](arch, **spec))
+    return ReconosSystem(arch, threads, **params)
+
+
 #: name -> builder
 TOPS = {
     "topic": build_topic,
     "msg_codec": build_msg_codec,
+    "reconos": build_reconos,
 }
 
 

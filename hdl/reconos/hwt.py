@@ -1,0 +1,602 @@
+"""The hardware-thread API: slot ports, the OSIF call engine with per-call FSM helpers, and
+the MEMIF read/write engine (spec reconos.md §2, §3, §5.2).
+
+A thread is a :class:`HardwareThread` (a component with the slot's ports). In its
+``elaborate`` it calls :meth:`HardwareThread.os_and_memory` and writes an FSM whose states
+call OS functions by name; the helpers emit the exact ReconOS word sequence::
+
+    os, mem = self.os_and_memory(m)
+    with m.FSM():
+        with m.State("INIT"):
+            os.thread_init(then="TAKE")
+        with m.State("TAKE"):
+            os.ros_take(H_SUB, H_MSG, ptr=msg_ptr, then="PUBLISH")
+        with m.State("PUBLISH"):
+            os.ros_publish(H_PUB, H_MSG, then="TAKE")
+
+A call state drives the engine until the call's replies are in; then the named replies are
+latched into the given signals and the FSM moves to ``then``. While a call waits for a reply
+and ``HWT_Signal`` is high, the engine writes THREAD_EXIT and stops (the delegate then resets
+the slot), as ReconOS' HLS library does.
+"""
+
+import enum
+
+from amaranth.hdl import Const, Module, Mux, Signal, Value
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int
+from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
+from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
+                       arch as get_arch)
+
+__all__ = ["ThreadSignature", "HardwareThread", "OsifEngine", "OsifMode", "OsifCalls",
+           "MemifEngine", "MemCalls", "MAX_ARGS", "MAX_REPLIES"]
+
+MAX_ARGS = 4
+MAX_REPLIES = 2
+
+
+def ThreadSignature(arch):
+    """The slot ports of a hardware thread (entity ``rt_<name>``), seen from the thread.
+
+    Members
+    -------
+    osif_sw2hw : Out(FifoReadSignature(W*8))
+        Words from the delegate (``OSIF_Sw2Hw_Data/_Empty/_RE``).
+    osif_hw2sw : Out(FifoWriteSignature(W*8))
+        Words to the delegate (``OSIF_Hw2Sw_Data/_Full/_WE``).
+    memif_hwt2mem : Out(FifoWriteSignature(W*8))
+        MEMIF requests and write data.
+    memif_mem2hwt : Out(FifoReadSignature(W*8))
+        MEMIF read data.
+    hwt_signal : In(1)
+        ``HWT_Signal``: the software asks the thread to stop at its next OS call.
+    """
+    w = get_arch(arch).word_bits
+    return wiring.Signature({
+        "osif_sw2hw": Out(FifoReadSignature(w)),
+        "osif_hw2sw": Out(FifoWriteSignature(w)),
+        "memif_hwt2mem": Out(FifoWriteSignature(w)),
+        "memif_mem2hwt": Out(FifoReadSignature(w)),
+        "hwt_signal": In(1),
+    })
+
+
+class OsifMode(enum.IntEnum):
+    CALL = 0     # write the command and arguments, then block for the replies
+    POLL = 1     # take one reply word if there is one (interruptible take: check)
+    CANCEL = 2   # take the reply if there; else write 0x904 and block (interruptible cancel)
+
+
+class OsifEngine(wiring.Component):
+    """Executes one OS call at a time on the OSIF FIFOs.
+
+    Members
+    -------
+    osif_sw2hw, osif_hw2sw, hwt_signal :
+        As in :func:`ThreadSignature`.
+    start : In(1)
+        Begin a call with the request members below (sampled while ``busy`` is low).
+    mode : In(OsifMode)
+    has_cmd : In(1)
+        Write ``cmd`` first (THREAD_INIT writes nothing).
+    cmd : In(W*8)
+    args : In(W*8).array(4)
+    nargs : In(range(5)), nreplies : In(range(3))
+    busy : Out(1)
+    done : Out(1)
+        One-cycle pulse: the call is complete; ``replies`` and ``got`` are valid from now
+        until the next call.
+    replies : Out(W*8).array(2)
+    got : Out(1)
+        POLL: a reply was taken. CANCEL: the take delivered a message (reply not all ones).
+    exited : Out(1)
+        The thread wrote THREAD_EXIT (explicitly or because of ``hwt_signal``); the engine
+        does nothing more until the slot is reset.
+    """
+
+    def __init__(self, arch):
+        self._arch = a = get_arch(arch)
+        w = a.word_bits
+        slot = ThreadSignature(a).members
+        super().__init__({
+            "osif_sw2hw": slot["osif_sw2hw"], "osif_hw2sw": slot["osif_hw2sw"],
+            "hwt_signal": slot["hwt_signal"],
+            "start": In(1), "mode": In(2), "has_cmd": In(1), "cmd": In(w),
+            "args": In(w).array(MAX_ARGS), "nargs": In(range(MAX_ARGS + 1)),
+            "nreplies": In(range(MAX_REPLIES + 1)),
+            "busy": Out(1), "done": Out(1), "replies": Out(w).array(MAX_REPLIES),
+            "got": Out(1), "exited": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        w = self._arch.word_bits
+        buf = [Signal(w, name=f"word{k}") for k in range(MAX_ARGS + 1)]  # cmd, args...
+        k = Signal(range(MAX_ARGS + 2))
+        end = Signal(range(MAX_ARGS + 2))
+        nrep = Signal(range(MAX_REPLIES + 1))
+        j = Signal(range(MAX_REPLIES + 1))
+        mode = Signal(2)
+        cancel_read = Signal()
+        rx, tx = self.osif_sw2hw, self.osif_hw2sw
+
+        current = Signal(w)
+        for i, word in enumerate(buf):
+            with m.If(k == i):
+                m.d.comb += current.eq(word)
+        m.d.comb += tx.data.eq(current)
+
+        with m.FSM() as fsm:
+            with m.State("IDLE"):
+                with m.If(self.start):
+                    m.d.sync += [buf[0].eq(self.cmd), k.eq(Mux(self.has_cmd, 0, 1)),
+                                 end.eq(self.nargs + 1), nrep.eq(self.nreplies), j.eq(0),
+                                 mode.eq(self.mode), cancel_read.eq(0), self.got.eq(0)]
+                    m.d.sync += [buf[1 + i].eq(self.args[i]) for i in range(MAX_ARGS)]
+                    with m.If(self.mode != OsifMode.CALL):
+                        m.next = "POLL"
+                    with m.Elif(self.has_cmd | (self.nargs != 0)):
+                        m.next = "WRITE"
+                    with m.Elif(self.nreplies != 0):
+                        m.next = "READ"
+                    with m.Else():
+                        m.next = "DONE"
+            with m.State("WRITE"):
+                m.d.comb += tx.we.eq(1)
+                with m.If(~tx.full):
+                    m.d.sync += k.eq(k + 1)
+                    with m.If(k + 1 == end):
+                        with m.If((buf[0] == Command.THREAD_EXIT) & (end == 1)):
+                            m.next = "EXITED"
+                        with m.Elif(nrep != 0):
+                            m.next = "READ"
+                        with m.Else():
+                            m.next = "DONE"
+            with m.State("READ"):
+                m.d.comb += rx.re.eq(1)
+                with m.If(~rx.empty):
+                    for i in range(MAX_REPLIES):
+                        with m.If(j == i):
+                            m.d.sync += self.replies[i].eq(rx.data)
+                    m.d.sync += j.eq(j + 1)
+                    with m.If(cancel_read):
+                        m.d.sync += self.got.eq(rx.data != INTERRUPTED_REPLY(w))
+                    with m.If(j + 1 == nrep):
+                        m.next = "DONE"
+                with m.Elif(self.hwt_signal):
+                    m.d.sync += [buf[0].eq(Command.THREAD_EXIT), k.eq(0), end.eq(1)]
+                    m.next = "SIGNAL_EXIT"
+            with m.State("POLL"):
+                m.d.comb += rx.re.eq(1)
+                with m.If(~rx.empty):
+                    m.d.sync += [self.replies[0].eq(rx.data), self.got.eq(1)]
+                    m.next = "DONE"
+                with m.Elif(mode == OsifMode.CANCEL):
+                    m.d.sync += [buf[0].eq(Command.ROS_TAKE_INTERRUPTABLE_CANCEL), k.eq(0),
+                                 end.eq(1), nrep.eq(1), cancel_read.eq(1)]
+                    m.next = "WRITE"
+                with m.Else():
+                    m.next = "DONE"
+            with m.State("SIGNAL_EXIT"):
+                m.d.comb += tx.we.eq(1)
+                with m.If(~tx.full):
+                    m.next = "EXITED"
+            with m.State("DONE"):
+                m.d.comb += self.done.eq(1)
+                m.next = "IDLE"
+            with m.State("EXITED"):
+                m.d.comb += self.exited.eq(1)
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        return m
+
+
+class OsifCalls:
+    """Per-call helpers for a thread's FSM, bound to an :class:`OsifEngine`.
+
+    Every entry of :data:`~hdl.reconos.protocol.CALLS` is a method of the same name taking
+    the call's arguments positionally (ints or Amaranth values), its replies as keyword
+    arguments naming the signals that receive them (omitted replies are dropped), and
+    ``then``, the next state. Use a method inside ``with m.State(...)`` only.
+
+    Extra methods: :meth:`ros_take_interruptable_check` (non-blocking check of an
+    interruptible take: ``ptr=``, ``got=``) and :meth:`ros_take_interruptable_cancel`
+    (``ptr=``, ``got=``: whether a message was delivered after all).
+    """
+
+    def __init__(self, m, engine):
+        self._m = m
+        self._engine = engine
+        self._w = engine._arch.word_bits
+
+    def _drive(self, mode, command, args, nreplies):
+        e = self._engine
+        if len(args) > MAX_ARGS:
+            raise ValueError(f"an OS call takes at most {MAX_ARGS} arguments, not {len(args)}")
+        self._m.d.comb += [
+            e.start.eq(~e.busy), e.mode.eq(mode),
+            e.has_cmd.eq(command is not None), e.cmd.eq(0 if command is None else int(command)),
+            e.nargs.eq(len(args)), e.nreplies.eq(nreplies),
+        ]
+        for i, arg in enumerate(args):
+            self._m.d.comb += e.args[i].eq(arg)
+
+    def _finish(self, outputs, then):
+        e, m = self._engine, self._m
+        with m.If(e.done):
+            for target, value in outputs:
+                m.d.sync += target.eq(value)
+            if then is not None:
+                m.next = then
+
+    def _call(self, name, args, replies, then):
+        c = CALLS[name]
+        if len(args) != len(c.args):
+            raise TypeError(f"{name}() takes the arguments ({', '.join(c.args)}), "
+                            f"not {len(args)} values")
+        unknown = set(replies) - set(c.replies)
+        if unknown:
+            raise TypeError(f"{name}() has no reply named {sorted(unknown)[0]!r}; its replies "
+                            f"are ({', '.join(c.replies)})")
+        if name == "thread_exit":
+            self._drive(OsifMode.CALL, c.command, (), 0)
+            return
+        self._drive(OsifMode.CALL, c.command, args, len(c.replies) if c.blocking else 0)
+        self._finish([(target, self._engine.replies[c.replies.index(r)])
+                      for r, target in replies.items()], then)
+
+    def ros_take_interruptable_check(self, *, ptr=None, got=None, then=None):
+        self._drive(OsifMode.POLL, None, (), 1)
+        self._finish([(t, v) for t, v in ((ptr, self._engine.replies[0]),
+                                          (got, self._engine.got)) if t is not None], then)
+
+    def ros_take_interruptable_cancel(self, *, ptr=None, got=None, then=None):
+        self._drive(OsifMode.CANCEL, None, (), 1)
+        self._finish([(t, v) for t, v in ((ptr, self._engine.replies[0]),
+                                          (got, self._engine.got)) if t is not None], then)
+
+
+def _make_method(name):
+    c = CALLS[name]
+
+    def method(self, *args, then=None, **replies):
+        self._call(name, args, replies, then)
+    method.__name__ = name
+    cmd = "(no command word)" if c.command is None else f"0x{int(c.command):03X}"
+    method.__doc__ = (f"{c.command.name if c.command else 'THREAD_INIT'} {cmd}: arguments "
+                      f"({', '.join(c.args)}), replies ({', '.join(c.replies)}).")
+    return method
+
+
+for _name in CALLS:
+    if _name != "ros_take_interruptable_cancel":
+        setattr(OsifCalls, _name, _make_method(_name))
+
+
+def memif_command_layout(arch):
+    w = get_arch(arch).word_bits
+    return data.StructLayout({"addr": w, "length": w})
+
+
+class MemifEngine(wiring.Component):
+    """MEM_READ/MEM_WRITE as streams: splits accesses into ReconOS requests (at most 256 B,
+    never crossing a 256-B boundary, spec §5.2) and moves data at one word per cycle.
+
+    Addresses and lengths are in bytes and must be multiples of W (their low bits are
+    ignored, as in ReconOS' VHDL library). A read and a write may run at the same time (a
+    streaming copy); their requests share the hwt2mem FIFO without deadlock because
+
+    * read requests are issued only while the mem2hwt FIFO has room for all their data, and
+    * a write request is issued only when its whole chunk is buffered (a 2-chunk buffer
+      decouples the user's stream from the FIFO).
+
+    Parameters
+    ----------
+    arch : str
+    fence : bool
+        After the last chunk of a write, read back one word of it and pulse ``write_done``
+        only when that word arrives. The memory controller orders reads after completed
+        writes, so ``write_done`` then means "in memory" and an OS call made after it (a
+        publish) cannot overtake the data. Default ``True``.
+
+    Members
+    -------
+    memif_hwt2mem, memif_mem2hwt :
+        As in :func:`ThreadSignature`.
+    read_cmd : In(stream.Signature(memif_command_layout))
+        ``addr`` (virtual) and ``length`` of a read; taken when the previous read's data has
+        all been delivered.
+    read_data : Out(stream.Signature(StructLayout{data, last}))
+        ``length/W`` words; ``last`` on the final one.
+    write_cmd : In(stream.Signature(memif_command_layout))
+    write_data : In(stream.Signature(W*8))
+        ``length/W`` words to write.
+    write_done : Out(1)
+        One-cycle pulse when a write command has completed (see ``fence``).
+    """
+
+    def __init__(self, arch, *, fence=True, mem2hwt_depth=MEMIF_FIFO_DEPTH):
+        self._arch = a = get_arch(arch)
+        self._fence = bool(fence)
+        self._credits = check_int("mem2hwt_depth", mem2hwt_depth, a.chunk_words)
+        w = a.word_bits
+        super().__init__({
+            "memif_hwt2mem": Out(FifoWriteSignature(w)),
+            "memif_mem2hwt": Out(FifoReadSignature(w)),
+            "read_cmd": In(stream.Signature(memif_command_layout(a))),
+            "read_data": Out(stream.Signature(data.StructLayout({"data": w, "last": 1}))),
+            "write_cmd": In(stream.Signature(memif_command_layout(a))),
+            "write_data": In(stream.Signature(w)),
+            "write_done": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        a = self._arch
+        w, wb, lb = a.word_bits, a.word_bytes, a.length_bits
+        sh = wb.bit_length() - 1
+        cw = a.chunk_words
+        out, inp = self.memif_hwt2mem, self.memif_mem2hwt
+
+        def chunk_len(addr, remaining):
+            room = MEMIF_CHUNK - addr[:8]
+            return Mux(remaining < room, remaining, room)
+
+        # ---- credits: words requested but not yet popped from mem2hwt ----
+        outstanding = Signal(range(self._credits + 1))
+        add = Signal(range(self._credits + 1))
+        pop = Signal()
+        m.d.sync += outstanding.eq(outstanding + add - pop)
+
+        # per read request: is its data for the user (0) or a fence word (1), and how many
+        m.submodules.kinds = kinds = SyncFIFO(width=1 + 8, depth=8)
+
+        # ---- hwt2mem owner: read issuer (0) or write issuer (1) ----
+        r_words = [Signal(w, name="r_cmd"), Signal(w, name="r_addr")]
+        w_cmd = Signal(w)
+        w_addr = Signal(w)
+
+        # ---- read issuer ----
+        r_addr = Signal(w)
+        r_rem = Signal(w)
+        r_total = Signal(w)      # words of the user read not yet delivered
+        r_len = Signal(w)
+        m.d.comb += r_len.eq(chunk_len(r_addr, r_rem))
+        r_want = Signal()
+        fence_want = Signal()
+        fence_addr = Signal(w)
+        m.d.comb += r_want.eq(r_rem != 0)
+
+        with m.If((r_total == 0) & (r_rem == 0)):
+            m.d.comb += self.read_cmd.ready.eq(1)
+            with m.If(self.read_cmd.valid):
+                aligned = Signal(w)
+                m.d.comb += aligned.eq(self.read_cmd.payload.length >> sh << sh)
+                m.d.sync += [r_addr.eq(self.read_cmd.payload.addr >> sh << sh),
+                             r_rem.eq(aligned), r_total.eq(aligned >> sh)]
+
+        # ---- write buffer and issuer ----
+        m.submodules.wbuf = wbuf = SyncFIFO(width=w, depth=2 * cw)
+        w_rem_in = Signal(w)     # words the user still has to supply for the command
+        w_addr_cur = Signal(w)
+        w_rem = Signal(w)        # bytes not yet issued
+        w_len = Signal(w)
+        m.d.comb += w_len.eq(chunk_len(w_addr_cur, w_rem))
+        w_ready = Signal()
+        m.d.comb += w_ready.eq((w_rem != 0) & (wbuf.r_level >= (w_len >> sh)))
+        w_busy = Signal()
+        with m.If(~w_busy):
+            m.d.comb += self.write_cmd.ready.eq(1)
+            with m.If(self.write_cmd.valid):
+                aligned = Signal(w)
+                m.d.comb += aligned.eq(self.write_cmd.payload.length >> sh << sh)
+                with m.If(aligned != 0):
+                    m.d.sync += [w_busy.eq(1), w_addr_cur.eq(self.write_cmd.payload.addr >> sh << sh),
+                                 w_rem.eq(aligned), w_rem_in.eq(aligned >> sh)]
+                with m.Else():
+                    m.d.comb += self.write_done.eq(1)
+        m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
+                     wbuf.w_en.eq(self.write_data.valid & (w_rem_in != 0)),
+                     self.write_data.ready.eq(wbuf.w_rdy & (w_rem_in != 0))]
+        with m.If(self.write_data.valid & self.write_data.ready):
+            m.d.sync += w_rem_in.eq(w_rem_in - 1)
+
+        # ---- the request sequencer (owns hwt2mem) ----
+        seq_words = Signal(w)    # data words left of the current write chunk
+        fence_pending = Signal()
+        fence_wait = Signal()
+        with m.FSM():
+            with m.State("IDLE"):
+                r_ok = r_want & kinds.w_rdy & (outstanding + (r_len >> sh) <= self._credits)
+                f_ok = fence_want & kinds.w_rdy & (outstanding + 1 <= self._credits)
+                with m.If(w_ready):
+                    m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
+                                 seq_words.eq(w_len >> sh),
+                                 w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len)]
+                    if self._fence:
+                        with m.If(w_rem == w_len):
+                            m.d.sync += [fence_want.eq(1), fence_addr.eq(w_addr_cur)]
+                    m.next = "W_CMD"
+                with m.Elif(f_ok):
+                    m.d.comb += [add.eq(1), kinds.w_en.eq(1), kinds.w_data.eq(1 | (1 << 1))]
+                    m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | wb),
+                                 r_words[1].eq(fence_addr), fence_want.eq(0)]
+                    m.next = "R_CMD"
+                with m.Elif(r_ok):
+                    m.d.comb += [add.eq(r_len >> sh), kinds.w_en.eq(1),
+                                 kinds.w_data.eq(0 | ((r_len >> sh) << 1))]
+                    m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | r_len),
+                                 r_words[1].eq(r_addr),
+                                 r_addr.eq(r_addr + r_len), r_rem.eq(r_rem - r_len)]
+                    m.next = "R_CMD"
+            with m.State("R_CMD"):
+                m.d.comb += [out.we.eq(1), out.data.eq(r_words[0])]
+                with m.If(~out.full):
+                    m.next = "R_ADDR"
+            with m.State("R_ADDR"):
+                m.d.comb += [out.we.eq(1), out.data.eq(r_words[1])]
+                with m.If(~out.full):
+                    m.next = "IDLE"
+            with m.State("W_CMD"):
+                m.d.comb += [out.we.eq(1), out.data.eq(w_cmd)]
+                with m.If(~out.full):
+                    m.next = "W_ADDR"
+            with m.State("W_ADDR"):
+                m.d.comb += [out.we.eq(1), out.data.eq(w_addr)]
+                with m.If(~out.full):
+                    m.next = "W_DATA"
+            with m.State("W_DATA"):
+                m.d.comb += [out.we.eq(wbuf.r_rdy), out.data.eq(wbuf.r_data),
+                             wbuf.r_en.eq(~out.full)]
+                with m.If(wbuf.r_rdy & ~out.full):
+                    m.d.sync += seq_words.eq(seq_words - 1)
+                    with m.If(seq_words == 1):
+                        if not self._fence:
+                            with m.If(w_rem == 0):
+                                m.d.comb += self.write_done.eq(1)
+                                m.d.sync += w_busy.eq(0)
+                        m.next = "IDLE"
+
+        # ---- read data routing ----
+        kind_fence = kinds.r_data[0]
+        kind_words = kinds.r_data[1:]
+        got = Signal(8)
+        with m.If(kinds.r_rdy):
+            with m.If(kind_fence):
+                m.d.comb += [inp.re.eq(1), pop.eq(~inp.empty)]
+                with m.If(~inp.empty):
+                    m.d.comb += [kinds.r_en.eq(1), self.write_done.eq(1)]
+                    m.d.sync += w_busy.eq(0)
+            with m.Else():
+                m.d.comb += [
+                    self.read_data.valid.eq(~inp.empty),
+                    self.read_data.payload.data.eq(inp.data),
+                    self.read_data.payload.last.eq(r_total == 1),
+                    inp.re.eq(self.read_data.ready),
+                    pop.eq(~inp.empty & self.read_data.ready),
+                ]
+                with m.If(~inp.empty & self.read_data.ready):
+                    m.d.sync += [got.eq(got + 1), r_total.eq(r_total - 1)]
+                    with m.If(got + 1 == kind_words):
+                        m.d.sync += got.eq(0)
+                        m.d.comb += kinds.r_en.eq(1)
+        return m
+
+
+class MemCalls:
+    """FSM helpers for memory access through a :class:`MemifEngine` (the MEM_READ/MEM_WRITE
+    of ReconOS' HLS library). Use each inside ``with m.State(...)`` only; the FSM moves to
+    ``then`` when the access is complete. Addresses and lengths are W-aligned bytes.
+
+    For streaming access, drive :attr:`engine`'s ``read_cmd``/``read_data`` and
+    ``write_cmd``/``write_data``/``write_done`` directly.
+    """
+
+    def __init__(self, m, engine):
+        self._m = m
+        self.engine = engine
+        self._w = engine._arch.word_bits
+        self._wb = engine._arch.word_bytes
+
+    def read_words(self, addr, targets, *, then):
+        """Read ``len(targets)`` words from ``addr`` into the signals ``targets``."""
+        m, e = self._m, self.engine
+        sent = Signal(name="rd_sent")
+        k = Signal(range(len(targets) + 1), name="rd_k")
+        with m.If(~sent):
+            m.d.comb += [e.read_cmd.valid.eq(1), e.read_cmd.payload.addr.eq(addr),
+                         e.read_cmd.payload.length.eq(len(targets) * self._wb)]
+            with m.If(e.read_cmd.ready):
+                m.d.sync += [sent.eq(1), k.eq(0)]
+        with m.Else():
+            m.d.comb += e.read_data.ready.eq(1)
+            with m.If(e.read_data.valid):
+                for i, t in enumerate(targets):
+                    with m.If(k == i):
+                        m.d.sync += t.eq(e.read_data.payload.data)
+                m.d.sync += k.eq(k + 1)
+                with m.If(e.read_data.payload.last):
+                    m.d.sync += sent.eq(0)
+                    m.next = then
+
+    def read_word(self, addr, into, *, then):
+        self.read_words(addr, [into], then=then)
+
+    def write_words(self, addr, values, *, then):
+        """Write the values (ints or Amaranth values) to consecutive words from ``addr``."""
+        m, e = self._m, self.engine
+        sent = Signal(name="wr_sent")
+        k = Signal(range(len(values) + 1), name="wr_k")
+        with m.If(~sent):
+            m.d.comb += [e.write_cmd.valid.eq(1), e.write_cmd.payload.addr.eq(addr),
+                         e.write_cmd.payload.length.eq(len(values) * self._wb)]
+            with m.If(e.write_cmd.ready):
+                m.d.sync += [sent.eq(1), k.eq(0)]
+        with m.Else():
+            m.d.comb += e.write_data.valid.eq(k != len(values))
+            for i, v in enumerate(values):
+                with m.If(k == i):
+                    m.d.comb += e.write_data.payload.eq(v)
+            with m.If(e.write_data.valid & e.write_data.ready):
+                m.d.sync += k.eq(k + 1)
+            with m.If(e.write_done):
+                m.d.sync += sent.eq(0)
+                m.next = then
+
+    def write_word(self, addr, value, *, then):
+        self.write_words(addr, [value], then=then)
+
+    def copy(self, src, dst, length, *, then):
+        """Copy ``length`` bytes (a multiple of W) from ``src`` to ``dst`` at full rate: the
+        read and the write run at the same time, the data streams through the thread."""
+        m, e = self._m, self.engine
+        r_sent = Signal(name="cp_r_sent")
+        w_sent = Signal(name="cp_w_sent")
+        with m.If(~r_sent):
+            m.d.comb += [e.read_cmd.valid.eq(1), e.read_cmd.payload.addr.eq(src),
+                         e.read_cmd.payload.length.eq(length)]
+            with m.If(e.read_cmd.ready):
+                m.d.sync += r_sent.eq(1)
+        with m.If(~w_sent):
+            m.d.comb += [e.write_cmd.valid.eq(1), e.write_cmd.payload.addr.eq(dst),
+                         e.write_cmd.payload.length.eq(length)]
+            with m.If(e.write_cmd.ready):
+                m.d.sync += w_sent.eq(1)
+        m.d.comb += [e.write_data.valid.eq(e.read_data.valid),
+                     e.write_data.payload.eq(e.read_data.payload.data),
+                     e.read_data.ready.eq(e.write_data.ready)]
+        with m.If(w_sent & e.write_done):
+            m.d.sync += [r_sent.eq(0), w_sent.eq(0)]
+            m.next = then
+
+
+class HardwareThread(wiring.Component):
+    """Base class of a hardware thread: a component with the slot ports of
+    :func:`ThreadSignature` plus ``members``.
+
+    Parameters
+    ----------
+    arch : str
+        ``"r32"`` or ``"r64"``.
+    members : dict
+        Additional members (for example hardware-topic streams).
+    """
+
+    def __init__(self, arch, members=None):
+        self.arch = get_arch(arch)
+        super().__init__({**ThreadSignature(self.arch).members, **(members or {})})
+
+    def os_and_memory(self, m, *, fence=True):
+        """Add an :class:`OsifEngine` and a :class:`MemifEngine` to ``m``, connected to the slot
+        ports; return ``(OsifCalls, MemCalls)``."""
+        m.submodules.osif = osif = OsifEngine(self.arch)
+        m.submodules.memif = mem = MemifEngine(self.arch, fence=fence)
+        for name in ("osif_sw2hw", "osif_hw2sw"):
+            wiring.connect(m, wiring.flipped(getattr(self, name)), getattr(osif, name))
+        m.d.comb += osif.hwt_signal.eq(self.hwt_signal)
+        for name in ("memif_hwt2mem", "memif_mem2hwt"):
+            wiring.connect(m, wiring.flipped(getattr(self, name)), getattr(mem, name))
+        return OsifCalls(m, osif), MemCalls(m, mem)

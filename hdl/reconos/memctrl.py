@@ -1,0 +1,207 @@
+"""The MEMIF AXI4 memory controller (spec reconos.md §5.5, with defects 6 and 9 fixed)."""
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.wiring import In, Out
+
+from ..bus import AXI4Signature, AXIBurst, AXIResp
+from ..params import check_int
+from .memif import rdata_layout, request_layout, request_words, wdata_layout
+from .protocol import MEMIF_CHUNK, MemStatus, arch as get_arch
+
+__all__ = ["MemoryController", "READS_IN_FLIGHT"]
+
+#: Read bursts the controller keeps outstanding (AXI allows reads to overlap).
+READS_IN_FLIGHT = 4
+
+
+class MemoryController(wiring.Component):
+    """reconos_memif_memory_controller: one AXI4 INCR burst per MEMIF request.
+
+    ``AxLEN = length/W - 1``, ``AxSIZE = log2 W``, ``AxBURST`` INCR, ``AxCACHE``/``AxPROT``/
+    ``AxUSER`` from :class:`~hdl.reconos.protocol.Arch`, ``AxID``/``AxQOS``/``AxLOCK`` 0,
+    ``WSTRB`` all ones (zero for ``null`` words).
+
+    Ordering: up to :data:`READS_IN_FLIGHT` read bursts overlap; a write starts only when no
+    read is outstanding, and the next request of any kind starts only after the write's
+    response (spec §11 defect 9: ReconOS does not wait for B). ``RREADY`` follows the ready
+    of ``m_rdata``, i.e. the requester's FIFO space (defect 9).
+
+    Bad requests (length 0, not a multiple of W, over 256 B, crossing a 256-B boundary, or
+    marked ``bad`` by the MMU) never reach AXI (defect 6: ReconOS hangs): a read returns
+    ``ceil(length/W)`` zero words, a write drains its data words; ``error`` pulses
+    ``BAD_REQUEST``. A SLVERR/DECERR response pulses the matching :class:`MemStatus` bit; the
+    data still flows, so the requester never waits forever.
+
+    Members
+    -------
+    s_req : In(stream.Signature(request_layout))
+        Requests with physical addresses.
+    s_wdata : In(stream.Signature(wdata_layout))
+    m_rdata : Out(stream.Signature(rdata_layout))
+    axi : Out(AXI4Signature(addr_bits, W*8, id_width=1, user_width=2))
+    error : Out(len(MemStatus))
+        One-cycle :class:`MemStatus` pulses.
+    error_addr : Out(addr_bits)
+        Address of the request that caused ``error``.
+    busy : Out(1)
+        A request is being executed or read data is outstanding.
+    """
+
+    def __init__(self, arch, num_hwts):
+        self._arch = a = get_arch(arch)
+        self._n = check_int("num_hwts", num_hwts, 1, 32)
+        super().__init__({
+            "s_req": In(stream.Signature(request_layout(a, num_hwts))),
+            "s_wdata": In(stream.Signature(wdata_layout(a))),
+            "m_rdata": Out(stream.Signature(rdata_layout(a, num_hwts))),
+            "axi": Out(AXI4Signature(a.addr_bits, a.word_bits, id_width=1, user_width=2)),
+            "error": Out(len(MemStatus)),
+            "error_addr": Out(a.addr_bits),
+            "busy": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        a = self._arch
+        wb = a.word_bytes
+        lb = a.length_bits
+        axi = self.axi
+        req = self.s_req.payload
+
+        for ch in ("ar", "aw"):
+            m.d.comb += [
+                getattr(axi, f"{ch}size").eq(wb.bit_length() - 1),
+                getattr(axi, f"{ch}burst").eq(AXIBurst.INCR),
+                getattr(axi, f"{ch}cache").eq(a.axcache),
+                getattr(axi, f"{ch}prot").eq(a.axprot),
+                getattr(axi, f"{ch}user").eq(a.axuser),
+            ]
+
+        track_layout = data.StructLayout({"tag": len(req.tag), "words": lb, "bad": 1,
+                                          "addr": a.addr_bits})
+        m.submodules.track = track = SyncFIFO(width=track_layout.size, depth=READS_IN_FLIGHT)
+        push = data.View(track_layout, track.w_data)
+        head = data.View(track_layout, track.r_data)
+
+        length = req.length
+        offset = req.addr[:8]
+        good = Signal()
+        m.d.comb += good.eq(~req.bad & (length != 0) & (length[:wb.bit_length() - 1] == 0) &
+                            (length <= MEMIF_CHUNK) & (offset + length <= MEMIF_CHUNK))
+        words = Signal(lb)
+        m.d.comb += words.eq(request_words(a, length))
+
+        # ---- request side ----
+        remaining = Signal(lb)
+        aw_done = Signal()
+        w_addr = Signal(a.addr_bits)
+        with m.If(axi.arready):
+            m.d.sync += axi.arvalid.eq(0)
+        with m.If(axi.awready):
+            m.d.sync += axi.awvalid.eq(0)
+
+        req_error = Signal(len(MemStatus))
+        req_error_addr = Signal(a.addr_bits)
+        r_error = Signal(len(MemStatus))
+        r_error_addr = Signal(a.addr_bits)
+        m.d.comb += [
+            self.error.eq(req_error | r_error),
+            self.error_addr.eq(Mux(r_error.any(), r_error_addr, req_error_addr)),
+        ]
+
+        with m.FSM() as fsm:
+            with m.State("IDLE"):
+                with m.If(self.s_req.valid):
+                    with m.If(~req.write):
+                        # A read: one AR (or, if bad, a zero-filled answer) per request.
+                        with m.If(track.w_rdy & (~axi.arvalid | axi.arready)):
+                            m.d.comb += [
+                                self.s_req.ready.eq(1), track.w_en.eq(1),
+                                push.tag.eq(req.tag), push.words.eq(words),
+                                push.bad.eq(~good), push.addr.eq(req.addr),
+                            ]
+                            with m.If(good):
+                                m.d.sync += [axi.araddr.eq(req.addr),
+                                             axi.arlen.eq(words - 1), axi.arvalid.eq(1)]
+                            with m.Elif(words != 0):
+                                m.d.comb += [req_error.eq(MemStatus.BAD_REQUEST),
+                                             req_error_addr.eq(req.addr)]
+                            with m.Else():
+                                # length 0: nothing to answer
+                                m.d.comb += [track.w_en.eq(0),
+                                             req_error.eq(MemStatus.BAD_REQUEST),
+                                             req_error_addr.eq(req.addr)]
+                    with m.Elif(~track.r_rdy & ~axi.arvalid):
+                        # A write waits until every read before it has completed.
+                        m.d.comb += self.s_req.ready.eq(1)
+                        m.d.sync += [remaining.eq(words), w_addr.eq(req.addr)]
+                        with m.If(good):
+                            m.d.sync += [axi.awaddr.eq(req.addr), axi.awlen.eq(words - 1),
+                                         axi.awvalid.eq(1), aw_done.eq(0)]
+                            m.next = "WRITE"
+                        with m.Else():
+                            m.d.comb += [req_error.eq(MemStatus.BAD_REQUEST),
+                                         req_error_addr.eq(req.addr)]
+                            with m.If(words != 0):
+                                m.next = "DRAIN"
+            with m.State("WRITE"):
+                with m.If(axi.awvalid & axi.awready):
+                    m.d.sync += aw_done.eq(1)
+                m.d.comb += [
+                    axi.wvalid.eq(self.s_wdata.valid),
+                    axi.wdata.eq(self.s_wdata.payload.data),
+                    axi.wstrb.eq(Mux(self.s_wdata.payload.null, 0, (1 << wb) - 1)),
+                    axi.wlast.eq(remaining == 1),
+                    self.s_wdata.ready.eq(axi.wready),
+                ]
+                with m.If(self.s_wdata.valid & axi.wready):
+                    m.d.sync += remaining.eq(remaining - 1)
+                    with m.If(remaining == 1):
+                        m.next = "WRITE_RESP"
+            with m.State("WRITE_RESP"):
+                m.d.comb += axi.bready.eq(1)
+                with m.If(axi.bvalid):
+                    with m.If(axi.bresp == AXIResp.SLVERR):
+                        m.d.comb += [req_error.eq(MemStatus.AXI_SLVERR),
+                                     req_error_addr.eq(w_addr)]
+                    with m.Elif(axi.bresp == AXIResp.DECERR):
+                        m.d.comb += [req_error.eq(MemStatus.AXI_DECERR),
+                                     req_error_addr.eq(w_addr)]
+                    m.next = "IDLE"
+            with m.State("DRAIN"):
+                m.d.comb += self.s_wdata.ready.eq(1)
+                with m.If(self.s_wdata.valid):
+                    m.d.sync += remaining.eq(remaining - 1)
+                    with m.If(remaining == 1):
+                        m.next = "IDLE"
+
+        # ---- read data side: bursts in request order ----
+        count = Signal(lb)       # words of the head burst already delivered
+        last_word = Signal()
+        m.d.comb += [
+            last_word.eq(count + 1 == head.words),
+            self.m_rdata.payload.tag.eq(head.tag),
+        ]
+        with m.If(track.r_rdy):
+            with m.If(head.bad):
+                m.d.comb += [self.m_rdata.valid.eq(1), self.m_rdata.payload.data.eq(0)]
+            with m.Else():
+                m.d.comb += [self.m_rdata.valid.eq(axi.rvalid),
+                             self.m_rdata.payload.data.eq(axi.rdata),
+                             axi.rready.eq(self.m_rdata.ready)]
+            with m.If(self.m_rdata.valid & self.m_rdata.ready):
+                m.d.sync += count.eq(count + 1)
+                with m.If(~head.bad & (axi.rresp == AXIResp.SLVERR)):
+                    m.d.comb += [r_error.eq(MemStatus.AXI_SLVERR),
+                                 r_error_addr.eq(head.addr)]
+                with m.If(~head.bad & (axi.rresp == AXIResp.DECERR)):
+                    m.d.comb += [r_error.eq(MemStatus.AXI_DECERR),
+                                 r_error_addr.eq(head.addr)]
+                with m.If(last_word):
+                    m.d.sync += count.eq(0)
+                    m.d.comb += track.r_en.eq(1)
+
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE") | track.r_rdy | axi.arvalid)
+        return m

@@ -1,0 +1,141 @@
+"""The ReconOS infrastructure around a set of hardware threads (spec reconos.md §1)."""
+
+from amaranth.hdl import Module, ResetInserter, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from ..bus import AXI4LiteSignature, AXI4Signature
+from .control import CONTROL_ADDR_WIDTH, MAX_HWTS, OsifIntc, ProcControl, ReconosOsif
+from .fifo import MEMIF_FIFO_DEPTH, OSIF_FIFO_DEPTH, ReconosFifo
+from .hwt import ThreadSignature
+from .memctrl import MemoryController
+from .memif import MemifArbiter
+from .mmu import MMU
+from .protocol import arch as get_arch
+from ..params import check_int, check_power_of_two
+
+__all__ = ["ReconosSystem"]
+
+
+class ReconosSystem(wiring.Component):
+    """Hardware threads in slots with their OSIF/MEMIF FIFOs, reconos_osif, osif_intc,
+    proc_control, the MEMIF arbiter, the MMU and the AXI4 memory controller.
+
+    ``proc_control``'s per-thread reset clears slot *i*'s thread and its four FIFOs; its
+    system reset (and the bus reset) clears the arbiter, MMU, TLB and controller.
+
+    Parameters
+    ----------
+    arch : str
+        ``"r32"`` or ``"r64"``.
+    threads : list of wiring.Component
+        One per slot, each with the members of :func:`~hdl.reconos.hwt.ThreadSignature`.
+    tlb_entries : int
+        TLB size (ReconROS block designs: 16).
+    osif_depth, memif_depth : int
+        FIFO depths (ReconROS: 8 and 128).
+
+    Members
+    -------
+    s_axi_osif, s_axi_intc, s_axi_proc : In(AXI4LiteSignature(16, W*8))
+        reconos_osif, reconos_osif_intc and reconos_proc_control.
+    m_axi_mem : Out(AXI4Signature(addr_bits, W*8, id_width=1, user_width=2))
+        Process memory.
+    irq_osif : Out(1)
+        osif_intc's level interrupt.
+    irq_pgf : Out(1)
+        proc_control's page-fault interrupt.
+    """
+
+    def __init__(self, arch, threads, *, tlb_entries=16, osif_depth=OSIF_FIFO_DEPTH,
+                 memif_depth=MEMIF_FIFO_DEPTH):
+        self._arch = a = get_arch(arch)
+        threads = list(threads)
+        check_int("slots", len(threads), 1, MAX_HWTS)
+        self._osif_depth = check_power_of_two("osif_depth", osif_depth, 2, 4096)
+        self._memif_depth = check_power_of_two("memif_depth", memif_depth, 2, 4096)
+        expected = ThreadSignature(a).members
+        for i, t in enumerate(threads):
+            for name, member in expected.items():
+                if name not in t.signature.members or t.signature.members[name] != member:
+                    raise ValueError(f"thread in slot {i} ({type(t).__name__}) lacks the slot "
+                                     f"port {name!r} of a {a.name} hardware thread")
+        self._threads = threads
+        self._tlb_entries = tlb_entries
+        w = a.word_bits
+        super().__init__({
+            "s_axi_osif": In(AXI4LiteSignature(CONTROL_ADDR_WIDTH, w)),
+            "s_axi_intc": In(AXI4LiteSignature(CONTROL_ADDR_WIDTH, w)),
+            "s_axi_proc": In(AXI4LiteSignature(CONTROL_ADDR_WIDTH, w)),
+            "m_axi_mem": Out(AXI4Signature(a.addr_bits, w, id_width=1, user_width=2)),
+            "irq_osif": Out(1),
+            "irq_pgf": Out(1),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        a = self._arch
+        n = len(self._threads)
+        w = a.word_bits
+
+        m.submodules.osif = osif = ReconosOsif(a, n)
+        m.submodules.intc = intc = OsifIntc(a, n)
+        m.submodules.proc = proc = ProcControl(a, n)
+        wiring.connect(m, wiring.flipped(self.s_axi_osif), osif.bus)
+        wiring.connect(m, wiring.flipped(self.s_axi_intc), intc.bus)
+        wiring.connect(m, wiring.flipped(self.s_axi_proc), proc.bus)
+        m.d.comb += [self.irq_osif.eq(intc.irq), self.irq_pgf.eq(proc.irq_pgf)]
+
+        sys_rst = proc.sys_reset
+        arbiter = ResetInserter(sys_rst)(MemifArbiter(a, n))
+        mmu = ResetInserter(sys_rst)(MMU(a, n, tlb_entries=self._tlb_entries))
+        ctrl = ResetInserter(sys_rst)(MemoryController(a, n))
+        m.submodules.arbiter = arbiter
+        m.submodules.mmu = mmu
+        m.submodules.memctrl = ctrl
+        wiring.connect(m, arbiter.req, mmu.s_req)
+        wiring.connect(m, mmu.m_req, ctrl.s_req)
+        wiring.connect(m, arbiter.wdata, ctrl.s_wdata)
+        wiring.connect(m, ctrl.m_rdata, mmu.s_rdata)
+        wiring.connect(m, mmu.m_rdata, arbiter.rdata)
+        wiring.connect(m, ctrl.axi, wiring.flipped(self.m_axi_mem))
+        m.d.comb += [
+            mmu.pgd.eq(proc.pgd),
+            mmu.flush.eq(proc.tlb_flush),
+            mmu.retry.eq(proc.mmu_retry),
+            mmu.abort.eq(proc.mmu_abort),
+            proc.mmu_pgf.eq(mmu.pgf),
+            proc.mmu_fault_addr.eq(mmu.fault_addr),
+            proc.tlb_hit.eq(mmu.tlb_hit),
+            proc.tlb_miss.eq(mmu.tlb_miss),
+            proc.mem_error.eq(ctrl.error),
+            proc.mem_error_addr.eq(ctrl.error_addr),
+            arbiter.slot_reset.eq(proc.hwt_reset),
+        ]
+
+        has_data = []
+        for i, thread in enumerate(self._threads):
+            rst = proc.hwt_reset[i]
+            m.submodules[f"slot{i}"] = ResetInserter(rst)(thread)
+            fifos = {}
+            for name, depth in (("sw2hw", self._osif_depth), ("hw2sw", self._osif_depth),
+                                ("hwt2mem", self._memif_depth), ("mem2hwt", self._memif_depth)):
+                fifos[name] = f = ReconosFifo(w, depth)
+                m.submodules[f"slot{i}_{name}"] = f
+                m.d.comb += f.rst.eq(rst)
+            # The thread's ports are the FIFOs' far sides.
+            wiring.connect(m, thread.osif_sw2hw, fifos["sw2hw"].r)
+            wiring.connect(m, thread.osif_hw2sw, fifos["hw2sw"].w)
+            wiring.connect(m, thread.memif_hwt2mem, fifos["hwt2mem"].w)
+            wiring.connect(m, thread.memif_mem2hwt, fifos["mem2hwt"].r)
+            m.d.comb += thread.hwt_signal.eq(proc.hwt_signal[i])
+            wiring.connect(m, osif.hw2sw[i], fifos["hw2sw"].r)
+            wiring.connect(m, osif.sw2hw[i], fifos["sw2hw"].w)
+            m.d.comb += [osif.hw2sw_fill[i].eq(fifos["hw2sw"].r_fill),
+                         osif.sw2hw_free[i].eq(fifos["sw2hw"].w_free)]
+            wiring.connect(m, arbiter.hwt2mem[i], fifos["hwt2mem"].r)
+            wiring.connect(m, arbiter.mem2hwt[i], fifos["mem2hwt"].w)
+            has_data.append(fifos["hw2sw"].has_data)
+        for i, hd in enumerate(has_data):
+            m.d.comb += intc.has_data[i].eq(hd)
+        return m
