@@ -568,7 +568,8 @@ class MemCalls:
         m.d.comb += [e.write_data.valid.eq(e.read_data.valid),
                      e.write_data.payload.eq(e.read_data.payload.data),
                      e.read_data.ready.eq(e.write_data.ready)]
-        with m.If(w_sent & e.write_done):
+        # (a zero-length write is done in the cycle its command is taken)
+        with m.If(e.write_done):
             m.d.sync += [r_sent.eq(0), w_sent.eq(0)]
             m.next = then
 

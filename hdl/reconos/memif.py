@@ -174,6 +174,7 @@ class MemifArbiter(wiring.Component):
                     self.req.payload.length.eq(length),
                     self.req.payload.addr.eq(head),
                     self.req.payload.tag.eq(slot),
+                    self.req.payload.bad.eq(0),
                     pop.eq(self.req.ready),
                 ]
                 with m.If(head_valid & self.req.ready & ~granted_reset):

@@ -1,0 +1,871 @@
+"""A Python model of the software side of ReconROS, for co-simulation of hardware threads.
+
+Written from the spec (reconos.md §3, §4, §5.4, §6, §7), not from the RTL:
+
+* :class:`ProcessMemory`: the process's virtual memory in physical memory behind the AXI4
+  port (cocotbext-axi ``AxiRam``), with a page table the model builds (ARMv8 4 KiB / 39-bit,
+  three levels, for r64; ARMv7 short descriptors with pages and 1 MiB sections for r32),
+  demand-mapped pages and a page-fault handler;
+* :class:`MessageMemory`: ROS messages as rosidl C structs in that memory (layout of
+  :class:`gen.msg.layout.CLayout` for the chosen architecture);
+* :class:`Broker`: an in-process ROS graph (topics, services) for hardware and Python nodes;
+* :class:`ReconosRuntime`: the runtime: thread create/suspend/resume through proc_control,
+  one delegate per slot that reads OSIF commands through the reconos_osif registers (waiting
+  for the osif_intc interrupt as the Linux driver does) and answers with the spec's words.
+"""
+
+import collections
+import struct
+
+import cocotb
+from cocotb.triggers import Event, RisingEdge, Timer, First
+
+from hdl.reconos.protocol import (CALLS, CMD_MASK, INTERRUPTED_REPLY, SIGNAL_THREAD_RESUME,
+                                  SIGNAL_THREAD_START, Command, OsifRegister,
+                                  ProcControlRegister, ResourceType, arch as get_arch,
+                                  osif_register_offset, proc_control_offset)
+
+__all__ = ["ProcessMemory", "MessageMemory", "Broker", "Resource", "ReconosRuntime",
+           "ProtocolError", "PAGE"]
+
+PAGE = 4096
+
+
+class ProtocolError(AssertionError):
+    """The hardware broke the ReconOS protocol (the real delegate would panic)."""
+
+
+class ProcessMemory:
+    """Virtual memory of one process in ``ram`` (an object with ``read(addr, n)`` and
+    ``write(addr, data)``, e.g. cocotbext-axi's AxiRam).
+
+    Parameters
+    ----------
+    arch : str
+        ``"r32"`` or ``"r64"``.
+    ram : Memory
+    ram_size : int
+        Bytes of physical memory; frames are handed out from ``phys_base`` upwards.
+    heap_base : int
+        First virtual address of :meth:`malloc` (r64 default above 4 GiB, so pointers need
+        the full word: spec §11 defect 5).
+    """
+
+    def __init__(self, arch, ram, ram_size, *, phys_base=0x1000, heap_base=None):
+        self.arch = get_arch(arch)
+        self.ram = ram
+        self.ram_size = ram_size
+        self._next_frame = phys_base
+        self._next_va = heap_base if heap_base is not None else (
+            0x12_3450_0000 if self.arch.name == "r64" else 0x4000_0000)
+        self.pages = {}        # vpn -> pfn, pages the process owns
+        self.mapped = set()    # vpns present in the hardware page table
+        self.sections = {}     # r32: 1 MiB section index -> physical base
+        self.faults = []       # VAs the fault handler was called for
+        self.pgd = self._frame(align=16 * 1024 if self.arch.name == "r32" else PAGE,
+                               size=16 * 1024 if self.arch.name == "r32" else PAGE)
+        self._tables = {}
+
+    # ---- physical frames and page tables ----
+    def _frame(self, *, align=PAGE, size=PAGE):
+        base = -(-self._next_frame // align) * align
+        if base + size > self.ram_size:
+            raise MemoryError("the co-simulation's physical memory is exhausted")
+        self._next_frame = base + size
+        self.ram.write(base, bytes(size))
+        return base
+
+    def _word(self, pa, value=None):
+        n = self.arch.word_bytes
+        if value is None:
+            return int.from_bytes(self.ram.read(pa, n), "little")
+        self.ram.write(pa, value.to_bytes(n, "little"))
+
+    def _table(self, key, size=PAGE, align=PAGE):
+        if key not in self._tables:
+            self._tables[key] = self._frame(size=size, align=align)
+        return self._tables[key]
+
+    def _map(self, vpn, pfn):
+        va = vpn * PAGE
+        if self.arch.name == "r64":
+            l1 = self.pgd + ((va >> 30) & 0x1FF) * 8
+            l2t = self._table(("l2", va >> 30))
+            self._word(l1, l2t | 0b11)
+            l2 = l2t + ((va >> 21) & 0x1FF) * 8
+            l3t = self._table(("l3", va >> 21))
+            self._word(l2, l3t | 0b11)
+            self._word(l3t + ((va >> 12) & 0x1FF) * 8, (pfn * PAGE) | 0b11 | (1 << 10))
+        else:
+            l1 = self.pgd + (va >> 20) * 4
+            l2t = self._table(("l2", va >> 20), size=1024, align=1024)
+            self._word(l1, l2t | 0b01)
+            self._word(l2t + ((va >> 12) & 0xFF) * 4, (pfn * PAGE) | 0b10)
+        self.mapped.add(vpn)
+
+    def unmap(self, va):
+        """Remove the page of ``va`` from the hardware page table (the process keeps it)."""
+        vpn = va // PAGE
+        if self.arch.name == "r64":
+            l3t = self._tables[("l3", (vpn * PAGE) >> 21)]
+            self._word(l3t + (vpn & 0x1FF) * 8, 0)
+        else:
+            l2t = self._tables[("l2", (vpn * PAGE) >> 20)]
+            self._word(l2t + (vpn & 0xFF) * 4, 0)
+        self.mapped.discard(vpn)
+
+    def remap(self, va, other_va):
+        """Point the page of ``va`` at the frame of ``other_va`` (page table only)."""
+        self._map(va // PAGE, self.pages[other_va // PAGE])
+
+    def map_section(self, size=1 << 20):
+        """r32: allocate a 1 MiB-aligned region mapped by one ARMv7 section descriptor
+        (spec §11 defect 11); return its VA."""
+        if self.arch.name != "r32":
+            raise ValueError("sections are an ARMv7 (r32) feature")
+        va = -(-self._next_va // (1 << 20)) * (1 << 20)
+        pa = self._frame(size=1 << 20, align=1 << 20)
+        self._word(self.pgd + (va >> 20) * 4, pa | 0b10)
+        for i in range((1 << 20) // PAGE):
+            self.pages[va // PAGE + i] = pa // PAGE + i
+        self.sections[va >> 20] = pa
+        self._next_va = va + (1 << 20)
+        return va
+
+    # ---- the process's view ----
+    def malloc(self, size, *, populate=True, align=64):
+        """Allocate ``size`` bytes (zeroed) and return the VA. With ``populate=False`` the pages
+        exist but are missing from the hardware page table until the first fault."""
+        va = -(-self._next_va // align) * align
+        end = va + max(size, 1)
+        for vpn in range(va // PAGE, -(-end // PAGE)):
+            if vpn not in self.pages:
+                self.pages[vpn] = self._frame() // PAGE
+                if populate:
+                    self._map(vpn, self.pages[vpn])
+        self._next_va = end
+        return va
+
+    def translate(self, va):
+        vpn = va // PAGE
+        if vpn not in self.pages:
+            raise KeyError(f"virtual address 0x{va:x} is not allocated")
+        return self.pages[vpn] * PAGE + va % PAGE
+
+    def read(self, va, n):
+        out = bytearray()
+        while n > 0:
+            k = min(n, PAGE - va % PAGE)
+            out += self.ram.read(self.translate(va), k)
+            va, n = va + k, n - k
+        return bytes(out)
+
+    def write(self, va, data):
+        data = bytes(data)
+        while data:
+            k = min(len(data), PAGE - va % PAGE)
+            self.ram.write(self.translate(va), data[:k])
+            va, data = va + k, data[k:]
+
+    def handle_fault(self, va):
+        """The page-fault handler (``proc_pgfhandler``): map the page if the process owns it.
+        The page's contents are kept (ReconOS writes 0 to the faulting word: defect 7).
+        Return whether the fault was resolved."""
+        self.faults.append(va)
+        vpn = va // PAGE
+        if vpn in self.pages:
+            self._map(vpn, self.pages[vpn])
+            return True
+        return False
+
+
+_FMT = {"bool": "B", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
+        "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
+        "float32": "f", "float64": "d"}
+
+
+class MessageMemory:
+    """ROS messages as rosidl C structs in :class:`ProcessMemory` (spec §6).
+
+    Values are dicts of field name to value: primitives as ints/floats, strings as ``str``,
+    nested messages as dicts, ``uint8``/``byte``/``char`` sequences and arrays as ``bytes``,
+    other sequences and arrays of primitives as lists.
+    """
+
+    def __init__(self, memory, library):
+        from gen.msg.layout import CLayout
+        self.mem = memory
+        self.library = library
+        self.layout = CLayout(library, "arm64" if memory.arch.name == "r64" else "arm32")
+        self.p = self.layout.pointer
+
+    def sizeof(self, type_name):
+        return self.layout.struct(type_name).size
+
+    def create(self, type_name):
+        """``pkg__msg__Type__create()``: a zeroed struct; return its VA."""
+        return self.mem.malloc(self.sizeof(type_name))
+
+    def _ptr(self, va, value=None):
+        if value is None:
+            return int.from_bytes(self.mem.read(va, self.p), "little")
+        self.mem.write(va, value.to_bytes(self.p, "little"))
+
+    def member(self, type_name, path):
+        """Byte offset of a field path (``"data"``, ``"header.stamp.sec"``)."""
+        offset = 0
+        for part in path.split("."):
+            s = self.layout.struct(type_name)
+            mem = next(m for m in s.members if m.name == part)
+            offset += mem.offset
+            type_name = getattr(mem.type, "typename", None)
+        return offset
+
+    def set_sequence(self, va, elem_size, count):
+        """``ROS_MESSAGE_SET_SIZE``: reallocate the sequence at ``va`` for ``count`` elements
+        (keeping the old contents), size = capacity = count; return the data pointer."""
+        old, size, cap = self._ptr(va), self._ptr(va + self.p), self._ptr(va + 2 * self.p)
+        if count != cap:
+            data = self.mem.malloc(count * elem_size) if count else 0
+            if old and data:
+                self.mem.write(data, self.mem.read(old, min(size, count) * elem_size))
+            self._ptr(va, data)
+        self._ptr(va + self.p, count)
+        self._ptr(va + 2 * self.p, count)
+        return self._ptr(va)
+
+    def _primitive_size(self, name):
+        return struct.calcsize("<" + _FMT[name])
+
+    def write(self, va, type_name, value):
+        from gen.msg.model import Array, Named, Primitive, Sequence
+        for m in self.layout.struct(type_name).members:
+            if m.name == "structure_needs_at_least_one_member":
+                continue
+            v = value[m.name]
+            at = va + m.offset
+            t = m.type
+            if isinstance(t, Named):
+                self.write(at, t.typename, v)
+            elif isinstance(t, Primitive) and t.is_string:
+                raw = v.encode() + b"\0"
+                buf = self.mem.malloc(len(raw))
+                self.mem.write(buf, raw)
+                self._ptr(at, buf)
+                self._ptr(at + self.p, len(raw) - 1)
+                self._ptr(at + 2 * self.p, len(raw))
+            elif isinstance(t, Primitive):
+                self.mem.write(at, struct.pack("<" + _FMT[t.name], v))
+            elif isinstance(t, (Sequence, Array)):
+                raw = self._pack_elements(t.element, v)
+                if isinstance(t, Array):
+                    self.mem.write(at, raw)
+                else:
+                    n = len(v)
+                    buf = self.mem.malloc(max(len(raw), 1)) if n else 0
+                    if n:
+                        self.mem.write(buf, raw)
+                    self._ptr(at, buf)
+                    self._ptr(at + self.p, n)
+                    self._ptr(at + 2 * self.p, n)
+            else:
+                raise TypeError(f"cannot store field {m.name} of {type_name}")
+
+    def _pack_elements(self, element, v):
+        from gen.msg.model import Primitive
+        if not isinstance(element, Primitive) or element.is_string:
+            raise TypeError("the co-simulation model stores sequences of primitives only")
+        if isinstance(v, (bytes, bytearray)):
+            return bytes(v)
+        return struct.pack(f"<{len(v)}{_FMT[element.name]}", *v)
+
+    def read(self, va, type_name):
+        from gen.msg.model import Array, Named, Primitive, Sequence
+        out = {}
+        for m in self.layout.struct(type_name).members:
+            if m.name == "structure_needs_at_least_one_member":
+                continue
+            at = va + m.offset
+            t = m.type
+            if isinstance(t, Named):
+                out[m.name] = self.read(at, t.typename)
+            elif isinstance(t, Primitive) and t.is_string:
+                ptr, n = self._ptr(at), self._ptr(at + self.p)
+                out[m.name] = self.mem.read(ptr, n).decode() if n else ""
+            elif isinstance(t, Primitive):
+                raw = self.mem.read(at, self._primitive_size(t.name))
+                out[m.name] = struct.unpack("<" + _FMT[t.name], raw)[0]
+            else:
+                esz = self._primitive_size(t.element.name)
+                if isinstance(t, Array):
+                    ptr, n = at, t.length
+                else:
+                    ptr, n = self._ptr(at), self._ptr(at + self.p)
+                raw = self.mem.read(ptr, n * esz) if n else b""
+                if t.element.name in ("uint8", "byte", "char"):
+                    out[m.name] = raw
+                else:
+                    out[m.name] = list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
+        return out
+
+
+class Broker:
+    """An in-process ROS graph: topics with any number of publishers and subscribers, and
+    services. Python nodes subscribe with :meth:`subscribe` (a queue) and publish with
+    :meth:`publish`; services are Python callables or hardware servers."""
+
+    def __init__(self):
+        self._subs = collections.defaultdict(list)
+        self.published = collections.defaultdict(list)   # topic -> values, in order
+        self._services = {}
+
+    def subscribe(self, topic):
+        q = _Queue()
+        self._subs[topic].append(q)
+        return q
+
+    def publish(self, topic, value):
+        self.published[topic].append(value)
+        for q in self._subs[topic]:
+            q.put(value)
+
+    def serve(self, service, server):
+        """Register a server: a :class:`_Queue` of ``(request, reply_queue)`` pairs."""
+        self._services[service] = server
+
+    def server_queue(self, service):
+        q = _Queue()
+        self._services[service] = q
+        return q
+
+    async def call(self, service, request):
+        """Call a service; return the response value."""
+        reply = _Queue()
+        self._services[service].put((request, reply))
+        return await reply.get()
+
+
+class _Queue:
+    """An unbounded FIFO for coroutines."""
+
+    def __init__(self, maxsize=0):
+        self.items = collections.deque()
+        self.maxsize = maxsize
+        self._event = Event()
+        self._space = Event()
+
+    def put_nowait(self, item):
+        if self.maxsize and len(self.items) >= self.maxsize:
+            return False
+        self.put(item)
+        return True
+
+    def put(self, item):
+        self.items.append(item)
+        self._event.set()
+
+    async def put_wait(self, item):
+        while self.maxsize and len(self.items) >= self.maxsize:
+            self._space.clear()
+            await self._space.wait()
+        self.put(item)
+
+    def get_nowait(self):
+        if not self.items:
+            return None
+        item = self.items.popleft()
+        self._space.set()
+        return item
+
+    async def get(self):
+        while not self.items:
+            self._event.clear()
+            await self._event.wait()
+        item = self.items.popleft()
+        self._space.set()
+        return item
+
+    def __len__(self):
+        return len(self.items)
+
+
+class Resource:
+    """One entry of a thread's resource list (its index is the handle, spec §7.3).
+
+    ``kind`` is a :class:`ResourceType` name in lower case (``"mbox"``, ``"sem"``,
+    ``"mutex"``, ``"cond"``, ``"mem"``, ``"rosnode"``, ``"rosmsg"``, ``"rossub"``, ``"rospub"``,
+    ``"rossrvmsgreq"``, ``"rossrvmsgres"``, ``"rossrvs"``, ``"rossrvc"``); ``args`` as in
+    build.cfg (message type for a message, topic for a subscriber or publisher, size for a
+    mailbox or memory, initial value for a semaphore, service name for servers/clients).
+    """
+
+    def __init__(self, kind, *args, name=None):
+        self.kind = kind
+        self.type = ResourceType[kind.upper()]
+        self.args = args
+        self.name = name or kind
+        self.ptr = 0          # resources[h].ptr (GETOBJADDR)
+        self.state = None
+
+    def __repr__(self):
+        return f"Resource({self.kind}, {', '.join(map(repr, self.args))})"
+
+
+class _Semaphore:
+    def __init__(self, value):
+        self.value = value
+        self.event = Event()
+
+    async def wait(self):
+        while self.value == 0:
+            self.event.clear()
+            await self.event.wait()
+        self.value -= 1
+
+    def post(self):
+        self.value += 1
+        self.event.set()
+
+
+class _Mutex:
+    def __init__(self):
+        self.owner = None
+        self.event = Event()
+
+    async def lock(self, who):
+        while self.owner is not None:
+            self.event.clear()
+            await self.event.wait()
+        self.owner = who
+
+    def trylock(self, who):
+        if self.owner is None:
+            self.owner = who
+            return True
+        return False
+
+    def unlock(self):
+        self.owner = None
+        self.event.set()
+
+
+class _Cond:
+    def __init__(self):
+        self.waiters = []
+
+    async def wait(self, mutex, who):
+        ev = Event()
+        self.waiters.append(ev)
+        mutex.unlock()
+        await ev.wait()
+        await mutex.lock(who)
+
+    def signal(self):
+        if self.waiters:
+            self.waiters.pop(0).set()
+
+    def broadcast(self):
+        while self.waiters:
+            self.waiters.pop(0).set()
+
+
+class ReconosRuntime:
+    """The ReconOS runtime on the CPU, talking to a :class:`~hdl.reconos.ReconosSystem` in
+    simulation through its three AXI4-Lite ports and interrupts.
+
+    Parameters
+    ----------
+    arch : str
+    osif, intc, proc : cocotbext.axi.AxiLiteMaster
+        Masters on ``s_axi_osif``, ``s_axi_intc``, ``s_axi_proc``.
+    irq_osif, irq_pgf : cocotb handles
+        The interrupt outputs.
+    clock : cocotb handle
+    memory : ProcessMemory
+    messages : MessageMemory
+    broker : Broker
+    num_hwts : int
+    """
+
+    def __init__(self, arch, *, osif, intc, proc, irq_osif, irq_pgf, clock, memory, messages,
+                 broker, num_hwts):
+        self.arch = get_arch(arch)
+        self.w = self.arch.word_bits
+        self.osif, self.intc, self.proc = osif, intc, proc
+        self.irq_osif, self.irq_pgf, self.clock = irq_osif, irq_pgf, clock
+        self.mem = memory
+        self.msgs = messages
+        self.broker = broker
+        self.n = num_hwts
+        self.log = collections.defaultdict(list)   # slot -> [(command name, args, replies)]
+        self.ignored = collections.defaultdict(list)  # slot -> unknown command words
+        self.exited = {i: Event() for i in range(num_hwts)}
+        self._wakeup = {i: Event() for i in range(num_hwts)}
+        self._enabled = 0
+        self._reset_mask = (1 << num_hwts) - 1
+        self._signal_mask = 0
+        self._delegates = {}
+        self._subs = {}
+        self.unresolved_faults = []
+        self.errors = []
+        self._threads = {}
+
+    # ---- registers ----
+    async def _read(self, bus, offset):
+        resp = await bus.read(offset, self.arch.word_bytes)
+        return int.from_bytes(resp.data, "little")
+
+    async def _write(self, bus, offset, value):
+        await bus.write(offset, (value & ((1 << self.w) - 1)).to_bytes(self.arch.word_bytes,
+                                                                      "little"))
+
+    def proc_offset(self, register):
+        return proc_control_offset(self.arch, register, self.n)
+
+    async def proc_read(self, register):
+        return await self._read(self.proc, self.proc_offset(register))
+
+    async def proc_write(self, register, value):
+        await self._write(self.proc, self.proc_offset(register), value)
+
+    async def osif_write(self, slot, word):
+        while (await self._read(self.osif, osif_register_offset(
+                self.arch, slot, OsifRegister.SW2HW_FULL))) >> (self.w - 1):
+            await RisingEdge(self.clock)
+        await self._write(self.osif, osif_register_offset(self.arch, slot,
+                                                          OsifRegister.SW2HW_DATA), word)
+
+    async def osif_read(self, slot):
+        """``reconos_osif_read``: wait for the slot's interrupt as the driver does, then pop."""
+        while True:
+            empty = (await self._read(self.osif, osif_register_offset(
+                self.arch, slot, OsifRegister.HW2SW_EMPTY))) >> (self.w - 1)
+            if not empty:
+                return await self._read(self.osif, osif_register_offset(
+                    self.arch, slot, OsifRegister.HW2SW_DATA))
+            ev = self._wakeup[slot]
+            ev.clear()
+            await self._intc_enable(slot, True)
+            await ev.wait()
+
+    async def _intc_enable(self, slot, on):
+        if on:
+            self._enabled |= 1 << slot
+        else:
+            self._enabled &= ~(1 << slot)
+        await self._write(self.intc, 0, self._enabled)
+
+    async def _intc_isr(self):
+        """The osif_intc ISR: read pending, disable the active bits, wake their waiters."""
+        while True:
+            if not int(self.irq_osif.value):
+                await RisingEdge(self.irq_osif)
+            pending = await self._read(self.intc, 0) & 0xFFFF_FFFF
+            self._enabled &= ~pending
+            await self._write(self.intc, 0, self._enabled)
+            for i in range(self.n):
+                if pending >> i & 1:
+                    self._wakeup[i].set()
+            await RisingEdge(self.clock)
+
+    async def _pgf_handler(self):
+        """``proc_pgfhandler``: read the fault address, map the page, retry (or abort)."""
+        while True:
+            if not int(self.irq_pgf.value):
+                await RisingEdge(self.irq_pgf)
+            va = await self.proc_read(ProcControlRegister.FAULT_ADDR)
+            if self.mem.handle_fault(va):
+                await self.proc_write(ProcControlRegister.FAULT_ADDR, 0)
+            else:
+                self.unresolved_faults.append(va)
+                await self.proc_write(ProcControlRegister.FAULT_ABORT, 0)
+            await RisingEdge(self.clock)
+
+    async def start(self):
+        """Driver init: system reset, page table base, interrupt handlers."""
+        await self.proc_write(ProcControlRegister.SYS_RESET, 1)
+        await self.proc_write(ProcControlRegister.PGD, self.mem.pgd)
+        cocotb.start_soon(self._intc_isr())
+        cocotb.start_soon(self._pgf_handler())
+
+    # ---- threads ----
+    async def _set_reset(self, slot, value):
+        self._reset_mask = (self._reset_mask & ~(1 << slot)) | (int(value) << slot)
+        await self.proc_write(ProcControlRegister.HWT_RESET, self._reset_mask)
+
+    async def _set_signal(self, slot, value):
+        self._signal_mask = (self._signal_mask & ~(1 << slot)) | (int(value) << slot)
+        await self.proc_write(ProcControlRegister.HWT_SIGNAL, self._signal_mask)
+
+    async def create_thread(self, slot, resources, init_data=0, *, resume=False, state=None):
+        """``reconos_hwt_create``: reset pulse, signal low, START (or RESUME) word, delegate."""
+        self._threads[slot] = {"resources": resources, "init_data": init_data,
+                               "state": state or 0}
+        for r in resources:
+            self._prepare(r)
+        self.exited[slot].clear()
+        await self._set_reset(slot, 1)
+        await self._set_signal(slot, 0)
+        await self._set_reset(slot, 0)
+        await self.osif_write(slot, SIGNAL_THREAD_RESUME if resume else SIGNAL_THREAD_START)
+        self._delegates[slot] = cocotb.start_soon(self._delegate(slot))
+
+    async def suspend_thread(self, slot):
+        """``reconos_hwt_suspend``: stop the delegate (the runtime's SIGUSR1), set HWT_Signal;
+        the thread writes THREAD_EXIT while it waits for a reply; then hold it in reset.
+        Words the thread sent before the exit belong to the abandoned call and are dropped."""
+        task = self._delegates.pop(slot, None)
+        if task is not None and not task.done():
+            task.cancel()
+        await self._set_signal(slot, 1)
+        while True:
+            word = await self.osif_read(slot)
+            if word & CMD_MASK == Command.THREAD_EXIT:
+                break
+            self.ignored[slot].append(word)
+        self.log[slot].append(("thread_exit", (), ()))
+        await self._set_reset(slot, 1)
+        await self._set_signal(slot, 0)
+        self.exited[slot].set()
+
+    async def resume_thread(self, slot):
+        t = self._threads[slot]
+        await self.create_thread(slot, t["resources"], t["init_data"], resume=True,
+                                 state=t["state"])
+
+    def _prepare(self, r):
+        if r.state is not None:
+            return
+        k = r.kind
+        if k == "mbox":
+            r.state = _Queue(maxsize=int(r.args[0]))
+        elif k == "sem":
+            r.state = _Semaphore(int(r.args[0]) if r.args else 0)
+        elif k == "mutex":
+            r.state = _Mutex()
+        elif k == "cond":
+            r.state = _Cond()
+        elif k == "mem":
+            r.ptr = self.mem.malloc(int(r.args[0]))
+        elif k in ("rosmsg", "rossrvmsgreq", "rossrvmsgres"):
+            r.ptr = self.msgs.create(r.args[0])
+        elif k == "rossub":
+            r.state = self.broker.subscribe(r.args[0])
+        elif k == "rossrvs":
+            r.state = {"queue": self.broker.server_queue(r.args[0]), "pending": None}
+        elif k == "rossrvc":
+            r.state = {"reply": None}
+        if not r.ptr:
+            r.ptr = self.mem.malloc(64)   # a stand-in object address for GETOBJADDR
+
+    def _resource(self, slot, handle, *kinds):
+        res = self._threads[slot]["resources"]
+        if not 0 <= handle < len(res) or res[handle].kind not in kinds:
+            got = res[handle].kind if 0 <= handle < len(res) else "no resource"
+            raise ProtocolError(f"slot {slot}: handle {handle} is {got}, expected "
+                                f"{' or '.join(kinds)}")
+        return res[handle]
+
+    async def _delegate(self, slot):
+        """``dt_delegate``: read a command, dispatch on ``cmd & 0xFFF``, answer."""
+        while True:
+            word = await self.osif_read(slot)
+            c = CALLS.get(_METHOD_BY_CODE.get(word & CMD_MASK, ""), None)
+            if word & CMD_MASK == Command.THREAD_EXIT:
+                self.log[slot].append(("thread_exit", (), ()))
+                await self._set_reset(slot, 1)
+                await self._set_signal(slot, 0)
+                self.exited[slot].set()
+                return
+            if c is None:
+                # unknown codes, OSIF_INTERRUPTED and a stray 0x904 are ignored (no reply)
+                self.ignored[slot].append(word)
+                continue
+            args = [await self.osif_read(slot) for _ in c.args]
+            handler = getattr(self, "do_" + c.method, None)
+            try:
+                if handler is None:
+                    raise ProtocolError(f"slot {slot}: {c.method} is not modelled")
+                replies = await handler(slot, *args)
+            except ProtocolError as exc:
+                self.ignored[slot].append((word, args, str(exc)))
+                self.errors.append(str(exc))
+                continue
+            self.log[slot].append((c.method, tuple(args), tuple(replies)))
+            for r in replies:
+                await self.osif_write(slot, r & ((1 << self.w) - 1))
+
+    # ---- handlers: return the reply words ----
+    async def do_get_init_data(self, slot):
+        return [self._threads[slot]["init_data"]]
+
+    async def do_get_state_addr(self, slot):
+        return [self._threads[slot]["state"]]
+
+    async def do_thread_clear_signal(self, slot):
+        await self._set_signal(slot, 0)
+        return []
+
+    async def do_sem_post(self, slot, h):
+        self._resource(slot, h, "sem").state.post()
+        return [0]
+
+    async def do_sem_wait(self, slot, h):
+        await self._resource(slot, h, "sem").state.wait()
+        return [0]
+
+    async def do_mutex_lock(self, slot, h):
+        await self._resource(slot, h, "mutex").state.lock(slot)
+        return [0]
+
+    async def do_mutex_unlock(self, slot, h):
+        self._resource(slot, h, "mutex").state.unlock()
+        return [0]
+
+    async def do_mutex_trylock(self, slot, h):
+        return [0 if self._resource(slot, h, "mutex").state.trylock(slot) else 16]
+
+    async def do_cond_wait(self, slot, hc, hm):
+        cond = self._resource(slot, hc, "cond").state
+        await cond.wait(self._resource(slot, hm, "mutex").state, slot)
+        return [0]
+
+    async def do_cond_signal(self, slot, h):
+        self._resource(slot, h, "cond").state.signal()
+        return [0]
+
+    async def do_cond_broadcast(self, slot, h):
+        self._resource(slot, h, "cond").state.broadcast()
+        return [0]
+
+    async def do_mbox_get(self, slot, h):
+        return [await self._resource(slot, h, "mbox").state.get()]
+
+    async def do_mbox_put(self, slot, h, value):
+        await self._resource(slot, h, "mbox").state.put_wait(value)
+        return [0]
+
+    async def do_mbox_tryget(self, slot, h):
+        q = self._resource(slot, h, "mbox").state
+        if len(q):
+            return [q.get_nowait(), 1]
+        return [0, 0]
+
+    async def do_mbox_tryput(self, slot, h, value):
+        return [1 if self._resource(slot, h, "mbox").state.put_nowait(value) else 0]
+
+    async def do_memory_malloc(self, slot, pdst, length):
+        ptr = self.mem.malloc(length)
+        self.mem.write(pdst, ptr.to_bytes(self.arch.word_bytes, "little"))
+        return [ptr]
+
+    async def do_memory_free(self, slot, ptr):
+        return []
+
+    async def do_memory_getobjaddr(self, slot, h):
+        return [self._resource(slot, h, *_ALL_KINDS).ptr]
+
+    async def do_memory_getmemaddr(self, slot, h):
+        return [self._resource(slot, h, "mem").ptr]
+
+    async def do_ros_message_set_size(self, slot, h, offset, elem_size, count):
+        r = self._resource(slot, h, "rosmsg", "rossrvmsgreq", "rossrvmsgres")
+        return [self.msgs.set_sequence(r.ptr + offset, elem_size, count)]
+
+    async def do_ros_publish(self, slot, hp, hm):
+        pub = self._resource(slot, hp, "rospub")
+        msg = self._resource(slot, hm, "rosmsg")
+        self.broker.publish(pub.args[0], self.msgs.read(msg.ptr, msg.args[0]))
+        return [0]
+
+    async def do_ros_take(self, slot, hs, hm):
+        sub = self._resource(slot, hs, "rossub")
+        msg = self._resource(slot, hm, "rosmsg")
+        value = await sub.state.get()
+        self.msgs.write(msg.ptr, msg.args[0], value)
+        return [msg.ptr]
+
+    async def do_ros_trytake(self, slot, hs, hm):
+        sub = self._resource(slot, hs, "rossub")
+        msg = self._resource(slot, hm, "rosmsg")
+        value = sub.state.get_nowait()
+        if value is None:
+            return [0, 1]
+        self.msgs.write(msg.ptr, msg.args[0], value)
+        return [msg.ptr, 0]
+
+    async def do_ros_take_interruptable(self, slot, hs, hm):
+        """Loop: a message -> its pointer; any word from the thread -> all ones (§3.4)."""
+        sub = self._resource(slot, hs, "rossub")
+        msg = self._resource(slot, hm, "rosmsg")
+        while True:
+            value = sub.state.get_nowait()
+            if value is not None:
+                self.msgs.write(msg.ptr, msg.args[0], value)
+                return [msg.ptr]
+            empty = (await self._read(self.osif, osif_register_offset(
+                self.arch, slot, OsifRegister.HW2SW_EMPTY))) >> (self.w - 1)
+            if not empty:
+                word = await self.osif_read(slot)   # the cancel word
+                if word != Command.ROS_TAKE_INTERRUPTABLE_CANCEL:
+                    raise ProtocolError(f"slot {slot}: 0x{word:x} during an interruptible take")
+                return [INTERRUPTED_REPLY(self.w)]
+            await First(sub.state._event.wait(), Timer(1, "us"))
+
+    async def do_ros_services_take(self, slot, hs, hm):
+        srv = self._resource(slot, hs, "rossrvs")
+        req = self._resource(slot, hm, "rossrvmsgreq")
+        request, reply = await srv.state["queue"].get()
+        srv.state["pending"] = reply
+        self.msgs.write(req.ptr, req.args[0], request)
+        return [req.ptr]
+
+    async def do_ros_services_trytake(self, slot, hs, hm):
+        srv = self._resource(slot, hs, "rossrvs")
+        req = self._resource(slot, hm, "rossrvmsgreq")
+        item = srv.state["queue"].get_nowait()
+        if item is None:
+            return [0, 1]
+        srv.state["pending"] = item[1]
+        self.msgs.write(req.ptr, req.args[0], item[0])
+        return [req.ptr, 0]
+
+    async def do_ros_services_response(self, slot, hs, hm):
+        srv = self._resource(slot, hs, "rossrvs")
+        res = self._resource(slot, hm, "rossrvmsgres")
+        if srv.state["pending"] is None:
+            raise ProtocolError(f"slot {slot}: a service response without a request")
+        srv.state["pending"].put(self.msgs.read(res.ptr, res.args[0]))
+        srv.state["pending"] = None
+        return [0]
+
+    async def do_ros_servicec_request(self, slot, hc, hm):
+        cli = self._resource(slot, hc, "rossrvc")
+        req = self._resource(slot, hm, "rossrvmsgreq")
+        reply = _Queue()
+        self.broker._services[cli.args[0]].put((self.msgs.read(req.ptr, req.args[0]), reply))
+        cli.state["reply"] = reply
+        return [0]
+
+    async def do_ros_servicec_take(self, slot, hc, hm):
+        cli = self._resource(slot, hc, "rossrvc")
+        res = self._resource(slot, hm, "rossrvmsgres")
+        value = await cli.state["reply"].get()
+        self.msgs.write(res.ptr, res.args[0], value)
+        return [res.ptr]
+
+    async def do_ros_servicec_trytake(self, slot, hc, hm):
+        cli = self._resource(slot, hc, "rossrvc")
+        res = self._resource(slot, hm, "rossrvmsgres")
+        value = cli.state["reply"].get_nowait() if cli.state["reply"] else None
+        if value is None:
+            return [0, 1]
+        self.msgs.write(res.ptr, res.args[0], value)
+        return [res.ptr, 0]
+
+
+_ALL_KINDS = tuple(t.name.lower() for t in ResourceType)
+# 0x904 is not a command of its own: the delegate reads it inside an interruptible take, and
+# a stray one (sent after the reply) is ignored like an unknown code (spec §3.4, defect 25).
+_METHOD_BY_CODE = {int(c.command): name for name, c in CALLS.items()
+                   if c.command is not None and name != "ros_take_interruptable_cancel"}

@@ -1,0 +1,72 @@
+"""The shared test bench of the ``reconos`` top: clock, reset, the three AXI4-Lite masters,
+process memory behind the AXI4 port, and the software model of :mod:`tb.models.reconos_sw`."""
+
+import logging
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, RisingEdge
+from cocotbext.axi import AxiBus, AxiLiteBus, AxiLiteMaster, AxiRam
+
+from hdl.reconos.protocol import arch as get_arch
+
+from .harness import bench_params
+from .models.reconos_sw import Broker, MessageMemory, ProcessMemory, ReconosRuntime
+
+__all__ = ["ReconosTB", "RAM_SIZE"]
+
+RAM_SIZE = 1 << 25
+
+
+class ReconosTB:
+    def __init__(self, dut, *, ram_size=RAM_SIZE):
+        self.dut = dut
+        self.params = bench_params()
+        self.arch = get_arch(self.params.get("arch", "r64"))
+        self.num_hwts = len(self.params["threads"])
+        cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+        self.osif = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_osif"), dut.aclk,
+                                  dut.aresetn, reset_active_level=False)
+        self.intc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_intc"), dut.aclk,
+                                  dut.aresetn, reset_active_level=False)
+        self.proc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_proc"), dut.aclk,
+                                  dut.aresetn, reset_active_level=False)
+        self.ram = AxiRam(AxiBus.from_prefix(dut, "m_axi_mem"), dut.aclk, dut.aresetn,
+                          reset_active_level=False, size=ram_size)
+        for m in (self.osif, self.intc, self.proc, self.ram):
+            for part in ("write_if", "read_if"):
+                if hasattr(m, part):
+                    getattr(m, part).log.setLevel(logging.WARNING)
+            m.log.setLevel(logging.WARNING) if hasattr(m, "log") else None
+        self.ram_size = ram_size
+        self.memory = ProcessMemory(self.arch, self.ram, ram_size)
+        self.broker = Broker()
+        self.messages = None
+        self.runtime = None
+
+    async def reset(self):
+        self.dut.aresetn.value = 0
+        await ClockCycles(self.dut.aclk, 5)
+        self.dut.aresetn.value = 1
+        await ClockCycles(self.dut.aclk, 2)
+
+    async def start_runtime(self, library=None):
+        from gen.msg import MessageLibrary
+        library = library or MessageLibrary([], store="ros2_humble")
+        self.messages = MessageMemory(self.memory, library)
+        self.runtime = ReconosRuntime(
+            self.arch, osif=self.osif, intc=self.intc, proc=self.proc,
+            irq_osif=self.dut.irq_osif, irq_pgf=self.dut.irq_pgf, clock=self.dut.aclk,
+            memory=self.memory, messages=self.messages, broker=self.broker,
+            num_hwts=self.num_hwts)
+        await self.runtime.start()
+        return self.runtime
+
+    async def cycles_until(self, event, limit):
+        """Cycles until ``event`` (a cocotb Event) is set; fail after ``limit``."""
+        n = 0
+        while not event.is_set():
+            await RisingEdge(self.dut.aclk)
+            n += 1
+            assert n <= limit, f"no result within {limit} cycles"
+        return n
