@@ -37,8 +37,10 @@ def build_msg_codec(**params):
 
 #: hardware-thread kinds of the ``reconos`` top -> thread class
 def _thread_classes():
-    from hdl.reconos import CallSequenceThread, CopyThread, EchoThread
-    return {"echo": EchoThread, "copy": CopyThread, "calls": CallSequenceThread}
+    from hdl.reconos.threads import (CallSequenceThread, CopyThread, EchoThread,
+                                     MemoryTestThread)
+    return {"echo": EchoThread, "copy": CopyThread, "calls": CallSequenceThread,
+            "memtest": MemoryTestThread}
 
 
 def build_reconos(**params):

@@ -39,10 +39,24 @@ class ReconosTB:
                     getattr(m, part).log.setLevel(logging.WARNING)
             m.log.setLevel(logging.WARNING) if hasattr(m, "log") else None
         self.ram_size = ram_size
+        self._decode_window(ram_size)
         self.memory = ProcessMemory(self.arch, self.ram, ram_size)
         self.broker = Broker()
         self.messages = None
         self.runtime = None
+
+    def _decode_window(self, size):
+        """AxiRam wraps addresses modulo its size; a real interconnect answers an access with
+        no memory behind it with an error. Accesses at or above ``size`` raise here, which
+        cocotbext-axi answers with SLVERR."""
+        for port, name in ((self.ram.read_if, "_read"), (self.ram.write_if, "_write")):
+            inner = getattr(port, name)
+
+            async def checked(address, arg, _inner=inner):
+                if address >= size:
+                    raise IndexError(f"no memory at 0x{address:x}")
+                return await _inner(address, arg)
+            setattr(port, name, checked)
 
     async def reset(self):
         self.dut.aresetn.value = 0

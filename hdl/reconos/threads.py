@@ -6,7 +6,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from .hwt import HardwareThread
 from .protocol import CALLS
 
-__all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "REPORT_MBOX"]
+__all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX"]
 
 
 class EchoThread(HardwareThread):
@@ -158,4 +158,115 @@ class CallSequenceThread(HardwareThread):
                         os.mbox_put(REPORT_MBOX, reg, then=after)
             with m.State("EXIT"):
                 os.thread_exit()
+        return m
+
+
+class MemoryTestThread(HardwareThread):
+    """A thread that executes memory operations sent by software through a mailbox, for
+    testing the MEMIF path with requests a well-behaved thread never makes.
+
+    Each operation is a sequence of words on mailbox ``h_cmd``; results go to ``h_result``:
+
+    * ``0, addr, length``: one raw MEMIF read request (no splitting, any length); the
+      ``ceil(length/W)`` words that come back are put into ``h_result``;
+    * ``1, addr, length, seed``: one raw write request with data words ``seed + k``; then 0;
+    * ``2, src, dst, length``: a copy through the :class:`~hdl.reconos.hwt.MemifEngine`
+      (split, full rate); then 0.
+
+    Parameters
+    ----------
+    arch : str
+    h_cmd, h_result : int
+        Mailbox handles.
+    """
+
+    def __init__(self, arch, *, h_cmd, h_result):
+        self.handles = (h_cmd, h_result)
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        from amaranth.lib import wiring as _w
+        from .hwt import MemCalls, MemifEngine, OsifCalls, OsifEngine
+        from .memif import request_words
+        from .protocol import MemifOp
+        m = Module()
+        a = self.arch
+        w = a.word_bits
+        m.submodules.osif = osif = OsifEngine(a)
+        for name in ("osif_sw2hw", "osif_hw2sw"):
+            _w.connect(m, _w.flipped(getattr(self, name)), getattr(osif, name))
+        m.d.comb += osif.hwt_signal.eq(self.hwt_signal)
+        os = OsifCalls(m, osif)
+        m.submodules.memif = engine = MemifEngine(a)
+        mem = MemCalls(m, engine)
+        raw = Signal()
+        h2m, m2h = self.memif_hwt2mem, self.memif_mem2hwt
+        raw_we = Signal()
+        raw_data = Signal(w)
+        raw_re = Signal()
+        m.d.comb += [
+            h2m.we.eq(Mux(raw, raw_we, engine.memif_hwt2mem.we)),
+            h2m.data.eq(Mux(raw, raw_data, engine.memif_hwt2mem.data)),
+            engine.memif_hwt2mem.full.eq(h2m.full | raw),
+            m2h.re.eq(Mux(raw, raw_re, engine.memif_mem2hwt.re)),
+            engine.memif_mem2hwt.data.eq(m2h.data),
+            engine.memif_mem2hwt.empty.eq(m2h.empty | raw),
+        ]
+        h_cmd, h_res = self.handles
+        op, x, y, z, word = (Signal(w, name=n) for n in ("op", "x", "y", "z", "word"))
+        count = Signal(w)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="OP")
+            with m.State("OP"):
+                os.mbox_get(h_cmd, data=op, then="X")
+            with m.State("X"):
+                os.mbox_get(h_cmd, data=x, then="Y")
+            with m.State("Y"):
+                with m.If(op == 0):
+                    os.mbox_get(h_cmd, data=y, then="RAW_CMD")
+                with m.Else():
+                    os.mbox_get(h_cmd, data=y, then="Z")
+            with m.State("Z"):
+                with m.If(op == 2):
+                    os.mbox_get(h_cmd, data=z, then="COPY")
+                with m.Else():
+                    os.mbox_get(h_cmd, data=z, then="RAW_CMD")
+            with m.State("RAW_CMD"):
+                length = y[:a.length_bits]
+                m.d.comb += [raw.eq(1), raw_we.eq(1),
+                             raw_data.eq(Mux(op == 0, MemifOp.READ, MemifOp.WRITE) << a.length_bits
+                                         | length)]
+                with m.If(~h2m.full):
+                    m.d.sync += count.eq(request_words(a, length))
+                    m.next = "RAW_ADDR"
+            with m.State("RAW_ADDR"):
+                m.d.comb += [raw.eq(1), raw_we.eq(1), raw_data.eq(x)]
+                with m.If(~h2m.full):
+                    with m.If(count == 0):
+                        m.next = "RESULT"
+                    with m.Elif(op == 0):
+                        m.next = "RAW_READ"
+                    with m.Else():
+                        m.next = "RAW_WRITE"
+            with m.State("RAW_WRITE"):
+                m.d.comb += [raw.eq(1), raw_we.eq(1), raw_data.eq(z)]
+                with m.If(~h2m.full):
+                    m.d.sync += [z.eq(z + 1), count.eq(count - 1)]
+                    with m.If(count == 1):
+                        m.next = "RESULT"
+            with m.State("RAW_READ"):
+                m.d.comb += [raw.eq(1), raw_re.eq(1)]
+                with m.If(~m2h.empty):
+                    m.d.sync += [word.eq(m2h.data), count.eq(count - 1)]
+                    m.next = "RAW_REPORT"
+            with m.State("RAW_REPORT"):
+                with m.If(count == 0):
+                    os.mbox_put(h_res, word, then="OP")
+                with m.Else():
+                    os.mbox_put(h_res, word, then="RAW_READ")
+            with m.State("COPY"):
+                mem.copy(x, y, z, then="RESULT")
+            with m.State("RESULT"):
+                os.mbox_put(h_res, 0, then="OP")
         return m
