@@ -597,6 +597,14 @@ class ReconosRuntime:
         self._signal_mask = (self._signal_mask & ~(1 << slot)) | (int(value) << slot)
         await self.proc_write(ProcControlRegister.HWT_SIGNAL, self._signal_mask)
 
+    async def start_slot(self, slot, first_word=SIGNAL_THREAD_START):
+        """Reset the slot and write its first word, without a delegate (for tests that play
+        the delegate themselves)."""
+        await self._set_reset(slot, 1)
+        await self._set_signal(slot, 0)
+        await self._set_reset(slot, 0)
+        await self.osif_write(slot, first_word)
+
     async def create_thread(self, slot, resources, init_data=0, *, resume=False, state=None):
         """``reconos_hwt_create``: reset pulse, signal low, START (or RESUME) word, delegate."""
         self._threads[slot] = {"resources": resources, "init_data": init_data,

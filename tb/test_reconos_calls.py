@@ -1,0 +1,119 @@
+"""ReconROS compatibility of the hardware-thread API: every OS call's command code and word
+sequence (spec reconos.md §3.1, §3.3) as the thread writes them, the replies it reads (full
+word width: defect 5), the fixed sequences of defects 1-3, the interruptible take (§3.4,
+including a late reply followed by a stray 0x904: defect 25), and HWT_Signal during a
+blocking call (§3.2). The test plays the delegate through the reconos_osif registers."""
+
+import cocotb
+
+from hdl.reconos.protocol import (CALLS, INTERRUPTED_REPLY, SIGNAL_THREAD_START, Command)
+from hdl.reconos.threads import REPORT_MBOX
+
+from .harness import cocotb_bench
+from .reconos_tb import ReconosTB
+
+SKIP = {"thread_init", "thread_exit", "ros_take_interruptable", "ros_take_interruptable_cancel"}
+BLOCKED_SEM = 0x63
+
+
+def argument(i, k, wide):
+    """A distinct argument value; on r64 some are wider than 32 bits."""
+    base = (i + 1) * 16 + k + 1
+    return base | (0x1234_5678 << 32) if wide and k == 0 and i % 3 == 0 else base
+
+
+def program(arch):
+    wide = arch == "r64"
+    out = []
+    for i, (name, c) in enumerate(CALLS.items()):
+        if name in SKIP:
+            continue
+        out.append((name, [argument(i, k, wide) for k in range(len(c.args))]))
+    out += [("ros_take_interruptable", [5, 6]), ("ros_take_interruptable_cancel", []),
+            ("ros_take_interruptable", [7, 8]), ("ros_take_interruptable_cancel", []),
+            ("sem_wait", [BLOCKED_SEM])]
+    return out
+
+
+CONFIGS = {
+    "calls_r64": {"arch": "r64", "threads": [{"kind": "calls", "program": program("r64")}]},
+    "calls_r32": {"arch": "r32", "threads": [{"kind": "calls", "program": program("r32")}]},
+}
+
+
+class CallsTB(ReconosTB):
+    async def expect(self, words, what):
+        got = [await self.runtime.osif_read(0) for _ in words]
+        assert got == list(words), f"{what}: thread wrote {[hex(g) for g in got]}, " \
+                                   f"spec says {[hex(w) for w in words]}"
+
+    async def reply(self, *words):
+        for w in words:
+            await self.runtime.osif_write(0, w)
+
+    async def expect_report(self, value, what):
+        """The thread reports a received value with MBOX_PUT(REPORT_MBOX, value)."""
+        cmd = await self.runtime.osif_read(0)
+        h = await self.runtime.osif_read(0)
+        v = await self.runtime.osif_read(0)
+        assert (cmd, h) == (Command.MBOX_PUT, REPORT_MBOX), f"{what}: no report"
+        if value is not None:
+            assert v == value, f"{what}: thread received 0x{v:x}, delegate sent 0x{value:x}"
+        await self.reply(0)
+        return v
+
+
+@cocotb.test()
+async def every_call_word_sequence(dut):
+    tb = CallsTB(dut)
+    await tb.reset()
+    rt = await tb.start_runtime()
+    w = tb.arch.word_bits
+    await rt.start_slot(0)
+    await tb.expect_report(SIGNAL_THREAD_START, "THREAD_INIT")
+    prog = tb.params["threads"][0]["program"]
+    covered = set()
+    for i, (name, args) in enumerate(prog):
+        c = CALLS[name]
+        if name == "ros_take_interruptable":
+            await tb.expect([Command.ROS_TAKE_INTERRUPTABLE, *args], name)
+            cancel = prog[i + 1][0]
+            assert cancel == "ros_take_interruptable_cancel"
+            if args == [5, 6]:
+                # no message: the cancel word comes, the delegate answers all ones
+                await tb.expect([Command.ROS_TAKE_INTERRUPTABLE_CANCEL], "cancel")
+                await tb.reply(INTERRUPTED_REPLY(w))
+                await tb.expect_report(INTERRUPTED_REPLY(w), "cancel ptr")
+                await tb.expect_report(0, "cancel: no message")
+            else:
+                # the message arrives first; a 0x904 may follow and is to be ignored
+                ptr = 0xBEEF_0000 | i
+                await tb.reply(ptr)
+                word = await rt.osif_read(0)
+                if word == Command.ROS_TAKE_INTERRUPTABLE_CANCEL:
+                    word = await rt.osif_read(0)
+                assert word == Command.MBOX_PUT
+                assert [await rt.osif_read(0), await rt.osif_read(0)] == [REPORT_MBOX, ptr]
+                await tb.reply(0)
+                await tb.expect_report(1, "late message delivered")
+            covered |= {name, "ros_take_interruptable_cancel"}
+            continue
+        if name == "ros_take_interruptable_cancel":
+            continue
+        if name == "sem_wait" and args == [BLOCKED_SEM]:
+            await tb.expect([Command.SEM_WAIT, BLOCKED_SEM], "blocked sem_wait")
+            await rt._set_signal(0, 1)
+            await tb.expect([Command.THREAD_EXIT], "HWT_Signal during a blocking call")
+            continue
+        await tb.expect([int(c.command), *args], name)
+        replies = [(0xA000_0000 + 16 * i + k) | ((0xCAFE << 40) if w == 64 else 0)
+                   for k in range(len(c.replies))]
+        await tb.reply(*replies)
+        for k, r in enumerate(replies):
+            await tb.expect_report(r, f"{name} reply {c.replies[k]}")
+        covered.add(name)
+    assert covered | {"thread_init", "thread_exit"} == set(CALLS), \
+        set(CALLS) - covered
+
+
+test_reconos_calls = cocotb_bench("reconos", CONFIGS)
