@@ -64,6 +64,44 @@ class CallsTB(ReconosTB):
 
 
 @cocotb.test()
+async def control_registers(dut):
+    """reconos_osif, osif_intc and proc_control registers at the spec's offsets and bits."""
+    from cocotb.triggers import ClockCycles
+    from hdl.reconos.protocol import OsifRegister as O, ProcControlRegister as R
+    from hdl.reconos.protocol import osif_register_offset
+    tb = CallsTB(dut)
+    await tb.reset()
+    rt = await tb.start_runtime()
+    w = tb.arch.word_bits
+    msb = 1 << (w - 1)
+    assert await rt.proc_read(R.NUM_HWTS) == 1
+    assert await rt.proc_read(R.HWT_RESET) == 1        # every thread held in reset
+    assert await rt.proc_read(R.HWT_SIGNAL) == 0
+    assert await rt.proc_read(R.TLB_HITS) == 0 and await rt.proc_read(R.TLB_MISSES) == 0
+
+    async def osif(reg):
+        return await rt._read(tb.osif, osif_register_offset(tb.arch, 0, reg))
+    assert await osif(O.HW2SW_EMPTY) == msb            # empty, fill 0
+    assert await osif(O.SW2HW_FULL) == 8               # not full, 8 free
+    assert int(dut.irq_osif.value) == 0
+    await rt.start_slot(0)                             # the thread reports START (3 words)
+    await ClockCycles(dut.aclk, 20)
+    assert await osif(O.HW2SW_EMPTY) == 3              # not empty, fill 3
+    assert int(dut.irq_osif.value) == 0                # not enabled
+    await rt._write(tb.intc, 0, 1)
+    await ClockCycles(dut.aclk, 2)
+    assert int(dut.irq_osif.value) == 1
+    assert await rt._read(tb.intc, 0) & 1 == 1         # pending
+    await rt._write(tb.intc, 0, 0)
+    assert await osif(O.HW2SW_DATA) == Command.MBOX_PUT   # the read pops
+    assert await osif(O.HW2SW_EMPTY) == 2
+    resp = await tb.proc.read(0x1000, tb.arch.word_bytes)  # no register there
+    assert int(resp.resp) == 2                         # SLVERR
+    await rt.proc_write(R.HWT_SIGNAL, 1)
+    assert await rt.proc_read(R.HWT_SIGNAL) == 1
+
+
+@cocotb.test()
 async def every_call_word_sequence(dut):
     tb = CallsTB(dut)
     await tb.reset()
