@@ -6,7 +6,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import hmt, msg  # noqa: E402
+from bench import hmt, msg, reconos  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -26,6 +26,13 @@ def main():
     resources = msg.measure_resources()
     print(msg.write_results(results, resources, RESULTS))
     print(f"wrote {RESULTS / 'msg.json'} and {RESULTS / 'msg.md'} "
+          f"({time.monotonic() - start:.0f} s)")
+    start = time.monotonic()
+    print("rosgate bench: ReconOS infrastructure (MEMIF copies, OS calls, resources)")
+    results = reconos.measure()
+    resources = reconos.measure_resources()
+    print(reconos.write_results(results, resources, RESULTS))
+    print(f"wrote {RESULTS / 'reconos.json'} and {RESULTS / 'reconos.md'} "
           f"({time.monotonic() - start:.0f} s)")
     return 0
 

@@ -8,7 +8,9 @@ from tb.harness import config_params, export_bench_top
 from tb.toolchain import SIM_BUILD
 
 #: bench module -> top name
-BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec"}
+BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
+           "tb.test_reconos_pingpong": "reconos", "tb.test_reconos_memory": "reconos",
+           "tb.test_reconos_calls": "reconos"}
 
 
 def main():

@@ -129,7 +129,7 @@ class MemifArbiter(wiring.Component):
         m.d.comb += pick.eq(Mux(masked.any(), masked, req_bits))
         m.d.comb += winner.eq(pick & (~pick + 1))
 
-        slot = Signal(range(n))
+        slot = Signal(range(max(n, 2)))
         head = Signal(a.word_bits)
         head_valid = Signal()
         pop = Signal()

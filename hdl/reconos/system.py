@@ -28,8 +28,10 @@ class ReconosSystem(wiring.Component):
     ----------
     arch : str
         ``"r32"`` or ``"r64"``.
-    threads : list of wiring.Component
+    threads : list of wiring.Component or None
         One per slot, each with the members of :func:`~hdl.reconos.hwt.ThreadSignature`.
+        ``None`` leaves the slot empty and exposes its ports as ``slot<i>`` (the FIFO sides a
+        thread connects to, for a thread implemented outside Amaranth) and ``slot<i>_rst``.
     tlb_entries : int
         TLB size (ReconROS block designs: 16).
     osif_depth, memif_depth : int
@@ -55,7 +57,12 @@ class ReconosSystem(wiring.Component):
         self._osif_depth = check_power_of_two("osif_depth", osif_depth, 2, 4096)
         self._memif_depth = check_power_of_two("memif_depth", memif_depth, 2, 4096)
         expected = ThreadSignature(a).members
+        external = {}
         for i, t in enumerate(threads):
+            if t is None:
+                external[f"slot{i}"] = In(ThreadSignature(a))
+                external[f"slot{i}_rst"] = Out(1)
+                continue
             for name, member in expected.items():
                 if name not in t.signature.members or t.signature.members[name] != member:
                     raise ValueError(f"thread in slot {i} ({type(t).__name__}) lacks the slot "
@@ -70,6 +77,7 @@ class ReconosSystem(wiring.Component):
             "m_axi_mem": Out(AXI4Signature(a.addr_bits, w, id_width=1, user_width=2)),
             "irq_osif": Out(1),
             "irq_pgf": Out(1),
+            **external,
         })
 
     def elaborate(self, platform):
@@ -116,7 +124,11 @@ class ReconosSystem(wiring.Component):
         has_data = []
         for i, thread in enumerate(self._threads):
             rst = proc.hwt_reset[i]
-            m.submodules[f"slot{i}"] = ResetInserter(rst)(thread)
+            if thread is None:
+                thread = wiring.flipped(getattr(self, f"slot{i}"))
+                m.d.comb += getattr(self, f"slot{i}_rst").eq(rst)
+            else:
+                m.submodules[f"slot{i}"] = ResetInserter(rst)(thread)
             fifos = {}
             for name, depth in (("sw2hw", self._osif_depth), ("hw2sw", self._osif_depth),
                                 ("hwt2mem", self._memif_depth), ("mem2hwt", self._memif_depth)):

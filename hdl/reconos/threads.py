@@ -74,8 +74,10 @@ class CopyThread(HardwareThread):
         m.d.comb += [main.eq(size >> sh << sh), tail.eq(size[:sh])]
         merged = Signal(w)
         for b in range(wb):
+            # byte b comes from the source when b < tail (tail < W, so never the top byte)
+            src_byte = s_word.word_select(b, 8) if b < wb - 1 else d_word.word_select(b, 8)
             m.d.comb += merged.word_select(b, 8).eq(
-                Mux(b < tail, s_word.word_select(b, 8), d_word.word_select(b, 8)))
+                Mux(tail > b, src_byte, d_word.word_select(b, 8)) if b < wb - 1 else src_byte)
 
         with m.FSM():
             with m.State("INIT"):
