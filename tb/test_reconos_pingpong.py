@@ -14,12 +14,17 @@ from .reconos_tb import ReconosTB
 IMAGE = "sensor_msgs/msg/Image"
 
 
+#: slot 2: post semaphore 1, post semaphore 2, then an unknown command word
+BAD_PROGRAM = [["sem_post", [1]], ["sem_post", [2]], ["command", [0x123]]]
+
+
 def _threads(arch):
     offset = 72 if arch == "r64" else 48    # Image.data (spec §6 table)
     return [
         {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
         {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,
          "data_offset": offset},
+        {"kind": "calls", "program": BAD_PROGRAM, "h_report": 0},
     ]
 
 
@@ -119,6 +124,29 @@ async def suspend_and_resume_repeatedly(dut):
     # the copy thread in the other slot was never disturbed
     await run_round_trips(tb, "/ping_copy", tb.pong_copy, [40], 21, payload_only=True)
     assert not rt.errors, rt.errors
+
+
+@cocotb.test()
+async def bad_calls_get_a_defined_outcome(dut):
+    """An unknown command word is ignored (no reply) and recorded; a handle of the wrong
+    resource type is refused (no reply, an error recorded, where ReconOS panics); the stuck
+    thread is suspended through HWT_Signal and the other slots keep working."""
+    from cocotb.triggers import ClockCycles
+    tb = PingPongTB(dut)
+    rt = await tb.setup()
+    slot = 2
+    for kinds in (("sem", "sem"), ("sem", "mutex")):
+        res = [Resource("mbox", 8), Resource(kinds[0], 0), Resource(kinds[1], 0)]
+        await rt.create_thread(slot, res)
+        await ClockCycles(dut.aclk, 3000)
+        if kinds[1] == "sem":
+            assert res[1].state.value == 1 and res[2].state.value == 1
+            assert rt.ignored[slot][-1] == 0x123
+        else:
+            assert "handle 2 is mutex, expected sem" in rt.errors[-1]
+        await rt.suspend_thread(slot)
+        await run_round_trips(tb, "/ping", tb.pong, [32], 30)
+        await run_round_trips(tb, "/ping_copy", tb.pong_copy, [64], 31, payload_only=True)
 
 
 test_reconos_pingpong = cocotb_bench("reconos", CONFIGS)

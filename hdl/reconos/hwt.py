@@ -248,6 +248,12 @@ class OsifCalls:
         self._finish([(target, self._engine.replies[c.replies.index(r)])
                       for r, target in replies.items()], then)
 
+    def command(self, word, *args, nreplies=0, replies=(), then=None):
+        """Write ``word`` and ``args`` and read ``nreplies`` words into the signals
+        ``replies``: an escape hatch for commands outside the ReconOS table."""
+        self._drive(OsifMode.CALL, word, args, nreplies)
+        self._finish([(t, self._engine.replies[k]) for k, t in enumerate(replies)], then)
+
     def ros_take_interruptable_check(self, *, ptr=None, got=None, then=None):
         self._drive(OsifMode.POLL, None, (), 1)
         self._finish([(t, v) for t, v in ((ptr, self._engine.replies[0]),

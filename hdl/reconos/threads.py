@@ -120,13 +120,17 @@ class CallSequenceThread(HardwareThread):
     arch : str
     program : list of (method, [args])
         Method names of :data:`~hdl.reconos.protocol.CALLS` (plus
-        ``ros_take_interruptable_check``) and their constant arguments.
+        ``ros_take_interruptable_check``, and ``command`` whose first argument is any command
+        word, expecting one reply) and their constant arguments.
+    h_report : int
+        Mailbox handle for the reports (default :data:`REPORT_MBOX`).
     """
 
-    def __init__(self, arch, *, program):
+    def __init__(self, arch, *, program, h_report=REPORT_MBOX):
         self.program = [(name, tuple(args)) for name, args in program]
+        self.h_report = h_report
         for name, args in self.program:
-            if name in ("ros_take_interruptable_check",):
+            if name in ("ros_take_interruptable_check", "command"):
                 continue
             if name not in CALLS:
                 raise ValueError(f"unknown OS call {name!r} in the program")
@@ -142,13 +146,16 @@ class CallSequenceThread(HardwareThread):
             with m.State("INIT"):
                 os.thread_init(signal=regs[0], then="REPORT_INIT")
             with m.State("REPORT_INIT"):
-                os.mbox_put(REPORT_MBOX, regs[0], then="CALL0")
+                os.mbox_put(self.h_report, regs[0], then="CALL0")
             for i, (name, args) in enumerate(self.program):
                 nxt = f"CALL{i + 1}" if i + 1 < len(self.program) else "EXIT"
                 with m.State(f"CALL{i}"):
                     if name in ("ros_take_interruptable_check", "ros_take_interruptable_cancel"):
                         getattr(os, name)(ptr=regs[0], got=got, then=f"REPORT{i}_0")
                         replies = [regs[0], got]
+                    elif name == "command":
+                        os.command(*args, nreplies=1, replies=[regs[0]], then=f"REPORT{i}_0")
+                        replies = [regs[0]]
                     else:
                         c = CALLS[name]
                         getattr(os, name)(*args, then=f"REPORT{i}_0" if c.replies else nxt,
@@ -157,7 +164,7 @@ class CallSequenceThread(HardwareThread):
                 for k, reg in enumerate(replies):
                     after = f"REPORT{i}_{k + 1}" if k + 1 < len(replies) else nxt
                     with m.State(f"REPORT{i}_{k}"):
-                        os.mbox_put(REPORT_MBOX, reg, then=after)
+                        os.mbox_put(self.h_report, reg, then=after)
             with m.State("EXIT"):
                 os.thread_exit()
         return m
