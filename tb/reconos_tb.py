@@ -13,9 +13,38 @@ from hdl.reconos.protocol import arch as get_arch
 from .harness import bench_params
 from .models.reconos_sw import Broker, MessageMemory, ProcessMemory, ReconosRuntime
 
-__all__ = ["ReconosTB", "RAM_SIZE"]
+__all__ = ["ReconosTB", "RAM_SIZE", "SYSTEM_CONFIGS", "slot_of"]
 
 RAM_SIZE = 1 << 25
+
+
+def _system(arch):
+    """One system per architecture for every ``reconos`` bench module (one build each):
+    0 echo node, 1 copy node, 2 a thread making bad calls, 3 and 4 memory-test threads,
+    5 the OS-call sequencer of the compatibility bench."""
+    from .test_reconos_calls import program
+    from .test_reconos_pingpong import BAD_PROGRAM
+    offset = 72 if arch == "r64" else 48    # sensor_msgs/Image.data (spec §6 table)
+    return {"arch": arch, "threads": [
+        {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
+        {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,
+         "data_offset": offset},
+        {"kind": "calls", "program": BAD_PROGRAM, "h_report": 0},
+        {"kind": "memtest", "h_cmd": 0, "h_result": 1},
+        {"kind": "memtest", "h_cmd": 0, "h_result": 1},
+        {"kind": "calls", "program": program(arch)},
+    ]}
+
+
+def system_configs():
+    return {f"system_{arch}": _system(arch) for arch in ("r64", "r32")}
+
+
+def slot_of(params, kind, nth=0, **match):
+    """Index of the ``nth`` thread of ``kind`` (with the given parameters) in a config."""
+    found = [i for i, t in enumerate(params["threads"]) if t["kind"] == kind and
+             all(t.get(k, "absent") == v for k, v in match.items())]
+    return found[nth]
 
 
 class ReconosTB:

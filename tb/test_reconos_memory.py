@@ -12,12 +12,8 @@ from hdl.reconos.protocol import MemStatus, ProcControlRegister as R
 
 from .harness import cocotb_bench
 from .models.reconos_sw import PAGE, Resource
-from .reconos_tb import ReconosTB
+from .reconos_tb import ReconosTB, system_configs
 
-CONFIGS = {
-    "memtest_r64": {"arch": "r64", "threads": [{"kind": "memtest", "h_cmd": 0, "h_result": 1}] * 2},
-    "memtest_r32": {"arch": "r32", "threads": [{"kind": "memtest", "h_cmd": 0, "h_result": 1}] * 2},
-}
 
 READ, WRITE, COPY = 0, 1, 2
 
@@ -26,16 +22,17 @@ class MemoryTB(ReconosTB):
     async def setup(self):
         await self.reset()
         rt = await self.start_runtime()
+        self.slots = [i for i, t in enumerate(self.params["threads"]) if t["kind"] == "memtest"]
         self.res = []
-        for slot in range(self.num_hwts):
+        for slot in self.slots:
             res = [Resource("mbox", 16), Resource("mbox", 1024)]
             self.res.append(res)
             await rt.create_thread(slot, res)
         return rt
 
     async def op(self, slot, *words, results=1, limit=2_000_000):
-        """Send an operation to the thread in ``slot``; return its result words and the
-        cycles from the first command word to the last result."""
+        """Send an operation to memory-test thread number ``slot`` (0 or 1); return its result
+        words and the cycles from the first command word to the last result."""
         cmd, out = self.res[slot][0].state, self.res[slot][1].state
         for wd in words:
             cmd.put(wd & ((1 << self.arch.word_bits) - 1))
@@ -214,5 +211,7 @@ async def armv7_section_mapping(dut):
     await tb.op(0, COPY, sec + 0x8_1000, sec + 0xF_F000, 1024)
     assert mem.read(sec + 0xF_F000, 1024) == data
 
+
+CONFIGS = system_configs()
 
 test_reconos_memory = cocotb_bench("reconos", CONFIGS)

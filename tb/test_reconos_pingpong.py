@@ -9,7 +9,7 @@ import pytest
 
 from .harness import cocotb_bench
 from .models.reconos_sw import Resource
-from .reconos_tb import ReconosTB
+from .reconos_tb import ReconosTB, slot_of
 
 IMAGE = "sensor_msgs/msg/Image"
 
@@ -18,20 +18,6 @@ IMAGE = "sensor_msgs/msg/Image"
 BAD_PROGRAM = [["sem_post", [1]], ["sem_post", [2]], ["command", [0x123]]]
 
 
-def _threads(arch):
-    offset = 72 if arch == "r64" else 48    # Image.data (spec §6 table)
-    return [
-        {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
-        {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,
-         "data_offset": offset},
-        {"kind": "calls", "program": BAD_PROGRAM, "h_report": 0},
-    ]
-
-
-CONFIGS = {
-    "pingpong_r64": {"arch": "r64", "threads": _threads("r64")},
-    "pingpong_r32": {"arch": "r32", "threads": _threads("r32")},
-}
 
 
 def image(size, rng, seq=0):
@@ -43,9 +29,10 @@ def image(size, rng, seq=0):
 
 
 class PingPongTB(ReconosTB):
-    ECHO, COPY = 0, 1
-
     async def setup(self):
+        self.ECHO = slot_of(self.params, "echo")
+        self.COPY = slot_of(self.params, "copy")
+        self.BAD = slot_of(self.params, "calls", h_report=0)
         await self.reset()
         rt = await self.start_runtime()
         self.echo_res = [Resource("rosnode", "echo"), Resource("rossub", "/ping"),
@@ -134,7 +121,7 @@ async def bad_calls_get_a_defined_outcome(dut):
     from cocotb.triggers import ClockCycles
     tb = PingPongTB(dut)
     rt = await tb.setup()
-    slot = 2
+    slot = tb.BAD
     for kinds in (("sem", "sem"), ("sem", "mutex")):
         res = [Resource("mbox", 8), Resource(kinds[0], 0), Resource(kinds[1], 0)]
         await rt.create_thread(slot, res)
@@ -148,5 +135,9 @@ async def bad_calls_get_a_defined_outcome(dut):
         await run_round_trips(tb, "/ping", tb.pong, [32], 30)
         await run_round_trips(tb, "/ping_copy", tb.pong_copy, [64], 31, payload_only=True)
 
+
+from .reconos_tb import system_configs  # noqa: E402 (uses this module's programs)
+
+CONFIGS = system_configs()
 
 test_reconos_pingpong = cocotb_bench("reconos", CONFIGS)
