@@ -16,9 +16,13 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
 def main():
     failed = 0
     count = 0
+    seen = set()
     for module_name, top in BENCHES.items():
         module = importlib.import_module(module_name)
         for config_id, params in module.CONFIGS.items():
+            if (top, config_id) in seen:   # benches may share a configuration
+                continue
+            seen.add((top, config_id))
             params, _ = config_params(params)
             vfile = export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}")
             report = lint_verilog(vfile, top)
