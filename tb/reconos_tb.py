@@ -20,12 +20,12 @@ RAM_SIZE = 1 << 25
 
 def _system(arch):
     """One system per architecture for every ``reconos`` bench module (one build each):
-    0 echo node, 1 copy node, 2 a thread making bad calls, 3 and 4 memory-test threads,
+    0 echo node (in its own clock: the slot's FIFOs cross clock domains), 1 copy node, 2 a thread making bad calls, 3 and 4 memory-test threads,
     5 the OS-call sequencer of the compatibility bench."""
     from .test_reconos_calls import program
     from .test_reconos_pingpong import BAD_PROGRAM
     offset = 72 if arch == "r64" else 48    # sensor_msgs/Image.data (spec §6 table)
-    return {"arch": arch, "threads": [
+    return {"arch": arch, "async_slots": [0], "threads": [
         {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
         {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,
          "data_offset": offset},
@@ -54,6 +54,9 @@ class ReconosTB:
         self.arch = get_arch(self.params.get("arch", "r64"))
         self.num_hwts = len(self.params["threads"])
         cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+        for i in self.params.get("async_slots", ()):
+            # a slot clock unrelated to the system clock (ReconROS: a reconos_clock output)
+            cocotb.start_soon(Clock(getattr(dut, f"slot{i}_clk"), 13.7, unit="ns").start())
         self.osif = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_osif"), dut.aclk,
                                   dut.aresetn, reset_active_level=False)
         self.intc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_intc"), dut.aclk,

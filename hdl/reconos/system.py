@@ -1,6 +1,7 @@
 """The ReconOS infrastructure around a set of hardware threads (spec reconos.md §1)."""
 
-from amaranth.hdl import Module, ResetInserter, Signal
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetInserter, ResetSignal, Signal
+from amaranth.lib.cdc import FFSynchronizer, ResetSynchronizer
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -36,6 +37,10 @@ class ReconosSystem(wiring.Component):
         TLB size (ReconROS block designs: 16).
     osif_depth, memif_depth : int
         FIFO depths (ReconROS: 8 and 128).
+    async_slots : iterable of int
+        Slots with their own clock (input ``slot<i>_clk``): the slot's thread runs in domain
+        ``hwt<i>``, its four FIFOs cross clocks (``reconos_fifo_async``), HWT_Rst and
+        HWT_Signal are synchronised into it.
 
     Members
     -------
@@ -50,7 +55,7 @@ class ReconosSystem(wiring.Component):
     """
 
     def __init__(self, arch, threads, *, tlb_entries=16, osif_depth=OSIF_FIFO_DEPTH,
-                 memif_depth=MEMIF_FIFO_DEPTH):
+                 memif_depth=MEMIF_FIFO_DEPTH, async_slots=()):
         self._arch = a = get_arch(arch)
         threads = list(threads)
         check_int("slots", len(threads), 1, MAX_HWTS)
@@ -69,6 +74,12 @@ class ReconosSystem(wiring.Component):
                                      f"port {name!r} of a {a.name} hardware thread")
         self._threads = threads
         self._tlb_entries = tlb_entries
+        self._async = sorted(set(async_slots))
+        for i in self._async:
+            check_int("async slot", i, 0, len(threads) - 1)
+            if threads[i] is None:
+                raise ValueError(f"async slot {i} is empty; a clock-crossing slot needs a thread")
+            external[f"slot{i}_clk"] = In(1)
         w = a.word_bits
         super().__init__({
             "s_axi_osif": In(AXI4LiteSignature(CONTROL_ADDR_WIDTH, w)),
@@ -124,23 +135,41 @@ class ReconosSystem(wiring.Component):
         has_data = []
         for i, thread in enumerate(self._threads):
             rst = proc.hwt_reset[i]
+            hwt = "sync"
             if thread is None:
                 thread = wiring.flipped(getattr(self, f"slot{i}"))
                 m.d.comb += getattr(self, f"slot{i}_rst").eq(rst)
+            elif i in self._async:
+                hwt = f"hwt{i}"
+                cd = ClockDomain(hwt, local=True)
+                m.domains += cd
+                m.d.comb += cd.clk.eq(getattr(self, f"slot{i}_clk"))
+                m.submodules[f"slot{i}_rst_sync"] = ResetSynchronizer(
+                    rst | ResetSignal("sync"), domain=hwt)
+                m.submodules[f"slot{i}"] = DomainRenamer({"sync": hwt})(thread)
             else:
                 m.submodules[f"slot{i}"] = ResetInserter(rst)(thread)
             fifos = {}
-            for name, depth in (("sw2hw", self._osif_depth), ("hw2sw", self._osif_depth),
-                                ("hwt2mem", self._memif_depth), ("mem2hwt", self._memif_depth)):
-                fifos[name] = f = ReconosFifo(w, depth)
+            # (name, depth, write domain, read domain)
+            for name, depth, wd, rd in (
+                    ("sw2hw", self._osif_depth, "sync", hwt),
+                    ("hw2sw", self._osif_depth, hwt, "sync"),
+                    ("hwt2mem", self._memif_depth, hwt, "sync"),
+                    ("mem2hwt", self._memif_depth, "sync", hwt)):
+                fifos[name] = f = ReconosFifo(w, depth, w_domain=wd, r_domain=rd)
                 m.submodules[f"slot{i}_{name}"] = f
-                m.d.comb += f.rst.eq(rst)
+                # (a FIFO written in the slot's own domain is cleared by that domain's reset)
+                m.d.comb += f.rst.eq(rst if wd == "sync" else 0)
             # The thread's ports are the FIFOs' far sides.
             wiring.connect(m, thread.osif_sw2hw, fifos["sw2hw"].r)
             wiring.connect(m, thread.osif_hw2sw, fifos["hw2sw"].w)
             wiring.connect(m, thread.memif_hwt2mem, fifos["hwt2mem"].w)
             wiring.connect(m, thread.memif_mem2hwt, fifos["mem2hwt"].r)
-            m.d.comb += thread.hwt_signal.eq(proc.hwt_signal[i])
+            if hwt == "sync":
+                m.d.comb += thread.hwt_signal.eq(proc.hwt_signal[i])
+            else:
+                m.submodules[f"slot{i}_signal_sync"] = FFSynchronizer(
+                    proc.hwt_signal[i], thread.hwt_signal, o_domain=hwt)
             wiring.connect(m, osif.hw2sw[i], fifos["hw2sw"].r)
             wiring.connect(m, osif.sw2hw[i], fifos["sw2hw"].w)
             m.d.comb += [osif.hw2sw_fill[i].eq(fifos["hw2sw"].r_fill),
