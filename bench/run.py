@@ -11,31 +11,25 @@ from bench import hmt, msg, reconos  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def main():
-    start = time.monotonic()
-    print("rosgate bench: hardware-mapped topics")
-    results = hmt.measure()
-    resources = hmt.measure_resources()
-    text = hmt.write_results(results, resources, RESULTS)
-    print(text)
-    print(f"wrote {RESULTS / 'hmt.json'} and {RESULTS / 'hmt.md'} "
-          f"({time.monotonic() - start:.0f} s)")
-    start = time.monotonic()
-    print("rosgate bench: message serializers and deserializers")
-    results = msg.measure()
-    resources = msg.measure_resources()
-    print(msg.write_results(results, resources, RESULTS))
-    print(f"wrote {RESULTS / 'msg.json'} and {RESULTS / 'msg.md'} "
-          f"({time.monotonic() - start:.0f} s)")
-    start = time.monotonic()
-    print("rosgate bench: ReconOS infrastructure (MEMIF copies, OS calls, resources)")
-    results = reconos.measure()
-    resources = reconos.measure_resources()
-    print(reconos.write_results(results, resources, RESULTS))
-    print(f"wrote {RESULTS / 'reconos.json'} and {RESULTS / 'reconos.md'} "
-          f"({time.monotonic() - start:.0f} s)")
-    return 0
+#: (title, module): each module has measure(), measure_resources() and write_results()
+BENCHES = [
+    ("hardware-mapped topics", hmt),
+    ("message serializers and deserializers", msg),
+    ("ReconOS infrastructure (MEMIF copies, OS calls, resources)", reconos),
+]
 
+
+def main():
+    for title, module in BENCHES:
+        start = time.monotonic()
+        print(f"rosgate bench: {title}")
+        results = module.measure()
+        resources = module.measure_resources()
+        print(module.write_results(results, resources, RESULTS))
+        name = module.__name__.rsplit(".", 1)[-1]
+        print(f"wrote {RESULTS / (name + '.json')} and {RESULTS / (name + '.md')} "
+              f"({time.monotonic() - start:.0f} s)")
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -5,7 +5,7 @@ import logging
 
 import cocotb
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, RisingEdge
+from cocotb.triggers import ClockCycles
 from cocotbext.axi import AxiBus, AxiLiteBus, AxiLiteMaster, AxiRam
 
 from hdl.reconos.protocol import arch as get_arch
@@ -13,7 +13,7 @@ from hdl.reconos.protocol import arch as get_arch
 from .harness import bench_params
 from .models.reconos_sw import Broker, MessageMemory, ProcessMemory, ReconosRuntime
 
-__all__ = ["ReconosTB", "RAM_SIZE", "SYSTEM_CONFIGS", "slot_of"]
+__all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "slot_of"]
 
 RAM_SIZE = 1 << 25
 
@@ -24,7 +24,12 @@ def _system(arch):
     5 the OS-call sequencer of the compatibility bench."""
     from .test_reconos_calls import program
     from .test_reconos_pingpong import BAD_PROGRAM
-    offset = 72 if arch == "r64" else 48    # sensor_msgs/Image.data (spec §6 table)
+    from gen.msg import MessageLibrary
+    from gen.msg.layout import CLayout
+    layout = CLayout(MessageLibrary([], store="ros2_humble"), "arm64" if arch == "r64" else "arm32")
+    # sensor_msgs/Image.data (spec §6: 72 on arm64, 48 on arm32)
+    offset = next(m.offset for m in layout.struct("sensor_msgs/msg/Image").members
+                  if m.name == "data")
     return {"arch": arch, "async_slots": [0], "threads": [
         {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
         {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,
@@ -107,12 +112,3 @@ class ReconosTB:
             num_hwts=self.num_hwts)
         await self.runtime.start()
         return self.runtime
-
-    async def cycles_until(self, event, limit):
-        """Cycles until ``event`` (a cocotb Event) is set; fail after ``limit``."""
-        n = 0
-        while not event.is_set():
-            await RisingEdge(self.dut.aclk)
-            n += 1
-            assert n <= limit, f"no result within {limit} cycles"
-        return n

@@ -146,7 +146,6 @@ def test_memory_path_reads_and_writes_through_the_mmu(arch):
     wb = a.word_bytes
     ram = _Ram(1 << 22)
     mem = ProcessMemory(arch, ram, len(ram.data))
-    rng = random.Random(3)
     bufs = [mem.malloc(20000), mem.malloc(20000)]
     dut = MemoryPath(arch, 2)
     sim = Simulator(dut)

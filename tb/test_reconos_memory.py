@@ -203,7 +203,6 @@ async def armv7_section_mapping(dut):
     await tb.setup()
     if tb.arch.name != "r32":
         return
-    wb = tb.arch.word_bytes
     mem = tb.memory
     sec = mem.map_section()
     data = bytes(random.Random(6).randrange(256) for _ in range(1024))

@@ -5,7 +5,7 @@ a page table the MMU walks). Spec: reconos.md §3, §5, §6."""
 import random
 
 import cocotb
-import pytest
+from cocotb.triggers import RisingEdge
 
 from .harness import cocotb_bench
 from .models.reconos_sw import Resource
@@ -49,9 +49,7 @@ class PingPongTB(ReconosTB):
     async def ping(self, topic, reply_queue, value, limit):
         """Publish ``value`` and wait for the reply; return (reply, cycles)."""
         self.broker.publish(topic, value)
-        start = cocotb.utils.get_sim_time("ns") if hasattr(cocotb, "utils") else 0
         n = 0
-        from cocotb.triggers import RisingEdge
         while not len(reply_queue):
             await RisingEdge(self.dut.aclk)
             n += 1
@@ -101,7 +99,6 @@ async def suspend_and_resume_repeatedly(dut):
     RESUME restarts it; three times on one slot, and it still echoes."""
     tb = PingPongTB(dut)
     rt = await tb.setup()
-    rng = random.Random(5)
     for round_ in range(3):
         await run_round_trips(tb, "/ping", tb.pong, [16], 10 + round_)
         await rt.suspend_thread(tb.ECHO)

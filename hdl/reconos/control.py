@@ -1,14 +1,15 @@
 """The software-visible ReconOS control blocks: reconos_osif, reconos_osif_intc and
 reconos_proc_control (spec reconos.md §4), each an AXI4-Lite subordinate."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..bus import AXI4LiteSignature, AXI4LiteTarget
 from ..params import check_int
 from .fifo import FifoReadSignature, FifoWriteSignature
-from .protocol import MemStatus, OsifRegister, ProcControlRegister, arch as get_arch
+from .protocol import (MemStatus, OsifRegister, ProcControlRegister, arch as get_arch,
+                       proc_control_offset)
 
 __all__ = ["ReconosOsif", "OsifIntc", "ProcControl", "CONTROL_ADDR_WIDTH", "MAX_HWTS",
            "SYS_RESET_CYCLES"]
@@ -223,7 +224,6 @@ class ProcControl(wiring.Component):
         m.submodules.target = t = AXI4LiteTarget(CONTROL_ADDR_WIDTH, w)
         wiring.connect(m, wiring.flipped(self.bus), t.bus)
         R = ProcControlRegister
-        from .protocol import proc_control_offset
         byte_shift = (w // 8).bit_length() - 1
         index_of = {r: proc_control_offset(a, r, self._n) >> byte_shift for r in R}
 

@@ -1,6 +1,6 @@
 """ReconOS FIFO interfaces and the OSIF/MEMIF FIFO (spec reconos.md §2)."""
 
-from amaranth.hdl import Module, ResetInserter, Signal
+from amaranth.hdl import Module, ResetInserter
 from amaranth.lib import wiring
 from amaranth.lib.fifo import AsyncFIFO, SyncFIFO
 from amaranth.lib.wiring import In, Out

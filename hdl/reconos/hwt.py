@@ -22,7 +22,7 @@ the slot), as ReconOS' HLS library does.
 
 import enum
 
-from amaranth.hdl import Const, Module, Mux, Signal, Value
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
@@ -254,15 +254,16 @@ class OsifCalls:
         self._drive(OsifMode.CALL, word, args, nreplies)
         self._finish([(t, self._engine.replies[k]) for k, t in enumerate(replies)], then)
 
-    def ros_take_interruptable_check(self, *, ptr=None, got=None, then=None):
-        self._drive(OsifMode.POLL, None, (), 1)
+    def _interruptable(self, mode, ptr, got, then):
+        self._drive(mode, None, (), 1)
         self._finish([(t, v) for t, v in ((ptr, self._engine.replies[0]),
                                           (got, self._engine.got)) if t is not None], then)
 
+    def ros_take_interruptable_check(self, *, ptr=None, got=None, then=None):
+        self._interruptable(OsifMode.POLL, ptr, got, then)
+
     def ros_take_interruptable_cancel(self, *, ptr=None, got=None, then=None):
-        self._drive(OsifMode.CANCEL, None, (), 1)
-        self._finish([(t, v) for t, v in ((ptr, self._engine.replies[0]),
-                                          (got, self._engine.got)) if t is not None], then)
+        self._interruptable(OsifMode.CANCEL, ptr, got, then)
 
 
 def _make_method(name):
@@ -376,13 +377,19 @@ class MemifEngine(wiring.Component):
         fence_addr = Signal(w)
         m.d.comb += r_want.eq(r_rem != 0)
 
+        # command addresses and lengths with their low bits ignored (W-aligned)
+        r_cmd_addr, r_cmd_len, w_cmd_addr, w_cmd_len = (Signal(w) for _ in range(4))
+        m.d.comb += [
+            r_cmd_addr.eq(self.read_cmd.payload.addr >> sh << sh),
+            r_cmd_len.eq(self.read_cmd.payload.length >> sh << sh),
+            w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
+            w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
+        ]
         with m.If((r_total == 0) & (r_rem == 0)):
             m.d.comb += self.read_cmd.ready.eq(1)
             with m.If(self.read_cmd.valid):
-                aligned = Signal(w)
-                m.d.comb += aligned.eq(self.read_cmd.payload.length >> sh << sh)
-                m.d.sync += [r_addr.eq(self.read_cmd.payload.addr >> sh << sh),
-                             r_rem.eq(aligned), r_total.eq(aligned >> sh)]
+                m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
+                             r_total.eq(r_cmd_len >> sh)]
 
         # ---- write buffer and issuer ----
         m.submodules.wbuf = wbuf = SyncFIFO(width=w, depth=2 * cw)
@@ -397,11 +404,9 @@ class MemifEngine(wiring.Component):
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
             with m.If(self.write_cmd.valid):
-                aligned = Signal(w)
-                m.d.comb += aligned.eq(self.write_cmd.payload.length >> sh << sh)
-                with m.If(aligned != 0):
-                    m.d.sync += [w_busy.eq(1), w_addr_cur.eq(self.write_cmd.payload.addr >> sh << sh),
-                                 w_rem.eq(aligned), w_rem_in.eq(aligned >> sh)]
+                with m.If(w_cmd_len != 0):
+                    m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
+                                 w_rem_in.eq(w_cmd_len >> sh)]
                 with m.Else():
                     m.d.comb += self.write_done.eq(1)
         m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
@@ -412,8 +417,6 @@ class MemifEngine(wiring.Component):
 
         # ---- the request sequencer (owns hwt2mem) ----
         seq_words = Signal(w)    # data words left of the current write chunk
-        fence_pending = Signal()
-        fence_wait = Signal()
         with m.FSM():
             with m.State("IDLE"):
                 r_ok = r_want & kinds.w_rdy & (outstanding + (r_len >> sh) <= self._credits)
@@ -507,17 +510,22 @@ class MemCalls:
         self._w = engine._arch.word_bits
         self._wb = engine._arch.word_bytes
 
+    def _issue(self, cmd, addr, length, sent, *also):
+        """Offer one command on ``cmd`` until it is taken; then set ``sent`` (and ``also``)."""
+        m = self._m
+        with m.If(~sent):
+            m.d.comb += [cmd.valid.eq(1), cmd.payload.addr.eq(addr),
+                         cmd.payload.length.eq(length)]
+            with m.If(cmd.ready):
+                m.d.sync += [sent.eq(1), *also]
+
     def read_words(self, addr, targets, *, then):
         """Read ``len(targets)`` words from ``addr`` into the signals ``targets``."""
         m, e = self._m, self.engine
         sent = Signal(name="rd_sent")
         k = Signal(range(len(targets) + 1), name="rd_k")
-        with m.If(~sent):
-            m.d.comb += [e.read_cmd.valid.eq(1), e.read_cmd.payload.addr.eq(addr),
-                         e.read_cmd.payload.length.eq(len(targets) * self._wb)]
-            with m.If(e.read_cmd.ready):
-                m.d.sync += [sent.eq(1), k.eq(0)]
-        with m.Else():
+        self._issue(e.read_cmd, addr, len(targets) * self._wb, sent, k.eq(0))
+        with m.If(sent):
             m.d.comb += e.read_data.ready.eq(1)
             with m.If(e.read_data.valid):
                 for i, t in enumerate(targets):
@@ -536,12 +544,8 @@ class MemCalls:
         m, e = self._m, self.engine
         sent = Signal(name="wr_sent")
         k = Signal(range(len(values) + 1), name="wr_k")
-        with m.If(~sent):
-            m.d.comb += [e.write_cmd.valid.eq(1), e.write_cmd.payload.addr.eq(addr),
-                         e.write_cmd.payload.length.eq(len(values) * self._wb)]
-            with m.If(e.write_cmd.ready):
-                m.d.sync += [sent.eq(1), k.eq(0)]
-        with m.Else():
+        self._issue(e.write_cmd, addr, len(values) * self._wb, sent, k.eq(0))
+        with m.If(sent):
             m.d.comb += e.write_data.valid.eq(k != len(values))
             for i, v in enumerate(values):
                 with m.If(k == i):
@@ -561,16 +565,8 @@ class MemCalls:
         m, e = self._m, self.engine
         r_sent = Signal(name="cp_r_sent")
         w_sent = Signal(name="cp_w_sent")
-        with m.If(~r_sent):
-            m.d.comb += [e.read_cmd.valid.eq(1), e.read_cmd.payload.addr.eq(src),
-                         e.read_cmd.payload.length.eq(length)]
-            with m.If(e.read_cmd.ready):
-                m.d.sync += r_sent.eq(1)
-        with m.If(~w_sent):
-            m.d.comb += [e.write_cmd.valid.eq(1), e.write_cmd.payload.addr.eq(dst),
-                         e.write_cmd.payload.length.eq(length)]
-            with m.If(e.write_cmd.ready):
-                m.d.sync += w_sent.eq(1)
+        self._issue(e.read_cmd, src, length, r_sent)
+        self._issue(e.write_cmd, dst, length, w_sent)
         m.d.comb += [e.write_data.valid.eq(e.read_data.valid),
                      e.write_data.payload.eq(e.read_data.payload.data),
                      e.read_data.ready.eq(e.write_data.ready)]

@@ -1,6 +1,6 @@
 """The ReconOS infrastructure around a set of hardware threads (spec reconos.md §1)."""
 
-from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetInserter, ResetSignal, Signal
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetInserter, ResetSignal
 from amaranth.lib.cdc import FFSynchronizer, ResetSynchronizer
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out

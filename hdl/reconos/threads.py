@@ -1,7 +1,7 @@
 """Example hardware threads: the ReconROS ping-pong nodes and an OS-call sequencer used by the
 compatibility tests. They are written with the thread API only (no word counting)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Module, Mux, Signal
 
 from .hwt import HardwareThread
 from .protocol import CALLS

@@ -20,7 +20,8 @@ import struct
 import cocotb
 from cocotb.triggers import Event, RisingEdge, Timer, First
 
-from hdl.reconos.protocol import (CALLS, CMD_MASK, INTERRUPTED_REPLY, SIGNAL_THREAD_RESUME,
+from gen.msg.wire import STRUCT_FORMAT as _FMT
+from hdl.reconos.protocol import (CMD_MASK, call, INTERRUPTED_REPLY, SIGNAL_THREAD_RESUME,
                                   SIGNAL_THREAD_START, Command, OsifRegister,
                                   ProcControlRegister, ResourceType, arch as get_arch,
                                   osif_register_offset, proc_control_offset)
@@ -179,9 +180,6 @@ class ProcessMemory:
         return False
 
 
-_FMT = {"bool": "B", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
-        "uint16": "H", "int32": "i", "uint32": "I", "int64": "q", "uint64": "Q",
-        "float32": "f", "float64": "d"}
 
 
 class MessageMemory:
@@ -280,7 +278,7 @@ class MessageMemory:
         return struct.pack(f"<{len(v)}{_FMT[element.name]}", *v)
 
     def read(self, va, type_name):
-        from gen.msg.model import Array, Named, Primitive, Sequence
+        from gen.msg.model import Array, Named, Primitive
         out = {}
         for m in self.layout.struct(type_name).members:
             if m.name == "structure_needs_at_least_one_member":
@@ -535,12 +533,14 @@ class ReconosRuntime:
         await self._write(self.osif, osif_register_offset(self.arch, slot,
                                                           OsifRegister.SW2HW_DATA), word)
 
+    async def hw2sw_empty(self, slot):
+        return (await self._read(self.osif, osif_register_offset(
+            self.arch, slot, OsifRegister.HW2SW_EMPTY))) >> (self.w - 1)
+
     async def osif_read(self, slot):
         """``reconos_osif_read``: wait for the slot's interrupt as the driver does, then pop."""
         while True:
-            empty = (await self._read(self.osif, osif_register_offset(
-                self.arch, slot, OsifRegister.HW2SW_EMPTY))) >> (self.w - 1)
-            if not empty:
+            if not await self.hw2sw_empty(slot):
                 return await self._read(self.osif, osif_register_offset(
                     self.arch, slot, OsifRegister.HW2SW_DATA))
             ev = self._wakeup[slot]
@@ -678,15 +678,17 @@ class ReconosRuntime:
         """``dt_delegate``: read a command, dispatch on ``cmd & 0xFFF``, answer."""
         while True:
             word = await self.osif_read(slot)
-            c = CALLS.get(_METHOD_BY_CODE.get(word & CMD_MASK, ""), None)
+            c = call(word)
             if word & CMD_MASK == Command.THREAD_EXIT:
                 self.log[slot].append(("thread_exit", (), ()))
                 await self._set_reset(slot, 1)
                 await self._set_signal(slot, 0)
                 self.exited[slot].set()
                 return
-            if c is None:
-                # unknown codes, OSIF_INTERRUPTED and a stray 0x904 are ignored (no reply)
+            if c is None or c.method == "ros_take_interruptable_cancel":
+                # Unknown codes, OSIF_INTERRUPTED and a stray 0x904 are ignored (no reply):
+                # 0x904 is read inside an interruptible take, and one sent after the reply
+                # arrives here (spec §3.4, defect 25).
                 self.ignored[slot].append(word)
                 continue
             args = [await self.osif_read(slot) for _ in c.args]
@@ -811,9 +813,7 @@ class ReconosRuntime:
             if value is not None:
                 self.msgs.write(msg.ptr, msg.args[0], value)
                 return [msg.ptr]
-            empty = (await self._read(self.osif, osif_register_offset(
-                self.arch, slot, OsifRegister.HW2SW_EMPTY))) >> (self.w - 1)
-            if not empty:
+            if not await self.hw2sw_empty(slot):
                 word = await self.osif_read(slot)   # the cancel word
                 if word != Command.ROS_TAKE_INTERRUPTABLE_CANCEL:
                     raise ProtocolError(f"slot {slot}: 0x{word:x} during an interruptible take")
@@ -873,7 +873,3 @@ class ReconosRuntime:
 
 
 _ALL_KINDS = tuple(t.name.lower() for t in ResourceType)
-# 0x904 is not a command of its own: the delegate reads it inside an interruptible take, and
-# a stray one (sent after the reply) is ignored like an unknown code (spec §3.4, defect 25).
-_METHOD_BY_CODE = {int(c.command): name for name, c in CALLS.items()
-                   if c.command is not None and name != "ros_take_interruptable_cancel"}
