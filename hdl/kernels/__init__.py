@@ -1,0 +1,5 @@
+"""Streaming compute kernels for hardware nodes (spec kernels.md, reconos.md §9)."""
+
+from .sort import MergeSorter
+
+__all__ = ["MergeSorter"]

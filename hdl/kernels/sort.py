@@ -1,0 +1,169 @@
+"""Sorting a block of unsigned integers (the ReconROS sort node, spec reconos.md §9.2)."""
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int, check_power_of_two
+from ..stream import AXIStreamSignature
+
+__all__ = ["MergeSorter"]
+
+
+class MergeSorter(wiring.Component):
+    """Sorts blocks of up to ``block_size`` unsigned integers into ascending order.
+
+    A block streams in, is merged in ``log2(block_size)`` passes between two block RAMs (one
+    element per cycle, one cycle per pair of runs to start the reads) and streams out. About
+    ``(log2(block_size) + 3) * block_size`` cycles per block; 2048 elements: 28.7 k cycles.
+
+    Parameters
+    ----------
+    block_size : int
+        Power of two in 2..4096: the largest block.
+    width : int
+        Element width in bits, a multiple of 8 in 8..64. Default 32.
+
+    Members
+    -------
+    i : In(AXIStreamSignature(width, keep=False))
+        The unsorted block, one element per beat, ``tlast`` on the last.
+    o : Out(AXIStreamSignature(width, keep=False))
+        The sorted block: ``length`` elements, ascending, ``tlast`` on the last.
+    length : In(range(block_size + 1))
+        Elements per block, sampled at the first beat of a block; 0 means ``block_size``.
+    err_short : Out(1)
+        One-cycle pulse: a block ended (``tlast``) before ``length`` elements. The block is
+        padded with all-ones elements to ``length`` (so they sort to the end).
+    err_long : Out(1)
+        One-cycle pulse: a block had more than ``length`` elements. The extra beats are
+        dropped up to ``tlast``.
+    progress : Out(range(log2(block_size) + 1))
+        Merge passes finished on the current block (0 while loading, all when streaming out).
+    busy : Out(1)
+        A block has been accepted and is not yet fully streamed out.
+    """
+
+    def __init__(self, block_size, *, width=32):
+        self._block_size = check_power_of_two("block_size", block_size, 2, 4096)
+        self._width = check_int("width", width, 8, 64, multiple_of=8)
+        self._passes = block_size.bit_length() - 1
+        sig = AXIStreamSignature(width, keep=False)
+        super().__init__({
+            "i": In(sig),
+            "o": Out(sig),
+            "length": In(range(block_size + 1)),
+            "err_short": Out(1),
+            "err_long": Out(1),
+            "progress": Out(range(self._passes + 1)),
+            "busy": Out(1),
+        })
+
+    block_size = property(lambda self: self._block_size)
+    width = property(lambda self: self._width)
+    passes = property(lambda self: self._passes)
+
+    def elaborate(self, platform):
+        m = Module()
+        n, w, passes = self._block_size, self._width, self._passes
+        ab = passes                      # address bits
+        m.submodules.mem_a = mem_a = Memory(shape=w, depth=n, init=[])
+        m.submodules.mem_b = mem_b = Memory(shape=w, depth=n, init=[])
+        wr = [mem_a.write_port(), mem_b.write_port()]
+        rx = [mem_a.read_port(), mem_b.read_port()]
+        ry = [mem_a.read_port(), mem_b.read_port()]
+
+        length = Signal(range(n + 1))
+        count = Signal(range(n + 1))        # elements stored
+        run = Signal(range(n + 1))          # run width of this pass
+        base, i, j, k = (Signal(range(2 * n + 1), name=nm) for nm in ("base", "i", "j", "k"))
+        p = Signal(range(passes + 1))
+        src = Signal()                      # memory read in this pass: 0 = A, 1 = B
+        ovalid, olast = Signal(), Signal()
+        oaddr = Signal(range(n + 1))
+        m.d.comb += [self.progress.eq(p), src.eq(p[0])]
+
+        def write(sel, addr, value):
+            m.d.comb += [wr[sel].en.eq(1), wr[sel].addr.eq(addr[:ab]), wr[sel].data.eq(value)]
+
+        with m.FSM():
+            with m.State("LOAD"):
+                m.d.comb += self.i.tready.eq(1)
+                with m.If(self.i.tvalid):
+                    lim = Signal(range(n + 1))
+                    m.d.comb += lim.eq(Mux(count == 0, Mux(self.length == 0, n, self.length),
+                                           length))
+                    with m.If(count == 0):
+                        m.d.sync += length.eq(lim)
+                    with m.If(count < lim):
+                        write(0, count, self.i.tdata)
+                        m.d.sync += count.eq(count + 1)
+                    with m.If(self.i.tlast):
+                        m.d.comb += [self.err_short.eq(count + 1 < lim),
+                                     self.err_long.eq(count >= lim)]
+                        m.d.sync += p.eq(0)
+                        m.next = "PAD"
+                with m.If(count != 0):
+                    m.d.comb += self.busy.eq(1)
+            with m.State("PAD"):
+                m.d.comb += self.busy.eq(1)
+                with m.If(count == n):
+                    m.d.sync += [run.eq(1), base.eq(0)]
+                    m.next = "PRIME"
+                with m.Else():
+                    write(0, count, (1 << w) - 1)
+                    m.d.sync += count.eq(count + 1)
+            with m.State("PRIME"):
+                m.d.comb += self.busy.eq(1)
+                for s in (0, 1):
+                    m.d.comb += [rx[s].addr.eq(base[:ab]), ry[s].addr.eq((base + run)[:ab])]
+                m.d.sync += [i.eq(base), j.eq(base + run), k.eq(base)]
+                m.next = "MERGE"
+            with m.State("MERGE"):
+                m.d.comb += self.busy.eq(1)
+                hx = Mux(src, rx[1].data, rx[0].data)
+                hy = Mux(src, ry[1].data, ry[0].data)
+                x_ok = i != base + run
+                y_ok = j != base + 2 * run
+                take_x = Signal()
+                m.d.comb += take_x.eq(x_ok & (~y_ok | (hx <= hy)))
+                value = Mux(take_x, hx, hy)
+                with m.If(src):
+                    write(0, k, value)
+                with m.Else():
+                    write(1, k, value)
+                i_n, j_n = i + take_x, j + ~take_x
+                for s in (0, 1):
+                    m.d.comb += [rx[s].addr.eq(i_n[:ab]), ry[s].addr.eq(j_n[:ab])]
+                m.d.sync += [i.eq(i_n), j.eq(j_n), k.eq(k + 1)]
+                with m.If(k == base + 2 * run - 1):
+                    with m.If(base + 2 * run == n):
+                        m.d.sync += [p.eq(p + 1), run.eq(run << 1), base.eq(0)]
+                        with m.If(p == passes - 1):
+                            m.d.sync += [oaddr.eq(0), ovalid.eq(0)]
+                            m.next = "OUT"
+                        with m.Else():
+                            m.next = "PRIME"
+                    with m.Else():
+                        m.d.sync += base.eq(base + 2 * run)
+                        m.next = "PRIME"
+            with m.State("OUT"):
+                m.d.comb += self.busy.eq(1)
+                res = passes % 2          # the memory the last pass wrote
+                port = rx[res]
+                adv = ~ovalid | self.o.tready
+                m.d.comb += [self.o.tvalid.eq(ovalid), self.o.tlast.eq(olast),
+                             self.o.tdata.eq(port.data), port.en.eq(adv),
+                             port.addr.eq(oaddr[:ab])]
+                with m.If(adv):
+                    with m.If(oaddr < length):
+                        m.d.sync += [ovalid.eq(1), olast.eq(oaddr == length - 1),
+                                     oaddr.eq(oaddr + 1)]
+                    with m.Else():
+                        m.d.sync += ovalid.eq(0)
+                with m.If(ovalid & self.o.tready & olast):
+                    m.d.sync += [count.eq(0), p.eq(0)]
+                    m.next = "LOAD"
+        # read ports not driven above keep reading (en defaults to 1)
+        return m
