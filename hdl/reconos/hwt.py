@@ -576,6 +576,40 @@ class MemCalls:
             m.next = then
 
 
+    def copy_bytes_states(self, name, src, dst, size, *, then):
+        """Emit the states ``name`` and ``name_TAIL_*`` of a copy of ``size`` bytes (any
+        count; ``src`` and ``dst`` W-aligned): whole words stream at full rate, a tail of
+        fewer than W bytes is merged into the destination word by read-modify-write, so no
+        byte past ``dst + size`` changes. Call at FSM level (not inside a state)."""
+        m = self._m
+        w, wb = self._w, self._wb
+        sh = wb.bit_length() - 1
+        main = Signal(w, name=f"{name.lower()}_main")
+        tail = Signal(range(wb), name=f"{name.lower()}_tail")
+        s_word = Signal(w, name=f"{name.lower()}_s_word")
+        d_word = Signal(w, name=f"{name.lower()}_d_word")
+        merged = Signal(w, name=f"{name.lower()}_merged")
+        m.d.comb += [main.eq(size >> sh << sh), tail.eq(size[:sh])]
+        for b in range(wb):
+            # byte b comes from the source when b < tail (tail < W, so never the top byte)
+            keep = d_word.word_select(b, 8)
+            m.d.comb += merged.word_select(b, 8).eq(
+                Mux(tail > b, s_word.word_select(b, 8), keep) if b < wb - 1 else keep)
+        with m.State(name):
+            self.copy(src, dst, main, then=f"{name}_TAIL")
+        with m.State(f"{name}_TAIL"):
+            with m.If(tail == 0):
+                m.next = then
+            with m.Else():
+                m.next = f"{name}_TAIL_SRC"
+        with m.State(f"{name}_TAIL_SRC"):
+            self.read_word(src + main, s_word, then=f"{name}_TAIL_DST")
+        with m.State(f"{name}_TAIL_DST"):
+            self.read_word(dst + main, d_word, then=f"{name}_TAIL_WRITE")
+        with m.State(f"{name}_TAIL_WRITE"):
+            self.write_word(dst + main, merged, then=then)
+
+
 class HardwareThread(wiring.Component):
     """Base class of a hardware thread: a component with the slot ports of
     :func:`ThreadSignature` plus ``members``.

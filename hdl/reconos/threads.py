@@ -1,12 +1,14 @@
 """Example hardware threads: the ReconROS ping-pong nodes and an OS-call sequencer used by the
 compatibility tests. They are written with the thread API only (no word counting)."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 
 from .hwt import HardwareThread
 from .protocol import CALLS
 
-__all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX"]
+__all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX",
+           "SortSteps", "SortServiceThread", "SortActionThread", "MailboxSortThread",
+           "SharedCounterThread"]
 
 
 class EchoThread(HardwareThread):
@@ -65,20 +67,8 @@ class CopyThread(HardwareThread):
         m = Module()
         os, mem = self.os_and_memory(m)
         h_sub, h_pub, h_in, h_out = self.handles
-        w, wb = self.arch.word_bits, self.arch.word_bytes
-        sh = wb.bit_length() - 1
+        w = self.arch.word_bits
         in_ptr, src, size, dst = (Signal(w, name=n) for n in ("in_ptr", "src", "size", "dst"))
-        main = Signal(w)
-        tail = Signal(range(wb))
-        s_word, d_word = Signal(w), Signal(w)
-        m.d.comb += [main.eq(size >> sh << sh), tail.eq(size[:sh])]
-        merged = Signal(w)
-        for b in range(wb):
-            # byte b comes from the source when b < tail (tail < W, so never the top byte)
-            src_byte = s_word.word_select(b, 8) if b < wb - 1 else d_word.word_select(b, 8)
-            m.d.comb += merged.word_select(b, 8).eq(
-                Mux(tail > b, src_byte, d_word.word_select(b, 8)) if b < wb - 1 else src_byte)
-
         with m.FSM():
             with m.State("INIT"):
                 os.thread_init(then="TAKE")
@@ -88,19 +78,7 @@ class CopyThread(HardwareThread):
                 mem.read_words(in_ptr + self.data_offset, [src, size], then="SET_SIZE")
             with m.State("SET_SIZE"):
                 os.ros_message_set_size(h_out, self.data_offset, 1, size, ptr=dst, then="COPY")
-            with m.State("COPY"):
-                mem.copy(src, dst, main, then="TAIL")
-            with m.State("TAIL"):
-                with m.If(tail == 0):
-                    m.next = "PUBLISH"
-                with m.Else():
-                    m.next = "TAIL_SRC"
-            with m.State("TAIL_SRC"):
-                mem.read_word(src + main, s_word, then="TAIL_DST")
-            with m.State("TAIL_DST"):
-                mem.read_word(dst + main, d_word, then="TAIL_WRITE")
-            with m.State("TAIL_WRITE"):
-                mem.write_word(dst + main, merged, then="PUBLISH")
+            mem.copy_bytes_states("COPY", src, dst, size, then="PUBLISH")
             with m.State("PUBLISH"):
                 os.ros_publish(h_pub, h_out, then="TAKE")
         return m
@@ -278,4 +256,377 @@ class MemoryTestThread(HardwareThread):
                 mem.copy(x, y, z, then="RESULT")
             with m.State("RESULT"):
                 os.mbox_put(h_res, 0, then="OP")
+        return m
+
+
+class SortSteps:
+    """FSM helpers that move a block of unsigned 32-bit elements between process memory and
+    a :class:`~hdl.kernels.MergeSorter` (W/32 elements per MEMIF word, little-endian).
+
+    Use :meth:`load` inside a state; :meth:`store_states` emits its own states. ``n`` is the
+    element count (1..block size), held stable from :meth:`load` to the end of the store.
+    """
+
+    def __init__(self, m, mem, sorter, arch, n):
+        self._m, self._mem, self._sorter, self._arch, self._n = m, mem, sorter, arch, n
+        self._per_word = arch.word_bits // 32
+        self._idx = Signal(range(sorter.block_size + 2), name="sort_idx")
+        self._lane = Signal(range(max(2, self._per_word)), name="sort_lane")
+        self._low = Signal(32, name="sort_low")
+        self._tail = Signal(32, name="sort_tail")
+        self._dst_word = Signal(arch.word_bits, name="sort_dst_word")
+        self._w_done = Signal(name="sort_w_done")
+        self._o_done = Signal(name="sort_o_done")
+        m.d.comb += sorter.length.eq(n)
+
+    def _bytes(self, count):
+        return count << 2
+
+    def load(self, addr, *, then):
+        """Read ``n`` elements from ``addr`` into the sorter (whole words are read)."""
+        m, e, s, n = self._m, self._mem.engine, self._sorter, self._n
+        wb = self._arch.word_bytes
+        sent = Signal(name="sort_rd_sent")
+        rbytes = (self._bytes(n) + wb - 1) & ~(wb - 1)
+        self._mem._issue(e.read_cmd, addr, rbytes, sent, self._idx.eq(0), self._lane.eq(0))
+        with m.If(sent):
+            data = e.read_data.payload.data
+            in_range = self._idx < n
+            m.d.comb += [
+                s.i.tdata.eq(data.word_select(self._lane, 32) if self._per_word > 1 else data),
+                s.i.tlast.eq(self._idx == n - 1),
+                s.i.tvalid.eq(e.read_data.valid & in_range),
+                # the word moves on after its last lane, or at once past the n-th element
+                e.read_data.ready.eq(Mux(in_range, s.i.tready & (self._lane == self._per_word - 1),
+                                         1)),
+            ]
+            with m.If(s.i.tvalid & s.i.tready):
+                m.d.sync += self._idx.eq(self._idx + 1)
+                if self._per_word > 1:
+                    m.d.sync += self._lane.eq(self._lane + 1)
+            with m.If(e.read_data.valid & e.read_data.ready & e.read_data.payload.last):
+                m.d.sync += sent.eq(0)
+                m.next = then
+
+    def store_states(self, name, addr, *, then):
+        """States ``name`` (+ ``name_TAIL_READ``/``_WRITE`` on r64): stream the sorted block
+        to ``addr``; an odd last element is merged into its word by read-modify-write."""
+        m, e, s, n = self._m, self._mem.engine, self._sorter, self._n
+        per = self._per_word
+        full = n >> (per.bit_length() - 1)             # whole words
+        tail = n[0] if per > 1 else 0
+        wb = self._arch.word_bytes
+        sent = Signal(name="sort_wr_sent")
+        with m.State(name):
+            self._mem._issue(e.write_cmd, addr, full * wb, sent, self._idx.eq(0),
+                             self._lane.eq(0), self._w_done.eq(0), self._o_done.eq(0))
+            with m.If(e.write_done):
+                m.d.sync += self._w_done.eq(1)
+            with m.If(sent):
+                if per == 1:
+                    m.d.comb += [e.write_data.valid.eq(s.o.tvalid), e.write_data.payload.eq(s.o.tdata),
+                                 s.o.tready.eq(e.write_data.ready)]
+                else:
+                    in_main = self._idx < (full << 1)
+                    with m.If(~in_main):
+                        m.d.comb += s.o.tready.eq(1)
+                        m.d.sync += self._tail.eq(s.o.tdata)
+                    with m.Elif(self._lane == 0):
+                        m.d.comb += s.o.tready.eq(1)
+                        m.d.sync += self._low.eq(s.o.tdata)
+                    with m.Else():
+                        m.d.comb += [e.write_data.valid.eq(s.o.tvalid),
+                                     e.write_data.payload.eq(Cat(self._low, s.o.tdata)),
+                                     s.o.tready.eq(e.write_data.ready)]
+                with m.If(s.o.tvalid & s.o.tready):
+                    m.d.sync += self._idx.eq(self._idx + 1)
+                    if per > 1:
+                        m.d.sync += self._lane.eq(~self._lane[0])
+                    with m.If(s.o.tlast):
+                        m.d.sync += self._o_done.eq(1)
+                with m.If((self._w_done | e.write_done) & self._o_done):
+                    m.d.sync += sent.eq(0)
+                    m.next = f"{name}_TAIL_READ" if per > 1 else then
+        if per > 1:
+            with m.State(f"{name}_TAIL_READ"):
+                with m.If(tail):
+                    self._mem.read_word(addr + full * wb, self._dst_word, then=f"{name}_TAIL_WRITE")
+                with m.Else():
+                    m.next = then
+            with m.State(f"{name}_TAIL_WRITE"):
+                self._mem.write_word(addr + full * wb, Cat(self._tail, self._dst_word[32:]),
+                                     then=then)
+
+
+class SortServiceThread(HardwareThread):
+    """The ReconROS sort service server (``sorter_msgs/srv/Sort``, spec §9.2), with defect 14
+    fixed: the response carries the sorted data.
+
+    Loop: SERVICES_TAKE the request; read ``unsorted``'s data pointer and size; sort; size
+    the response's ``sorted`` with ROS_MESSAGE_SET_SIZE; write it; SERVICES_RESPONSE.
+    A request with 0 or more than ``block_size`` elements is answered with an empty
+    ``sorted``.
+
+    Parameters
+    ----------
+    arch : str
+    h_srvs, h_req, h_res : int
+        Handles of the service server and its request and response messages.
+    req_offset, res_offset : int
+        Byte offsets of the ``uint32[]`` in the request and in the response (0 and 0).
+    block_size : int
+        Largest request (default 2048, the ReconROS demo's size).
+    """
+
+    def __init__(self, arch, *, h_srvs, h_req, h_res, req_offset=0, res_offset=0,
+                 block_size=2048):
+        self.handles = (h_srvs, h_req, h_res)
+        self.offsets = (req_offset, res_offset)
+        self.block_size = block_size
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        from ..kernels import MergeSorter
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        h_srvs, h_req, h_res = self.handles
+        req_off, res_off = self.offsets
+        w = self.arch.word_bits
+        req, src, size, dst = (Signal(w, name=n) for n in ("req", "src", "size", "dst"))
+        n = Signal(range(self.block_size + 1))
+        steps = SortSteps(m, mem, sorter, self.arch, n)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="TAKE")
+            with m.State("TAKE"):
+                os.ros_services_take(h_srvs, h_req, ptr=req, then="HEADER")
+            with m.State("HEADER"):
+                mem.read_words(req + req_off, [src, size], then="CHECK")
+            with m.State("CHECK"):
+                with m.If((size == 0) | (size > self.block_size)):
+                    m.d.sync += n.eq(0)
+                    m.next = "SET_SIZE"
+                with m.Else():
+                    m.d.sync += n.eq(size)
+                    m.next = "LOAD"
+            with m.State("LOAD"):
+                steps.load(src, then="SET_SIZE")
+            with m.State("SET_SIZE"):
+                os.ros_message_set_size(h_res, res_off, 4, n, ptr=dst, then="STORE")
+            with m.State("STORE"):
+                m.next = "RESPOND"
+                with m.If(n != 0):
+                    m.next = "STORE_SORTED"
+            steps.store_states("STORE_SORTED", dst, then="RESPOND")
+            with m.State("RESPOND"):
+                os.ros_services_response(h_srvs, h_res, then="TAKE")
+        return m
+
+
+def _float32_bits(value):
+    import struct
+    return struct.unpack("<I", struct.pack("<f", value))[0]
+
+
+class SortActionThread(HardwareThread):
+    """The ReconROS sort action server (``sorter_msgs/action/Sort``, spec §9.2): goal,
+    feedback, result.
+
+    Loop: ACTIONS_GOAL_TAKE; read ``goal.unsorted``; ACTIONS_GOAL_DECIDE (accept when it has
+    1..``block_size`` elements, else reject); ACTIONS_RESULT_TAKE (waits for the client's
+    result request); sort, sending ACTIONS_FEEDBACK with ``feedback.percent`` = merge passes
+    done / all passes x 100 whenever the sorter has finished a pass since the last feedback
+    (always ending with 100.0); ROS_MESSAGE_SET_SIZE on ``result.sorted``; write it;
+    ACTIONS_RESULT_SEND.
+
+    Parameters
+    ----------
+    arch : str
+    h_as, h_goal, h_res, h_fb : int
+        Handles of the action server, its goal request, result response and feedback
+        message.
+    goal_offset, res_offset, fb_offset : int
+        Byte offsets of ``goal.unsorted`` in the goal request, ``result.sorted`` in the result
+        response and ``feedback.percent`` in the feedback message (spec §6).
+    block_size : int
+        Largest goal (default 2048).
+    """
+
+    def __init__(self, arch, *, h_as, h_goal, h_res, h_fb, goal_offset, res_offset, fb_offset,
+                 block_size=2048):
+        self.handles = (h_as, h_goal, h_res, h_fb)
+        self.offsets = (goal_offset, res_offset, fb_offset)
+        self.block_size = block_size
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        from ..kernels import MergeSorter
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        h_as, h_goal, h_res, h_fb = self.handles
+        goal_off, res_off, fb_off = self.offsets
+        a = self.arch
+        w = a.word_bits
+        goal, src, size, dst, fb, fb_word = (
+            Signal(w, name=nm) for nm in ("goal", "src", "size", "dst", "fb", "fb_word"))
+        n = Signal(range(self.block_size + 1))
+        accept = Signal()
+        reported = Signal(range(sorter.passes + 1))
+        steps = SortSteps(m, mem, sorter, a, n)
+        fb_addr = fb + (fb_off & ~(a.word_bytes - 1))
+        lane = (fb_off % a.word_bytes) // 4
+        percent = Signal(32)
+        with m.Switch(reported):
+            for k in range(sorter.passes + 1):
+                with m.Case(k):
+                    m.d.comb += percent.eq(_float32_bits(100.0 * k / sorter.passes))
+        fb_new = Signal(w)
+        m.d.comb += fb_new.eq(fb_word)
+        m.d.comb += fb_new.word_select(lane, 32).eq(percent)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="FB_ADDR")
+            with m.State("FB_ADDR"):
+                os.memory_getobjaddr(h_fb, ptr=fb, then="GOAL")
+            with m.State("GOAL"):
+                os.ros_actions_goal_take(h_as, h_goal, ptr=goal, then="HEADER")
+            with m.State("HEADER"):
+                mem.read_words(goal + goal_off, [src, size], then="CHECK")
+            with m.State("CHECK"):
+                m.d.sync += [accept.eq((size != 0) & (size <= self.block_size)),
+                             n.eq(size[:n.shape().width]), reported.eq(0)]
+                m.next = "DECIDE"
+            with m.State("DECIDE"):
+                with m.If(accept):
+                    os.ros_actions_goal_decide(h_as, 1, then="RESULT_TAKE")
+                with m.Else():
+                    os.ros_actions_goal_decide(h_as, 0, then="GOAL")
+            with m.State("RESULT_TAKE"):
+                os.ros_actions_result_take(h_as, then="LOAD")
+            with m.State("LOAD"):
+                steps.load(src, then="PROGRESS")
+            with m.State("PROGRESS"):
+                with m.If(reported == sorter.passes):
+                    m.next = "SET_SIZE"
+                with m.Elif(sorter.progress > reported):
+                    m.d.sync += reported.eq(sorter.progress)
+                    m.next = "FB_READ"
+            with m.State("FB_READ"):
+                mem.read_word(fb_addr, fb_word, then="FB_WRITE")
+            with m.State("FB_WRITE"):
+                mem.write_word(fb_addr, fb_new, then="FEEDBACK")
+            with m.State("FEEDBACK"):
+                os.ros_actions_feedback(h_as, h_fb, then="PROGRESS")
+            with m.State("SET_SIZE"):
+                os.ros_message_set_size(h_res, res_off, 4, n, ptr=dst, then="STORE")
+            steps.store_states("STORE", dst, then="SEND")
+            with m.State("SEND"):
+                os.ros_actions_result_send(h_as, h_res, then="GOAL")
+        return m
+
+
+class MailboxSortThread(HardwareThread):
+    """The ReconOS sort demo's hardware thread (the VHDL variant of spec §9.2): get an
+    address from mailbox ``h_in``, sort the ``block_size`` unsigned 32-bit words there in
+    place, put the address into mailbox ``h_out``; an all-ones address ends the thread
+    (THREAD_EXIT).
+
+    Parameters
+    ----------
+    arch : str
+    h_in, h_out : int
+        Mailbox handles.
+    block_size : int
+        Words per block (default 2048).
+    """
+
+    def __init__(self, arch, *, h_in, h_out, block_size=2048):
+        self.handles = (h_in, h_out)
+        self.block_size = block_size
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        from ..kernels import MergeSorter
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        h_in, h_out = self.handles
+        addr = Signal(self.arch.word_bits)
+        steps = SortSteps(m, mem, sorter, self.arch, self.block_size)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="GET")
+            with m.State("GET"):
+                os.mbox_get(h_in, data=addr, then="CHECK")
+            with m.State("CHECK"):
+                with m.If(addr == (1 << self.arch.word_bits) - 1):
+                    m.next = "EXIT"
+                with m.Else():
+                    m.next = "LOAD"
+            with m.State("LOAD"):
+                steps.load(addr, then="STORE")
+            steps.store_states("STORE", addr, then="PUT")
+            with m.State("PUT"):
+                os.mbox_put(h_out, addr, then="GET")
+            with m.State("EXIT"):
+                os.thread_exit()
+        return m
+
+
+class SharedCounterThread(HardwareThread):
+    """Increments a counter in shared memory under a mutex: get a count ``k`` from mailbox
+    ``h_cmd`` (0 ends the thread); ``k`` times MUTEX_LOCK, read the word at the init-data
+    address, add 1, write it back, MUTEX_UNLOCK; then SEM_POST ``h_done``. Several slots
+    running it contend for the mutex and for memory; the final count shows whether every
+    increment was exclusive.
+
+    Parameters
+    ----------
+    arch : str
+    h_cmd, h_mutex, h_done : int
+        Mailbox, mutex and semaphore handles.
+    """
+
+    def __init__(self, arch, *, h_cmd, h_mutex, h_done):
+        self.handles = (h_cmd, h_mutex, h_done)
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        h_cmd, h_mutex, h_done = self.handles
+        w = self.arch.word_bits
+        addr, k, value = (Signal(w, name=nm) for nm in ("addr", "k", "value"))
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="INIT_DATA")
+            with m.State("INIT_DATA"):
+                os.get_init_data(init_data=addr, then="CMD")
+            with m.State("CMD"):
+                os.mbox_get(h_cmd, data=k, then="CHECK")
+            with m.State("CHECK"):
+                with m.If(k == 0):
+                    m.next = "EXIT"
+                with m.Else():
+                    m.next = "LOCK"
+            with m.State("LOCK"):
+                os.mutex_lock(h_mutex, then="READ")
+            with m.State("READ"):
+                mem.read_word(addr, value, then="WRITE")
+            with m.State("WRITE"):
+                mem.write_word(addr, value + 1, then="UNLOCK")
+            with m.State("UNLOCK"):
+                os.mutex_unlock(h_mutex, then="NEXT")
+            with m.State("NEXT"):
+                m.d.sync += k.eq(k - 1)
+                with m.If(k == 1):
+                    m.next = "DONE"
+                with m.Else():
+                    m.next = "LOCK"
+            with m.State("DONE"):
+                os.sem_post(h_done, then="CMD")
+            with m.State("EXIT"):
+                os.thread_exit()
         return m

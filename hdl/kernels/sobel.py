@@ -1,0 +1,155 @@
+"""Sobel filters (spec reconos.md §9.1; kernels.md)."""
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int
+from ..stream import AXIStreamSignature
+
+__all__ = ["SobelByteLanes"]
+
+
+class SobelByteLanes(wiring.Component):
+    """The ReconROS demo's Sobel filter, "per byte lane" (spec reconos.md §9.1), streaming.
+
+    The image is a ``height`` x ``words`` array of little-endian 32-bit words; each byte
+    lane k of a word is filtered on its own (horizontal neighbours are 4 bytes apart)::
+
+        gx = sum(p * [1,2,1; 0,0,0; -1,-2,-1]),  gy = sum(p * [1,0,-1; 2,0,-2; 1,0,-1])
+        out = (|gx| + |gy|) >> 3
+
+    (row-major correlation). Native border (defect 12 fixed): the whole frame is written;
+    rows 0 and ``height-1`` and word columns 0 and ``words-1`` are 0. On rows
+    1..height-2 x columns 1..words-2 the output equals ReconROS'; ReconROS leaves row
+    ``height-2`` and the border unwritten.
+
+    Two line buffers of ``max_words`` words (block RAM); one word per cycle in and out; the
+    output of row r streams while row r+1 arrives.
+
+    Parameters
+    ----------
+    max_words : int
+        Largest row in 32-bit words (ReconROS: 480, a 640-pixel ``bgr8`` row), 3..8192.
+
+    Members
+    -------
+    i : In(AXIStreamSignature(32, keep=False))
+        ``height * words`` words, row by row. ``tlast`` is not interpreted: the frame size
+        comes from ``words`` and ``height``.
+    o : Out(AXIStreamSignature(32, keep=False))
+        ``height * words`` filtered words, ``tlast`` on the last.
+    words : In(range(max_words + 1))
+        Words per row, 3..``max_words``; sampled at the start of a frame.
+    height : In(32)
+        Rows, at least 3; sampled at the start of a frame.
+    busy : Out(1)
+        A frame is in progress.
+    """
+
+    def __init__(self, max_words=480):
+        self._max_words = check_int("max_words", max_words, 3, 8192)
+        sig = AXIStreamSignature(32, keep=False)
+        super().__init__({
+            "i": In(sig),
+            "o": Out(sig),
+            "words": In(range(max_words + 1)),
+            "height": In(32),
+            "busy": Out(1),
+        })
+
+    max_words = property(lambda self: self._max_words)
+
+    def elaborate(self, platform):
+        m = Module()
+        n = self._max_words
+        m.submodules.lb_top = lb_top = Memory(shape=32, depth=n, init=[])
+        m.submodules.lb_mid = lb_mid = Memory(shape=32, depth=n, init=[])
+        rd_top, rd_mid = lb_top.read_port(), lb_mid.read_port()
+        wr_top, wr_mid = lb_top.write_port(), lb_mid.write_port()
+
+        words = Signal.like(self.words)
+        height = Signal(32)
+        in_row, row = Signal(32), Signal(32)
+        in_col, col = Signal(range(n)), Signal(range(n))
+        s1_valid, s1_data = Signal(), Signal(32)
+        w1 = [Signal(32, name=f"w1_{k}") for k in ("top", "mid", "bot")]
+        w2 = [Signal(32, name=f"w2_{k}") for k in ("top", "mid", "bot")]
+        o_valid, o_data, o_last = Signal(), Signal(32), Signal()
+        zeros = Signal(range(n + 2))
+        out_free = ~o_valid | self.o.tready
+        m.d.comb += [self.o.tvalid.eq(o_valid), self.o.tdata.eq(o_data),
+                     self.o.tlast.eq(o_last)]
+        with m.If(self.o.tvalid & self.o.tready):
+            m.d.sync += o_valid.eq(0)
+
+        # the filter on the window: column a = w1 (c-2), b = w2 (c-1), c = the new column
+        top_c, mid_c, bot_c = rd_top.data, rd_mid.data, s1_data
+        result = Signal(32)
+        for k in range(4):
+            def lane(v):
+                return v.word_select(k, 8)
+            ta, ma, ba = (lane(v) for v in w1)
+            tb, bb = lane(w2[0]), lane(w2[2])
+            tc, mc, bc = lane(top_c), lane(mid_c), lane(bot_c)
+            gx_p, gx_n = ta + 2 * tb + tc, ba + 2 * bb + bc
+            gy_p, gy_n = ta + 2 * ma + ba, tc + 2 * mc + bc
+            ax = Mux(gx_p >= gx_n, gx_p - gx_n, gx_n - gx_p)
+            ay = Mux(gy_p >= gy_n, gy_p - gy_n, gy_n - gy_p)
+            m.d.comb += result.word_select(k, 8).eq((ax[:11] + ay[:11]) >> 3)
+
+        with m.FSM():
+            with m.State("IDLE"):
+                with m.If(self.i.tvalid):
+                    m.d.sync += [words.eq(self.words), height.eq(self.height),
+                                 zeros.eq(self.words), in_row.eq(0), in_col.eq(0)]
+                    m.next = "TOP"
+            with m.State("TOP"):
+                # row 0 is border: zeros
+                m.d.comb += self.busy.eq(1)
+                with m.If(out_free):
+                    m.d.sync += [o_valid.eq(1), o_data.eq(0), o_last.eq(0),
+                                 zeros.eq(zeros - 1)]
+                    with m.If(zeros == 1):
+                        m.next = "RUN"
+            with m.State("RUN"):
+                m.d.comb += self.busy.eq(1)
+                emit = (row >= 2) & ((col >= 1) | (row >= 3))
+                go = Signal()
+                m.d.comb += go.eq(s1_valid & (~emit | out_free))
+                capture = Signal()
+                m.d.comb += [capture.eq((~s1_valid | go) & ~(in_row == height)),
+                             self.i.tready.eq(capture),
+                             rd_top.en.eq(capture & self.i.tvalid),
+                             rd_mid.en.eq(capture & self.i.tvalid),
+                             rd_top.addr.eq(in_col), rd_mid.addr.eq(in_col)]
+                with m.If(go):
+                    m.d.sync += s1_valid.eq(0)
+                with m.If(capture & self.i.tvalid):
+                    m.d.sync += [s1_valid.eq(1), s1_data.eq(self.i.tdata), row.eq(in_row),
+                                 col.eq(in_col)]
+                    with m.If(in_col == words - 1):
+                        m.d.sync += [in_col.eq(0), in_row.eq(in_row + 1)]
+                    with m.Else():
+                        m.d.sync += in_col.eq(in_col + 1)
+                with m.If(go):
+                    m.d.comb += [wr_top.en.eq(1), wr_top.addr.eq(col), wr_top.data.eq(mid_c),
+                                 wr_mid.en.eq(1), wr_mid.addr.eq(col), wr_mid.data.eq(s1_data)]
+                    m.d.sync += [w1[0].eq(w2[0]), w1[1].eq(w2[1]), w1[2].eq(w2[2]),
+                                 w2[0].eq(top_c), w2[1].eq(mid_c), w2[2].eq(bot_c)]
+                    with m.If(emit):
+                        m.d.sync += [o_valid.eq(1), o_last.eq(0),
+                                     o_data.eq(Mux(col >= 2, result, 0))]
+                    with m.If((row == height - 1) & (col == words - 1)):
+                        m.d.sync += zeros.eq(words + 1)
+                        m.next = "BOTTOM"
+            with m.State("BOTTOM"):
+                # the last column of row height-2, then row height-1: zeros
+                m.d.comb += self.busy.eq(1)
+                with m.If(out_free):
+                    m.d.sync += [o_valid.eq(1), o_data.eq(0), o_last.eq(zeros == 1),
+                                 zeros.eq(zeros - 1)]
+                    with m.If(zeros == 1):
+                        m.next = "IDLE"
+        return m
