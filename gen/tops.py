@@ -37,16 +37,18 @@ def build_msg_codec(**params):
 
 #: hardware-thread kinds of the ``reconos`` top -> thread class
 def _thread_classes():
-    from hdl.reconos.threads import (CallSequenceThread, CopyThread, EchoThread,
-                                     MemoryTestThread)
-    return {"echo": EchoThread, "copy": CopyThread, "calls": CallSequenceThread,
-            "memtest": MemoryTestThread}
+    from hdl.reconos import threads as t
+    return {"echo": t.EchoThread, "copy": t.CopyThread, "calls": t.CallSequenceThread,
+            "memtest": t.MemoryTestThread, "sort_service": t.SortServiceThread,
+            "sort_action": t.SortActionThread, "mbox_sort": t.MailboxSortThread,
+            "counter": t.SharedCounterThread, "sobel_server": t.SobelServerThread,
+            "dip": t.DipThread}
 
 
 def build_reconos(**params):
-    """A :class:`hdl.reconos.ReconosSystem`: ``arch``, ``threads`` (a list of ``{"kind":
-    "echo"|"copy"|"calls", ...thread parameters}``), ``tlb_entries``, ``osif_depth``,
-    ``memif_depth``."""
+    """A :class:`hdl.reconos.ReconosSystem`: ``arch``, ``threads`` (a list of ``{"kind": k,
+    ...thread parameters}`` with k a key of :func:`_thread_classes`), ``tlb_entries``,
+    ``osif_depth``, ``memif_depth``, ``async_slots``."""
     from hdl.reconos import ReconosSystem
     arch = params.pop("arch", "r64")
     classes = _thread_classes()

@@ -2,6 +2,7 @@
 process memory behind the AXI4 port, and the software model of :mod:`tb.models.reconos_sw`."""
 
 import logging
+from pathlib import Path
 
 import cocotb
 from cocotb.clock import Clock
@@ -13,9 +14,11 @@ from hdl.reconos.protocol import arch as get_arch
 from .harness import bench_params
 from .models.reconos_sw import Broker, MessageMemory, ProcessMemory, ReconosRuntime
 
-__all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "slot_of"]
+__all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "apps_configs", "struct_offsets", "slot_of"]
 
 RAM_SIZE = 1 << 25
+#: message packages of the examples (sorter_msgs, application_msgs, ...)
+EXAMPLE_MESSAGES = str(Path(__file__).resolve().parent.parent / "examples" / "messages")
 
 
 def _system(arch):
@@ -43,6 +46,43 @@ def _system(arch):
 
 def system_configs():
     return {f"system_{arch}": _system(arch) for arch in ("r64", "r32")}
+
+
+def struct_offsets(arch, type_name, library=None):
+    """Member offsets of ``type_name`` in the rosidl C layout of ``arch`` (spec §6)."""
+    from gen.msg import MessageLibrary
+    from gen.msg.layout import CLayout
+    library = library or MessageLibrary([EXAMPLE_MESSAGES], store="ros2_humble")
+    layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
+    return {m.name: m.offset for m in layout.struct(type_name).members}
+
+
+def _apps_system(arch):
+    """The ReconROS demo nodes of :mod:`tb.test_reconos_apps`: 0 sort service server, 1 sort
+    action server, 2 the mailbox sort thread, 3 and 4 shared-counter threads, 5 the Sobel
+    service server, 6 the DIP node (Listings 2 and 3 of the paper)."""
+    img = struct_offsets(arch, "sensor_msgs/msg/Image")
+    image_offsets = {k: img[k] for k in ("height", "encoding", "is_bigendian", "step", "data")}
+    goal = struct_offsets(arch, "sorter_msgs/action/Sort_SendGoal_Request")["goal"]
+    result = struct_offsets(arch, "sorter_msgs/action/Sort_GetResult_Response")["result"]
+    fb = struct_offsets(arch, "sorter_msgs/action/Sort_FeedbackMessage")["feedback"]
+    return {"arch": arch, "threads": [
+        {"kind": "sort_service", "h_srvs": 2, "h_req": 1, "h_res": 3},
+        {"kind": "sort_action", "h_as": 4, "h_goal": 1, "h_res": 2, "h_fb": 3,
+         "goal_offset": goal, "res_offset": result, "fb_offset": fb},
+        {"kind": "mbox_sort", "h_in": 0, "h_out": 1},
+        {"kind": "counter", "h_cmd": 0, "h_mutex": 1, "h_done": 2},
+        {"kind": "counter", "h_cmd": 0, "h_mutex": 1, "h_done": 2},
+        {"kind": "sobel_server", "h_srvs": 2, "h_req": 1, "h_res": 3,
+         "image_offsets": image_offsets},
+        {"kind": "dip", "h_sub": 1, "h_pub": 2, "h_img": 3, "h_srvc": 5, "h_req": 4,
+         "h_res": 6, "image_offsets": image_offsets},
+    ]}
+
+
+def apps_configs():
+    return {"apps_r64": _apps_system("r64"),
+            "apps_r32": _apps_system("r32")}
 
 
 def slot_of(params, kind, nth=0, **match):

@@ -22,7 +22,7 @@ the slot), as ReconOS' HLS library does.
 
 import enum
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
@@ -575,6 +575,116 @@ class MemCalls:
             m.d.sync += [r_sent.eq(0), w_sent.eq(0)]
             m.next = then
 
+
+    def _unpack(self, sink, count, tag):
+        """Drive ``sink`` (a stream of ``tvalid``/``tready``/``tdata``/``tlast`` with
+        elements of W/k bits) from the read data, low element of a word first; elements
+        past ``count`` are dropped. Returns the statements that restart it."""
+        m, e = self._m, self.engine
+        ew = len(sink.tdata)
+        per = self._w // ew
+        lane = Signal(range(max(2, per)), name=f"{tag}_lane")
+        idx = Signal(32, name=f"{tag}_idx")
+        data = e.read_data.payload.data
+        in_range = idx < count
+        last_lane = lane == per - 1
+        m.d.comb += [
+            sink.tdata.eq(data.word_select(lane[:max(1, (per - 1).bit_length())], ew)
+                          if per > 1 else data),
+            sink.tlast.eq(idx == count - 1),
+            sink.tvalid.eq(e.read_data.valid & in_range),
+            # a word moves on after its last element, or at once past the count-th element
+            e.read_data.ready.eq(Mux(in_range, sink.tready & last_lane, 1)),
+        ]
+        with m.If(sink.tvalid & sink.tready):
+            m.d.sync += [idx.eq(idx + 1), lane.eq(Mux(last_lane, 0, lane + 1))]
+        return [idx.eq(0), lane.eq(0)]
+
+    def _pack(self, source, tag, count=None):
+        """Drive the write data from ``source`` (elements of W/k bits, low element first),
+        taking at most ``count`` elements. Returns the statements that restart it."""
+        m, e = self._m, self.engine
+        ew = len(source.tdata)
+        per = self._w // ew
+        restart = []
+        if count is not None:
+            taken = Signal(32, name=f"{tag}_taken")
+            restart.append(taken.eq(0))
+            with m.If(source.tvalid & source.tready):
+                m.d.sync += taken.eq(taken + 1)
+        if per == 1:
+            m.d.comb += [e.write_data.valid.eq(source.tvalid),
+                         e.write_data.payload.eq(source.tdata),
+                         source.tready.eq(e.write_data.ready)]
+            if count is not None:
+                with m.If(taken >= count):
+                    m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
+            return restart
+        lane = Signal(range(per), name=f"{tag}_lane")
+        low = [Signal(ew, name=f"{tag}_low{k}") for k in range(per - 1)]
+        with m.If(lane == per - 1):
+            m.d.comb += [e.write_data.valid.eq(source.tvalid),
+                         e.write_data.payload.eq(Cat(*low, source.tdata)),
+                         source.tready.eq(e.write_data.ready)]
+        with m.Else():
+            m.d.comb += source.tready.eq(1)
+            with m.If(source.tvalid):
+                for k in range(per - 1):
+                    with m.If(lane == k):
+                        m.d.sync += low[k].eq(source.tdata)
+        if count is not None:
+            with m.If(taken >= count):
+                m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
+        with m.If(source.tvalid & source.tready):
+            m.d.sync += lane.eq(Mux(lane == per - 1, 0, lane + 1))
+        return restart + [lane.eq(0)]
+
+    def read_stream(self, addr, length, sink, *, count, then):
+        """Read ``length`` bytes from ``addr`` and deliver the first ``count`` elements to
+        ``sink`` (an AXI-Stream-like interface with elements of W/k bits, ``tlast`` on the
+        ``count``-th); the rest of the last word is dropped."""
+        m, e = self._m, self.engine
+        sent = Signal(name="rs_sent")
+        restart = self._unpack(sink, count, "rs")
+        self._issue(e.read_cmd, addr, length, sent, *restart)
+        with m.If(~sent):
+            m.d.comb += [sink.tvalid.eq(0), e.read_data.ready.eq(0)]
+        with m.If(sent & e.read_data.valid & e.read_data.ready & e.read_data.payload.last):
+            m.d.sync += sent.eq(0)
+            m.next = then
+
+    def write_stream(self, addr, length, source, *, then):
+        """Write ``length`` bytes (a multiple of W) to ``addr`` from the elements of
+        ``source`` (W/k bits each, low element first; no more are taken than fit);
+        ``then`` once they are in memory."""
+        m, e = self._m, self.engine
+        sent = Signal(name="ws_sent")
+        ew = len(source.tdata)
+        restart = self._pack(source, "ws", count=length >> (ew // 8).bit_length() - 1)
+        self._issue(e.write_cmd, addr, length, sent, *restart)
+        with m.If(~sent):
+            m.d.comb += [source.tready.eq(0), e.write_data.valid.eq(0)]
+        with m.If(e.write_done):
+            m.d.sync += sent.eq(0)
+            m.next = then
+
+    def transform(self, src, dst, length, sink, source, *, then):
+        """Stream ``length`` bytes (a multiple of W) from ``src`` into ``sink`` and, at the
+        same time, from ``source`` to ``dst``: a streaming kernel between the two sees one
+        element per cycle. ``then`` once the written data is in memory."""
+        m, e = self._m, self.engine
+        r_sent, w_sent = Signal(name="tf_r_sent"), Signal(name="tf_w_sent")
+        ew = len(sink.tdata)
+        restart = self._unpack(sink, length >> (ew // 8).bit_length() - 1, "tf")
+        self._issue(e.read_cmd, src, length, r_sent, *restart)
+        self._issue(e.write_cmd, dst, length, w_sent, *self._pack(source, "tf"))
+        with m.If(~r_sent):
+            m.d.comb += [sink.tvalid.eq(0), e.read_data.ready.eq(0)]
+        with m.If(~w_sent):
+            m.d.comb += [source.tready.eq(0), e.write_data.valid.eq(0)]
+        with m.If(e.write_done):
+            m.d.sync += [r_sent.eq(0), w_sent.eq(0)]
+            m.next = then
 
     def copy_bytes_states(self, name, src, dst, size, *, then):
         """Emit the states ``name`` and ``name_TAIL_*`` of a copy of ``size`` bytes (any

@@ -1,14 +1,14 @@
 """Example hardware threads: the ReconROS ping-pong nodes and an OS-call sequencer used by the
 compatibility tests. They are written with the thread API only (no word counting)."""
 
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
 from .hwt import HardwareThread
 from .protocol import CALLS
 
 __all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX",
            "SortSteps", "SortServiceThread", "SortActionThread", "MailboxSortThread",
-           "SharedCounterThread"]
+           "SharedCounterThread", "SobelServerThread", "DipThread"]
 
 
 class EchoThread(HardwareThread):
@@ -268,94 +268,42 @@ class SortSteps:
     """
 
     def __init__(self, m, mem, sorter, arch, n):
-        self._m, self._mem, self._sorter, self._arch, self._n = m, mem, sorter, arch, n
+        self._m, self._mem, self._sorter, self._arch = m, mem, sorter, arch
+        self._n = n = Value.cast(n)
         self._per_word = arch.word_bits // 32
-        self._idx = Signal(range(sorter.block_size + 2), name="sort_idx")
-        self._lane = Signal(range(max(2, self._per_word)), name="sort_lane")
-        self._low = Signal(32, name="sort_low")
         self._tail = Signal(32, name="sort_tail")
         self._dst_word = Signal(arch.word_bits, name="sort_dst_word")
-        self._w_done = Signal(name="sort_w_done")
-        self._o_done = Signal(name="sort_o_done")
         m.d.comb += sorter.length.eq(n)
-
-    def _bytes(self, count):
-        return count << 2
 
     def load(self, addr, *, then):
         """Read ``n`` elements from ``addr`` into the sorter (whole words are read)."""
-        m, e, s, n = self._m, self._mem.engine, self._sorter, self._n
         wb = self._arch.word_bytes
-        sent = Signal(name="sort_rd_sent")
-        rbytes = (self._bytes(n) + wb - 1) & ~(wb - 1)
-        self._mem._issue(e.read_cmd, addr, rbytes, sent, self._idx.eq(0), self._lane.eq(0))
-        with m.If(sent):
-            data = e.read_data.payload.data
-            in_range = self._idx < n
-            m.d.comb += [
-                s.i.tdata.eq(data.word_select(self._lane, 32) if self._per_word > 1 else data),
-                s.i.tlast.eq(self._idx == n - 1),
-                s.i.tvalid.eq(e.read_data.valid & in_range),
-                # the word moves on after its last lane, or at once past the n-th element
-                e.read_data.ready.eq(Mux(in_range, s.i.tready & (self._lane == self._per_word - 1),
-                                         1)),
-            ]
-            with m.If(s.i.tvalid & s.i.tready):
-                m.d.sync += self._idx.eq(self._idx + 1)
-                if self._per_word > 1:
-                    m.d.sync += self._lane.eq(self._lane + 1)
-            with m.If(e.read_data.valid & e.read_data.ready & e.read_data.payload.last):
-                m.d.sync += sent.eq(0)
-                m.next = then
+        length = ((self._n << 2) + wb - 1) & ~(wb - 1)
+        self._mem.read_stream(addr, length, self._sorter.i, count=self._n, then=then)
 
     def store_states(self, name, addr, *, then):
-        """States ``name`` (+ ``name_TAIL_READ``/``_WRITE`` on r64): stream the sorted block
-        to ``addr``; an odd last element is merged into its word by read-modify-write."""
-        m, e, s, n = self._m, self._mem.engine, self._sorter, self._n
-        per = self._per_word
+        """States ``name`` (+ ``name_TAIL_*`` on r64): stream the sorted block to ``addr``;
+        an odd last element is merged into its word by read-modify-write, so nothing past
+        the block changes."""
+        m, mem, o, n = self._m, self._mem, self._sorter.o, self._n
+        per, wb = self._per_word, self._arch.word_bytes
         full = n >> (per.bit_length() - 1)             # whole words
-        tail = n[0] if per > 1 else 0
-        wb = self._arch.word_bytes
-        sent = Signal(name="sort_wr_sent")
         with m.State(name):
-            self._mem._issue(e.write_cmd, addr, full * wb, sent, self._idx.eq(0),
-                             self._lane.eq(0), self._w_done.eq(0), self._o_done.eq(0))
-            with m.If(e.write_done):
-                m.d.sync += self._w_done.eq(1)
-            with m.If(sent):
-                if per == 1:
-                    m.d.comb += [e.write_data.valid.eq(s.o.tvalid), e.write_data.payload.eq(s.o.tdata),
-                                 s.o.tready.eq(e.write_data.ready)]
-                else:
-                    in_main = self._idx < (full << 1)
-                    with m.If(~in_main):
-                        m.d.comb += s.o.tready.eq(1)
-                        m.d.sync += self._tail.eq(s.o.tdata)
-                    with m.Elif(self._lane == 0):
-                        m.d.comb += s.o.tready.eq(1)
-                        m.d.sync += self._low.eq(s.o.tdata)
-                    with m.Else():
-                        m.d.comb += [e.write_data.valid.eq(s.o.tvalid),
-                                     e.write_data.payload.eq(Cat(self._low, s.o.tdata)),
-                                     s.o.tready.eq(e.write_data.ready)]
-                with m.If(s.o.tvalid & s.o.tready):
-                    m.d.sync += self._idx.eq(self._idx + 1)
-                    if per > 1:
-                        m.d.sync += self._lane.eq(~self._lane[0])
-                    with m.If(s.o.tlast):
-                        m.d.sync += self._o_done.eq(1)
-                with m.If((self._w_done | e.write_done) & self._o_done):
-                    m.d.sync += sent.eq(0)
-                    m.next = f"{name}_TAIL_READ" if per > 1 else then
-        if per > 1:
-            with m.State(f"{name}_TAIL_READ"):
-                with m.If(tail):
-                    self._mem.read_word(addr + full * wb, self._dst_word, then=f"{name}_TAIL_WRITE")
-                with m.Else():
-                    m.next = then
-            with m.State(f"{name}_TAIL_WRITE"):
-                self._mem.write_word(addr + full * wb, Cat(self._tail, self._dst_word[32:]),
-                                     then=then)
+            mem.write_stream(addr, full * wb, o, then=f"{name}_TAIL" if per > 1 else then)
+        if per == 1:
+            return
+        with m.State(f"{name}_TAIL"):
+            with m.If(n[0]):
+                m.d.comb += o.tready.eq(1)
+                with m.If(o.tvalid):
+                    m.d.sync += self._tail.eq(o.tdata)
+                    m.next = f"{name}_TAIL_READ"
+            with m.Else():
+                m.next = then
+        with m.State(f"{name}_TAIL_READ"):
+            mem.read_word(addr + full * wb, self._dst_word, then=f"{name}_TAIL_WRITE")
+        with m.State(f"{name}_TAIL_WRITE"):
+            mem.write_word(addr + full * wb, Cat(self._tail, self._dst_word[32:]), then=then)
 
 
 class SortServiceThread(HardwareThread):
@@ -629,4 +577,189 @@ class SharedCounterThread(HardwareThread):
                 os.sem_post(h_done, then="CMD")
             with m.State("EXIT"):
                 os.thread_exit()
+        return m
+
+
+def _image_offsets(offsets, arch):
+    """Check the ``sensor_msgs/Image`` offsets a Sobel-pair thread copies by MEMIF words."""
+    need = ("height", "encoding", "is_bigendian", "step", "data")
+    missing = [k for k in need if k not in offsets]
+    if missing:
+        raise ValueError(f"image_offsets lacks {', '.join(missing)}; it needs {', '.join(need)}")
+    wb = arch.word_bytes
+    for a, b in (("height", "encoding"), ("is_bigendian", "data")):
+        if offsets[a] % wb or offsets[b] % wb:
+            raise ValueError(f"image_offsets: {a} ({offsets[a]}) and {b} ({offsets[b]}) must be "
+                             f"multiples of the {wb}-byte word")
+    return {k: int(offsets[k]) for k in need}
+
+
+def _lane32(word, offset, wb):
+    return word.word_select((offset % wb) // 4, 32) if wb > 4 else word
+
+
+class SobelServerThread(HardwareThread):
+    """The "Sobel" node of the ReconROS paper (Listing 2): a service server that filters
+    the request's image with the per-byte-lane Sobel of spec §9.1 and answers with the
+    filtered image.
+
+    Loop: SERVICES_TAKE; read the request image's ``height``, ``step`` and payload; copy
+    ``height``, ``width``, ``is_bigendian`` and ``step`` into the response image (its
+    ``encoding`` and header are left as software set them); ROS_MESSAGE_SET_SIZE the
+    response payload; stream the payload through a :class:`~hdl.kernels.SobelByteLanes`
+    into it (native border: the whole frame is written, border words 0); SERVICES_RESPONSE.
+
+    Unlike Listing 2 the result goes into the response, not back over the request. An image
+    whose ``step`` is not a multiple of W, whose rows are shorter than 3 or longer than
+    ``max_words`` words, with fewer than 3 rows, or whose payload size is not
+    ``height * step`` is answered with an empty payload.
+
+    Parameters
+    ----------
+    arch : str
+    h_srvs, h_req, h_res : int
+        Handles of the service server and its request and response messages.
+    image_offsets : dict
+        Byte offsets in ``sensor_msgs/Image`` of ``height``, ``encoding``,
+        ``is_bigendian``, ``step`` and ``data`` for the target ABI (spec §6).
+    req_image_offset, res_image_offset : int
+        Offset of the image in the request and in the response (``img``: 0 and 0).
+    max_words : int
+        Longest row in 32-bit words (default 480: 640 ``bgr8`` pixels).
+    """
+
+    def __init__(self, arch, *, h_srvs, h_req, h_res, image_offsets, req_image_offset=0,
+                 res_image_offset=0, max_words=480):
+        self.handles = (h_srvs, h_req, h_res)
+        super().__init__(arch)
+        self.offsets = _image_offsets(image_offsets, self.arch)
+        self.image_at = (req_image_offset, res_image_offset)
+        self.max_words = max_words
+
+    def elaborate(self, platform):
+        from ..kernels import SobelByteLanes
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.sobel = sobel = SobelByteLanes(self.max_words)
+        h_srvs, h_req, h_res = self.handles
+        off = self.offsets
+        ri, so = self.image_at
+        a = self.arch
+        w, wb = a.word_bits, a.word_bytes
+        req, res, src, size, dst, dims, steps = (
+            Signal(w, name=nm) for nm in ("req", "res", "src", "size", "dst", "dims", "steps"))
+        height, step = Signal(32), Signal(32)
+        n = Signal(w)
+        m.d.comb += [height.eq(_lane32(dims, off["height"], wb)),
+                     step.eq(_lane32(steps, off["step"], wb)),
+                     sobel.words.eq(step >> 2), sobel.height.eq(height)]
+
+        def aligned(o):
+            return o & ~(wb - 1)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="RES_ADDR")
+            with m.State("RES_ADDR"):
+                os.memory_getobjaddr(h_res, ptr=res, then="TAKE")
+            with m.State("TAKE"):
+                os.ros_services_take(h_srvs, h_req, ptr=req, then="PAYLOAD")
+            with m.State("PAYLOAD"):
+                mem.read_words(req + ri + off["data"], [src, size], then="DIMS")
+            with m.State("DIMS"):
+                mem.read_word(req + ri + aligned(off["height"]), dims, then="STEP")
+            with m.State("STEP"):
+                mem.read_word(req + ri + aligned(off["step"]), steps, then="CHECK")
+            with m.State("CHECK"):
+                ok = ((step[:(wb - 1).bit_length()] == 0) & (step >= 12) &
+                      (step <= 4 * self.max_words) & (height >= 3) & (size == height * step))
+                m.d.sync += n.eq(Mux(ok, size, 0))
+                m.next = "GEOMETRY"
+            with m.State("GEOMETRY"):
+                mem.copy(req + ri + off["height"], res + so + off["height"],
+                         off["encoding"] - off["height"], then="LAYOUT")
+            with m.State("LAYOUT"):
+                mem.copy(req + ri + off["is_bigendian"], res + so + off["is_bigendian"],
+                         off["data"] - off["is_bigendian"], then="SET_SIZE")
+            with m.State("SET_SIZE"):
+                os.ros_message_set_size(h_res, so + off["data"], 1, n, ptr=dst, then="FILTER?")
+            with m.State("FILTER?"):
+                m.next = "RESPOND"
+                with m.If(n != 0):
+                    m.next = "FILTER"
+            with m.State("FILTER"):
+                mem.transform(src, dst, n, sobel.i, sobel.o, then="RESPOND")
+            with m.State("RESPOND"):
+                os.ros_services_response(h_srvs, h_res, then="TAKE")
+        return m
+
+
+class DipThread(HardwareThread):
+    """The "DIP" node of the ReconROS paper (Listing 3): subscribe to images, have each
+    filtered by a service, publish the result.
+
+    Loop: ROS_TAKE an image; copy its geometry words and (ROS_MESSAGE_SET_SIZE, MEMIF copy)
+    its payload into the service request's image; SERVICEC_REQUEST; SERVICEC_TAKE the
+    response; copy the response payload over the taken image's payload (Listing 3, line
+    23); ROS_PUBLISH the image. A response whose payload size differs from the image's
+    (the server refused it) is not published.
+
+    Parameters
+    ----------
+    arch : str
+    h_sub, h_pub, h_img, h_srvc, h_req, h_res : int
+        Handles of the image subscriber, the publisher, the image message, the service
+        client and its request and response messages.
+    image_offsets, req_image_offset, res_image_offset :
+        As for :class:`SobelServerThread`.
+    """
+
+    def __init__(self, arch, *, h_sub, h_pub, h_img, h_srvc, h_req, h_res, image_offsets,
+                 req_image_offset=0, res_image_offset=0):
+        self.handles = (h_sub, h_pub, h_img, h_srvc, h_req, h_res)
+        super().__init__(arch)
+        self.offsets = _image_offsets(image_offsets, self.arch)
+        self.image_at = (req_image_offset, res_image_offset)
+
+    def elaborate(self, platform):
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        h_sub, h_pub, h_img, h_srvc, h_req, h_res = self.handles
+        off = self.offsets
+        qi, si = self.image_at
+        w = self.arch.word_bits
+        img, req, res, src, size, rdst, rsrc, rsize = (
+            Signal(w, name=nm) for nm in ("img", "req", "res", "src", "size", "rdst", "rsrc",
+                                          "rsize"))
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="REQ_ADDR")
+            with m.State("REQ_ADDR"):
+                os.memory_getobjaddr(h_req, ptr=req, then="TAKE")
+            with m.State("TAKE"):
+                os.ros_take(h_sub, h_img, ptr=img, then="PAYLOAD")
+            with m.State("PAYLOAD"):
+                mem.read_words(img + off["data"], [src, size], then="GEOMETRY")
+            with m.State("GEOMETRY"):
+                mem.copy(img + off["height"], req + qi + off["height"],
+                         off["encoding"] - off["height"], then="LAYOUT")
+            with m.State("LAYOUT"):
+                mem.copy(img + off["is_bigendian"], req + qi + off["is_bigendian"],
+                         off["data"] - off["is_bigendian"], then="SET_SIZE")
+            with m.State("SET_SIZE"):
+                os.ros_message_set_size(h_req, qi + off["data"], 1, size, ptr=rdst,
+                                        then="TO_REQUEST")
+            mem.copy_bytes_states("TO_REQUEST", src, rdst, size, then="REQUEST")
+            with m.State("REQUEST"):
+                os.ros_servicec_request(h_srvc, h_req, then="RESPONSE")
+            with m.State("RESPONSE"):
+                os.ros_servicec_take(h_srvc, h_res, ptr=res, then="RESULT")
+            with m.State("RESULT"):
+                mem.read_words(res + si + off["data"], [rsrc, rsize], then="CHECK")
+            with m.State("CHECK"):
+                m.next = "TAKE"
+                with m.If(rsize == size):
+                    m.next = "FROM_RESPONSE"
+            mem.copy_bytes_states("FROM_RESPONSE", rsrc, src, size, then="PUBLISH")
+            with m.State("PUBLISH"):
+                os.ros_publish(h_pub, h_img, then="TAKE")
         return m

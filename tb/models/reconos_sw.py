@@ -316,6 +316,7 @@ class Broker:
         self._subs = collections.defaultdict(list)
         self.published = collections.defaultdict(list)   # topic -> values, in order
         self._services = {}
+        self._actions = {}
 
     def subscribe(self, topic):
         q = _Queue()
@@ -341,6 +342,40 @@ class Broker:
         reply = _Queue()
         self._services[service].put((request, reply))
         return await reply.get()
+
+    def action_server_queue(self, action):
+        """Register an action server: a :class:`_Queue` of :class:`ActionGoal`."""
+        q = _Queue()
+        self._actions[action] = q
+        return q
+
+    def send_goal(self, action, goal, goal_id=None):
+        """Send a goal (the ``goal`` part of ``<Action>_SendGoal_Request``) to ``action``;
+        return its :class:`ActionGoal` (acceptance, feedback and result queues)."""
+        g = ActionGoal(goal, goal_id if goal_id is not None else bytes(range(16)))
+        self._actions[action].put(g)
+        return g
+
+
+class ActionGoal:
+    """One goal of an action, as both ends see it (rclc's goal handle).
+
+    ``accepted`` receives the server's decision (a bool); :meth:`request_result` is the
+    client's ``get_result`` request, which the server's ACTIONS_RESULT_TAKE waits for;
+    ``feedback`` receives ``<Action>_FeedbackMessage`` values; ``result`` the
+    ``<Action>_GetResult_Response`` value.
+    """
+
+    def __init__(self, goal, goal_id):
+        self.goal_id = bytes(goal_id)
+        self.request = {"goal_id": {"uuid": list(self.goal_id)}, "goal": goal}
+        self.accepted = _Queue()
+        self.feedback = _Queue()
+        self.result = _Queue()
+        self.result_requested = Event()
+
+    def request_result(self):
+        self.result_requested.set()
 
 
 class _Queue:
@@ -392,9 +427,11 @@ class Resource:
 
     ``kind`` is a :class:`ResourceType` name in lower case (``"mbox"``, ``"sem"``,
     ``"mutex"``, ``"cond"``, ``"mem"``, ``"rosnode"``, ``"rosmsg"``, ``"rossub"``, ``"rospub"``,
-    ``"rossrvmsgreq"``, ``"rossrvmsgres"``, ``"rossrvs"``, ``"rossrvc"``); ``args`` as in
-    build.cfg (message type for a message, topic for a subscriber or publisher, size for a
-    mailbox or memory, initial value for a semaphore, service name for servers/clients).
+    ``"rossrvmsgreq"``, ``"rossrvmsgres"``, ``"rossrvs"``, ``"rossrvc"``, ``"rosactions"``,
+    ``"rosactionmsggoalreq"``, ``"rosactionmsgresultres"``, ``"rosactionmsgfeedback"``);
+    ``args`` as in build.cfg (message type for a message, topic for a subscriber or
+    publisher, size for a mailbox or memory, initial value for a semaphore, service or
+    action name for servers/clients).
     """
 
     def __init__(self, kind, *args, name=None):
@@ -663,6 +700,10 @@ class ReconosRuntime:
             r.state = {"queue": self.broker.server_queue(r.args[0]), "pending": None}
         elif k == "rossrvc":
             r.state = {"reply": None}
+        elif k == "rosactions":
+            r.state = {"queue": self.broker.action_server_queue(r.args[0]), "goal": None}
+        elif k in ("rosactionmsggoalreq", "rosactionmsgresultres", "rosactionmsgfeedback"):
+            r.ptr = self.msgs.create(r.args[0])
         if not r.ptr:
             r.ptr = self.mem.malloc(64)   # a stand-in object address for GETOBJADDR
 
@@ -779,7 +820,7 @@ class ReconosRuntime:
         return [self._resource(slot, h, "mem").ptr]
 
     async def do_ros_message_set_size(self, slot, h, offset, elem_size, count):
-        r = self._resource(slot, h, "rosmsg", "rossrvmsgreq", "rossrvmsgres")
+        r = self._resource(slot, h, *_MESSAGE_KINDS)
         return [self.msgs.set_sequence(r.ptr + offset, elem_size, count)]
 
     async def do_ros_publish(self, slot, hp, hm):
@@ -872,4 +913,62 @@ class ReconosRuntime:
         return [res.ptr, 0]
 
 
+    # ---- action server (rclc action server semantics, spec §3.3 and §9.2) ----
+    def _goal(self, slot, ha):
+        srv = self._resource(slot, ha, "rosactions")
+        if srv.state["goal"] is None:
+            raise ProtocolError(f"slot {slot}: no goal taken on action server handle {ha}")
+        return srv.state["goal"]
+
+    async def _take_goal(self, slot, ha, hm, goal):
+        srv = self._resource(slot, ha, "rosactions")
+        msg = self._resource(slot, hm, "rosactionmsggoalreq")
+        srv.state["goal"] = goal
+        self.msgs.write(msg.ptr, msg.args[0], goal.request)
+        return msg.ptr
+
+    async def do_ros_actions_goal_take(self, slot, ha, hm):
+        goal = await self._resource(slot, ha, "rosactions").state["queue"].get()
+        return [await self._take_goal(slot, ha, hm, goal)]
+
+    async def do_ros_actions_goal_trytake(self, slot, ha, hm):
+        goal = self._resource(slot, ha, "rosactions").state["queue"].get_nowait()
+        if goal is None:
+            return [0, 1]
+        return [await self._take_goal(slot, ha, hm, goal), 0]
+
+    async def do_ros_actions_goal_decide(self, slot, ha, accept):
+        goal = self._goal(slot, ha)
+        goal.accepted.put(bool(accept))
+        if not accept:
+            self._resource(slot, ha, "rosactions").state["goal"] = None
+        return [0]
+
+    async def do_ros_actions_result_take(self, slot, ha):
+        await self._goal(slot, ha).result_requested.wait()
+        return [0]
+
+    async def do_ros_actions_result_trytake(self, slot, ha):
+        requested = self._goal(slot, ha).result_requested.is_set()
+        return [0, 0 if requested else 1]
+
+    async def do_ros_actions_feedback(self, slot, ha, hm):
+        goal = self._goal(slot, ha)
+        msg = self._resource(slot, hm, "rosactionmsgfeedback")
+        value = self.msgs.read(msg.ptr, msg.args[0])
+        # rclc_action_publish_feedback stamps the goal's id into the feedback message
+        value["goal_id"] = goal.request["goal_id"]
+        goal.feedback.put(value)
+        return [0]
+
+    async def do_ros_actions_result_send(self, slot, ha, hm):
+        goal = self._goal(slot, ha)
+        msg = self._resource(slot, hm, "rosactionmsgresultres")
+        goal.result.put(self.msgs.read(msg.ptr, msg.args[0]))
+        self._resource(slot, ha, "rosactions").state["goal"] = None
+        return [0]
+
+
 _ALL_KINDS = tuple(t.name.lower() for t in ResourceType)
+_MESSAGE_KINDS = ("rosmsg", "rossrvmsgreq", "rossrvmsgres", "rosactionmsggoalreq",
+                  "rosactionmsgresultres", "rosactionmsgfeedback")
