@@ -6,7 +6,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import hmt, msg, reconos  # noqa: E402
+from bench import hmt, msg, reconos, reconos_apps  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -16,6 +16,7 @@ BENCHES = [
     ("hardware-mapped topics", hmt),
     ("message serializers and deserializers", msg),
     ("ReconOS infrastructure (MEMIF copies, OS calls, resources)", reconos),
+    ("ReconROS demo nodes (sort, Sobel) as hardware threads", reconos_apps),
 ]
 
 

@@ -45,21 +45,26 @@ def _thread_classes():
             "dip": t.DipThread}
 
 
+def build_thread(arch, spec, where="thread"):
+    """A hardware thread from ``{"kind": k, ...parameters}`` (k a key of
+    :func:`_thread_classes`)."""
+    classes = _thread_classes()
+    spec = dict(spec)
+    kind = spec.pop("kind")
+    if kind not in classes:
+        raise ValueError(f"{where}: unknown thread kind {kind!r}; known: "
+                         f"{', '.join(sorted(classes))}")
+    return classes[kind](arch, **spec)
+
+
 def build_reconos(**params):
     """A :class:`hdl.reconos.ReconosSystem`: ``arch``, ``threads`` (a list of ``{"kind": k,
     ...thread parameters}`` with k a key of :func:`_thread_classes`), ``tlb_entries``,
     ``osif_depth``, ``memif_depth``, ``async_slots``."""
     from hdl.reconos import ReconosSystem
     arch = params.pop("arch", "r64")
-    classes = _thread_classes()
-    threads = []
-    for i, spec in enumerate(params.pop("threads")):
-        spec = dict(spec)
-        kind = spec.pop("kind")
-        if kind not in classes:
-            raise ValueError(f"threads[{i}]: unknown thread kind {kind!r}; known: "
-                             f"{', '.join(sorted(classes))}")
-        threads.append(classes[kind](arch, **spec))
+    threads = [build_thread(arch, spec, f"threads[{i}]")
+               for i, spec in enumerate(params.pop("threads"))]
     return ReconosSystem(arch, threads, **params)
 
 

@@ -3,13 +3,13 @@ the sort service server and action server (spec reconos.md §9.2, defect 14 fixe
 ReconOS mailbox sort thread, two threads sharing a counter under a mutex, and the Sobel
 service pair of the paper's Listings 2 and 3 (spec §9.1) on a real photograph."""
 
-import os
 import random
 import struct
 from pathlib import Path
 
 import cocotb
 import cv2
+import pytest
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 
 from .harness import cocotb_bench
@@ -214,21 +214,20 @@ def check_sobel(out, pixels):
     assert out["data"] == want, "the border or row height-2 differs from the native mode"
 
 
-@cocotb.test()
-async def sobel_service_pair_on_a_photograph(dut):
+async def run_sobel_pair(dut, photo_name):
     """The DIP node sends each image to the Sobel server and publishes the result: a real
-    photograph (80x60 ``bgr8``; 640x480 with ROSGATE_SOBEL_FULL=1), a random image, a refused
-    one (step not a multiple of W: not published), then a photograph again."""
+    photograph, a random image, a refused one (not published), the photograph again.
+    Returns the cycles of the first round trip."""
     import numpy as np
     tb = AppsTB(dut)
     rt = await tb.setup()
     await tb.start_sobel_pair()
-    name = "coffee_640x480.png" if os.environ.get("ROSGATE_SOBEL_FULL") else "coffee_80x60.png"
-    photo = cv2.imread(str(IMAGES / name), cv2.IMREAD_COLOR)
+    photo = cv2.imread(str(IMAGES / photo_name), cv2.IMREAD_COLOR)
     rng = np.random.default_rng(4)
     noise = rng.integers(0, 256, size=(12, 16, 3), dtype=np.uint8)
-    out = await run_sobel(tb, photo, 0)
-    check_sobel(out, photo)
+    start = cocotb.utils.get_sim_time("ns")
+    check_sobel(await run_sobel(tb, photo, 0), photo)
+    cycles = int((cocotb.utils.get_sim_time("ns") - start) // 10)
     check_sobel(await run_sobel(tb, noise, 1), noise)
     # a step that is no multiple of the word and does not match the payload: refused
     odd = rng.integers(0, 256, size=(5, 20, 3), dtype=np.uint8)
@@ -236,6 +235,21 @@ async def sobel_service_pair_on_a_photograph(dut):
     assert not len(tb.filtered)
     check_sobel(await run_sobel(tb, photo, 3), photo)
     assert not rt.errors, rt.errors
+    return cycles
 
 
-test_reconos_apps = cocotb_bench("reconos", apps_configs())
+@cocotb.test()
+async def sobel_service_pair_on_a_photograph(dut):
+    """The Sobel service pair on an 80x60 ``bgr8`` photograph (640x480 in
+    test_reconos_apps_full)."""
+    await run_sobel_pair(dut, "coffee_80x60.png")
+
+
+CONFIGS = apps_configs()
+#: r64 on both simulators, r32 on Verilator; r32 on Icarus in the long matrix
+test_reconos_apps = cocotb_bench("reconos", {"apps_r64": CONFIGS["apps_r64"]})
+test_reconos_apps_r32 = cocotb_bench("reconos", {"apps_r32": CONFIGS["apps_r32"]},
+                                     simulators=("verilator",))
+test_reconos_apps_r32_icarus = cocotb_bench(
+    "reconos", {"apps_r32": pytest.param(CONFIGS["apps_r32"], marks=pytest.mark.full)},
+    simulators=("icarus",))
