@@ -14,7 +14,7 @@ from cocotb.triggers import ClockCycles
 
 from tb.models.reconos_sw import Resource
 from tb.models.sobel import sobel_byte_lanes
-from tb.test_reconos_apps import (IMAGES, SOBEL_SRV, AppsTB, check_sobel, image_msg,
+from tb.test_reconos_apps import (IMAGES, AppsTB, check_sobel, image_msg,
                                   run_sobel)
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import cocotb
 import cv2
 import pytest
-from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
+from cocotb.triggers import ClockCycles, with_timeout
 
 from .harness import cocotb_bench
 from .models.reconos_sw import Resource

@@ -306,7 +306,22 @@ class SortSteps:
             mem.write_word(addr + full * wb, Cat(self._tail, self._dst_word[32:]), then=then)
 
 
-class SortServiceThread(HardwareThread):
+class _SortingThread(HardwareThread):
+    """A thread around a :class:`~hdl.kernels.MergeSorter` of ``block_size`` elements."""
+
+    def __init__(self, arch, block_size):
+        self.block_size = block_size
+        super().__init__(arch)
+
+    def _with_sorter(self, m, n):
+        """``(os, mem, sorter, steps)`` for a block of ``n`` elements."""
+        from ..kernels import MergeSorter
+        os, mem = self.os_and_memory(m)
+        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        return os, mem, sorter, SortSteps(m, mem, sorter, self.arch, n)
+
+
+class SortServiceThread(_SortingThread):
     """The ReconROS sort service server (``sorter_msgs/srv/Sort``, spec §9.2), with defect 14
     fixed: the response carries the sorted data.
 
@@ -330,20 +345,16 @@ class SortServiceThread(HardwareThread):
                  block_size=2048):
         self.handles = (h_srvs, h_req, h_res)
         self.offsets = (req_offset, res_offset)
-        self.block_size = block_size
-        super().__init__(arch)
+        super().__init__(arch, block_size)
 
     def elaborate(self, platform):
-        from ..kernels import MergeSorter
         m = Module()
-        os, mem = self.os_and_memory(m)
-        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        n = Signal(range(self.block_size + 1))
+        os, mem, _, steps = self._with_sorter(m, n)
         h_srvs, h_req, h_res = self.handles
         req_off, res_off = self.offsets
         w = self.arch.word_bits
-        req, src, size, dst = (Signal(w, name=n) for n in ("req", "src", "size", "dst"))
-        n = Signal(range(self.block_size + 1))
-        steps = SortSteps(m, mem, sorter, self.arch, n)
+        req, src, size, dst = (Signal(w, name=nm) for nm in ("req", "src", "size", "dst"))
         with m.FSM():
             with m.State("INIT"):
                 os.thread_init(then="TAKE")
@@ -377,7 +388,7 @@ def _float32_bits(value):
     return struct.unpack("<I", struct.pack("<f", value))[0]
 
 
-class SortActionThread(HardwareThread):
+class SortActionThread(_SortingThread):
     """The ReconROS sort action server (``sorter_msgs/action/Sort``, spec §9.2): goal,
     feedback, result.
 
@@ -405,24 +416,20 @@ class SortActionThread(HardwareThread):
                  block_size=2048):
         self.handles = (h_as, h_goal, h_res, h_fb)
         self.offsets = (goal_offset, res_offset, fb_offset)
-        self.block_size = block_size
-        super().__init__(arch)
+        super().__init__(arch, block_size)
 
     def elaborate(self, platform):
-        from ..kernels import MergeSorter
         m = Module()
-        os, mem = self.os_and_memory(m)
-        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        n = Signal(range(self.block_size + 1))
+        os, mem, sorter, steps = self._with_sorter(m, n)
         h_as, h_goal, h_res, h_fb = self.handles
         goal_off, res_off, fb_off = self.offsets
         a = self.arch
         w = a.word_bits
         goal, src, size, dst, fb, fb_word = (
             Signal(w, name=nm) for nm in ("goal", "src", "size", "dst", "fb", "fb_word"))
-        n = Signal(range(self.block_size + 1))
         accept = Signal()
         reported = Signal(range(sorter.passes + 1))
-        steps = SortSteps(m, mem, sorter, a, n)
         fb_addr = fb + (fb_off & ~(a.word_bytes - 1))
         lane = (fb_off % a.word_bytes) // 4
         percent = Signal(32)
@@ -475,7 +482,7 @@ class SortActionThread(HardwareThread):
         return m
 
 
-class MailboxSortThread(HardwareThread):
+class MailboxSortThread(_SortingThread):
     """The ReconOS sort demo's hardware thread (the VHDL variant of spec §9.2): get an
     address from mailbox ``h_in``, sort the ``block_size`` unsigned 32-bit words there in
     place, put the address into mailbox ``h_out``; an all-ones address ends the thread
@@ -492,17 +499,13 @@ class MailboxSortThread(HardwareThread):
 
     def __init__(self, arch, *, h_in, h_out, block_size=2048):
         self.handles = (h_in, h_out)
-        self.block_size = block_size
-        super().__init__(arch)
+        super().__init__(arch, block_size)
 
     def elaborate(self, platform):
-        from ..kernels import MergeSorter
         m = Module()
-        os, mem = self.os_and_memory(m)
-        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        os, mem, _, steps = self._with_sorter(m, self.block_size)
         h_in, h_out = self.handles
         addr = Signal(self.arch.word_bits)
-        steps = SortSteps(m, mem, sorter, self.arch, self.block_size)
         with m.FSM():
             with m.State("INIT"):
                 os.thread_init(then="GET")
