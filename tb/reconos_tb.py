@@ -57,10 +57,22 @@ def struct_offsets(arch, type_name, library=None):
     return {m.name: m.offset for m in layout.struct(type_name).members}
 
 
+#: a hardware action client (slot 7 of the apps system): send the goal in message 2 on client
+#: 1, wait for the decision, request the result, take one feedback, take the result (into
+#: message 3), exit; every reply reported to mailbox 0
+ACTION_CLIENT_PROGRAM = [
+    ["ros_actionc_goal_send", [1, 2]], ["ros_actionc_goal_take", [1]],
+    ["ros_actionc_result_send", [1]], ["ros_actionc_feedback_take", [1, 4]],
+    ["ros_actionc_feedback_trytake", [1, 4]], ["ros_actionc_result_take", [1, 3]],
+    ["ros_actionc_result_trytake", [1, 3]],
+]
+
+
 def _apps_system(arch):
     """The ReconROS demo nodes of :mod:`tb.test_reconos_apps`: 0 sort service server, 1 sort
     action server, 2 the mailbox sort thread, 3 and 4 shared-counter threads, 5 the Sobel
-    service server, 6 the DIP node (Listings 2 and 3 of the paper)."""
+    service server, 6 the DIP node (Listings 2 and 3 of the paper), 7 an action client (a call
+    sequencer) of the sort action server."""
     img = struct_offsets(arch, "sensor_msgs/msg/Image")
     image_offsets = {k: img[k] for k in ("height", "encoding", "is_bigendian", "step", "data")}
     goal = struct_offsets(arch, "sorter_msgs/action/Sort_SendGoal_Request")["goal"]
@@ -77,6 +89,7 @@ def _apps_system(arch):
          "image_offsets": image_offsets},
         {"kind": "dip", "h_sub": 1, "h_pub": 2, "h_img": 3, "h_srvc": 5, "h_req": 4,
          "h_res": 6, "image_offsets": image_offsets},
+        {"kind": "calls", "program": ACTION_CLIENT_PROGRAM, "h_report": 0},
     ]}
 
 

@@ -144,6 +144,37 @@ async def sort_action_goal_feedback_result(dut):
 
 
 @cocotb.test()
+async def hardware_action_client_and_server(dut):
+    """A hardware action client (the call sequencer) sends a goal to the hardware sort action
+    server: accepted, result requested, feedback taken, result taken into the client's
+    message; the try variants read both reply words (defect 2) and the next call works."""
+    from hdl.reconos.protocol import SIGNAL_THREAD_START
+    tb = AppsTB(dut)
+    rt = await tb.setup()
+    await tb.start_sort_action()
+    client = slot_of(tb.params, "calls")
+    res = [Resource("mbox", 64), Resource("rosactionc", "sort"),
+           Resource("rosactionmsggoalreq", SORT_ACTION + "_SendGoal_Request"),
+           Resource("rosactionmsgresultres", SORT_ACTION + "_GetResult_Response"),
+           Resource("rosactionmsgfeedback", SORT_ACTION + "_FeedbackMessage")]
+    await rt.create_thread(client, res)
+    unsorted = random.Random(5).sample(range(1, 100000), 700)
+    rt.msgs.write(res[2].ptr, SORT_ACTION + "_SendGoal_Request",
+                  {"goal_id": {"uuid": list(range(16, 32))}, "goal": {"unsorted": unsorted}})
+    await tb.within(rt.exited[client].wait(), "action client")
+    report = [res[0].state.get_nowait() for _ in range(len(res[0].state))]
+    init, sent, accept, ret, rsend, fb, fb_try, ptr, try_ptr, try_ret = report
+    assert (init, sent, accept, ret, rsend, fb) == (SIGNAL_THREAD_START, 0, 1, 0, 0, 0), report
+    assert fb_try in (0, 1) and (ptr, try_ptr, try_ret) == (res[3].ptr, 0, 1), report
+    result = rt.msgs.read(res[3].ptr, SORT_ACTION + "_GetResult_Response")
+    assert result["result"]["sorted"] == sorted(unsorted)
+    feedback = rt.msgs.read(res[4].ptr, SORT_ACTION + "_FeedbackMessage")
+    assert bytes(feedback["goal_id"]["uuid"]) == bytes(range(16, 32))
+    assert 0 < feedback["feedback"]["percent"] <= 100.0
+    assert not rt.errors, rt.errors
+
+
+@cocotb.test()
 async def mailbox_sort_and_shared_counter(dut):
     """The ReconOS sort demo thread (address in through one mailbox, sorted in place, address
     back through another; all ones ends it) while two threads increment a shared counter

@@ -702,6 +702,8 @@ class ReconosRuntime:
             r.state = {"reply": None}
         elif k == "rosactions":
             r.state = {"queue": self.broker.action_server_queue(r.args[0]), "goal": None}
+        elif k == "rosactionc":
+            r.state = {"goal": None}
         elif k in ("rosactionmsggoalreq", "rosactionmsgresultres", "rosactionmsgfeedback"):
             r.ptr = self.msgs.create(r.args[0])
         if not r.ptr:
@@ -966,6 +968,60 @@ class ReconosRuntime:
         msg = self._resource(slot, hm, "rosactionmsgresultres")
         goal.result.put(self.msgs.read(msg.ptr, msg.args[0]))
         self._resource(slot, ha, "rosactions").state["goal"] = None
+        return [0]
+
+
+    # ---- action client (rclc action client semantics; cancel is not modelled) ----
+    def _client_goal(self, slot, hc):
+        cli = self._resource(slot, hc, "rosactionc")
+        if cli.state["goal"] is None:
+            raise ProtocolError(f"slot {slot}: no goal sent on action client handle {hc}")
+        return cli.state["goal"]
+
+    async def do_ros_actionc_goal_send(self, slot, hc, hm):
+        cli = self._resource(slot, hc, "rosactionc")
+        msg = self._resource(slot, hm, "rosactionmsggoalreq")
+        value = self.msgs.read(msg.ptr, msg.args[0])
+        cli.state["goal"] = self.broker.send_goal(cli.args[0], value["goal"],
+                                                  bytes(value["goal_id"]["uuid"]))
+        return [0]
+
+    async def do_ros_actionc_goal_take(self, slot, hc):
+        return [int(await self._client_goal(slot, hc).accepted.get()), 0]
+
+    async def do_ros_actionc_goal_trytake(self, slot, hc):
+        accepted = self._client_goal(slot, hc).accepted.get_nowait()
+        return [0, 1] if accepted is None else [int(accepted), 0]
+
+    async def do_ros_actionc_result_send(self, slot, hc):
+        self._client_goal(slot, hc).request_result()
+        return [0]
+
+    def _client_message(self, slot, hm, kind, value):
+        msg = self._resource(slot, hm, kind)
+        self.msgs.write(msg.ptr, msg.args[0], value)
+        return msg.ptr
+
+    async def do_ros_actionc_result_take(self, slot, hc, hm):
+        value = await self._client_goal(slot, hc).result.get()
+        return [self._client_message(slot, hm, "rosactionmsgresultres", value)]
+
+    async def do_ros_actionc_result_trytake(self, slot, hc, hm):
+        value = self._client_goal(slot, hc).result.get_nowait()
+        if value is None:
+            return [0, 1]
+        return [self._client_message(slot, hm, "rosactionmsgresultres", value), 0]
+
+    async def do_ros_actionc_feedback_take(self, slot, hc, hm):
+        value = await self._client_goal(slot, hc).feedback.get()
+        self._client_message(slot, hm, "rosactionmsgfeedback", value)
+        return [0]
+
+    async def do_ros_actionc_feedback_trytake(self, slot, hc, hm):
+        value = self._client_goal(slot, hc).feedback.get_nowait()
+        if value is None:
+            return [1]
+        self._client_message(slot, hm, "rosactionmsgfeedback", value)
         return [0]
 
 
