@@ -364,6 +364,15 @@ def bad_messages(tb):
     data = bytearray(good)
     data[offset:offset + 4] = (tb.max_count + 1).to_bytes(4, "little")
     cases.append(("count above max_count", bytes(data), DeserializerError.LENGTH, value))
+    # the same on an empty sequence of 8-byte elements: the count is followed by no padding,
+    # so the bytes after it are not zero; the count is still what gets reported
+    empty = _copy(value)
+    set_at(empty, seq.path, [] if seq.element not in ("uint8", "byte", "char") else b"")
+    offset = count_offset(tb, empty, seq)
+    data = bytearray(tb.wire_bytes(empty))
+    data[offset:offset + 4] = (tb.max_count + 1).to_bytes(4, "little")
+    cases.append(("count above max_count, empty sequence", bytes(data),
+                  DeserializerError.LENGTH, empty))
     if tb.framing == "cdr":
         data = bytearray(good)
         data[0:2] = b"\x00\x00"   # CDR_BE

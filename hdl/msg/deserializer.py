@@ -144,6 +144,17 @@ class Deserializer(wiring.Component):
             if i == last_writer:
                 m.d.sync += offered.eq(1)
 
+        def count_error(var):
+            """(bad, code) of the element count of variable ``var``: above its bound or
+            ``max_count`` (LENGTH), or a CDR string count of 0 (FORMAT)."""
+            v = plan.variables[var]
+            bound = v.bound or self._max_count
+            element_count = counts[var] - int(v.nul)
+            if not v.nul:
+                return element_count > bound, Const(DeserializerError.LENGTH, 3)
+            return ((counts[var] == 0) | (element_count > bound),
+                    Mux(counts[var] == 0, DeserializerError.FORMAT, DeserializerError.LENGTH))
+
         with m.Switch(op):
             for i, s in enumerate(steps):
                 with m.Case(i):
@@ -163,7 +174,13 @@ class Deserializer(wiring.Component):
                     short = ~have & ended
 
                     if s.kind == "pad":
-                        with m.If(have):
+                        # a bad count of the sequence this padding aligns is reported as
+                        # such, not as the padding it implies (the count came first)
+                        bad_count, bad_code = (count_error(s.var) if s.var is not None
+                                               else (Const(0), DeserializerError.LENGTH))
+                        with m.If(bad_count):
+                            fail(bad_code)
+                        with m.Elif(have):
                             bad = (byte_mask(window, B, k) != 0) if s.check else Const(0)
                             with m.If(bad):
                                 fail(DeserializerError.PADDING)
@@ -173,18 +190,10 @@ class Deserializer(wiring.Component):
                         with m.Elif(short):
                             fail(DeserializerError.EARLY_END)
                         continue
-                    v = plan.variables[s.var]
-                    bound = v.bound or self._max_count
                     port = ports[s.var]
-                    element_count = counts[s.var] - int(v.nul)
-                    bad_count = (element_count > bound) if not v.nul else \
-                        ((counts[s.var] == 0) | (element_count > bound))
+                    bad_count, bad_code = count_error(s.var)
                     with m.If((step == 0) & bad_count):
-                        if v.nul:
-                            fail(Mux(counts[s.var] == 0, DeserializerError.FORMAT,
-                                     DeserializerError.LENGTH))
-                        else:
-                            fail(DeserializerError.LENGTH)
+                        fail(bad_code)
                     with m.Else():
                         n = Mux(short, avail, k)
                         m.d.comb += [
