@@ -176,19 +176,24 @@ class Deserializer(wiring.Component):
                     if s.kind == "pad":
                         # a bad count of the sequence this padding aligns is reported as
                         # such, not as the padding it implies (the count came first)
-                        bad_count, bad_code = (count_error(s.var) if s.var is not None
-                                               else (Const(0), DeserializerError.LENGTH))
-                        with m.If(bad_count):
-                            fail(bad_code)
-                        with m.Elif(have):
-                            bad = (byte_mask(window, B, k) != 0) if s.check else Const(0)
-                            with m.If(bad):
-                                fail(DeserializerError.PADDING)
+                        bad_pad = Signal(name=f"bad_pad_{i}")
+                        nonzero = (byte_mask(window, B, k) != 0) if s.check else Const(0)
+                        if s.var is not None:
+                            bad_count, bad_code = count_error(s.var)
+                            bad_pad_code = Mux(bad_count, bad_code, DeserializerError.PADDING)
+                            m.d.comb += bad_pad.eq(nonzero | bad_count)
+                        else:
+                            bad_pad_code = DeserializerError.PADDING
+                            m.d.comb += bad_pad.eq(nonzero)
+                        with m.If(have):
+                            with m.If(bad_pad):
+                                fail(bad_pad_code)
                             with m.Else():
                                 take(k)
                                 advance()
                         with m.Elif(short):
-                            fail(DeserializerError.EARLY_END)
+                            fail(Mux(bad_count, bad_code, DeserializerError.EARLY_END)
+                                 if s.var is not None else DeserializerError.EARLY_END)
                         continue
                     port = ports[s.var]
                     bad_count, bad_code = count_error(s.var)
