@@ -7,11 +7,10 @@ the fpgaDDS evaluation. Resources come from Debian's Yosys ``synth_xilinx -flatt
 
 import json
 import math
-from pathlib import Path
 
 from bench.trafficgen import TopicTrafficBench
-from gen.export.resources import YOSYS_COMMAND, estimate_resources
-from gen.export.verilog import export_verilog, write_if_changed
+from bench.report import component_resources, write_report
+from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_top
 from tb.harness import run_bench
 from tb.toolchain import SIM_BUILD
@@ -113,11 +112,8 @@ def measure_resources(log=print):
             ("4:4 64 b, 512-deep FIFOs, monitor counters", dict(fifo_depth=512, monitor=True))):
         log(f"  yosys {YOSYS_COMMAND}: {label}...")
         component = build_top("topic", pubs=4, subs=4, data_width=64, **params)
-        text, _ = export_verilog(component, "topic")
-        vfile = SIM_BUILD / "bench-resources" / f"topic-{len(rows)}.v"
-        write_if_changed(vfile, text)
-        res = estimate_resources(vfile, "topic")
-        rows.append({"config": label, **{k: v for k, v in res.items() if k != "cells"}})
+        rows.append({"config": label,
+                     **component_resources(component, "topic", f"topic-{len(rows)}")})
     return rows
 
 
@@ -171,11 +167,6 @@ def markdown(results, resources):
 
 
 def write_results(results, resources, folder):
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     data = dict(results, resources=resources, resource_target=RESOURCE_TARGET,
                 paper_table_i={str(k): v for k, v in PAPER_TABLE_I.items()})
-    (folder / "hmt.json").write_text(json.dumps(data, indent=1) + "\n")
-    text = markdown(results, resources)
-    (folder / "hmt.md").write_text(text)
-    return text
+    return write_report(folder, "hmt", data, markdown(results, resources))

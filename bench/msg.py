@@ -8,10 +8,9 @@ Yosys ``synth_xilinx -flatten -family xc7``.
 """
 
 import json
-from pathlib import Path
 
-from gen.export.resources import YOSYS_COMMAND, estimate_resources
-from gen.export.verilog import export_verilog, write_if_changed
+from bench.report import component_resources, write_report
+from gen.export.resources import YOSYS_COMMAND
 from gen.tops import message_plan
 from hdl.msg import Deserializer, Serializer
 from tb.harness import run_bench
@@ -75,12 +74,9 @@ def measure_resources(log=print):
                              ("Deserializer", Deserializer, 512)):
         log(f"  yosys {YOSYS_COMMAND}: Image {kind} (CDR, {width} bit)...")
         plan = message_plan(IMAGE, "cdr", DIRS[IMAGE])
-        text, _ = export_verilog(cls(plan, width), "msg_block")
-        vfile = SIM_BUILD / "bench-resources" / f"image-{kind.lower()}-w{width}.v"
-        write_if_changed(vfile, text)
-        res = estimate_resources(vfile, "msg_block")
         rows.append({"config": f"sensor_msgs/Image {kind}, CDR, {width} bit",
-                     **{k: v for k, v in res.items() if k != "cells"}})
+                     **component_resources(cls(plan, width), "msg_block",
+                                           f"image-{kind.lower()}-w{width}")})
     return rows
 
 
@@ -119,10 +115,5 @@ def markdown(results, resources):
 
 
 def write_results(results, resources, folder):
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     data = dict(results, resources=resources, reconros_image_beats=RECONROS_IMAGE_BEATS)
-    (folder / "msg.json").write_text(json.dumps(data, indent=1) + "\n")
-    text = markdown(results, resources)
-    (folder / "msg.md").write_text(text)
-    return text
+    return write_report(folder, "msg", data, markdown(results, resources))

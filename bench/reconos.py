@@ -10,14 +10,13 @@ reconos.md §5, §10).
 """
 
 import json
-from pathlib import Path
 
 from amaranth.hdl import Module
 from amaranth.lib import wiring
 from amaranth.sim import Simulator
 
-from gen.export.resources import YOSYS_COMMAND, estimate_resources
-from gen.export.verilog import export_verilog, write_if_changed
+from bench.report import component_resources, write_report
+from gen.export.resources import YOSYS_COMMAND
 from hdl.reconos import ReconosSystem
 from hdl.reconos.fifo import OSIF_FIFO_DEPTH, ReconosFifo
 from hdl.reconos.hwt import OsifEngine
@@ -130,12 +129,9 @@ def measure_resources(log=print):
     for arch in ("r64", "r32"):
         for n in (1, 2, 4):
             log(f"  yosys {YOSYS_COMMAND}: {arch} infrastructure, {n} slot(s)...")
-            text, _ = export_verilog(ReconosSystem(arch, [None] * n), "reconos_infra")
-            vfile = SIM_BUILD / "bench-resources" / f"reconos-{arch}-{n}.v"
-            write_if_changed(vfile, text)
-            res = estimate_resources(vfile, "reconos_infra")
             rows.append({"config": f"{arch}, {n} slot{'s' if n > 1 else ''}",
-                         **{k: v for k, v in res.items() if k != "cells"}})
+                         **component_resources(ReconosSystem(arch, [None] * n),
+                                               "reconos_infra", f"reconos-{arch}-{n}")})
     return rows
 
 
@@ -187,10 +183,5 @@ def markdown(results, resources):
 
 
 def write_results(results, resources, folder):
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "reconos.json").write_text(json.dumps(dict(results, resources=resources),
-                                                    indent=1) + "\n")
-    text = markdown(results, resources)
-    (folder / "reconos.md").write_text(text)
-    return text
+    return write_report(folder, "reconos", dict(results, resources=resources),
+                        markdown(results, resources))

@@ -4,10 +4,9 @@ trip as hardware threads under Verilator, beside P-RR Table 6; yosys resources o
 threads beside P-RR Table 5."""
 
 import json
-from pathlib import Path
 
-from gen.export.resources import YOSYS_COMMAND, estimate_resources
-from gen.export.verilog import export_verilog, write_if_changed
+from bench.report import component_resources, write_report
+from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_thread
 from tb.harness import run_bench
 from tb.reconos_tb import apps_configs
@@ -50,15 +49,13 @@ def measure_resources(log=print):
     rows = []
     params = apps_configs()["apps_r64"]
     for spec in params["threads"]:
-        if spec["kind"] in ("counter",) or any(r["thread"] == spec["kind"] for r in rows):
+        # the counter and the call sequencer are test fixtures, not demo nodes
+        if spec["kind"] in ("counter", "calls") or any(r["thread"] == spec["kind"] for r in rows):
             continue
         log(f"  yosys {YOSYS_COMMAND}: {spec['kind']} thread (r64)...")
-        thread = build_thread("r64", spec)
-        text, _ = export_verilog(thread, f"thread_{spec['kind']}")
-        vfile = SIM_BUILD / "bench-resources" / f"thread-{spec['kind']}.v"
-        write_if_changed(vfile, text)
-        res = estimate_resources(vfile, f"thread_{spec['kind']}")
-        rows.append({"thread": spec["kind"], **{k: v for k, v in res.items() if k != "cells"},
+        res = component_resources(build_thread("r64", spec), f"thread_{spec['kind']}",
+                                  f"thread-{spec['kind']}")
+        rows.append({"thread": spec["kind"], **res,
                      "paper": PAPER_RESOURCES.get(spec["kind"], "-")})
     return rows
 
@@ -92,10 +89,5 @@ def markdown(results, resources):
 
 
 def write_results(results, resources, folder):
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "reconos_apps.json").write_text(
-        json.dumps(dict(results, resources=resources), indent=1) + "\n")
-    text = markdown(results, resources)
-    (folder / "reconos_apps.md").write_text(text)
-    return text
+    return write_report(folder, "reconos_apps", dict(results, resources=resources),
+                        markdown(results, resources))

@@ -27,12 +27,8 @@ def _system(arch):
     5 the OS-call sequencer of the compatibility bench."""
     from .test_reconos_calls import program
     from .test_reconos_pingpong import BAD_PROGRAM
-    from gen.msg import MessageLibrary
-    from gen.msg.layout import CLayout
-    layout = CLayout(MessageLibrary([], store="ros2_humble"), "arm64" if arch == "r64" else "arm32")
     # sensor_msgs/Image.data (spec §6: 72 on arm64, 48 on arm32)
-    offset = next(m.offset for m in layout.struct("sensor_msgs/msg/Image").members
-                  if m.name == "data")
+    offset = struct_offsets(arch, "sensor_msgs/msg/Image")["data"]
     return {"arch": arch, "async_slots": [0], "threads": [
         {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
         {"kind": "copy", "h_sub": 1, "h_pub": 2, "h_msg_in": 3, "h_msg_out": 4,

@@ -576,6 +576,11 @@ class MemCalls:
             m.next = then
 
 
+    @staticmethod
+    def _elements(length, stream):
+        """Elements of ``stream``'s ``tdata`` width in ``length`` bytes."""
+        return length >> ((len(stream.tdata) // 8).bit_length() - 1)
+
     def _unpack(self, sink, count, tag):
         """Drive ``sink`` (a stream of ``tvalid``/``tready``/``tdata``/``tlast`` with
         elements of W/k bits) from the read data, low element of a word first; elements
@@ -659,8 +664,7 @@ class MemCalls:
         ``then`` once they are in memory."""
         m, e = self._m, self.engine
         sent = Signal(name="ws_sent")
-        ew = len(source.tdata)
-        restart = self._pack(source, "ws", count=length >> (ew // 8).bit_length() - 1)
+        restart = self._pack(source, "ws", count=self._elements(length, source))
         self._issue(e.write_cmd, addr, length, sent, *restart)
         with m.If(~sent):
             m.d.comb += [source.tready.eq(0), e.write_data.valid.eq(0)]
@@ -674,8 +678,7 @@ class MemCalls:
         element per cycle. ``then`` once the written data is in memory."""
         m, e = self._m, self.engine
         r_sent, w_sent = Signal(name="tf_r_sent"), Signal(name="tf_w_sent")
-        ew = len(sink.tdata)
-        restart = self._unpack(sink, length >> (ew // 8).bit_length() - 1, "tf")
+        restart = self._unpack(sink, self._elements(length, sink), "tf")
         self._issue(e.read_cmd, src, length, r_sent, *restart)
         self._issue(e.write_cmd, dst, length, w_sent, *self._pack(source, "tf"))
         with m.If(~r_sent):

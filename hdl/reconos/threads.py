@@ -597,6 +597,18 @@ def _image_offsets(offsets, arch):
     return {k: int(offsets[k]) for k in need}
 
 
+def _image_geometry_states(m, mem, name, src, dst, off, *, then):
+    """States ``name`` and ``name_LAYOUT``: copy an Image's ``height``, ``width`` and
+    ``is_bigendian``, ``step`` words from the image at ``src`` to the one at ``dst``, leaving
+    ``encoding`` (a pointer) and the header alone."""
+    with m.State(name):
+        mem.copy(src + off["height"], dst + off["height"], off["encoding"] - off["height"],
+                 then=f"{name}_LAYOUT")
+    with m.State(f"{name}_LAYOUT"):
+        mem.copy(src + off["is_bigendian"], dst + off["is_bigendian"],
+                 off["data"] - off["is_bigendian"], then=then)
+
+
 def _lane32(word, offset, wb):
     return word.word_select((offset % wb) // 4, 32) if wb > 4 else word
 
@@ -677,12 +689,7 @@ class SobelServerThread(HardwareThread):
                       (step <= 4 * self.max_words) & (height >= 3) & (size == height * step))
                 m.d.sync += n.eq(Mux(ok, size, 0))
                 m.next = "GEOMETRY"
-            with m.State("GEOMETRY"):
-                mem.copy(req + ri + off["height"], res + so + off["height"],
-                         off["encoding"] - off["height"], then="LAYOUT")
-            with m.State("LAYOUT"):
-                mem.copy(req + ri + off["is_bigendian"], res + so + off["is_bigendian"],
-                         off["data"] - off["is_bigendian"], then="SET_SIZE")
+            _image_geometry_states(m, mem, "GEOMETRY", req + ri, res + so, off, then="SET_SIZE")
             with m.State("SET_SIZE"):
                 os.ros_message_set_size(h_res, so + off["data"], 1, n, ptr=dst, then="FILTER?")
             with m.State("FILTER?"):
@@ -742,12 +749,7 @@ class DipThread(HardwareThread):
                 os.ros_take(h_sub, h_img, ptr=img, then="PAYLOAD")
             with m.State("PAYLOAD"):
                 mem.read_words(img + off["data"], [src, size], then="GEOMETRY")
-            with m.State("GEOMETRY"):
-                mem.copy(img + off["height"], req + qi + off["height"],
-                         off["encoding"] - off["height"], then="LAYOUT")
-            with m.State("LAYOUT"):
-                mem.copy(img + off["is_bigendian"], req + qi + off["is_bigendian"],
-                         off["data"] - off["is_bigendian"], then="SET_SIZE")
+            _image_geometry_states(m, mem, "GEOMETRY", img, req + qi, off, then="SET_SIZE")
             with m.State("SET_SIZE"):
                 os.ros_message_set_size(h_req, qi + off["data"], 1, size, ptr=rdst,
                                         then="TO_REQUEST")

@@ -922,7 +922,7 @@ class ReconosRuntime:
             raise ProtocolError(f"slot {slot}: no goal taken on action server handle {ha}")
         return srv.state["goal"]
 
-    async def _take_goal(self, slot, ha, hm, goal):
+    def _take_goal(self, slot, ha, hm, goal):
         srv = self._resource(slot, ha, "rosactions")
         msg = self._resource(slot, hm, "rosactionmsggoalreq")
         srv.state["goal"] = goal
@@ -931,13 +931,13 @@ class ReconosRuntime:
 
     async def do_ros_actions_goal_take(self, slot, ha, hm):
         goal = await self._resource(slot, ha, "rosactions").state["queue"].get()
-        return [await self._take_goal(slot, ha, hm, goal)]
+        return [self._take_goal(slot, ha, hm, goal)]
 
     async def do_ros_actions_goal_trytake(self, slot, ha, hm):
         goal = self._resource(slot, ha, "rosactions").state["queue"].get_nowait()
         if goal is None:
             return [0, 1]
-        return [await self._take_goal(slot, ha, hm, goal), 0]
+        return [self._take_goal(slot, ha, hm, goal), 0]
 
     async def do_ros_actions_goal_decide(self, slot, ha, accept):
         goal = self._goal(slot, ha)
