@@ -18,7 +18,8 @@ __all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "apps_configs", "struct_of
 
 RAM_SIZE = 1 << 25
 #: message packages of the examples (sorter_msgs, application_msgs, ...)
-EXAMPLE_MESSAGES = str(Path(__file__).resolve().parent.parent / "examples" / "messages")
+EXAMPLE_MESSAGES = [str(Path(__file__).resolve().parent.parent / "examples" / d)
+                    for d in ("messages", "sobel_dip/msg")]
 
 
 def _system(arch):
@@ -48,7 +49,7 @@ def struct_offsets(arch, type_name, library=None):
     """Member offsets of ``type_name`` in the rosidl C layout of ``arch`` (spec §6)."""
     from gen.msg import MessageLibrary
     from gen.msg.layout import CLayout
-    library = library or MessageLibrary([EXAMPLE_MESSAGES], store="ros2_humble")
+    library = library or MessageLibrary(EXAMPLE_MESSAGES, store="ros2_humble")
     layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
     return {m.name: m.offset for m in layout.struct(type_name).members}
 

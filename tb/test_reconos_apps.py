@@ -38,7 +38,7 @@ class AppsTB(ReconosTB):
         await self.reset()
         from gen.msg import MessageLibrary
         from .reconos_tb import EXAMPLE_MESSAGES
-        rt = await self.start_runtime(MessageLibrary([EXAMPLE_MESSAGES], store="ros2_humble"))
+        rt = await self.start_runtime(MessageLibrary(EXAMPLE_MESSAGES, store="ros2_humble"))
         p = self.params
         self.SORT_SRV = slot_of(p, "sort_service")
         self.SORT_ACT = slot_of(p, "sort_action")

@@ -1,0 +1,243 @@
+"""System assembly: a parsed project (:mod:`gen.config`) to one Amaranth design (spec
+reconos.md §1, §8; hmt.md §1-3).
+
+Discovery as in the fpgaDDS paper: each ReconOS thread is built into its slots, every
+hardware topic becomes a :class:`~hdl.dds.Topic` whose topology follows from its publisher
+and subscriber counts (hmt.md §2) with the subscribers' FIFOs, and the ReconOS
+infrastructure is sized for the slots.
+
+Thread implementations
+----------------------
+A ``[ReconosThread@X]`` is implemented in Amaranth by the Python file
+``<project>/src/rt_<x>/amaranth/thread.py`` (``x`` in lower case, next to ReconROS' ``hls``
+and ``vhdl`` folders). It defines ``build(ctx)`` returning a component with the slot ports of
+:func:`hdl.reconos.ThreadSignature` plus one stream member per hardware-topic endpoint
+(``ctx.endpoints``: ``In(HW_TOPIC_STREAM)`` for a subscription, ``Out`` for a publication,
+named ``endpoint.port``). ``ctx`` is a :class:`ThreadContext`: the thread's handles by
+resource name, struct offsets for the target ABI, the architecture. A thread without such a
+file (an HLS or VHDL thread, or a ROS gateway) leaves its slot empty: the slot's FIFO ports
+and its topic ports become ports of the system top, for a core made elsewhere.
+"""
+
+import importlib.util
+import sys
+
+from amaranth.hdl import Module
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from hdl.dds import Topic
+from hdl.reconos import ReconosSystem, ThreadSignature
+from hdl.stream import AXIStreamSignature, StreamFIFO
+
+from .config import ConfigError, project_library
+
+__all__ = ["HW_TOPIC_STREAM", "ThreadContext", "SystemTop", "thread_module_path",
+           "build_thread", "build_system", "thread_sources"]
+
+#: a hardware topic's stream: 64-bit beats with TKEEP and a 1-bit TUSER (hmt.md §2)
+HW_TOPIC_STREAM = AXIStreamSignature(64, user_width=1)
+
+
+class ThreadContext:
+    """What a project's ``build(ctx)`` gets.
+
+    Attributes
+    ----------
+    project : gen.config.Project
+    thread : gen.config.Thread
+    slot : gen.config.Slot
+        The slot being built (a thread may fill several).
+    arch : str
+        ``"r32"`` or ``"r64"``.
+    endpoints : list of gen.config.HwEndpoint
+        The thread's hardware-topic ports.
+    stream : wiring.Signature
+        :data:`HW_TOPIC_STREAM`.
+    """
+
+    def __init__(self, project, thread, slot, library):
+        self.project = project
+        self.thread = thread
+        self.slot = slot
+        self.arch = project.arch
+        self.endpoints = thread.endpoints
+        self.stream = HW_TOPIC_STREAM
+        self._library = library
+
+    def handle(self, name):
+        """The thread-local handle of resource ``name`` (``"sub"`` or ``"resourcedip_sub"``)."""
+        return self.thread.handle(name)
+
+    def offsets(self, type_name):
+        """Byte offsets of the members of ``type_name`` in the rosidl C layout of the target."""
+        from gen.msg.layout import CLayout
+        layout = CLayout(self._library, "arm64" if self.arch == "r64" else "arm32")
+        return {m.name: m.offset for m in layout.struct(type_name).members}
+
+    def thread_signature(self):
+        """The slot ports plus the topic ports this thread must have."""
+        members = dict(ThreadSignature(self.arch).members)
+        for ep in self.endpoints:
+            members[ep.port] = (In if ep.direction == "sub" else Out)(HW_TOPIC_STREAM)
+        return wiring.Signature(members)
+
+
+def thread_module_path(project, thread):
+    return project.dir / "src" / thread.core_name / "amaranth" / "thread.py"
+
+
+def _load(path, thread):
+    name = f"rosgate_project_{thread.core_name}_{abs(hash(str(path)))}"
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except Exception:
+        del sys.modules[name]
+        raise
+    if not callable(getattr(module, "build", None)):
+        raise ConfigError(thread.where, f"{path} defines no build(ctx) function")
+    return module
+
+
+def build_thread(project, thread, slot, library=None):
+    """The component of ``thread`` for ``slot`` or ``None`` when the project has no Amaranth
+    implementation of it (see the module documentation)."""
+    path = thread_module_path(project, thread)
+    if not path.is_file():
+        return None
+    ctx = ThreadContext(project, thread, slot, library or project_library(project))
+    component = _load(path, thread).build(ctx)
+    expected = ctx.thread_signature().members
+    got = getattr(component, "signature", None)
+    members = got.members if got is not None else {}
+    for name, member in expected.items():
+        if name not in members or members[name] != member:
+            raise ConfigError(thread.where, f"{path}: build() returned a "
+                                            f"{type(component).__name__} without the port "
+                                            f"{name!r} ({member}) of thread {thread.name}")
+    return component
+
+
+class SystemTop(wiring.Component):
+    """A whole ReconROS project: the ReconOS infrastructure with its threads and the
+    hardware topics between them.
+
+    Members
+    -------
+    s_axi_osif, s_axi_intc, s_axi_proc, m_axi_mem, irq_osif, irq_pgf :
+        As :class:`hdl.reconos.ReconosSystem`.
+    slot<i>, slot<i>_rst :
+        Slot ``i`` has no Amaranth thread: its FIFO ports and reset for an external core.
+    slot<i>_clk : In(1)
+        Clock of slot ``i`` when it is not the system clock.
+    slot<i>_<port> : stream
+        A topic port of the external thread in slot ``i`` (``Out`` for its subscription,
+        ``In`` for its publication).
+
+    Attributes
+    ----------
+    topics : dict
+        Topic name -> :class:`hdl.dds.Topic` parameters used (``pubs``, ``subs``,
+        ``topology``, subscriber FIFO depths).
+    """
+
+    def __init__(self, project, *, library=None):
+        self.project = project
+        library = library or project_library(project)
+        slots = sorted(project.slots, key=lambda s: s.id)
+        self.threads = []
+        self.async_slots = []
+        for slot in slots:
+            thread = slot.thread
+            self.threads.append(build_thread(project, thread, slot, library) if thread else None)
+            if slot.clock is not project.system_clock:
+                self.async_slots.append(slot.id)
+        for slot in slots:
+            if slot.id in self.async_slots and self.threads[slot.id] is None:
+                raise ConfigError(slot.where, f"slot {slot.name} runs on clock "
+                                              f"{slot.clock.name} but has no Amaranth thread; "
+                                              "external slots must be on the system clock")
+        self.reconos = ReconosSystem(project.arch, self.threads, async_slots=self.async_slots)
+        members = dict(self.reconos.signature.members)
+        self._external_ports = {}
+        for slot in slots:
+            if self.threads[slot.id] is not None or slot.thread is None:
+                continue
+            for ep in slot.thread.endpoints:
+                name = f"slot{slot.id}_{ep.port}"
+                members[name] = (Out if ep.direction == "sub" else In)(HW_TOPIC_STREAM)
+                self._external_ports[(slot.id, ep.port)] = name
+        self.topics = {}
+        for topic in project.topics.values():
+            self.topics[topic.name] = {
+                "pubs": len(topic.pubs), "subs": len(topic.subs), "topology": topic.topology,
+                "fifo_depths": [ep.depth for ep in topic.subs]}
+        super().__init__(members)
+
+    def _endpoint_ports(self, endpoint):
+        """The stream interfaces of ``endpoint`` in each of its thread's slots."""
+        out = []
+        for slot in endpoint.thread.slots:
+            component = self.threads[slot.id]
+            if component is None:
+                out.append(wiring.flipped(getattr(self, self._external_ports[(slot.id,
+                                                                          endpoint.port)])))
+            else:
+                out.append(getattr(component, endpoint.port))
+        return out
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.reconos = rs = self.reconos
+        for name, member in rs.signature.members.items():
+            outer, inner = getattr(self, name), getattr(rs, name)
+            if member.is_signature:
+                wiring.connect(m, wiring.flipped(outer), inner)
+            elif member.flow == In:
+                m.d.comb += inner.eq(outer)
+            else:
+                m.d.comb += outer.eq(inner)
+        for topic in self.project.topics.values():
+            pubs = [p for ep in topic.pubs for p in self._endpoint_ports(ep)]
+            subs = []
+            for ep in topic.subs:
+                subs += [(p, ep.depth) for p in self._endpoint_ports(ep)]
+            fabric = Topic(len(pubs), len(subs), 64, user_width=1, monitor=False)
+            m.submodules[f"topic_{topic.name}"] = fabric
+            for i, port in enumerate(pubs):
+                wiring.connect(m, port, fabric.s_axis[i])
+            for j, (port, depth) in enumerate(subs):
+                if depth:
+                    fifo = StreamFIFO(HW_TOPIC_STREAM, depth)
+                    m.submodules[f"topic_{topic.name}_fifo{j}"] = fifo
+                    wiring.connect(m, fabric.m_axis[j], fifo.s_axis)
+                    wiring.connect(m, fifo.m_axis, port)
+                else:
+                    wiring.connect(m, fabric.m_axis[j], port)
+        return m
+
+
+def build_system(project, *, library=None):
+    """The :class:`SystemTop` of ``project``."""
+    return SystemTop(project, library=library)
+
+
+def thread_sources(project):
+    """Thread name -> ``"amaranth"`` (path) or why its slot is external."""
+    out = {}
+    for thread in project.threads:
+        path = thread_module_path(project, thread)
+        if path.is_file():
+            out[thread.name] = f"amaranth ({path.relative_to(project.dir)})"
+        elif thread.gateway is not None:
+            out[thread.name] = "ROS gateway: external core (rosgate has no gateway thread yet)"
+        else:
+            out[thread.name] = (f"{thread.hwsource or 'no HwSource'}: external core (no "
+                                f"{path.relative_to(project.dir)})")
+    return out
+
