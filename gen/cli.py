@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
+from gen.config import ConfigError
 from gen.msg.model import MessageDefinitionError
 from hdl.params import ParameterError
 
@@ -197,6 +198,192 @@ def _run_msg_plan(args):
     return 0
 
 
+# projects ----------------------------------------------------------------------------------
+
+def _project(args):
+    from gen.config import load_project
+    return load_project(args.build_cfg)
+
+
+def _add_project_commands(commands):
+    def add(name, helptext, func, description=None):
+        p = commands.add_parser(name, help=helptext, description=description or helptext)
+        p.add_argument("build_cfg", type=Path, help="the ReconROS project file (build.cfg)")
+        p.set_defaults(func=func, options={}, parser=p)
+        return p
+
+    add("info", "print a project's clocks, slots, resources with handles, threads and topics",
+        _run_info)
+    p = add("export-hw", "write the project's hardware: Verilog, Vivado TCL, FuseSoC cores, "
+                         "manifest", _run_export_hw,
+            "Write the system top and every Amaranth thread as Verilog (hdl/), FuseSoC cores "
+            "(hdl/*.core), Vivado IP packaging (ip/), the block design (bd/design_1.tcl), "
+            "build.tcl and manifest.json.")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created)")
+    p = add("export-msg", "write C offset headers for the project's messages",
+            _run_export_msg,
+            "Write one C header per message type the project uses (rosidl structs and "
+            "OFFSETOF constants for arm32, arm64 and x86_64).")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created)")
+    p = add("sim", "co-simulate the system with the ReconOS software model",
+            _run_sim,
+            "Export and simulate the system top; the ReconOS runtime model runs the "
+            "delegate threads, the project's sim.py the software nodes. Prints the nodes' "
+            "results (also in <output>/sim_results.json).")
+    p.add_argument("--sim", default="verilator", choices=["icarus", "verilator"],
+                   help="simulator (default verilator)")
+    p.add_argument("--waves", action="store_true", help="record FST waveforms")
+    p.add_argument("--arg", action="append", default=[], metavar="KEY=VALUE",
+                   help="passed to the software nodes as ctx.args (repeatable)")
+    p.add_argument("--limit-ms", type=float, default=1000.0,
+                   help="simulated-time limit in ms (default 1000)")
+    p.add_argument("-o", "--output", type=Path, default=None,
+                   help="folder for the nodes' files (default build/<name>/sim)")
+    p = add("report", "resources per core (yosys synth_xilinx) and the last simulation's "
+                      "numbers", _run_report)
+    p.add_argument("--sim-results", type=Path, default=None,
+                   help="sim_results.json to include (default build/<name>/sim/...)")
+
+
+def _run_info(args):
+    from gen.system import thread_sources
+    p = _project(args)
+    print(f"project {p.name} ({p.path}): {p.board} {p.part}, {p.target_os} ({p.arch}), "
+          f"reference design {p.reference_design}")
+    print("clocks:")
+    for c in p.clocks:
+        sysmark = "  (system)" if c is p.system_clock else ""
+        print(f"  {c.id} {c.name}: {c.freq / 1e6:g} MHz, {c.source}{sysmark}")
+    print("slots:")
+    for s in sorted(p.slots, key=lambda s: s.id):
+        print(f"  {s.id} {s.name}: clock {s.clock.name}, thread "
+              f"{s.thread.name if s.thread else '(none)'}")
+    sources = thread_sources(p)
+    print("threads:")
+    for t in p.threads:
+        print(f"  {t.id} {t.name} -> slots {', '.join(s.name for s in t.slots)}; "
+              f"{sources[t.name]}")
+        for h, r in enumerate(t.resources):
+            extra = f" {r.msgtype}" if r.msgtype else ""
+            print(f"      handle {h:2d} = {r.c_name:<34} {r.type:<22} (global {r.id}){extra} "
+                  f"[{', '.join(r.args)}]")
+        for e in t.endpoints:
+            fifo = f", FIFO {e.depth}" if e.depth else ""
+            print(f"      hw {e.direction} {e.topic} (port {e.port}{fifo})")
+    print("hardware topics:" if p.topics else "hardware topics: none")
+    for name, t in p.topics.items():
+        print(f"  {name}: {t.msgtype}, {t.topology}, publishers "
+              f"{', '.join(f'{e.thread.name}.{e.port}' for e in t.pubs)}; subscribers "
+              f"{', '.join(f'{e.thread.name}.{e.port}' for e in t.subs)}")
+    for w in p.warnings:
+        print(f"warning: {w}")
+    return 0
+
+
+def _run_export_hw(args):
+    from gen.export.hw import export_hw
+    p = _project(args)
+    start = time.monotonic()
+    try:
+        manifest = export_hw(p, args.output, log=lambda s: print(f"-- {s}", flush=True))
+    except OSError as exc:
+        print(f"{PROG} export-hw: error: cannot write {args.output}: {exc.strerror}",
+              file=sys.stderr)
+        return 1
+    print(f"wrote {args.output}: {len(manifest['cores'])} cores "
+          f"({', '.join(manifest['cores'])}), build.tcl, bd/design_1.tcl, manifest.json in "
+          f"{time.monotonic() - start:.1f} s")
+    return 0
+
+
+def _run_export_msg(args):
+    from gen.config import project_library
+    from gen.msg.cheader import c_header
+    p = _project(args)
+    library = project_library(p)
+    types = sorted({r.msgtype for r in p.resources if r.msgtype})
+    try:
+        args.output.mkdir(parents=True, exist_ok=True)
+        for t in types:
+            name = t.replace("/", "__").lower() + ".h"
+            (args.output / name).write_text(c_header(library, t))
+            print(f"wrote {args.output / name}")
+    except OSError as exc:
+        print(f"{PROG} export-msg: error: cannot write {args.output}: {exc.strerror}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def _key_values(items, option):
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ParameterError(option, item, "KEY=VALUE")
+        k, v = item.split("=", 1)
+        out[k] = v
+    return out
+
+
+def _default_out(p, leaf):
+    return Path("build") / p.name.lower() / leaf
+
+
+def _run_sim(args):
+    from tb.project_sim import run_project_sim
+    p = _project(args)
+    out = args.output or _default_out(p, "sim")
+    import os
+    if args.waves:
+        os.environ["WAVES"] = "1"
+    print(f"-- exporting, building and simulating {p.name} under {args.sim} "
+          f"(the first Verilator build takes minutes)", flush=True)
+    start = time.monotonic()
+    try:
+        results = run_project_sim(p.path, args.sim, out=out,
+                                  args=_key_values(args.arg, "--arg"),
+                                  limit_ms=args.limit_ms, quiet=True)
+    except AssertionError as exc:
+        print(f"{PROG} sim: simulation failed: {exc}", file=sys.stderr)
+        return 1
+    import json
+    print(json.dumps(results, indent=2))
+    print(f"-- {out / 'sim_results.json'} ({time.monotonic() - start:.0f} s)")
+    return 0
+
+
+def _run_report(args):
+    import json
+    from gen.export.resources import YOSYS_COMMAND, estimate_resources
+    from gen.export.verilog import export_verilog, write_if_changed
+    from gen.system import build_system
+    p = _project(args)
+    system = build_system(p)
+    rows = [("rosgate_system", "system", system)]
+    seen = set()
+    for s, c in zip(sorted(p.slots, key=lambda s: s.id), system.threads):
+        if c is not None and s.thread.core_name not in seen:
+            seen.add(s.thread.core_name)
+            rows.append((s.thread.core_name, f"thread {s.thread.name}", c))
+    folder = _default_out(p, "report")
+    print(f"{p.name}: resources per core from yosys `{YOSYS_COMMAND}` (estimates)", flush=True)
+    print("| core | what | LUT | FF | LUTRAM | BRAM18 equiv. | DSP |\n|---|---|---|---|---|---|---|")
+    for name, what, component in rows:
+        text, _ = export_verilog(component, name)
+        vfile = folder / f"{name}.v"
+        write_if_changed(vfile, text)
+        r = estimate_resources(vfile, name)
+        print(f"| {name} | {what} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
+              f"{r['BRAM18_equiv']} | {r['DSP']} |", flush=True)
+    path = args.sim_results or _default_out(p, "sim") / "sim_results.json"
+    if path.is_file():
+        print(f"last simulation ({path}):")
+        print(json.dumps(json.loads(path.read_text()), indent=2))
+    else:
+        print(f"no simulation results at {path} (run `rosgate sim {args.build_cfg}`)")
+    return 0
+
+
 # main --------------------------------------------------------------------------------------
 
 def build_parser():
@@ -209,6 +396,7 @@ def build_parser():
     cores = export.add_subparsers(dest="core", metavar="CORE", required=True)
     _add_export_topic(cores)
     _add_msg(commands)
+    _add_project_commands(commands)
     return parser
 
 
@@ -220,6 +408,9 @@ def main(argv=None):
     except ParameterError as exc:
         option = args.options.get(exc.name, exc.name)
         args.parser.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
+    except ConfigError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
     except (MessageDefinitionError, KeyError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2

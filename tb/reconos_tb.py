@@ -108,10 +108,11 @@ class ReconosTB:
         self.params = bench_params()
         self.arch = get_arch(self.params.get("arch", "r64"))
         self.num_hwts = len(self.params["threads"])
-        cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+        cocotb.start_soon(Clock(dut.aclk, self.params.get("clock_ns", 10), unit="ns").start())
         for i in self.params.get("async_slots", ()):
             # a slot clock unrelated to the system clock (ReconROS: a reconos_clock output)
-            cocotb.start_soon(Clock(getattr(dut, f"slot{i}_clk"), 13.7, unit="ns").start())
+            period = self.params.get("slot_clock_ns", {}).get(str(i), 13.7)
+            cocotb.start_soon(Clock(getattr(dut, f"slot{i}_clk"), period, unit="ns").start())
         self.osif = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_osif"), dut.aclk,
                                   dut.aresetn, reset_active_level=False)
         self.intc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_intc"), dut.aclk,
