@@ -17,6 +17,7 @@ Software nodes live in ``<project>/sim.py``:
 ``ctx`` is a :class:`SimContext`.
 """
 
+import hashlib
 import importlib.util
 import json
 import os
@@ -193,13 +194,14 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, limit_ms=1000
               "threads": [s.name for s in sorted(project.slots, key=lambda s: s.id)],
               "async_slots": [s.id for s in project.slots
                               if s.clock is not project.system_clock],
-              "clock_ns": round(1000 / project.clock_mhz, 3),
-              "slot_clock_ns": {str(s.id): round(s.clock.period_ns, 3) for s in project.slots},
+              "clock_ns": _period_ns(project.system_clock.freq),
+              "slot_clock_ns": {str(s.id): _period_ns(s.clock.freq) for s in project.slots},
               "args": dict(args or {}), "out": str(out), "limit_ms": limit_ms}
     system = build_system(project)
     inputs = [name for name, (_, _, flow) in _vivado_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
-    config_id = f"{project.name.lower()}-{abs(hash(str(build_cfg))) % 10 ** 8}"
+    digest = hashlib.sha1(str(build_cfg).encode()).hexdigest()[:8]
+    config_id = f"{project.name.lower()}-{digest}"
     results = out / "sim_results.json"
     if results.exists():
         results.unlink()
@@ -207,6 +209,12 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, limit_ms=1000
               build=lambda **_: system,
               extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)})
     return json.loads(results.read_text())
+
+
+def _period_ns(freq):
+    """The clock period in ns, rounded to an even number of picoseconds (cocotb's clock
+    needs equal high and low halves at the 1 ps precision)."""
+    return round(1e12 / freq / 2) * 2 / 1000
 
 
 def _vivado_ports(component):
