@@ -1,4 +1,5 @@
-"""``make lint``: export every top of every bench configuration and lint it."""
+"""``make lint``: export every top of every bench configuration and the system of every
+example project, and lint them."""
 
 import importlib
 import sys
@@ -31,6 +32,21 @@ def main():
             if report:
                 print(report)
                 failed += 1
+    from gen.config import load_project
+    from gen.export.verilog import export_verilog, write_if_changed
+    from gen.system import build_system
+    from tb.test_project_config import EXAMPLES, ROOT
+    for name in EXAMPLES:
+        system = build_system(load_project(ROOT / "examples" / name / "build.cfg"))
+        text, _ = export_verilog(system, "rosgate_system")
+        vfile = SIM_BUILD / "lint" / f"rosgate_system-{name}" / "rosgate_system.v"
+        write_if_changed(vfile, text)
+        report = lint_verilog(vfile, "rosgate_system")
+        count += 1
+        print(f"lint rosgate_system [examples/{name}]: {'clean' if not report else 'WARNINGS'}")
+        if report:
+            print(report)
+            failed += 1
     print(f"{count - failed} of {count} tops lint-clean (verilator --lint-only -Wall, waived: "
           f"{', '.join(WAIVERS)})")
     return 1 if failed else 0
