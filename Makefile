@@ -20,7 +20,7 @@ WAVES ?= 0
 
 help:
 	@echo "rosgate make targets:"
-	@echo "  make demo        the main job (for now: export a 4:4 topic, co-simulate it, print the table)"
+	@echo "  make demo        the main job: the Sobel/DIP application (export for Vivado, co-simulate, print the table)"
 	@echo "  make test        the default test suite (Icarus + Verilator, < 10 min on 2 cores)"
 	@echo "  make test-full   the long matrix as well"
 	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1]   one bench"

@@ -31,7 +31,7 @@ from .harness import bench_params, run_bench
 from .models.reconos_sw import Resource
 from .reconos_tb import ReconosTB
 
-__all__ = ["SimContext", "model_resources", "run_project_sim"]
+__all__ = ["SimContext", "model_resources", "run_project_sim", "top_ports"]
 
 TOP = "rosgate_system"
 
@@ -198,7 +198,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, limit_ms=1000
               "slot_clock_ns": {str(s.id): _period_ns(s.clock.freq) for s in project.slots},
               "args": dict(args or {}), "out": str(out), "limit_ms": limit_ms}
     system = build_system(project)
-    inputs = [name for name, (_, _, flow) in _vivado_ports(system).items()
+    inputs = [name for name, (_, _, flow) in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     digest = hashlib.sha1(str(build_cfg).encode()).hexdigest()[:8]
     config_id = f"{project.name.lower()}-{digest}"
@@ -217,7 +217,7 @@ def _period_ns(freq):
     return round(1e12 / freq / 2) * 2 / 1000
 
 
-def _vivado_ports(component):
+def top_ports(component):
     from amaranth.lib import wiring
     from gen.export.verilog import port_name
     out = {}
