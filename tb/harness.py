@@ -167,7 +167,7 @@ def config_params(value):
     return value.values[0], value.marks
 
 
-def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
+def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=()):
     """Return a pytest test running this module's cocotb tests on every config and simulator.
 
     Parameters
@@ -179,7 +179,12 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
         marks=...)`` to mark it (for example ``pytest.mark.full`` for the long matrix).
     module : str or None
         Dotted name of the cocotb test module; default: the calling module.
+    long : iterable of (config id, simulator)
+        Cases that run only in the long matrix (``make test-full``), to keep ``make test``
+        under 10 minutes on a fresh 2-core machine; each such configuration still runs on
+        the other simulator in ``make test``.
     """
+    long = set(long)
     import inspect
     if module is None:
         module = inspect.stack()[1].frame.f_globals["__name__"]
@@ -188,8 +193,9 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS):
     for config_id, params in configs.items():
         params, marks = config_params(params)
         for sim in simulators:
+            extra = (pytest.mark.full,) if (config_id, sim) in long else ()
             cases.append(pytest.param(config_id, params, sim, id=f"{config_id}-{sim}",
-                                      marks=marks))
+                                      marks=(*marks, *extra)))
 
     @pytest.mark.parametrize("config_id,params,sim", cases)
     def bench(config_id, params, sim):

@@ -103,7 +103,7 @@ async def topic_under_idle_and_backpressure(dut):
         await run_traffic(tb, 12, idle, bp)
 
 
-@pytest.mark.parametrize("sim", ("icarus", "verilator"))
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
 def test_project_topic(sim):
     from gen.config import load_project
     from gen.system import build_system

@@ -158,4 +158,5 @@ from .reconos_tb import system_configs  # noqa: E402 (uses this module's program
 
 CONFIGS = system_configs()
 
-test_reconos_calls = cocotb_bench("reconos", CONFIGS)
+#: r32 on Verilator in test-full (make test: r32 on Icarus, r64 on both)
+test_reconos_calls = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator")])

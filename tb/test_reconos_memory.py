@@ -213,4 +213,5 @@ async def armv7_section_mapping(dut):
 
 CONFIGS = system_configs()
 
-test_reconos_memory = cocotb_bench("reconos", CONFIGS)
+#: r32 on Verilator in test-full (make test: r32 on Icarus, r64 on both)
+test_reconos_memory = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator")])
