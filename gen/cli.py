@@ -27,6 +27,11 @@ def _version():
         return "unknown"
 
 
+def _cannot_write(command, path, exc):
+    print(f"{PROG} {command}: error: cannot write {path}: {exc.strerror}", file=sys.stderr)
+    return 1
+
+
 # export topic ------------------------------------------------------------------------------
 
 #: component parameter -> command-line option, so errors name what the user typed
@@ -89,9 +94,7 @@ def _run_export_topic(args):
         write_manifest(out / "topic.json", module="topic", component=component, top=top,
                        extra={"latency_cycles": component.latency})
     except OSError as exc:
-        print(f"{PROG} export topic: error: cannot write {out}: {exc.strerror}",
-              file=sys.stderr)
-        return 1
+        return _cannot_write("export topic", out, exc)
     print(f"wrote {out / 'topic.v'} (module topic, {len(top.ports) + 2} ports, "
           f"{component.pubs}:{component.subs} at {args.width} bits, qos {args.qos}, "
           f"latency {component.latency} cycles) and {out / 'topic.json'} "
@@ -176,9 +179,7 @@ def _run_msg_export_c(args):
         args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text)
     except OSError as exc:
-        print(f"{PROG} msg export-c: error: cannot write {args.output}: {exc.strerror}",
-              file=sys.stderr)
-        return 1
+        return _cannot_write("msg export-c", args.output, exc)
     print(f"wrote {args.output} (rosidl structs of {definition.name} and its members, offsets "
           "for arm32, arm64, x86_64)")
     return 0
@@ -287,9 +288,7 @@ def _run_export_hw(args):
     try:
         manifest = export_hw(p, args.output, log=lambda s: print(f"-- {s}", flush=True))
     except OSError as exc:
-        print(f"{PROG} export-hw: error: cannot write {args.output}: {exc.strerror}",
-              file=sys.stderr)
-        return 1
+        return _cannot_write("export-hw", args.output, exc)
     print(f"wrote {args.output}: {len(manifest['cores'])} cores "
           f"({', '.join(manifest['cores'])}), build.tcl, bd/design_1.tcl, manifest.json in "
           f"{time.monotonic() - start:.1f} s")
@@ -309,9 +308,7 @@ def _run_export_msg(args):
             (args.output / name).write_text(c_header(library, t))
             print(f"wrote {args.output / name}")
     except OSError as exc:
-        print(f"{PROG} export-msg: error: cannot write {args.output}: {exc.strerror}",
-              file=sys.stderr)
-        return 1
+        return _cannot_write("export-msg", args.output, exc)
     return 0
 
 
