@@ -323,7 +323,7 @@ def _key_values(items, option):
 
 
 def _default_out(p, leaf):
-    return Path("build") / p.name.lower() / leaf
+    return Path("build") / p.dir.resolve().name / leaf
 
 
 def _run_sim(args):
