@@ -25,6 +25,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gen.msg.parser import (ACTION_FEEDBACK_MESSAGE, ACTION_GET_RESULT_RESPONSE,
+                            ACTION_SEND_GOAL_REQUEST, SERVICE_REQUEST, SERVICE_RESPONSE)
 from hdl.reconos.protocol import ResourceType
 
 __all__ = ["ConfigError", "Location", "Project", "Clock", "Slot", "Resource", "Thread",
@@ -33,12 +35,13 @@ __all__ = ["ConfigError", "Location", "Project", "Clock", "Slot", "Resource", "T
 _SPLIT = re.compile(r"[, ]+")
 _RANGE = re.compile(r"^(?P<name>[^()]*)\((?P<start>[0-9]+):(?P<end>[0-9]+)\)$")
 
-#: build.cfg resource type -> resources it expands into (name suffix, type)
+#: build.cfg resource type -> resources it expands into (name suffix, type, message suffix)
 EXPANSIONS = {
-    "rossrvmsg": (("_res", "rossrvmsgres"), ("_req", "rossrvmsgreq")),
-    "rosactionmsg": (("_goal_req", "rosactionmsggoalreq"),
-                     ("_result_res", "rosactionmsgresultres"),
-                     ("_feedback", "rosactionmsgfeedback")),
+    "rossrvmsg": (("_res", "rossrvmsgres", SERVICE_RESPONSE),
+                  ("_req", "rossrvmsgreq", SERVICE_REQUEST)),
+    "rosactionmsg": (("_goal_req", "rosactionmsggoalreq", ACTION_SEND_GOAL_REQUEST),
+                     ("_result_res", "rosactionmsgresultres", ACTION_GET_RESULT_RESPONSE),
+                     ("_feedback", "rosactionmsgfeedback", ACTION_FEEDBACK_MESSAGE)),
 }
 #: build.cfg resource types (besides the expansions) -> (min args, max args, argument names)
 RESOURCE_ARGS = {
@@ -213,6 +216,8 @@ class Resource:
     id: int
     where: Location
     msgtype: str = None     # full message type for rosmsg / srv / action messages
+    key: str = None         # the build.cfg key it came from
+    declared: str = None    # the build.cfg type (rossrvmsg for its _res and _req)
 
     @property
     def c_name(self):
@@ -576,15 +581,10 @@ def _resource(key, value, group, where):
         return [_hw_endpoint(key, kind, rest, group, where)]
     if kind in EXPANSIONS:
         msgtype = _message_type(rest, kind, where)
-        out = []
-        for suffix, rtype in EXPANSIONS[kind]:
-            full = {"rossrvmsgres": "_Response", "rossrvmsgreq": "_Request",
-                    "rosactionmsggoalreq": "_SendGoal_Request",
-                    "rosactionmsgresultres": "_GetResult_Response",
-                    "rosactionmsgfeedback": "_FeedbackMessage"}[rtype]
-            out.append(Resource(key + suffix, rtype, rest, group, 0, where, msgtype + full))
-        return out
-    r = Resource(key, kind, rest, group, 0, where)
+        return [Resource(key + suffix, rtype, rest, group, 0, where, msgtype + msg_suffix,
+                         key=key, declared=kind)
+                for suffix, rtype, msg_suffix in EXPANSIONS[kind]]
+    r = Resource(key, kind, rest, group, 0, where, key=key, declared=kind)
     if kind == "rosmsg":
         r.msgtype = _message_type(rest, kind, where)
         if len(rest) == 4:
@@ -630,43 +630,26 @@ def _hw_endpoint(key, kind, rest, group, where):
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", topic):
         raise ConfigError(where, f"hardware topic name {rest[2]} does not make a port name")
     r = Resource(key, "hwtopic" + ("sub" if kind == "rossub" else "pub"), rest, group, 0, where,
-                 f"{pkg}/msg/{typ}")
+                 f"{pkg}/msg/{typ}", key=key, declared=kind)
     r.topic = topic
     r.depth = depth
     return r
 
 
 def _check_references(members):
-    by_name = {}
+    """Each node and message argument names a resource of the right type in the group."""
+    declared = {r.key: r.declared for r in members}
     for r in members:
-        by_name[r.name] = r
-    bases = {}
-    for r in members:
-        for suffix, _ in EXPANSIONS.get(_base_type(r.type), ()):
-            if r.name.endswith(suffix):
-                bases[r.name[:-len(suffix)]] = _base_type(r.type)
-    for r in members:
-        if r.type.startswith("hwtopic"):
-            refs = ((0, ("rosnode",)),)
-        else:
-            refs = REFERENCES.get(r.type, ())
+        refs = ((0, ("rosnode",)),) if r.type.startswith("hwtopic") else \
+            REFERENCES.get(r.type, ())
         for index, wanted in refs:
             target = r.args[index]
-            found = by_name.get(target)
-            ftype = found.type if found is not None else bases.get(target)
-            if ftype not in wanted:
-                what = f"a {ftype} resource" if ftype else "not defined"
+            found = declared.get(target)
+            if found not in wanted:
+                what = f"a {found} resource" if found else "not defined"
                 raise ConfigError(r.where, f"argument {index + 1} ({target!r}) must name a "
                                            f"{' or '.join(wanted)} resource of group "
                                            f"{r.group!r}; it is {what}")
-
-
-def _base_type(rtype):
-    if rtype.startswith("rossrvmsg"):
-        return "rossrvmsg"
-    if rtype.startswith("rosactionmsg"):
-        return "rosactionmsg"
-    return rtype
 
 
 def _match_slots(sec, key, slots, file):

@@ -138,12 +138,6 @@ class SystemTop(wiring.Component):
     slot<i>_<port> : stream
         A topic port of the external thread in slot ``i`` (``Out`` for its subscription,
         ``In`` for its publication).
-
-    Attributes
-    ----------
-    topics : dict
-        Topic name -> :class:`hdl.dds.Topic` parameters used (``pubs``, ``subs``,
-        ``topology``, subscriber FIFO depths).
     """
 
     def __init__(self, project, *, library=None):
@@ -172,11 +166,6 @@ class SystemTop(wiring.Component):
                 name = f"slot{slot.id}_{ep.port}"
                 members[name] = (Out if ep.direction == "sub" else In)(HW_TOPIC_STREAM)
                 self._external_ports[(slot.id, ep.port)] = name
-        self.topics = {}
-        for topic in project.topics.values():
-            self.topics[topic.name] = {
-                "pubs": len(topic.pubs), "subs": len(topic.subs), "topology": topic.topology,
-                "fifo_depths": [ep.depth for ep in topic.subs]}
         super().__init__(members)
 
     def _endpoint_ports(self, endpoint):

@@ -36,13 +36,9 @@ __all__ = ["SimContext", "model_resources", "run_project_sim", "top_ports"]
 TOP = "rosgate_system"
 
 
-def _unquote(token):
-    from gen.config import unquote
-    return unquote(token)
-
-
 def model_resources(thread):
     """The software model's resource list of ``thread`` (index = handle)."""
+    from gen.config import unquote
     out = []
     for r in thread.resources:
         a = r.args
@@ -53,13 +49,13 @@ def model_resources(thread):
         elif r.type in ("mutex", "cond"):
             args = ()
         elif r.type == "rosnode":
-            args = (_unquote(a[0]),)
+            args = (unquote(a[0]),)
         elif r.msgtype is not None:
             args = (r.msgtype,)
         elif r.type in ("rossub", "rospub"):
-            args = (_unquote(a[2]),)
+            args = (unquote(a[2]),)
         elif r.type in ("rossrvs", "rossrvc", "rosactions", "rosactionc"):
-            args = (_unquote(a[2]) if len(a) > 2 else r.name,)
+            args = (unquote(a[2]) if len(a) > 2 else r.name,)
         else:
             args = tuple(a)
         out.append(Resource(r.type, *args, name=r.name))
@@ -218,9 +214,8 @@ def _period_ns(freq):
 
 
 def top_ports(component):
+    """Ports of ``component`` as exported: name -> (top signal, inner value, "in"|"out")."""
     from amaranth.lib import wiring
-    from gen.export.verilog import port_name
-    out = {}
-    for path, member, value in component.signature.flatten(component):
-        out[port_name(path)] = (path, value, "in" if member.flow == wiring.In else "out")
-    return out
+    from gen.export.verilog import VivadoTop
+    return {name: (top, value, "in" if flow == wiring.In else "out")
+            for name, (top, value, flow) in VivadoTop(component).ports.items()}

@@ -14,6 +14,7 @@ from cocotb.triggers import ClockCycles, Combine, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
 from .harness import bench_params, run_bench
+from .streams import random_pauses
 from .test_project_config import ROOT
 
 PROJECT = ROOT / "examples" / "hwtopic_gateway" / "build.cfg"
@@ -37,16 +38,11 @@ class TopicPortsTB:
 
     def set_idle_generator(self, p):
         for s in self.sources.values():
-            s.set_pause_generator(self._pauses(p))
+            s.set_pause_generator(random_pauses(random.Random(self.rng.random()), p))
 
     def set_backpressure_generator(self, p):
         for s in self.sinks.values():
-            s.set_pause_generator(self._pauses(p))
-
-    def _pauses(self, p):
-        rng = random.Random(self.rng.random())
-        while True:
-            yield rng.random() < p
+            s.set_pause_generator(random_pauses(random.Random(self.rng.random()), p))
 
     async def reset(self):
         self.dut.aresetn.value = 0

@@ -62,10 +62,6 @@ def fusesoc_core(project, core, description):
     ])
 
 
-def _ports(vtop):
-    return vtop.manifest_ports()
-
-
 def export_hw(project, out, *, log=None):
     """Write the hardware of ``project`` into ``out``; return the manifest (a dict)."""
     from gen.system import build_system, thread_sources
@@ -89,7 +85,7 @@ def export_hw(project, out, *, log=None):
                        "fusesoc_name": core_vlnv(project, name),
                        "package_tcl": f"ip/package_{name}.tcl",
                        "vlnv": f"cs.upb.de:reconos:{name}:1.0", "description": description,
-                       "ports": _ports(vtop),
+                       "ports": vtop.manifest_ports(),
                        "interfaces": [{"name": i.name, "kind": i.kind, "mode": i.mode,
                                        "bus": i.bus[0], "ports": i.ports,
                                        "parameters": i.parameters} for i in interfaces]}

@@ -161,11 +161,19 @@ def _split_parts(text, count, source):
     return list(zip(parts, starts))
 
 
+#: name suffixes of the types ROS 2 generates for a service and an action (the C structs
+#: ReconROS' ``rossrvmsg``/``rosactionmsg`` resources are)
+SERVICE_REQUEST, SERVICE_RESPONSE = "_Request", "_Response"
+ACTION_SEND_GOAL_REQUEST = "_SendGoal_Request"
+ACTION_GET_RESULT_RESPONSE = "_GetResult_Response"
+ACTION_FEEDBACK_MESSAGE = "_FeedbackMessage"
+
+
 def parse_srv(text, name, source="<string>"):
     """``pkg/srv/Name`` -> [Name_Request, Name_Response]."""
     (req, l1), (res, l2) = _split_parts(text, 2, source)
-    return [parse_msg(req, f"{name}_Request", source, l1),
-            parse_msg(res, f"{name}_Response", source, l2)]
+    return [parse_msg(req, name + SERVICE_REQUEST, source, l1),
+            parse_msg(res, name + SERVICE_RESPONSE, source, l2)]
 
 
 def parse_action(text, name, source="<string>"):
@@ -176,16 +184,16 @@ def parse_action(text, name, source="<string>"):
             parse_msg(result, f"{name}_Result", source, l2),
             parse_msg(feedback, f"{name}_Feedback", source, l3)]
     defs += [
-        MessageDef(f"{name}_SendGoal_Request",
+        MessageDef(name + ACTION_SEND_GOAL_REQUEST,
                    [Field("goal_id", uuid), Field("goal", Named(f"{name}_Goal"))], [], source),
         MessageDef(f"{name}_SendGoal_Response",
                    [Field("accepted", Primitive("bool")),
                     Field("stamp", Named("builtin_interfaces/msg/Time"))], [], source),
         MessageDef(f"{name}_GetResult_Request", [Field("goal_id", uuid)], [], source),
-        MessageDef(f"{name}_GetResult_Response",
+        MessageDef(name + ACTION_GET_RESULT_RESPONSE,
                    [Field("status", Primitive("int8")),
                     Field("result", Named(f"{name}_Result"))], [], source),
-        MessageDef(f"{name}_FeedbackMessage",
+        MessageDef(name + ACTION_FEEDBACK_MESSAGE,
                    [Field("goal_id", uuid), Field("feedback", Named(f"{name}_Feedback"))], [],
                    source),
     ]
