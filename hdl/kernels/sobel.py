@@ -1,14 +1,15 @@
 """Sobel filters (spec reconos.md §9.1; kernels.md)."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..params import check_int
+from ..params import check_choice, check_int
 from ..stream import AXIStreamSignature
+from .window import WindowFilter
 
-__all__ = ["SobelByteLanes"]
+__all__ = ["Sobel", "SobelByteLanes"]
 
 
 class SobelByteLanes(wiring.Component):
@@ -153,3 +154,82 @@ class SobelByteLanes(wiring.Component):
                     with m.If(zeros == 1):
                         m.next = "IDLE"
         return m
+
+
+def _absdiff(a, b):
+    return Mux(a >= b, a - b, b - a)
+
+
+class Sobel(WindowFilter):
+    """3 x 3 Sobel edge filter on an image stream (spec kernels.md §1, reconos.md §9.1).
+
+    Modes:
+
+    ``"opencv"``
+        Per channel ``min(min(|Gx|, 255) + min(|Gy|, 255), 255)`` with OpenCV's
+        ``Sobel(dx=1)`` and ``Sobel(dy=1)`` kernels, i.e.
+        ``cv2.add(cv2.convertScaleAbs(gx), cv2.convertScaleAbs(gy))``, with the chosen border
+        (default ``reflect101``, OpenCV's default).
+    ``"reconros"``
+        The ReconROS demo filter: a pixel is one 32-bit word (``channels=4``; a 640-pixel
+        ``bgr8`` row is 480 such "pixels"), each byte lane filtered on its own,
+        ``(|Gx| + |Gy|) >> 3``. Interior pixels equal ReconROS'; the frame's edge rows and
+        columns, which ReconROS leaves unwritten (stale; reconos.md defect 12), are 0.
+
+    Parameters
+    ----------
+    mode : str
+        ``"opencv"`` or ``"reconros"``.
+    channels : int
+        Bytes per pixel: 1 or 3 for ``opencv`` (``mono8``, ``bgr8``), 4 for ``reconros``.
+    pixels_per_beat, max_width, max_height, border
+        As for :class:`~hdl.kernels.window.WindowFilter` (``border`` only in ``opencv``
+        mode).
+
+    Members
+    -------
+    See :class:`~hdl.kernels.window.WindowFilter`; ``o`` has ``channels`` bytes per pixel.
+    """
+
+    MODES = ("opencv", "reconros")
+
+    def __init__(self, mode="opencv", *, channels=3, pixels_per_beat=1, max_width=640,
+                 max_height=480, border="reflect101"):
+        self._mode = check_choice("mode", mode, self.MODES)
+        if mode == "reconros":
+            check_choice("channels", channels, (4,))
+            border = "replicate"
+        super().__init__(3, channels=channels, out_channels=channels,
+                         pixels_per_beat=pixels_per_beat, max_width=max_width,
+                         max_height=max_height, border=border,
+                         channel_choices=(1, 3) if mode == "opencv" else (4,))
+
+    mode = property(lambda self: self._mode)
+
+    def compute(self, m, pixel, ctx):
+        outputs = []
+        for p in range(self.pixels_per_beat):
+            lanes = []
+            for c in range(self.channels):
+                def q(dy, dx):
+                    return pixel(p, dy, dx).word_select(c, 8)
+                gx_pos = q(0, 2) + 2 * q(1, 2) + q(2, 2)
+                gx_neg = q(0, 0) + 2 * q(1, 0) + q(2, 0)
+                gy_pos = q(2, 0) + 2 * q(2, 1) + q(2, 2)
+                gy_neg = q(0, 0) + 2 * q(0, 1) + q(0, 2)
+                ax, ay = Signal(10), Signal(10)
+                m.d.comb += [ax.eq(_absdiff(gx_pos, gx_neg)), ay.eq(_absdiff(gy_pos, gy_neg))]
+                if self._mode == "opencv":
+                    sx, sy = Mux(ax > 255, 255, ax), Mux(ay > 255, 255, ay)
+                    total = sx + sy
+                    lanes.append(Mux(total > 255, 255, total)[:8])
+                else:
+                    lanes.append(((ax + ay) >> 3)[:8])
+            value = Cat(*lanes)
+            if self._mode == "reconros":
+                col = ctx.beat * self.pixels_per_beat + p
+                edge = ((ctx.row == 0) | (ctx.row == ctx.height - 1) | (col == 0) |
+                        (col == ctx.width_beats * self.pixels_per_beat - 1))
+                value = Mux(edge, 0, value)
+            outputs.append(value)
+        return outputs

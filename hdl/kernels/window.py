@@ -1,0 +1,279 @@
+"""Streaming k x k neighbourhood filters with line buffers and OpenCV border modes."""
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import ParameterError, check_choice
+from .image import BORDERS, FrameGuard, check_image_params, image_stream_signature
+
+__all__ = ["WindowFilter", "border_index"]
+
+
+def border_index(x, size, border):
+    """Where pixel ``x`` of a line of ``size`` comes from: an index in ``0..size-1``, or
+    ``None`` for the constant (zero) border. Plain-Python form of the hardware's mapping."""
+    if 0 <= x < size:
+        return x
+    if border == "constant":
+        return None
+    if border == "replicate":
+        return 0 if x < 0 else size - 1
+    return -x if x < 0 else 2 * (size - 1) - x
+
+
+class WindowContext:
+    """What :meth:`WindowFilter.compute` sees of the output position.
+
+    Attributes
+    ----------
+    row : Value
+        Output row (0..height-1).
+    beat : Value
+        Output beat in its row (0..width/P-1); pixel ``p`` of the beat is column
+        ``beat * P + p``.
+    width_beats, height : Value
+        Size of the frame, in beats per row and rows.
+    """
+
+    def __init__(self, row, beat, width_beats, height):
+        self.row, self.beat, self.width_beats, self.height = row, beat, width_beats, height
+
+
+class WindowFilter(wiring.Component):
+    """Base of the k x k filters: a pipeline from an image stream to an image stream.
+
+    ``k - 1`` line buffers of ``max_width`` pixels (one block RAM word holds a column of
+    them) and a horizontal register of ``2L + 1`` beats (``L = ceil(R / P)``, ``R = k // 2``)
+    give every output pixel its k x k neighbourhood, with rows and columns outside the frame
+    supplied by the border mode. Subclasses implement :meth:`compute`.
+
+    Timing: a frame of ``height`` rows of ``width / P`` beats takes
+    ``(height + R) * (width / P + L)`` cycles (``R`` rows drain after the last input row,
+    ``L`` beats after each row) plus a few of latency, when neither side stalls. A stall at
+    ``o`` stops the whole pipeline (one ``adv`` enable).
+
+    Parameters
+    ----------
+    ksize : int
+        Window size, 3 or 5.
+    channels : int
+        Bytes per pixel.
+    out_channels : int
+        Bytes per output pixel.
+    pixels_per_beat : int
+        1, 2, 4 or 8.
+    max_width, max_height : int
+        Largest frame; the line buffers hold ``max_width`` pixels.
+    border : str
+        One of :data:`~hdl.kernels.image.BORDERS`.
+
+    Members
+    -------
+    i : In(image_stream_signature(channels, pixels_per_beat))
+        Input frames (see :mod:`hdl.kernels.image`).
+    o : Out(image_stream_signature(out_channels, pixels_per_beat))
+        Filtered frames of the same size, ``tuser[0]`` on the first beat, ``tlast`` on the
+        last.
+    width, height : In
+        Frame size in pixels, sampled at the first beat of a frame; the width must be a
+        multiple of P, at least ``max(k, (2L + 1) P)``, and the height at least k. Other sizes
+        drop the frame (``err_size``).
+    err_short, err_long, err_size : Out(1)
+        A frame ended early (padded with zero pixels), ran late (cut) or had a size the
+        filter cannot process (dropped): one-cycle pulses (:class:`FrameGuard`).
+    busy : Out(1)
+        A frame is in the pipeline.
+    """
+
+    def __init__(self, ksize, *, channels, out_channels, pixels_per_beat, max_width,
+                 max_height, border, channel_choices=(1, 2, 3, 4)):
+        check_choice("ksize", ksize, (3, 5))
+        check_image_params(channels, pixels_per_beat, max_width, max_height,
+                           channel_choices=channel_choices)
+        check_choice("border", border, BORDERS)
+        self._k, self._c, self._oc, self._p = ksize, channels, out_channels, pixels_per_beat
+        self._r = ksize // 2
+        self._l = -(-self._r // pixels_per_beat)
+        self._max_width, self._max_height, self._border = max_width, max_height, border
+        self._min_width = max(ksize, (2 * self._l + 1) * pixels_per_beat)
+        if max_width < self._min_width or max_height < ksize:
+            raise ParameterError("max_width x max_height", f"{max_width}x{max_height}",
+                                 f"at least {self._min_width}x{ksize} for ksize {ksize} and "
+                                 f"{pixels_per_beat} pixels per beat")
+        super().__init__({
+            "i": In(image_stream_signature(channels, pixels_per_beat)),
+            "o": Out(image_stream_signature(out_channels, pixels_per_beat)),
+            "width": In(range(max_width + 1)),
+            "height": In(range(max_height + 1)),
+            "err_short": Out(1),
+            "err_long": Out(1),
+            "err_size": Out(1),
+            "busy": Out(1),
+        })
+
+    ksize = property(lambda self: self._k)
+    channels = property(lambda self: self._c)
+    out_channels = property(lambda self: self._oc)
+    pixels_per_beat = property(lambda self: self._p)
+    max_width = property(lambda self: self._max_width)
+    max_height = property(lambda self: self._max_height)
+    border = property(lambda self: self._border)
+    min_width = property(lambda self: self._min_width)
+
+    def cycles_per_frame(self, width, height):
+        """Cycles between frames when neither side stalls (see the class docstring)."""
+        return (height + self._r) * (width // self._p + self._l)
+
+    def compute(self, m, pixel, ctx):
+        """Return the ``P`` output pixels (``8 * out_channels`` bits each).
+
+        ``pixel(p, dy, dx)`` is the input pixel at row ``row + dy - R`` and column
+        ``beat * P + p + dx - R`` (``dy, dx`` in ``0..k-1``), border applied; ``ctx`` is a
+        :class:`WindowContext`. The result is registered at ``o``.
+        """
+        raise NotImplementedError
+
+    def elaborate(self, platform):
+        m = Module()
+        k, R, L, P = self._k, self._r, self._l, self._p
+        pix_bits = 8 * self._c
+        beat_bits = pix_bits * P
+        max_wb = self._max_width // P
+        max_h = self._max_height
+
+        m.submodules.guard = guard = FrameGuard(self._c, P, self._max_width, max_h,
+                                                min_width=self._min_width, min_height=k)
+        wiring.connect(m, wiring.flipped(self.i), guard.i)
+        m.d.comb += [guard.width.eq(self.width), guard.height.eq(self.height),
+                     self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long),
+                     self.err_size.eq(guard.err_size)]
+
+        m.submodules.lines = lines = Memory(shape=(k - 1) * beat_bits, depth=max_wb, init=[])
+        rd = lines.read_port()
+        wr = lines.write_port()
+
+        o_valid, o_last, o_user = Signal(), Signal(), Signal()
+        o_data = Signal(8 * self._oc * P)
+        adv = Signal()
+        m.d.comb += [adv.eq(~o_valid | self.o.tready),
+                     self.o.tvalid.eq(o_valid), self.o.tdata.eq(o_data),
+                     self.o.tlast.eq(o_last), self.o.tuser.eq(o_user)]
+
+        # stage 0: the step counters; one step per column beat, L flush steps per row
+        wb = Signal(range(max_wb + 1))
+        h = Signal(range(max_h + 1))
+        run = Signal()
+        r0 = Signal(range(max_h + R + 1))
+        c0 = Signal(range(max_wb + L + 1))
+        needs_input = (r0 < h) & (c0 < wb)
+        go0 = Signal()
+        m.d.comb += [go0.eq(run & adv & (~needs_input | guard.o.tvalid)),
+                     guard.o.tready.eq(run & adv & needs_input),
+                     rd.addr.eq(c0), rd.en.eq(adv)]
+        with m.If(~run & guard.o.tvalid):
+            m.d.sync += [wb.eq(guard.frame_width // P), h.eq(guard.frame_height),
+                         r0.eq(0), c0.eq(0), run.eq(1)]
+        with m.If(go0):
+            with m.If(c0 == wb + L - 1):
+                m.d.sync += c0.eq(0)
+                with m.If(r0 == h + R - 1):
+                    m.d.sync += run.eq(0)
+                with m.Else():
+                    m.d.sync += r0.eq(r0 + 1)
+            with m.Else():
+                m.d.sync += c0.eq(c0 + 1)
+
+        # stage 1: line buffer data; vertical border selection
+        v1, r1, c1, w1 = Signal(), Signal.like(r0), Signal.like(c0), Signal()
+        d1 = Signal(beat_bits)
+        with m.If(adv):
+            m.d.sync += [v1.eq(go0), r1.eq(r0), c1.eq(c0), w1.eq(needs_input),
+                         d1.eq(guard.o.tdata)]
+        m.d.comb += [wr.addr.eq(c1), wr.en.eq(adv & v1 & w1),
+                     wr.data.eq(Cat(d1, rd.data[:(k - 2) * beat_bits]))]
+        sources = [d1] + [rd.data.word_select(i, beat_bits) for i in range(k - 1)]
+        rows_in = Mux(r1 < h, r1, h)            # source s holds row rows_in - s
+        taps1 = []
+        zero1 = []
+        hs = Signal(signed(h.shape().width + 2))
+        m.d.comb += hs.eq(h)
+        for t in range(k):
+            n = Signal(signed(r1.shape().width + 2), name=f"vrow{t}")
+            m.d.comb += n.eq(r1 - 2 * R + t)
+            if self._border == "reflect101":
+                src_row = Mux(n < 0, -n, Mux(n > hs - 1, 2 * (hs - 1) - n, n))
+            elif self._border == "replicate":
+                src_row = Mux(n < 0, 0, Mux(n > hs - 1, hs - 1, n))
+            else:
+                src_row = n
+            sel = Signal(range(k), name=f"vsel{t}")
+            m.d.comb += sel.eq(rows_in - src_row)
+            tap = Signal(beat_bits, name=f"vtap{t}")
+            with m.Switch(sel):
+                for s in range(k):
+                    with m.Case(s):
+                        m.d.comb += tap.eq(sources[s])
+            taps1.append(tap)
+            zero1.append((n < 0) | (n > hs - 1) if self._border == "constant" else Const(0))
+
+        v2, r2, c2 = Signal(), Signal.like(r0), Signal.like(c0)
+        taps2 = [Signal(beat_bits, name=f"taps2_{t}") for t in range(k)]
+        with m.If(adv):
+            m.d.sync += [v2.eq(v1), r2.eq(r1), c2.eq(c1)]
+            m.d.sync += [t2.eq(Mux(z, 0, t1)) for t1, t2, z in zip(taps1, taps2, zero1)]
+
+        # stage 2: horizontal register of 2L + 1 beats (oldest first)
+        hreg = [[Signal(beat_bits, name=f"hreg{b}_{t}") for t in range(k)]
+                for b in range(2 * L + 1)]
+        v3, row3, beat3 = Signal(), Signal(range(max_h)), Signal(range(max_wb + L + 1))
+        with m.If(adv):
+            m.d.sync += [v3.eq(v2 & (r2 >= R) & (c2 >= L)), row3.eq(r2 - R), beat3.eq(c2 - L)]
+            with m.If(v2):
+                for b in range(2 * L):
+                    m.d.sync += [hreg[b][t].eq(hreg[b + 1][t]) for t in range(k)]
+                m.d.sync += [hreg[2 * L][t].eq(taps2[t]) for t in range(k)]
+
+        # stage 3: horizontal border selection, the filter, the output register
+        flat = [[hreg[f // P][t].word_select(f % P, pix_bits) for t in range(k)]
+                for f in range((2 * L + 1) * P)]
+        left = [beat3 == c for c in range(L)]
+        right = [beat3 == wb - e for e in range(1, L + 1)]
+        cache = {}
+
+        def pixel(p, dy, dx):
+            key = (p, dy, dx)
+            if key in cache:
+                return cache[key]
+            default = L * P + p + dx - R
+            value = flat[default][dy]
+            for c in range(L):
+                x = c * P + p + dx - R
+                if x < 0:
+                    src = border_index(x, 1 << 30, self._border)
+                    alt = Const(0, pix_bits) if src is None else flat[src + (L - c) * P][dy]
+                    value = Mux(left[c], alt, value)
+            for e in range(1, L + 1):
+                x_rel = p + dx - R - e * P
+                if x_rel >= 0:
+                    if self._border == "constant":
+                        alt = Const(0, pix_bits)
+                    elif self._border == "replicate":
+                        alt = flat[(e + L) * P - 1][dy]
+                    else:
+                        alt = flat[(e + L) * P - 2 - x_rel][dy]
+                    value = Mux(right[e - 1], alt, value)
+            sig = Signal(pix_bits, name=f"win_p{p}_y{dy}_x{dx}")
+            m.d.comb += sig.eq(value)
+            cache[key] = sig
+            return sig
+
+        ctx = WindowContext(row3, beat3, wb, h)
+        outputs = self.compute(m, pixel, ctx)
+        with m.If(adv):
+            m.d.sync += [o_valid.eq(v3), o_data.eq(Cat(*outputs)),
+                         o_last.eq((row3 == h - 1) & (beat3 == wb - 1)),
+                         o_user.eq((row3 == 0) & (beat3 == 0))]
+        m.d.comb += self.busy.eq(run | v1 | v2 | v3 | o_valid)
+        return m
