@@ -68,8 +68,35 @@ def build_reconos(**params):
     return ReconosSystem(arch, threads, **params)
 
 
+def _kernel_classes():
+    from hdl import kernels as k
+    return {"sobel": k.Sobel, "gaussian": k.GaussianBlur, "gray": k.BgrToGray,
+            "hsv": k.BgrToHsv, "inrange": k.InRange, "traffic_light": k.TrafficLightDetector,
+            "sort": k.MergeSorter}
+
+
+def build_kernel(spec, where="kernel"):
+    """A kernel from ``{"kind": k, ...parameters}`` (k a key of :func:`_kernel_classes`)."""
+    classes = _kernel_classes()
+    spec = dict(spec)
+    kind = spec.pop("kind")
+    if kind not in classes:
+        raise ValueError(f"{where}: unknown kernel kind {kind!r}; known: "
+                         f"{', '.join(sorted(classes))}")
+    return classes[kind](**spec)
+
+
+def build_kernels(**params):
+    """A :class:`hdl.kernels.group.KernelGroup` of ``kernels`` (name -> ``{"kind": k,
+    ...parameters}``), ports ``<name>_<port>``."""
+    from hdl.kernels.group import KernelGroup
+    return KernelGroup({name: build_kernel(spec, f"kernels[{name!r}]")
+                        for name, spec in params.pop("kernels").items()})
+
+
 #: name -> builder
 TOPS = {
+    "kernels": build_kernels,
     "topic": build_topic,
     "msg_codec": build_msg_codec,
     "reconos": build_reconos,

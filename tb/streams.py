@@ -50,17 +50,19 @@ class _Pausable:
 
 
 class PacketSink(_Pausable):
-    """Receives packets on an AXI4-Stream port ``<prefix>_t*`` with random backpressure."""
+    """Receives packets on an AXI4-Stream port ``<prefix>_t*`` with random backpressure
+    (every byte counts where the port has no ``tkeep``)."""
 
     def __init__(self, dut, prefix, clock):
         self.clock = clock
         self.tdata = getattr(dut, f"{prefix}_tdata")
-        self.tkeep = getattr(dut, f"{prefix}_tkeep")
+        self.tkeep = getattr(dut, f"{prefix}_tkeep", None)
         self.tlast = getattr(dut, f"{prefix}_tlast")
         self.tvalid = getattr(dut, f"{prefix}_tvalid")
         self.tready = getattr(dut, f"{prefix}_tready")
         self.tuser = getattr(dut, f"{prefix}_tuser", None)
-        self.bytes = len(self.tkeep)
+        self.prefix = prefix
+        self.bytes = len(self.tdata) // 8
         self.packets = []
         self.current = Packet()
         self.cycle = 0
@@ -74,7 +76,9 @@ class PacketSink(_Pausable):
             await RisingEdge(self.clock)
             self.cycle += 1
             if ready and self.tvalid.value == 1:
-                keep = int(self.tkeep.value)
+                keep = int(self.tkeep.value) if self.tkeep is not None else (1 << self.bytes) - 1
+                if not self.tdata.value.is_resolvable:
+                    raise AssertionError(f"{self.prefix}_tdata is {self.tdata.value} in a beat")
                 data = int(self.tdata.value).to_bytes(self.bytes, "little")
                 user = int(self.tuser.value) if self.tuser is not None else 0
                 self.current.data += bytes(d for i, d in enumerate(data) if keep >> i & 1)

@@ -51,7 +51,7 @@ class WindowFilter(wiring.Component):
 
     Timing: a frame of ``height`` rows of ``width / P`` beats takes
     ``(height + R) * (width / P + L)`` cycles (``R`` rows drain after the last input row,
-    ``L`` beats after each row) plus a few of latency, when neither side stalls. A stall at
+    ``L`` beats after each row) plus 4 between frames, when neither side stalls. A stall at
     ``o`` stops the whole pipeline (one ``adv`` enable).
 
     Parameters
@@ -124,7 +124,7 @@ class WindowFilter(wiring.Component):
 
     def cycles_per_frame(self, width, height):
         """Cycles between frames when neither side stalls (see the class docstring)."""
-        return (height + self._r) * (width // self._p + self._l)
+        return (height + self._r) * (width // self._p + self._l) + 4
 
     def compute(self, m, pixel, ctx):
         """Return the ``P`` output pixels (``8 * out_channels`` bits each).
@@ -171,8 +171,10 @@ class WindowFilter(wiring.Component):
         go0 = Signal()
         m.d.comb += [go0.eq(run & adv & (~needs_input | guard.o.tvalid)),
                      guard.o.tready.eq(run & adv & needs_input),
-                     rd.addr.eq(c0), rd.en.eq(adv)]
-        with m.If(~run & guard.o.tvalid):
+                     rd.addr.eq(Mux(c0 < wb, c0, 0)), rd.en.eq(adv)]
+        v1, v2, v3 = Signal(), Signal(), Signal()
+        # the size registers serve every stage: a frame starts once the last one has left them
+        with m.If(~run & ~v1 & ~v2 & ~v3 & guard.o.tvalid):
             m.d.sync += [wb.eq(guard.frame_width // P), h.eq(guard.frame_height),
                          r0.eq(0), c0.eq(0), run.eq(1)]
         with m.If(go0):
@@ -186,7 +188,7 @@ class WindowFilter(wiring.Component):
                 m.d.sync += c0.eq(c0 + 1)
 
         # stage 1: line buffer data; vertical border selection
-        v1, r1, c1, w1 = Signal(), Signal.like(r0), Signal.like(c0), Signal()
+        r1, c1, w1 = Signal.like(r0), Signal.like(c0), Signal()
         d1 = Signal(beat_bits)
         with m.If(adv):
             m.d.sync += [v1.eq(go0), r1.eq(r0), c1.eq(c0), w1.eq(needs_input),
@@ -218,7 +220,7 @@ class WindowFilter(wiring.Component):
             taps1.append(tap)
             zero1.append((n < 0) | (n > hs - 1) if self._border == "constant" else Const(0))
 
-        v2, r2, c2 = Signal(), Signal.like(r0), Signal.like(c0)
+        r2, c2 = Signal.like(r0), Signal.like(c0)
         taps2 = [Signal(beat_bits, name=f"taps2_{t}") for t in range(k)]
         with m.If(adv):
             m.d.sync += [v2.eq(v1), r2.eq(r1), c2.eq(c1)]
@@ -227,7 +229,7 @@ class WindowFilter(wiring.Component):
         # stage 2: horizontal register of 2L + 1 beats (oldest first)
         hreg = [[Signal(beat_bits, name=f"hreg{b}_{t}") for t in range(k)]
                 for b in range(2 * L + 1)]
-        v3, row3, beat3 = Signal(), Signal(range(max_h)), Signal(range(max_wb + L + 1))
+        row3, beat3 = Signal(range(max_h)), Signal(range(max_wb + L + 1))
         with m.If(adv):
             m.d.sync += [v3.eq(v2 & (r2 >= R) & (c2 >= L)), row3.eq(r2 - R), beat3.eq(c2 - L)]
             with m.If(v2):
