@@ -72,7 +72,8 @@ def _kernel_classes():
     from hdl import kernels as k
     return {"sobel": k.Sobel, "gaussian": k.GaussianBlur, "gray": k.BgrToGray,
             "hsv": k.BgrToHsv, "inrange": k.InRange, "traffic_light": k.TrafficLightDetector,
-            "sort": k.MergeSorter}
+            "equalize": k.EqualizeHist, "sort": k.MergeSorter, "pid": k.PidController,
+            "inverse_kinematics": k.InverseKinematics}
 
 
 def build_kernel(spec, where="kernel"):

@@ -76,13 +76,14 @@ def test_short_and_long_blocks_are_flagged_and_resynchronised():
 
 
 def test_cycles_per_block_without_stalls():
-    """(log2 N + 3) N cycles, give or take a few, when neither side stalls."""
+    """(log2 N + 1) N cycles, give or take a few, when neither side stalls (issue target
+    for 2048 elements: <= 25,000 cycles)."""
     rng = random.Random(1)
     n = 256
     blocks = [[rng.randrange(1 << 32) for _ in range(n)]]
     out, _, cycles = run_blocks(n, blocks, [0], idle=0.0, backpressure=0.0)
     assert out == [sorted(blocks[0])]
-    assert cycles <= (8 + 3) * n + 16, cycles
+    assert cycles <= (8 + 1) * n + 16, cycles
 
 
 def test_bad_parameters_name_the_value():

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["IMAGES", "load_image", "sobel", "gaussian", "gray", "hsv", "in_range",
+__all__ = ["IMAGES", "load_image", "sobel", "gaussian", "gray", "hsv", "equalize", "in_range",
            "traffic_lights", "sobel_reconros", "guard_frame", "CV_BORDERS"]
 
 IMAGES = Path(__file__).resolve().parents[2] / "examples" / "images"
@@ -67,6 +67,11 @@ def hsv(image):
     """``cv2.cvtColor(COLOR_BGR2HSV)`` (8-bit, H in 0..179)."""
     cv2 = _cv2()
     return cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+
+
+def equalize(image):
+    """``cv2.equalizeHist`` of a ``mono8`` image."""
+    return _cv2().equalizeHist(image)
 
 
 def in_range(image, lower, upper):

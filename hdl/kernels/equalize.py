@@ -1,0 +1,270 @@
+"""Histogram equalization, bit-exact with ``cv2.equalizeHist`` (spec kernels.md §4)."""
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.fifo import SyncFIFOBuffered
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import ParameterError
+from .image import FrameGuard, check_image_params, image_stream_signature
+
+__all__ = ["EqualizeHist", "round_to_float32"]
+
+#: the reciprocal 255 / D is computed as floor(255 * 2**SCALE_BITS / D) before rounding
+SCALE_BITS = 48
+
+
+def _leading_one(m, value, name):
+    """Index of the highest set bit of ``value`` (0 for 0)."""
+    lead = Signal(range(len(value)), name=name)
+    for b in range(len(value)):
+        with m.If(value[b]):
+            m.d.comb += lead.eq(b)
+    return lead
+
+
+def round_to_float32(m, value, sticky_in, name):
+    """Round the non-negative integer ``value`` (with ``sticky_in``: a non-zero remainder
+    below it) to 24 significant bits, to nearest, ties to even. Returns ``(mantissa,
+    shift)``: the rounded value is ``mantissa << shift`` (``mantissa < 2**24``)."""
+    lead = _leading_one(m, value, f"{name}_lead")
+    shift = Signal(range(len(value) + 1), name=f"{name}_shift")
+    m.d.comb += shift.eq(Mux(lead > 23, lead - 23, 0))
+    kept = Signal(24, name=f"{name}_kept")
+    m.d.comb += kept.eq(value >> shift)
+    rest = Signal(len(value), name=f"{name}_rest")
+    m.d.comb += rest.eq(value - (kept << shift))
+    half = Signal(len(value), name=f"{name}_half")
+    m.d.comb += half.eq(Mux(shift == 0, 0, Const(1, len(value)) << (shift - 1).as_unsigned()))
+    up = (shift != 0) & ((rest > half) | ((rest == half) & (sticky_in | kept[0])))
+    mantissa = Signal(25, name=f"{name}_mant")
+    m.d.comb += mantissa.eq(kept + up)
+    out_m, out_s = Signal(24, name=f"{name}_m"), Signal(range(len(value) + 2), name=f"{name}_s")
+    with m.If(mantissa[24]):
+        m.d.comb += [out_m.eq(mantissa >> 1), out_s.eq(shift + 1)]
+    with m.Else():
+        m.d.comb += [out_m.eq(mantissa), out_s.eq(shift)]
+    return out_m, out_s
+
+
+class EqualizeHist(wiring.Component):
+    """``cv2.equalizeHist`` on ``mono8`` frames, one frame of latency.
+
+    A frame streams into a frame buffer (block RAM FIFO of ``max_width * max_height``
+    pixels) while its histogram is counted; then its look-up table is computed (one bin per
+    cycle and one division: about 320 cycles) exactly as OpenCV does: ``i0`` the first non-empty bin,
+    ``scale = float32(255) / float32(N - hist[i0])``, ``lut[j] = 0`` for ``j <= i0`` and
+    ``round_half_even(float32((cdf[j] - hist[i0]) * scale))`` above (a frame of one grey
+    level maps to it). The float32 division and products are computed on integers with the
+    IEEE round-to-nearest-even rule, so the result is exact, not an approximation. The frame
+    then streams out through the table while the next frame streams in.
+
+    Steady state: ``W H / P`` cycles per frame plus the table (about 320) and the division
+    (``SCALE_BITS + 9`` = 57).
+
+    Parameters
+    ----------
+    pixels_per_beat : int
+        1, 2, 4 or 8 (P histogram banks).
+    max_width, max_height : int
+        Largest frame; the frame buffer holds ``max_width * max_height`` pixels.
+
+    Members
+    -------
+    i : In(image_stream_signature(1, pixels_per_beat))
+        ``mono8`` frames.
+    o : Out(image_stream_signature(1, pixels_per_beat))
+        Equalized frames, ``tuser[0]`` on the first beat, ``tlast`` on the last.
+    width, height : In
+        Frame size, sampled at a frame's first beat.
+    err_short, err_long, err_size : Out(1)
+        Bad frames (:class:`~hdl.kernels.image.FrameGuard`).
+    """
+
+    def __init__(self, *, pixels_per_beat=1, max_width=640, max_height=480):
+        check_image_params(1, pixels_per_beat, max_width, max_height, channel_choices=(1,))
+        if max_width * max_height > 1 << 22:
+            # the pixel counts must stay exact float32 values (and the buffer sensible)
+            raise ParameterError("max_width * max_height", max_width * max_height,
+                                 "at most 4194304 pixels")
+        self._p, self._max_width, self._max_height = pixels_per_beat, max_width, max_height
+        sig = image_stream_signature(1, pixels_per_beat)
+        super().__init__({
+            "i": In(sig),
+            "o": Out(sig),
+            "width": In(range(max_width + 1)),
+            "height": In(range(max_height + 1)),
+            "err_short": Out(1),
+            "err_long": Out(1),
+            "err_size": Out(1),
+        })
+
+    pixels_per_beat = property(lambda self: self._p)
+
+    def elaborate(self, platform):
+        m = Module()
+        P = self._p
+        max_pixels = self._max_width * self._max_height
+        count_bits = max_pixels.bit_length()
+        m.submodules.guard = guard = FrameGuard(1, P, self._max_width, self._max_height)
+        wiring.connect(m, wiring.flipped(self.i), guard.i)
+        m.d.comb += [guard.width.eq(self.width), guard.height.eq(self.height),
+                     self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long),
+                     self.err_size.eq(guard.err_size)]
+
+        m.submodules.frame = frame = SyncFIFOBuffered(width=8 * P + 1, depth=max_pixels // P)
+        hists = []
+        for p in range(P):
+            mem = Memory(shape=count_bits, depth=256, init=[])
+            m.submodules[f"hist{p}"] = mem
+            wr = mem.write_port()
+            rd = mem.read_port(transparent_for=(wr,))
+            hists.append((wr, rd))
+        m.submodules.lut = lut = Memory(shape=8, depth=256, init=[])
+        lut_wr = lut.write_port()
+
+        # input: frame buffer and histogram (read, then increment next cycle)
+        filling = Signal(init=1)
+        total = Signal(count_bits + 1)
+        inc_valid = Signal()
+        inc_bin = [Signal(8, name=f"inc_bin{p}") for p in range(P)]
+        take = guard.o.tvalid & guard.o.tready
+        m.d.comb += [guard.o.tready.eq(filling & frame.w_rdy),
+                     frame.w_en.eq(take), frame.w_data.eq(Cat(guard.o.tdata, guard.o.tlast))]
+        m.d.sync += inc_valid.eq(take)
+        for p, (wr, rd) in enumerate(hists):
+            pix = guard.o.tdata.word_select(p, 8)
+            m.d.comb += rd.addr.eq(pix)
+            with m.If(take):
+                m.d.sync += inc_bin[p].eq(pix)
+        with m.If(inc_valid):
+            for p, (wr, rd) in enumerate(hists):
+                m.d.comb += [wr.en.eq(1), wr.addr.eq(inc_bin[p]), wr.data.eq(rd.data + 1)]
+        with m.If(take):
+            m.d.sync += total.eq(total + P)
+            with m.If(guard.o.tlast):
+                m.d.sync += filling.eq(0)
+
+        # output: through the table of the frame at the head of the buffer
+        draining = Signal()
+        o_valid, o_first = Signal(), Signal(init=1)
+        adv = Signal()
+        lut_rd = [lut.read_port() for _ in range(P)]
+        m.d.comb += [adv.eq(~o_valid | self.o.tready), self.o.tvalid.eq(o_valid),
+                     frame.r_en.eq(adv & draining)]
+        for p, port in enumerate(lut_rd):
+            m.d.comb += [port.addr.eq(frame.r_data.word_select(p, 8)), port.en.eq(adv),
+                         self.o.tdata.word_select(p, 8).eq(port.data)]
+        out_last = frame.r_data[8 * P]
+        with m.If(adv):
+            m.d.sync += [o_valid.eq(draining & frame.r_rdy), self.o.tlast.eq(out_last),
+                         self.o.tuser.eq(o_first)]
+            with m.If(draining & frame.r_rdy):
+                m.d.sync += o_first.eq(out_last)
+                with m.If(out_last):
+                    m.d.sync += draining.eq(0)
+
+        # the table: scan the bins (clearing them), divide once at the first non-empty one
+        j = Signal(9)
+        cdf = Signal(count_bits + 1)
+        found = Signal()
+        i0 = Signal(8)
+        h0 = Signal(count_bits + 1)
+        denom = Signal(count_bits + 1)
+        quotient = Signal(SCALE_BITS + 9)
+        remainder = Signal(count_bits + 2)
+        numer = Signal(SCALE_BITS + 9)
+        div_step = Signal(range(SCALE_BITS + 10))
+        scale_m = Signal(24)
+        scale_s = Signal(range(SCALE_BITS + 12))
+        hist_sum = sum(rd.data for _, rd in hists)
+        with m.FSM():
+            with m.State("FILL"):
+                with m.If(~filling & ~inc_valid & ~draining):
+                    m.d.sync += [j.eq(0), cdf.eq(0), found.eq(0)]
+                    m.next = "READ"
+            with m.State("READ"):
+                for _, rd in hists:
+                    m.d.comb += rd.addr.eq(j)
+                m.next = "BIN"
+            with m.State("BIN"):
+                # rd.data = hist[j] (summed over the banks); clear the bin
+                for wr, _ in hists:
+                    m.d.comb += [wr.en.eq(1), wr.addr.eq(j), wr.data.eq(0)]
+                hj = Signal(count_bits + 1)
+                m.d.comb += hj.eq(hist_sum)
+                new_cdf = cdf + hj
+                m.d.sync += cdf.eq(new_cdf)
+                with m.If(~found & (hj != 0)):
+                    m.d.sync += [found.eq(1), h0.eq(hj), denom.eq(total - hj), i0.eq(j)]
+                    m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j), lut_wr.data.eq(0)]
+                    with m.If(hj == total):
+                        m.next = "SINGLE"
+                    with m.Else():
+                        m.d.sync += [numer.eq(255 << SCALE_BITS), quotient.eq(0),
+                                     remainder.eq(0), div_step.eq(SCALE_BITS + 8)]
+                        m.next = "DIVIDE"
+                with m.Elif(~found):
+                    m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j), lut_wr.data.eq(0)]
+                    with m.If(j == 255):
+                        m.next = "DONE"
+                    with m.Else():
+                        for _, rd in hists:
+                            m.d.comb += rd.addr.eq(j + 1)
+                        m.d.sync += j.eq(j + 1)
+                with m.Else():
+                    # lut[j] = rint(fl(fl(x) * scale)), x = cdf[j] - h0 < 2**24
+                    x = new_cdf - h0
+                    prod = Signal(48)
+                    m.d.comb += prod.eq(x * scale_m)
+                    pm, ps = round_to_float32(m, prod, Const(0), "prod")
+                    # value = pm * 2**(ps + scale_s - SCALE_BITS); scale_s + ps < SCALE_BITS
+                    frac = Signal(range(2 * SCALE_BITS + 4))
+                    m.d.comb += frac.eq(SCALE_BITS - scale_s - ps)
+                    whole = Signal(24)
+                    m.d.comb += whole.eq(pm >> frac)
+                    rest = Signal(24)
+                    m.d.comb += rest.eq(pm - (whole << frac))
+                    half = Signal(25)
+                    m.d.comb += half.eq(Mux(frac == 0, 0, Const(1, 25) << (frac - 1).as_unsigned()))
+                    up = (frac != 0) & ((rest > half) | ((rest == half) & whole[0]))
+                    # from 25 fraction bits on, pm < 2**24 is below one half: rounds to 0
+                    value = Signal(25)
+                    m.d.comb += value.eq(Mux(frac > 24, 0, whole + up))
+                    m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j),
+                                 lut_wr.data.eq(Mux(value > 255, 255, value))]
+                    with m.If(j == 255):
+                        m.next = "DONE"
+                    with m.Else():
+                        for _, rd in hists:
+                            m.d.comb += rd.addr.eq(j + 1)
+                        m.d.sync += j.eq(j + 1)
+            with m.State("DIVIDE"):
+                # floor(255 * 2**SCALE_BITS / denom), one quotient bit per cycle
+                r = Cat(numer[-1], remainder[:-1])
+                ge = r >= denom
+                m.d.sync += [remainder.eq(Mux(ge, r - denom, r)), numer.eq(numer << 1),
+                             quotient.eq(Cat(ge, quotient[:-1])), div_step.eq(div_step - 1)]
+                with m.If(div_step == 0):
+                    m.next = "ROUND"
+            with m.State("ROUND"):
+                qm, qs = round_to_float32(m, quotient, remainder != 0, "scale")
+                m.d.sync += [scale_m.eq(qm), scale_s.eq(qs)]
+                m.next = "NEXT"
+            with m.State("SINGLE"):
+                # one grey level: the table maps everything to it
+                m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j), lut_wr.data.eq(i0)]
+                m.d.sync += j.eq(j + 1)
+                with m.If(j == 255):
+                    m.next = "DONE"
+            with m.State("NEXT"):
+                m.d.sync += j.eq(j + 1)
+                with m.If(j == 255):
+                    m.next = "DONE"
+                with m.Else():
+                    m.next = "READ"
+            with m.State("DONE"):
+                m.d.sync += [draining.eq(1), filling.eq(1), total.eq(0)]
+                m.next = "FILL"
+        return m

@@ -1,0 +1,300 @@
+"""Bench of the non-image kernels in one ``kernels`` top: MergeSorter (reconos.md §9.2),
+PidController (finemb.md §6), InverseKinematics (reconos.md §9.3).
+
+Golden models: Python's ``sorted``; the AVR221 model of tb/models/pid.py (checked against the
+spec's test vectors in tb/test_kernels_models.py); the ap_fixed model of
+tb/models/inverse_kinematics.py. Every stream port runs under random idle and backpressure
+with a scoreboard, and each kernel's cycle budget of the issue is asserted at full rate:
+2048 values sorted in <= 25,000 cycles, one PID update per clock, <= 200 cycles per
+inverse-kinematics solution.
+"""
+
+import logging
+import os
+import random
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
+from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
+
+from tb.harness import bench_params, cocotb_bench
+from tb.models import inverse_kinematics as ik_model
+from tb.models.pid import AvrPid, FirstOrderPlant
+from tb.streams import PacketSink, random_pauses
+
+CLOCK_NS = 10
+
+KERNELS = {
+    "sort": dict(kind="sort", block_size=2048),
+    "pid": dict(kind="pid"),
+    "ik": dict(kind="inverse_kinematics", lanes=16),
+}
+
+CONFIGS = {"control": dict(kernels=KERNELS)}
+
+test_kernels = cocotb_bench("kernels", CONFIGS)
+
+SIM = os.environ.get("ROSGATE_SIM", "")
+
+
+class Port:
+    """A kernel's input source and output sink (``<name>_i``, ``<name>_o``)."""
+
+    def __init__(self, tb, name):
+        dut = tb.dut
+        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
+                                      dut.aresetn, reset_active_level=False)
+        self.source.log.setLevel(logging.WARNING)
+        self.sink = PacketSink(dut, f"{name}_o", dut.aclk)
+        self.rng = random.Random(tb.rng.random())
+
+    def set_pauses(self, idle, backpressure):
+        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
+        if not idle:
+            self.source.pause = False
+        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
+                                      if backpressure else None)
+
+    def words(self, width):
+        """Every received beat as an integer of ``width`` bits, packets concatenated."""
+        out = []
+        for packet in self.sink.packets:
+            out += [d for d, _, _ in packet.beats]
+        return out
+
+
+class ControlTB:
+    def __init__(self, dut, seed=None):
+        self.dut = dut
+        self.params = bench_params()
+        self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
+        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        self.ports = {name: Port(self, name) for name in self.params["kernels"]}
+        self.cycle = 0
+        self.err_leg = 0
+        self.sort_errors = {"short": 0, "long": 0}
+        dut.sort_length.value = 0
+        dut.pid_load.value = 0
+        dut.pid_reset_integrator.value = 0
+        cocotb.start_soon(self._count())
+
+    async def _count(self):
+        while True:
+            await RisingEdge(self.dut.aclk)
+            self.cycle += 1
+            self.err_leg += self.dut.ik_err_leg.value == 1
+            self.sort_errors["short"] += self.dut.sort_err_short.value == 1
+            self.sort_errors["long"] += self.dut.sort_err_long.value == 1
+
+    async def reset(self):
+        self.dut.aresetn.value = 0
+        await ClockCycles(self.dut.aclk, 4)
+        self.dut.aresetn.value = 1
+        await ClockCycles(self.dut.aclk, 2)
+
+    def set_pauses(self, idle, backpressure):
+        for port in self.ports.values():
+            port.set_pauses(idle, backpressure)
+
+    async def wait_words(self, name, count, timeout_cycles):
+        sink = self.ports[name].sink
+        for _ in range(timeout_cycles):
+            if sum(len(p.beats) for p in sink.packets) >= count:
+                return
+            await RisingEdge(self.dut.aclk)
+        raise AssertionError(f"{name}: {sum(len(p.beats) for p in sink.packets)} of {count} "
+                             f"output words after {timeout_cycles} cycles")
+
+    async def load_pid(self, p, i, d):
+        dut = self.dut
+        dut.pid_p_gain.value, dut.pid_i_gain.value, dut.pid_d_gain.value = p, i, d
+        dut.pid_load.value = 1
+        await RisingEdge(dut.aclk)
+        dut.pid_load.value = 0
+        for _ in range(64):
+            await RisingEdge(dut.aclk)
+            if dut.pid_ready.value == 1:
+                return
+        raise AssertionError("pid_ready did not return within 64 cycles of load")
+
+
+def pid_word(sp, pv):
+    return (sp & 0xFFFF) | (pv & 0xFFFF) << 16
+
+
+def int16(v):
+    return (v ^ 0x8000) - 0x8000
+
+
+async def run_sort(tb, blocks, lengths=None):
+    """Sort each block (``sort_length`` set per block); check against ``sorted``."""
+    port = tb.ports["sort"]
+    expected = []
+    for n, block in enumerate(blocks):
+        length = (lengths or [0] * len(blocks))[n]
+        await port.source.wait()
+        while tb.dut.sort_busy.value == 1 and length:
+            await RisingEdge(tb.dut.aclk)
+        tb.dut.sort_length.value = length
+        data = b"".join(v.to_bytes(4, "little") for v in block)
+        await port.source.send(AxiStreamFrame(data))
+        want = length or 2048
+        got = sorted(block[:want]) + [0xFFFFFFFF] * (want - len(block))
+        expected.append(got)
+    await port.source.wait()
+    total = sum(len(e) for e in expected)
+    await tb.wait_words("sort", total + sum(len(p.beats) for p in port.sink.packets) - total,
+                        30_000 * len(blocks))
+    for _ in range(30_000 * len(blocks)):
+        if len(port.sink.packets) >= len(expected):
+            break
+        await RisingEdge(tb.dut.aclk)
+    got = [[d for d, _, _ in p.beats] for p in port.sink.packets]
+    assert got == expected, "sorter output differs from sorted()"
+
+
+async def run_pid(tb, pairs):
+    """Stream ``pairs`` through the PID; compare with the AVR221 model."""
+    port = tb.ports["pid"]
+    data = b"".join(pid_word(sp, pv).to_bytes(4, "little") for sp, pv in pairs)
+    await port.source.send(AxiStreamFrame(data))
+    await tb.wait_words("pid", len(pairs), 20 * len(pairs) + 200)
+
+
+async def run_ik(tb, words):
+    port = tb.ports["ik"]
+    for w in words:
+        await port.source.send(AxiStreamFrame(w.to_bytes(4, "little")))
+    await port.source.wait()
+
+
+@cocotb.test()
+async def all_kernels_under_idle_and_backpressure(dut):
+    """Sort blocks (random, duplicates), a PID sequence (the spec's vectors, then random
+    pairs) and inverse-kinematics requests (the ReconROS client's, tilts of +-20 degrees)
+    concurrently, 30 % idle, 30 % backpressure; every output equals its golden model."""
+    tb = ControlTB(dut)
+    await tb.reset()
+    tb.set_pauses(0.3, 0.3)
+    await tb.load_pid(256, 64, 32)
+    rng = tb.rng
+    blocks = [[rng.randrange(1 << 32) for _ in range(2048)],
+              [rng.choice([0, 7, 0xFFFFFFFF]) for _ in range(2048)]]
+    vector = [(1000, pv) for pv in (0, 100, 250, 400, 600, 800, 950, 1000, 1020, 1000)]
+    pairs = vector + [(rng.randrange(-2000, 2000), rng.randrange(-2000, 2000))
+                      for _ in range(300)]
+    count = 120 if SIM == "icarus" else 1000
+    ik_words = [w for w in (ik_model.client_word(i) for i in range(count)) if w & 7 < 6]
+    twenty = round(20 * 256)
+    ik_words += [ik_model.encode_input(a, b, leg) for leg in range(6)
+                 for a, b in ((twenty, -twenty), (-twenty, twenty), (8191, -8192))]
+    tasks = [cocotb.start_soon(run_sort(tb, blocks)), cocotb.start_soon(run_pid(tb, pairs)),
+             cocotb.start_soon(run_ik(tb, ik_words))]
+    for task in tasks:
+        await with_timeout(task, 400_000 * CLOCK_NS, "ns")
+    await tb.wait_words("ik", len(ik_words), 400 * len(ik_words))
+
+    model = AvrPid(256, 64, 32)
+    want = [model.update(sp, pv) for sp, pv in pairs]
+    got = [int16(w) for w in tb.ports["pid"].words(16)]
+    assert got[:10] == [755, 1180, 1543, 1843, 2030, 2130, 2012, 1937, 1895, 1945], got[:10]
+    assert got == want, "PID output differs from the AVR221 model"
+
+    got = tb.ports["ik"].words(32)
+    want = [ik_model.solve(w) for w in ik_words]
+    bad = [(hex(w), hex(g), hex(e)) for w, g, e in zip(ik_words, got, want) if g != e]
+    assert not bad and len(got) == len(want), f"{len(bad)} IK solutions differ: {bad[:4]}"
+    assert tb.err_leg == 0 and tb.sort_errors == {"short": 0, "long": 0}
+
+
+@cocotb.test()
+async def bad_input_is_flagged_and_dropped(dut):
+    """IK requests naming leg 6 or 7 are dropped with ``err_leg``, the next ones answered;
+    a short and a long sort block are padded and cut with their error pulses, the next block
+    sorted."""
+    tb = ControlTB(dut)
+    await tb.reset()
+    tb.set_pauses(0.2, 0.2)
+    good = [ik_model.client_word(i) for i in (1, 2)]
+    await run_ik(tb, [good[0] | 7, good[0], (good[1] & ~7) | 6, good[1]])
+    await tb.wait_words("ik", 2, 2000)
+    await ClockCycles(dut.aclk, 400)
+    got = tb.ports["ik"].words(32)
+    assert got == [ik_model.solve(w) for w in good], [hex(g) for g in got]
+    assert tb.err_leg == 2
+    rng = tb.rng
+    short = [rng.randrange(1000) for _ in range(40)]
+    long_ = [rng.randrange(1000) for _ in range(70)]
+    ok = [rng.randrange(1 << 32) for _ in range(64)]
+    await run_sort(tb, [short, long_, ok], [64, 64, 64])
+    assert tb.sort_errors == {"short": 1, "long": 1}
+
+
+@cocotb.test()
+async def full_rate_budgets(dut):
+    """No idle or backpressure: 2048 values in <= 25,000 cycles; 500 PID updates in 500 +
+    latency cycles (one per clock); an IK solution every <= 200 cycles."""
+    tb = ControlTB(dut)
+    await tb.reset()
+    tb.set_pauses(0, 0)
+    await tb.load_pid(128, 16, 64)
+    rng = tb.rng
+    port = tb.ports["sort"]
+    block = [rng.randrange(1 << 32) for _ in range(2048)]
+    start = tb.cycle
+    await port.source.send(AxiStreamFrame(b"".join(v.to_bytes(4, "little") for v in block)))
+    await tb.wait_words("sort", 2048, 30_000)
+    first_in = start
+    sort_cycles = port.sink.packets[0].cycles[-1] - first_in
+    assert [d for d, _, _ in port.sink.packets[0].beats] == sorted(block)
+    assert sort_cycles <= 25_000, sort_cycles
+
+    pairs = [(rng.randrange(-3000, 3000), rng.randrange(-3000, 3000)) for _ in range(500)]
+    pid = tb.ports["pid"]
+    await run_pid(tb, pairs)
+    cycles = pid.sink.packets[0].cycles
+    pid_span = cycles[-1] - cycles[0] + 1
+    model = AvrPid(128, 16, 64)
+    assert [int16(w) for w in pid.words(16)] == [model.update(*p) for p in pairs]
+    assert pid_span == len(pairs), f"{len(pairs)} PID updates took {pid_span} cycles"
+
+    words = [ik_model.client_word(i) for i in range(3, 40) if ik_model.client_word(i) & 7 < 6]
+    ik = tb.ports["ik"]
+    await run_ik(tb, words)
+    await tb.wait_words("ik", len(words), 250 * len(words))
+    ends = [c for p in ik.sink.packets for c in p.cycles]
+    per = (ends[-1] - ends[0]) / (len(ends) - 1)
+    assert ik.words(32) == [ik_model.solve(w) for w in words]
+    assert per <= 200, per
+    tb.dut._log.info("full rate: sort 2048 in %d cycles, %d PID updates in %d cycles, IK %.1f "
+                     "cycles per solution", sort_cycles, len(pairs), pid_span, per)
+
+
+@cocotb.test()
+async def pid_closed_loop_first_order_plant(dut):
+    """The PID drives a first-order plant (tb/models/pid.py) to a set point step and back;
+    each output equals the model's, and the plant settles within 2 % of the set point
+    (P = 2, I = 0.25, D = 0: the model settles in under 100 updates)."""
+    tb = ControlTB(dut)
+    await tb.reset()
+    tb.set_pauses(0, 0.3)
+    await tb.load_pid(256, 32, 0)
+    model = AvrPid(256, 32, 0)
+    plant_hw, plant_model = FirstOrderPlant(), FirstOrderPlant()
+    port = tb.ports["pid"]
+    trace = []
+    for step in range(400):
+        sp = 2000 if step < 250 else -500
+        y = plant_hw.y
+        before = sum(len(p.beats) for p in port.sink.packets)
+        await port.source.send(AxiStreamFrame(pid_word(sp, y).to_bytes(4, "little")))
+        await tb.wait_words("pid", before + 1, 200)
+        u = int16(port.words(16)[-1])
+        assert u == model.update(sp, plant_model.y), f"step {step}: {u}"
+        plant_hw.step(u)
+        plant_model.step(u)
+        trace.append((sp, y, u))
+    for sp, target_end in ((2000, 249), (-500, 399)):
+        y = trace[target_end][1]
+        assert abs(y - sp) <= abs(sp) * 0.02, f"plant at {y} for set point {sp}"
