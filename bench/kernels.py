@@ -48,19 +48,28 @@ CONTROL = {
     "ik": (dict(kind="inverse_kinematics", lanes=16), "inverse kinematics (per solution)",
            ("ReconROS inverse kinematics raw HW", 0.19), 0.002),
 }
+MNIST = {
+    "mnist": (dict(kind="mnist", pixels_per_beat=4),
+              "MNIST CNN, 28x28 digit in to result out (latency)",
+              ("ReconROS MNIST raw HW", 30.74), 0.05),
+}
 
 
 def measure(log=print):
     records = {}
-    for config, kernels in (("bench_image", IMAGE), ("bench_control", CONTROL)):
+    # one top per image kernel: a simulation of many kernels pays every port's driver each
+    # cycle
+    runs = [(f"bench_{name}", {name: spec}) for name, (spec, *_) in IMAGE.items()]
+    runs.append(("bench_control", {name: spec for name, (spec, *_) in CONTROL.items()}))
+    runs.append(("bench_mnist", {"cnn": MNIST["mnist"][0]}))
+    for config, kernels in runs:
         out = SIM_BUILD / f"bench-kernels-{config}.json"
         log(f"  simulating {', '.join(kernels)} (Verilator)...")
-        params = {"kernels": {name: spec for name, (spec, *_) in kernels.items()}}
-        run_bench("bench.kernels_bench", "kernels", config, params, "verilator", quiet=True,
-                  extra_env={"ROSGATE_BENCH_OUT": str(out)})
+        run_bench("bench.kernels_bench", "kernels", config, {"kernels": kernels}, "verilator",
+                  quiet=True, extra_env={"ROSGATE_BENCH_OUT": str(out)})
         records.update(json.loads(out.read_text()))
     rows = []
-    for name, (spec, label, paper, target) in {**IMAGE, **CONTROL}.items():
+    for name, (spec, label, paper, target) in {**IMAGE, **CONTROL, **MNIST}.items():
         rec = records[name]
         if name in IMAGE:
             cycles = rec["period"]
@@ -77,7 +86,7 @@ def measure(log=print):
 
 def measure_resources(log=print):
     rows = []
-    for name, (spec, label, *_) in {**IMAGE, **CONTROL}.items():
+    for name, (spec, label, *_) in {**IMAGE, **CONTROL, **MNIST}.items():
         log(f"  yosys {YOSYS_COMMAND}: {name}...")
         rows.append({"kernel": name, "label": label,
                      **component_resources(build_kernel(spec), f"kernel_{name}",

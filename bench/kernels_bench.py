@@ -7,7 +7,6 @@ import json
 import os
 
 import cocotb
-import numpy as np
 from cocotbext.axi import AxiStreamFrame
 
 from tb.models import image as golden
@@ -21,7 +20,15 @@ from tb.test_kernels_image import KernelsTB
 async def measure_kernels(dut):
     params = json.loads(os.environ["ROSGATE_PARAMS"])
     records = {}
-    if "sort" in params["kernels"]:
+    if "cnn" in params["kernels"]:
+        from tb.test_kernels_mnist import MnistTB, check, held_out
+        tb = MnistTB(dut)
+        await tb.reset()
+        test_x, test_y = held_out()
+        results, latencies = await tb.classify(test_x[:50])
+        check(results, test_x[:50])
+        records["mnist"] = {"cycles": max(latencies), "items": 1}
+    elif "sort" in params["kernels"]:
         tb = ControlTB(dut, seed=1)
         await tb.reset()
         tb.set_pauses(0, 0)

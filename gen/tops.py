@@ -73,7 +73,15 @@ def _kernel_classes():
     return {"sobel": k.Sobel, "gaussian": k.GaussianBlur, "gray": k.BgrToGray,
             "hsv": k.BgrToHsv, "inrange": k.InRange, "traffic_light": k.TrafficLightDetector,
             "equalize": k.EqualizeHist, "sort": k.MergeSorter, "pid": k.PidController,
-            "inverse_kinematics": k.InverseKinematics}
+            "inverse_kinematics": k.InverseKinematics, "mnist": _mnist_cnn}
+
+
+def _mnist_cnn(weights=None, **params):
+    """A :class:`hdl.kernels.MnistCnn` with the weights of ``weights`` (an ``.npz`` path;
+    default: the trained network of :mod:`gen.mnist`)."""
+    from gen import mnist
+    from hdl.kernels import MnistCnn
+    return MnistCnn(mnist.load_weights(weights or mnist.WEIGHTS), **params)
 
 
 def build_kernel(spec, where="kernel"):

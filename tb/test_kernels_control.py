@@ -184,7 +184,7 @@ async def all_kernels_under_idle_and_backpressure(dut):
     vector = [(1000, pv) for pv in (0, 100, 250, 400, 600, 800, 950, 1000, 1020, 1000)]
     pairs = vector + [(rng.randrange(-2000, 2000), rng.randrange(-2000, 2000))
                       for _ in range(300)]
-    count = 120 if SIM == "icarus" else 1000
+    count = 60 if SIM == "icarus" else 1000
     ik_words = [w for w in (ik_model.client_word(i) for i in range(count)) if w & 7 < 6]
     twenty = round(20 * 256)
     ik_words += [ik_model.encode_input(a, b, leg) for leg in range(6)

@@ -12,7 +12,6 @@ per-pixel kernel, plus 4 cycles between frames and the pipeline latency.
 """
 
 import logging
-import os
 import random
 
 import cocotb
@@ -72,6 +71,7 @@ class KernelPort:
         dut = tb.dut
         self.kind = spec["kind"]
         self.p = spec.get("pixels_per_beat", 1)
+        self.max_width, self.max_height = spec["max_width"], spec["max_height"]
         self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
                                       dut.aresetn, reset_active_level=False)
         self.source.log.setLevel(logging.WARNING)
@@ -155,8 +155,8 @@ class KernelPort:
         await self.source.wait()
         self.width.value, self.height.value = width, height
         data = pixels.tobytes() if data is None else data
-        size_ok = (width % self.p == 0 and self.min_width <= width <= MAX_W and
-                   (2 * self.radius + 1 if self.radius else 1) <= height <= MAX_H)
+        size_ok = (width % self.p == 0 and self.min_width <= width <= self.max_width and
+                   (2 * self.radius + 1 if self.radius else 1) <= height <= self.max_height)
         if size_ok:
             size = self.frame_bytes(width, height)
             frame = np.frombuffer(golden.guard_frame(data, size), np.uint8)
@@ -234,10 +234,10 @@ class KernelsTB:
         lo = -(-kernel.min_width // step) * step
         if kernel.channels == 4:
             lo = max(lo, -(-kernel.min_width * 4 // 3 // step) * step)
-            hi = MAX_W * 4 // 3 // step * step
-            hi = min(hi, MAX_W)
+            hi = kernel.max_width * 4 // 3 // step * step
+            hi = min(hi, kernel.max_width)
         else:
-            hi = MAX_W // step * step
+            hi = kernel.max_width // step * step
         width = width or self.rng.randrange(lo, hi + 1, step)
         height = height or self.rng.randrange(max(2 * kernel.radius + 1, 1), 24)
         rng = np.random.default_rng(self.rng.randrange(1 << 30))
@@ -317,7 +317,7 @@ async def bad_frames_are_flagged_and_resynchronised(dut):
         h = pixels.shape[0]
         frames[name] = [(image, {"data": short}), (tb.random_image(k), {}),
                         (image, {"data": long_}), (tb.random_image(k), {}),
-                        (image, {"height": MAX_H + 1, "data": data}), (image, {})]
+                        (image, {"height": k.max_height + 1, "data": data}), (image, {})]
         del h
     await tb.run_frames(frames, timeout_cycles=100_000)
     for k in tb.kernels.values():

@@ -5,11 +5,12 @@ from .equalize import EqualizeHist
 from .gaussian import GaussianBlur
 from .image import FrameGuard
 from .inverse_kinematics import InverseKinematics
+from .mnist import MnistCnn
 from .pid import PidController
 from .sobel import Sobel, SobelByteLanes
 from .sort import MergeSorter
 from .window import WindowFilter
 
 __all__ = ["BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur", "InRange",
-           "InverseKinematics", "MergeSorter", "PidController", "PixelKernel", "Sobel",
+           "InverseKinematics", "MergeSorter", "MnistCnn", "PidController", "PixelKernel", "Sobel",
            "SobelByteLanes", "TrafficLightDetector", "WindowFilter"]

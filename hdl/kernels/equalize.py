@@ -40,7 +40,8 @@ def round_to_float32(m, value, sticky_in, name):
     up = (shift != 0) & ((rest > half) | ((rest == half) & (sticky_in | kept[0])))
     mantissa = Signal(25, name=f"{name}_mant")
     m.d.comb += mantissa.eq(kept + up)
-    out_m, out_s = Signal(24, name=f"{name}_m"), Signal(range(len(value) + 2), name=f"{name}_s")
+    out_m = Signal(24, name=f"{name}_m")
+    out_s = Signal(range(len(value) + 2), name=f"{name}_s")
     with m.If(mantissa[24]):
         m.d.comb += [out_m.eq(mantissa >> 1), out_s.eq(shift + 1)]
     with m.Else():
@@ -53,7 +54,8 @@ class EqualizeHist(wiring.Component):
 
     A frame streams into a frame buffer (block RAM FIFO of ``max_width * max_height``
     pixels) while its histogram is counted; then its look-up table is computed (one bin per
-    cycle and one division: about 320 cycles) exactly as OpenCV does: ``i0`` the first non-empty bin,
+    cycle and one division: about 320 cycles) exactly as OpenCV does: ``i0`` the first
+    non-empty bin,
     ``scale = float32(255) / float32(N - hist[i0])``, ``lut[j] = 0`` for ``j <= i0`` and
     ``round_half_even(float32((cdf[j] - hist[i0]) * scale))`` above (a frame of one grey
     level maps to it). The float32 division and products are computed on integers with the

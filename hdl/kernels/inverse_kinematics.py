@@ -212,7 +212,8 @@ class InverseKinematics(wiring.Component):
                         nxt = []
                         for n in range(0, len(level), 2):
                             (da, ia), (db, ib) = level[n], level[n + 1]
-                            d, i = Signal(33, name=f"red{depth}_{n}_d"), Signal(11, name=f"red{depth}_{n}_i")
+                            d = Signal(33, name=f"red{depth}_{n}_d")
+                            i = Signal(11, name=f"red{depth}_{n}_i")
                             take_b = (db < da) | ((db == da) & (ib < ia))
                             m.d.comb += [d.eq(Mux(take_b, db, da)), i.eq(Mux(take_b, ib, ia))]
                             nxt.append((d, i))
