@@ -84,9 +84,16 @@ def measure(log=print):
     return {"clock_mhz": CLOCK_MHZ, "rows": rows}
 
 
+#: kernels whose resource estimate uses a smaller maximum frame: Yosys does not finish
+#: mapping a 640x480 frame buffer (2.4 Mbit, about 67 RAMB36) in reasonable time
+RESOURCE_SPECS = {"equalize_p1": (dict(kind="equalize", max_width=128, max_height=128),
+                                  "equalizeHist, 128x128 frame buffer (640x480: + ~63 RAMB36)")}
+
+
 def measure_resources(log=print):
     rows = []
     for name, (spec, label, *_) in {**IMAGE, **CONTROL, **MNIST}.items():
+        spec, label = RESOURCE_SPECS.get(name, (spec, label))
         log(f"  yosys {YOSYS_COMMAND}: {name}...")
         rows.append({"kernel": name, "label": label,
                      **component_resources(build_kernel(spec), f"kernel_{name}",

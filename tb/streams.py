@@ -6,7 +6,7 @@ and ``tuser`` flags (:class:`PacketSink`), and a plain valid/ready payload port
 import cocotb
 from cocotb.triggers import RisingEdge
 
-__all__ = ["random_pauses", "bursty_pauses", "PacketSink", "HandshakeSource", "HandshakeSink",
+__all__ = ["random_pauses", "bursty_pauses", "count_pulses", "PacketSink", "HandshakeSource", "HandshakeSink",
            "Packet"]
 
 
@@ -22,6 +22,14 @@ def bursty_pauses(rng, probability, max_run=24):
         value = rng.random() < probability
         for _ in range(rng.randint(1, max_run)):
             yield value
+
+
+async def count_pulses(signal, counters, key):
+    """Count the rising edges of a registered one-cycle pulse output into ``counters[key]``
+    (cheaper than reading it every cycle; a combinational output may glitch)."""
+    while True:
+        await RisingEdge(signal)
+        counters[key] += 1
 
 
 class Packet:

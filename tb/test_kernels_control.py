@@ -21,7 +21,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 from tb.harness import bench_params, cocotb_bench
 from tb.models import inverse_kinematics as ik_model
 from tb.models.pid import AvrPid, FirstOrderPlant
-from tb.streams import PacketSink, random_pauses
+from tb.streams import PacketSink, count_pulses, random_pauses
 
 CLOCK_NS = 10
 
@@ -33,7 +33,8 @@ KERNELS = {
 
 CONFIGS = {"control": dict(kernels=KERNELS)}
 
-test_kernels = cocotb_bench("kernels", CONFIGS)
+# Verilator runs it in make test-full (make test stays under 10 minutes on 2 cores)
+test_kernels = cocotb_bench("kernels", CONFIGS, long=[("control", "verilator")])
 
 SIM = os.environ.get("ROSGATE_SIM", "")
 
@@ -72,20 +73,27 @@ class ControlTB:
         cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
         self.ports = {name: Port(self, name) for name in self.params["kernels"]}
         self.cycle = 0
-        self.err_leg = 0
-        self.sort_errors = {"short": 0, "long": 0}
+        cocotb.start_soon(self._count_cycles())
+        self.errors = {"leg": 0, "short": 0, "long": 0}
         dut.sort_length.value = 0
         dut.pid_load.value = 0
         dut.pid_reset_integrator.value = 0
-        cocotb.start_soon(self._count())
+        for key, sig in (("leg", dut.ik_err_leg), ("short", dut.sort_err_short),
+                         ("long", dut.sort_err_long)):
+            cocotb.start_soon(count_pulses(sig, self.errors, key))
 
-    async def _count(self):
+    async def _count_cycles(self):
         while True:
             await RisingEdge(self.dut.aclk)
             self.cycle += 1
-            self.err_leg += self.dut.ik_err_leg.value == 1
-            self.sort_errors["short"] += self.dut.sort_err_short.value == 1
-            self.sort_errors["long"] += self.dut.sort_err_long.value == 1
+
+    @property
+    def err_leg(self):
+        return self.errors["leg"]
+
+    @property
+    def sort_errors(self):
+        return {"short": self.errors["short"], "long": self.errors["long"]}
 
     async def reset(self):
         self.dut.aresetn.value = 0

@@ -22,7 +22,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
 from tb.harness import bench_params, cocotb_bench
 from tb.models import image as golden
-from tb.streams import PacketSink, random_pauses
+from tb.streams import PacketSink, count_pulses, random_pauses
 
 CLOCK_NS = 10
 MAX_W, MAX_H = 96, 72
@@ -50,7 +50,8 @@ KERNELS = {
 
 CONFIGS = {"image": dict(kernels=KERNELS)}
 
-test_kernels = cocotb_bench("kernels", CONFIGS)
+# Verilator runs it in make test-full (make test stays under 10 minutes on 2 cores)
+test_kernels = cocotb_bench("kernels", CONFIGS, long=[("image", "verilator")])
 
 #: HSV bounds of the traffic-light test (red wraps around H = 0)
 RED_RANGES = [((0, 100, 100), (10, 255, 255)), ((170, 100, 100), (179, 255, 255))]
@@ -197,16 +198,15 @@ class KernelsTB:
         self.kernels = {name: KernelPort(self, name, spec)
                         for name, spec in self.params["kernels"].items()}
         self.cycle = 0
-        cocotb.start_soon(self._watch_errors())
+        cocotb.start_soon(self._count_cycles())
+        for k in self.kernels.values():
+            for e, sig in k.err.items():
+                cocotb.start_soon(count_pulses(sig, k.errors, e))
 
-    async def _watch_errors(self):
+    async def _count_cycles(self):
         while True:
             await RisingEdge(self.dut.aclk)
             self.cycle += 1
-            for k in self.kernels.values():
-                for e, sig in k.err.items():
-                    if sig.value == 1:
-                        k.errors[e] += 1
 
     def set_idle_generator(self, probability):
         for k in self.kernels.values():
@@ -273,8 +273,9 @@ def traffic_scene(rng, width, height, colour):
 
 @cocotb.test()
 async def photos_and_random_frames_idle_backpressure(dut):
-    """Two photographs, a traffic scene and two random frames per kernel, sizes changing
-    from frame to frame, 30 % idle and 30 % backpressure: every frame equals OpenCV."""
+    """Two photographs and two random frames per kernel (and a red and a green traffic
+    scene for the detector), sizes changing from frame to frame, 30 % idle and 30 %
+    backpressure: every frame equals OpenCV."""
     tb = KernelsTB(dut)
     await tb.reset()
     tb.set_idle_generator(0.3)
@@ -284,8 +285,9 @@ async def photos_and_random_frames_idle_backpressure(dut):
     frames = {}
     for name, k in tb.kernels.items():
         items = [(p, {}) for p in photos]
-        items.append((traffic_scene(rng, 48, 32, (40, 40, 230)), {}))
-        items.append((traffic_scene(rng, 64, 40, (60, 220, 40)), {}))
+        if k.kind == "traffic_light":
+            items.append((traffic_scene(rng, 48, 32, (40, 40, 230)), {}))
+            items.append((traffic_scene(rng, 64, 40, (60, 220, 40)), {}))
         items += [(tb.random_image(k), {}) for _ in range(2)]
         frames[name] = items
     await tb.run_frames(frames, timeout_cycles=200_000)

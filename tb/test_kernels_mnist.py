@@ -18,7 +18,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
 from gen import mnist
 from tb.harness import bench_params, cocotb_bench
-from tb.streams import PacketSink, random_pauses
+from tb.streams import PacketSink, count_pulses, random_pauses
 
 CLOCK_NS = 10
 
@@ -43,13 +43,8 @@ class MnistTB:
         self.source.log.setLevel(logging.WARNING)
         self.sink = PacketSink(dut, "cnn_o", dut.aclk)
         self.errors = {"short": 0, "long": 0}
-        cocotb.start_soon(self._watch())
-
-    async def _watch(self):
-        while True:
-            await RisingEdge(self.dut.aclk)
-            for e in self.errors:
-                self.errors[e] += getattr(self.dut, f"cnn_err_{e}").value == 1
+        for e in self.errors:
+            cocotb.start_soon(count_pulses(getattr(dut, f"cnn_err_{e}"), self.errors, e))
 
     async def reset(self):
         self.dut.aresetn.value = 0

@@ -52,6 +52,7 @@ class FrameGuard(wiring.Component):
     ``min_height``..``max_height``) is dropped up to its ``tlast`` (``err_size``). Each error
     output pulses for one cycle per bad frame. Input ``tuser`` is ignored; output ``tuser[0]``
     marks the first beat of each frame. No buffering: beats pass through combinationally.
+    The error pulses are registered (one cycle after the beat that shows the error).
 
     Parameters
     ----------
@@ -114,6 +115,9 @@ class FrameGuard(wiring.Component):
                   (self.height <= self._max_height)
         m.d.comb += [self.frame_width.eq(cur_wb << shift), self.frame_height.eq(cur_h),
                      self.o.tuser.eq(~active)]
+        err_short, err_long, err_size = Signal(), Signal(), Signal()
+        m.d.sync += [self.err_short.eq(err_short), self.err_long.eq(err_long),
+                     self.err_size.eq(err_size)]
 
         def step():
             with m.If(~active):
@@ -130,7 +134,7 @@ class FrameGuard(wiring.Component):
                 with m.If(~active & ~size_ok):
                     m.d.comb += self.i.tready.eq(1)
                     with m.If(self.i.tvalid):
-                        m.d.comb += self.err_size.eq(1)
+                        m.d.comb += err_size.eq(1)
                         with m.If(~self.i.tlast):
                             m.next = "DROP"
                 with m.Else():
@@ -140,10 +144,10 @@ class FrameGuard(wiring.Component):
                         step()
                         with m.If(at_last):
                             with m.If(~self.i.tlast):
-                                m.d.comb += self.err_long.eq(1)
+                                m.d.comb += err_long.eq(1)
                                 m.next = "DROP"
                         with m.Elif(self.i.tlast):
-                            m.d.comb += self.err_short.eq(1)
+                            m.d.comb += err_short.eq(1)
                             m.next = "PAD"
             with m.State("PAD"):
                 m.d.comb += [self.o.tvalid.eq(1), self.o.tlast.eq(at_last)]

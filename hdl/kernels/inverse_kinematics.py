@@ -70,7 +70,7 @@ class InverseKinematics(wiring.Component):
     o : Out(AXIStreamSignature(32, keep=False))
         One output word per valid input, ``tlast`` set.
     err_leg : Out(1)
-        One-cycle pulse: an input named leg 6 or 7; it is dropped (no output).
+        One-cycle pulse (registered): an input named leg 6 or 7; it is dropped (no output).
     """
 
     def __init__(self, *, lanes=16):
@@ -119,12 +119,10 @@ class InverseKinematics(wiring.Component):
         na, ia = angle_index(raw_a)
         nb, ib = angle_index(raw_b)
         m.d.comb += [rd_a.addr.eq(ia), rd_b.addr.eq(ib), self.i.tready.eq(~busy)]
-        with m.If(self.i.tvalid & ~busy):
-            with m.If(self.i.tdata[:3] >= 6):
-                m.d.comb += self.err_leg.eq(1)
-            with m.Else():
-                m.d.sync += [busy.eq(1), phase.eq(0), leg.eq(self.i.tdata[:3]),
-                             neg_a.eq(na), neg_b.eq(nb)]
+        m.d.sync += self.err_leg.eq(self.i.tvalid & ~busy & (self.i.tdata[:3] >= 6))
+        with m.If(self.i.tvalid & ~busy & (self.i.tdata[:3] < 6)):
+            m.d.sync += [busy.eq(1), phase.eq(0), leg.eq(self.i.tdata[:3]),
+                         neg_a.eq(na), neg_b.eq(nb)]
 
         def lut_value(port, neg):
             s = port.data[:22].as_signed()

@@ -36,7 +36,7 @@ class MergeSorter(wiring.Component):
     length : In(range(block_size + 1))
         Elements per block, sampled at the first beat of a block; 0 means ``block_size``.
     err_short : Out(1)
-        One-cycle pulse: a block ended (``tlast``) before ``length`` elements. The block is
+        One-cycle pulse (registered): a block ended (``tlast``) before ``length`` elements. The block is
         padded with all-ones elements to ``length`` (so they sort to the end).
     err_long : Out(1)
         One-cycle pulse: a block had more than ``length`` elements. The extra beats are
@@ -88,6 +88,7 @@ class MergeSorter(wiring.Component):
         def write(sel, addr, value):
             m.d.comb += [wr[sel].en.eq(1), wr[sel].addr.eq(addr[:ab]), wr[sel].data.eq(value)]
 
+        m.d.sync += [self.err_short.eq(0), self.err_long.eq(0)]
         with m.FSM():
             with m.State("LOAD"):
                 m.d.comb += self.i.tready.eq(1)
@@ -101,7 +102,7 @@ class MergeSorter(wiring.Component):
                         write(0, count, self.i.tdata)
                         m.d.sync += count.eq(count + 1)
                     with m.If(self.i.tlast):
-                        m.d.comb += [self.err_short.eq(count + 1 < lim),
+                        m.d.sync += [self.err_short.eq(count + 1 < lim),
                                      self.err_long.eq(count >= lim)]
                         m.d.sync += p.eq(0)
                         m.next = "PAD"
