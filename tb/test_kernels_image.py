@@ -273,14 +273,15 @@ def traffic_scene(rng, width, height, colour):
 
 @cocotb.test()
 async def photos_and_random_frames_idle_backpressure(dut):
-    """Two photographs and two random frames per kernel (and a red and a green traffic
-    scene for the detector), sizes changing from frame to frame, 30 % idle and 30 %
-    backpressure: every frame equals OpenCV."""
+    """A photograph and two random frames per kernel (and a red and a green traffic scene
+    for the detector), sizes changing from frame to frame, 30 % idle and 30 % backpressure:
+    every frame equals OpenCV. (The full-rate test adds a second photograph, make bench the
+    640x480 one.)"""
     tb = KernelsTB(dut)
     await tb.reset()
     tb.set_idle_generator(0.3)
     tb.set_backpressure_generator(0.3)
-    photos = [golden.load_image("chelsea_96x72.png"), golden.load_image("coffee_80x60.png")]
+    photos = [golden.load_image("chelsea_96x72.png")]
     rng = np.random.default_rng(tb.rng.randrange(1 << 30))
     frames = {}
     for name, k in tb.kernels.items():
@@ -296,7 +297,7 @@ async def photos_and_random_frames_idle_backpressure(dut):
     det = tb.kernels["traffic"]
     flags = [(int.from_bytes(p.data, "little") >> 31 & 1, int.from_bytes(p.data, "little") >> 63)
              for p in det.sink.packets]
-    assert flags[2] == (1, 0) and flags[3] == (0, 1), f"traffic scenes detected as {flags[2:4]}"
+    assert flags[1] == (1, 0) and flags[2] == (0, 1), f"traffic scenes detected as {flags[1:3]}"
 
 
 @cocotb.test()
@@ -328,13 +329,13 @@ async def bad_frames_are_flagged_and_resynchronised(dut):
 
 @cocotb.test()
 async def full_rate_frame_time(dut):
-    """No idle, no backpressure, two 96x72 frames back to back: the frame time meets the
-    budget of the spec (see the module docstring)."""
+    """No idle, no backpressure, two 80x60 photographs back to back: the frame time meets
+    the budget of the spec (see the module docstring)."""
     tb = KernelsTB(dut)
     await tb.reset()
     tb.set_idle_generator(0)
     tb.set_backpressure_generator(0)
-    image = golden.load_image("chelsea_96x72.png")
+    image = golden.load_image("coffee_80x60.png")
     start = tb.cycle
     await tb.run_frames({n: [(image, {}), (image, {})] for n in tb.kernels},
                         timeout_cycles=50_000)

@@ -24,8 +24,10 @@ CLOCK_NS = 10
 
 CONFIGS = {"mnist": dict(kernels={"cnn": dict(kind="mnist", pixels_per_beat=4)})}
 
-# all 1000 images on Verilator take about 4 minutes: make test-full
-test_kernels = cocotb_bench("kernels", CONFIGS, long=[("mnist", "verilator")])
+# all 1000 images on Verilator take about 4 minutes, and the network is large for Icarus:
+# both run in make test-full
+test_kernels = cocotb_bench("kernels", CONFIGS, long=[("mnist", "verilator"),
+                                                      ("mnist", "icarus")])
 
 SIM = os.environ.get("ROSGATE_SIM", "")
 TARGET_ACCURACY = 0.975

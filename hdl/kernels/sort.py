@@ -127,6 +127,8 @@ class MergeSorter(wiring.Component):
                 # streams out instead of writing back
                 m.d.comb += self.busy.eq(1)
                 final = p == passes - 1
+                with m.If(final):
+                    m.d.comb += self.progress.eq(passes)
                 hx = Mux(src, rx[1].data, rx[0].data)
                 hy = Mux(src, ry[1].data, ry[0].data)
                 x_ok = i != base + run
@@ -163,7 +165,7 @@ class MergeSorter(wiring.Component):
                 for s_ in (0, 1):
                     m.d.comb += [rx[s_].addr.eq(rd_i[:ab]), ry[s_].addr.eq(rd_j[:ab])]
             with m.State("DRAIN"):
-                m.d.comb += self.busy.eq(1)
+                m.d.comb += [self.busy.eq(1), self.progress.eq(passes)]
                 with m.If(self.o.tready):
                     m.d.sync += ovalid.eq(0)
                     m.d.sync += [count.eq(0), p.eq(0)]
