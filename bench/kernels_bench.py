@@ -48,7 +48,7 @@ async def measure_kernels(dut):
                                                       for p in pairs)))
         await tb.wait_words("pid", len(pairs), 5000)
         model = AvrPid(256, 64, 32)
-        assert [int16(w) for w in pid.words(16)] == [model.update(*p) for p in pairs]
+        assert [int16(w) for w in pid.words()] == [model.update(*p) for p in pairs]
         c = pid.sink.packets[0].cycles
         records["pid"] = {"cycles": c[-1] - c[0] + 1, "items": len(pairs)}
 
@@ -57,7 +57,7 @@ async def measure_kernels(dut):
         for w in words:
             await ik.source.send(AxiStreamFrame(w.to_bytes(4, "little")))
         await tb.wait_words("ik", len(words), 300 * len(words))
-        assert ik.words(32) == [ik_model.solve(w) for w in words]
+        assert ik.words() == [ik_model.solve(w) for w in words]
         ends = [c for p in ik.sink.packets for c in p.cycles]
         records["ik"] = {"cycles": ends[-1] - ends[0], "items": len(words) - 1}
     else:

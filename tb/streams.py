@@ -3,10 +3,12 @@ and ``tuser`` flags (:class:`PacketSink`), and a plain valid/ready payload port
 (:class:`HandshakeSource`, :class:`HandshakeSink`)."""
 
 
-import cocotb
-from cocotb.triggers import RisingEdge
+import logging
 
-__all__ = ["random_pauses", "bursty_pauses", "count_pulses", "PacketSink", "HandshakeSource", "HandshakeSink",
+import cocotb
+from cocotb.triggers import ClockCycles, RisingEdge
+
+__all__ = ["random_pauses", "bursty_pauses", "count_pulses", "reset_aresetn", "StreamPort", "PacketSink", "HandshakeSource", "HandshakeSink",
            "Packet"]
 
 
@@ -30,6 +32,40 @@ async def count_pulses(signal, counters, key):
     while True:
         await RisingEdge(signal)
         counters[key] += 1
+
+
+async def reset_aresetn(dut, clock=None):
+    """Hold the active-low ``aresetn`` of an exported top for 4 cycles, then wait 2."""
+    clock = clock or dut.aclk
+    dut.aresetn.value = 0
+    await ClockCycles(clock, 4)
+    dut.aresetn.value = 1
+    await ClockCycles(clock, 2)
+
+
+class StreamPort:
+    """A kernel's input and output streams (``<name>_i`` driven by a cocotbext-axi source,
+    ``<name>_<out>`` taken by a :class:`PacketSink`), with idle and backpressure."""
+
+    def __init__(self, dut, name, rng, *, out="o"):
+        from cocotbext.axi import AxiStreamBus, AxiStreamSource
+        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
+                                      dut.aresetn, reset_active_level=False)
+        self.source.log.setLevel(logging.WARNING)
+        self.sink = PacketSink(dut, f"{name}_{out}", dut.aclk)
+        self.rng = rng
+
+    def set_pauses(self, idle, backpressure):
+        """Random idle at the source and backpressure at the sink (0: none)."""
+        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
+        if not idle:
+            self.source.pause = False   # the generator may have stopped on a pause
+        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
+                                      if backpressure else None)
+
+    def words(self):
+        """Every received beat's ``tdata``, packets concatenated."""
+        return [d for packet in self.sink.packets for d, _, _ in packet.beats]
 
 
 class Packet:

@@ -9,19 +9,18 @@ with a scoreboard, and each kernel's cycle budget of the issue is asserted at fu
 inverse-kinematics solution.
 """
 
-import logging
 import os
 import random
 
 import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
-from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
+from cocotbext.axi import AxiStreamFrame
 
 from tb.harness import bench_params, cocotb_bench
 from tb.models import inverse_kinematics as ik_model
 from tb.models.pid import AvrPid, FirstOrderPlant
-from tb.streams import PacketSink, count_pulses, random_pauses
+from tb.streams import StreamPort, count_pulses, reset_aresetn
 
 CLOCK_NS = 10
 
@@ -39,39 +38,14 @@ test_kernels = cocotb_bench("kernels", CONFIGS, long=[("control", "verilator")])
 SIM = os.environ.get("ROSGATE_SIM", "")
 
 
-class Port:
-    """A kernel's input source and output sink (``<name>_i``, ``<name>_o``)."""
-
-    def __init__(self, tb, name):
-        dut = tb.dut
-        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
-                                      dut.aresetn, reset_active_level=False)
-        self.source.log.setLevel(logging.WARNING)
-        self.sink = PacketSink(dut, f"{name}_o", dut.aclk)
-        self.rng = random.Random(tb.rng.random())
-
-    def set_pauses(self, idle, backpressure):
-        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
-        if not idle:
-            self.source.pause = False
-        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
-                                      if backpressure else None)
-
-    def words(self, width):
-        """Every received beat as an integer of ``width`` bits, packets concatenated."""
-        out = []
-        for packet in self.sink.packets:
-            out += [d for d, _, _ in packet.beats]
-        return out
-
-
 class ControlTB:
     def __init__(self, dut, seed=None):
         self.dut = dut
         self.params = bench_params()
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
-        self.ports = {name: Port(self, name) for name in self.params["kernels"]}
+        self.ports = {name: StreamPort(dut, name, random.Random(self.rng.random()))
+                      for name in self.params["kernels"]}
         self.cycle = 0
         cocotb.start_soon(self._count_cycles())
         self.errors = {"leg": 0, "short": 0, "long": 0}
@@ -96,10 +70,7 @@ class ControlTB:
         return {"short": self.errors["short"], "long": self.errors["long"]}
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 4)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
 
     def set_pauses(self, idle, backpressure):
         for port in self.ports.values():
@@ -151,9 +122,6 @@ async def run_sort(tb, blocks, lengths=None):
         got = sorted(block[:want]) + [0xFFFFFFFF] * (want - len(block))
         expected.append(got)
     await port.source.wait()
-    total = sum(len(e) for e in expected)
-    await tb.wait_words("sort", total + sum(len(p.beats) for p in port.sink.packets) - total,
-                        30_000 * len(blocks))
     for _ in range(30_000 * len(blocks)):
         if len(port.sink.packets) >= len(expected):
             break
@@ -205,11 +173,11 @@ async def all_kernels_under_idle_and_backpressure(dut):
 
     model = AvrPid(256, 64, 32)
     want = [model.update(sp, pv) for sp, pv in pairs]
-    got = [int16(w) for w in tb.ports["pid"].words(16)]
+    got = [int16(w) for w in tb.ports["pid"].words()]
     assert got[:10] == [755, 1180, 1543, 1843, 2030, 2130, 2012, 1937, 1895, 1945], got[:10]
     assert got == want, "PID output differs from the AVR221 model"
 
-    got = tb.ports["ik"].words(32)
+    got = tb.ports["ik"].words()
     want = [ik_model.solve(w) for w in ik_words]
     bad = [(hex(w), hex(g), hex(e)) for w, g, e in zip(ik_words, got, want) if g != e]
     assert not bad and len(got) == len(want), f"{len(bad)} IK solutions differ: {bad[:4]}"
@@ -228,7 +196,7 @@ async def bad_input_is_flagged_and_dropped(dut):
     await run_ik(tb, [good[0] | 7, good[0], (good[1] & ~7) | 6, good[1]])
     await tb.wait_words("ik", 2, 2000)
     await ClockCycles(dut.aclk, 400)
-    got = tb.ports["ik"].words(32)
+    got = tb.ports["ik"].words()
     assert got == [ik_model.solve(w) for w in good], [hex(g) for g in got]
     assert tb.err_leg == 2
     rng = tb.rng
@@ -264,7 +232,7 @@ async def full_rate_budgets(dut):
     cycles = pid.sink.packets[0].cycles
     pid_span = cycles[-1] - cycles[0] + 1
     model = AvrPid(128, 16, 64)
-    assert [int16(w) for w in pid.words(16)] == [model.update(*p) for p in pairs]
+    assert [int16(w) for w in pid.words()] == [model.update(*p) for p in pairs]
     assert pid_span == len(pairs), f"{len(pairs)} PID updates took {pid_span} cycles"
 
     words = [ik_model.client_word(i) for i in range(3, 40) if ik_model.client_word(i) & 7 < 6]
@@ -273,7 +241,7 @@ async def full_rate_budgets(dut):
     await tb.wait_words("ik", len(words), 250 * len(words))
     ends = [c for p in ik.sink.packets for c in p.cycles]
     per = (ends[-1] - ends[0]) / (len(ends) - 1)
-    assert ik.words(32) == [ik_model.solve(w) for w in words]
+    assert ik.words() == [ik_model.solve(w) for w in words]
     assert per <= 200, per
     tb.dut._log.info("full rate: sort 2048 in %d cycles, %d PID updates in %d cycles, IK %.1f "
                      "cycles per solution", sort_cycles, len(pairs), pid_span, per)
@@ -298,7 +266,7 @@ async def pid_closed_loop_first_order_plant(dut):
         before = sum(len(p.beats) for p in port.sink.packets)
         await port.source.send(AxiStreamFrame(pid_word(sp, y).to_bytes(4, "little")))
         await tb.wait_words("pid", before + 1, 200)
-        u = int16(port.words(16)[-1])
+        u = int16(port.words()[-1])
         assert u == model.update(sp, plant_model.y), f"step {step}: {u}"
         plant_hw.step(u)
         plant_model.step(u)

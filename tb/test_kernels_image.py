@@ -22,7 +22,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
 from tb.harness import bench_params, cocotb_bench
 from tb.models import image as golden
-from tb.streams import PacketSink, count_pulses, random_pauses
+from tb.streams import PacketSink, count_pulses, random_pauses, reset_aresetn
 
 CLOCK_NS = 10
 MAX_W, MAX_H = 96, 72
@@ -223,10 +223,7 @@ class KernelsTB:
                 if probability else None)
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 4)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
 
     def random_image(self, kernel, *, width=None, height=None):
         """Random bgr8 pixels of a random size the kernel accepts (as a bgr8 image)."""

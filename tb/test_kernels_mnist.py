@@ -6,19 +6,18 @@ held-out accuracy at least 97.5 %, and the latency per digit at most 5,000 cycle
 Icarus runs the first 4 held-out images, Verilator all 1000 (both under random idle and
 backpressure for the first 4); a short and a long image raise their error pulses."""
 
-import logging
 import os
 import random
 
 import cocotb
 import numpy as np
 from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles, RisingEdge
-from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
+from cocotb.triggers import RisingEdge
+from cocotbext.axi import AxiStreamFrame
 
 from gen import mnist
 from tb.harness import bench_params, cocotb_bench
-from tb.streams import PacketSink, count_pulses, random_pauses
+from tb.streams import StreamPort, count_pulses, reset_aresetn
 
 CLOCK_NS = 10
 
@@ -40,26 +39,17 @@ class MnistTB:
         self.params = bench_params()
         self.rng = random.Random(cocotb.RANDOM_SEED)
         cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
-        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, "cnn_i"), dut.aclk,
-                                      dut.aresetn, reset_active_level=False)
-        self.source.log.setLevel(logging.WARNING)
-        self.sink = PacketSink(dut, "cnn_o", dut.aclk)
+        self.port = StreamPort(dut, "cnn", self.rng)
+        self.source, self.sink = self.port.source, self.port.sink
         self.errors = {"short": 0, "long": 0}
         for e in self.errors:
             cocotb.start_soon(count_pulses(getattr(dut, f"cnn_err_{e}"), self.errors, e))
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 4)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
 
     def set_pauses(self, idle, backpressure):
-        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
-        if not idle:
-            self.source.pause = False
-        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
-                                      if backpressure else None)
+        self.port.set_pauses(idle, backpressure)
 
     async def classify(self, images, timeout_cycles=8000):
         """Send the images, wait for their results; return ``[(digit, scores)]`` and the

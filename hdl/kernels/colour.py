@@ -8,7 +8,8 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
 from ..stream import AXIStreamSignature
-from .image import FrameGuard, check_image_params, image_stream_signature
+from .image import (FrameGuard, check_image_params, image_kernel_members,
+                    image_stream_signature)
 
 __all__ = ["PixelKernel", "BgrToGray", "BgrToHsv", "InRange", "TrafficLightDetector",
            "GRAY_WEIGHTS", "HSV_SHIFT", "hsv_tables"]
@@ -57,13 +58,8 @@ class PixelKernel(wiring.Component):
         self._c, self._oc, self._p = channels, out_channels, pixels_per_beat
         self._max_width, self._max_height = max_width, max_height
         super().__init__({
-            "i": In(image_stream_signature(channels, pixels_per_beat)),
-            "o": Out(image_stream_signature(out_channels, pixels_per_beat)),
-            "width": In(range(max_width + 1)),
-            "height": In(range(max_height + 1)),
-            "err_short": Out(1),
-            "err_long": Out(1),
-            "err_size": Out(1),
+            **image_kernel_members(channels, out_channels, pixels_per_beat, max_width,
+                                   max_height),
             **(members or {}),
         })
 

@@ -4,10 +4,9 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.memory import Memory
-from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError
-from .image import FrameGuard, check_image_params, image_stream_signature
+from .image import FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["EqualizeHist", "round_to_float32"]
 
@@ -91,16 +90,7 @@ class EqualizeHist(wiring.Component):
             raise ParameterError("max_width * max_height", max_width * max_height,
                                  "at most 4194304 pixels")
         self._p, self._max_width, self._max_height = pixels_per_beat, max_width, max_height
-        sig = image_stream_signature(1, pixels_per_beat)
-        super().__init__({
-            "i": In(sig),
-            "o": Out(sig),
-            "width": In(range(max_width + 1)),
-            "height": In(range(max_height + 1)),
-            "err_short": Out(1),
-            "err_long": Out(1),
-            "err_size": Out(1),
-        })
+        super().__init__(image_kernel_members(1, 1, pixels_per_beat, max_width, max_height))
 
     pixels_per_beat = property(lambda self: self._p)
 
@@ -181,6 +171,16 @@ class EqualizeHist(wiring.Component):
         scale_m = Signal(24)
         scale_s = Signal(range(SCALE_BITS + 12))
         hist_sum = sum(rd.data for _, rd in hists)
+
+        def next_bin():
+            # the next bin's read is issued now, so the scan takes one cycle per bin
+            with m.If(j == 255):
+                m.next = "DONE"
+            with m.Else():
+                for _, rd in hists:
+                    m.d.comb += rd.addr.eq(j + 1)
+                m.d.sync += j.eq(j + 1)
+
         with m.FSM():
             with m.State("FILL"):
                 with m.If(~filling & ~inc_valid & ~draining):
@@ -209,12 +209,7 @@ class EqualizeHist(wiring.Component):
                         m.next = "DIVIDE"
                 with m.Elif(~found):
                     m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j), lut_wr.data.eq(0)]
-                    with m.If(j == 255):
-                        m.next = "DONE"
-                    with m.Else():
-                        for _, rd in hists:
-                            m.d.comb += rd.addr.eq(j + 1)
-                        m.d.sync += j.eq(j + 1)
+                    next_bin()
                 with m.Else():
                     # lut[j] = rint(fl(fl(x) * scale)), x = cdf[j] - h0 < 2**24
                     x = new_cdf - h0
@@ -236,12 +231,7 @@ class EqualizeHist(wiring.Component):
                     m.d.comb += value.eq(Mux(frac > 24, 0, whole + up))
                     m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j),
                                  lut_wr.data.eq(Mux(value > 255, 255, value))]
-                    with m.If(j == 255):
-                        m.next = "DONE"
-                    with m.Else():
-                        for _, rd in hists:
-                            m.d.comb += rd.addr.eq(j + 1)
-                        m.d.sync += j.eq(j + 1)
+                    next_bin()
             with m.State("DIVIDE"):
                 # floor(255 * 2**SCALE_BITS / denom), one quotient bit per cycle
                 r = Cat(numer[-1], remainder[:-1])

@@ -14,7 +14,7 @@ from ..params import ParameterError, check_choice, check_int
 from ..stream import AXIStreamSignature
 
 __all__ = ["BORDERS", "PIXELS_PER_BEAT", "image_stream_signature", "check_image_params",
-           "FrameGuard"]
+           "image_kernel_members", "FrameGuard"]
 
 #: border modes: OpenCV ``BORDER_REFLECT_101`` (``gfedcb|abcdefgh|gfedcba``),
 #: ``BORDER_REPLICATE`` and ``BORDER_CONSTANT`` with value 0
@@ -39,6 +39,20 @@ def check_image_params(channels, pixels_per_beat, max_width, max_height, *, chan
     if max_width % pixels_per_beat:
         raise ParameterError("max_width", max_width,
                              f"a multiple of pixels_per_beat ({pixels_per_beat})")
+
+
+def image_kernel_members(channels, out_channels, pixels_per_beat, max_width, max_height):
+    """The signature members every image kernel has: ``i``, ``o``, ``width``, ``height`` and
+    the :class:`FrameGuard` error pulses."""
+    return {
+        "i": In(image_stream_signature(channels, pixels_per_beat)),
+        "o": Out(image_stream_signature(out_channels, pixels_per_beat)),
+        "width": In(range(max_width + 1)),
+        "height": In(range(max_height + 1)),
+        "err_short": Out(1),
+        "err_long": Out(1),
+        "err_size": Out(1),
+    }
 
 
 class FrameGuard(wiring.Component):

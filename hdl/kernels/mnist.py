@@ -127,7 +127,8 @@ class MnistCnn(wiring.Component):
         """One convolution layer with pooling (see the class docstring)."""
         w, b, shift = self._weights[f"conv{n + 1}"]
         pooled = size // 2
-        rom = Memory(shape=8 * 9 * c_out, depth=c_in,
+        # at least two entries: a one-entry ROM would have a zero-width address
+        rom = Memory(shape=8 * 9 * c_out, depth=max(c_in, 2),
                      init=[_pack([w[o, c, dy, dx] for o in range(c_out) for dy in range(3)
                                   for dx in range(3)], 8) for c in range(c_in)])
         m.submodules[f"conv{n + 1}_w"] = rom
@@ -138,7 +139,7 @@ class MnistCnn(wiring.Component):
         run = Signal(name=f"c{n}_run")
         py, px = Signal(range(pooled), name=f"c{n}_py"), Signal(range(pooled), name=f"c{n}_px")
         sub = Signal(2, name=f"c{n}_sub")
-        c = Signal(range(c_in), name=f"c{n}_c")
+        c = Signal(range(max(c_in, 2)), name=f"c{n}_c")
         y = Cat(sub[1], py)
         x = Cat(sub[0], px)
         m.d.comb += w_rd.addr.eq(c)

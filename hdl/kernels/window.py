@@ -3,10 +3,10 @@
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
-from amaranth.lib.wiring import In, Out
+from amaranth.lib.wiring import Out
 
 from ..params import ParameterError, check_choice
-from .image import BORDERS, FrameGuard, check_image_params, image_stream_signature
+from .image import BORDERS, FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["WindowFilter", "border_index"]
 
@@ -103,13 +103,8 @@ class WindowFilter(wiring.Component):
                                  f"at least {self._min_width}x{ksize} for ksize {ksize} and "
                                  f"{pixels_per_beat} pixels per beat")
         super().__init__({
-            "i": In(image_stream_signature(channels, pixels_per_beat)),
-            "o": Out(image_stream_signature(out_channels, pixels_per_beat)),
-            "width": In(range(max_width + 1)),
-            "height": In(range(max_height + 1)),
-            "err_short": Out(1),
-            "err_long": Out(1),
-            "err_size": Out(1),
+            **image_kernel_members(channels, out_channels, pixels_per_beat, max_width,
+                                   max_height),
             "busy": Out(1),
         })
 
