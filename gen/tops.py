@@ -45,16 +45,21 @@ def _thread_classes():
             "dip": t.DipThread}
 
 
-def build_thread(arch, spec, where="thread"):
-    """A hardware thread from ``{"kind": k, ...parameters}`` (k a key of
-    :func:`_thread_classes`)."""
-    classes = _thread_classes()
+def _by_kind(classes, spec, where, what):
+    """``(class, parameters)`` of a ``{"kind": k, ...parameters}`` spec."""
     spec = dict(spec)
     kind = spec.pop("kind")
     if kind not in classes:
-        raise ValueError(f"{where}: unknown thread kind {kind!r}; known: "
+        raise ValueError(f"{where}: unknown {what} kind {kind!r}; known: "
                          f"{', '.join(sorted(classes))}")
-    return classes[kind](arch, **spec)
+    return classes[kind], spec
+
+
+def build_thread(arch, spec, where="thread"):
+    """A hardware thread from ``{"kind": k, ...parameters}`` (k a key of
+    :func:`_thread_classes`)."""
+    cls, params = _by_kind(_thread_classes(), spec, where, "thread")
+    return cls(arch, **params)
 
 
 def build_reconos(**params):
@@ -86,13 +91,8 @@ def _mnist_cnn(weights=None, **params):
 
 def build_kernel(spec, where="kernel"):
     """A kernel from ``{"kind": k, ...parameters}`` (k a key of :func:`_kernel_classes`)."""
-    classes = _kernel_classes()
-    spec = dict(spec)
-    kind = spec.pop("kind")
-    if kind not in classes:
-        raise ValueError(f"{where}: unknown kernel kind {kind!r}; known: "
-                         f"{', '.join(sorted(classes))}")
-    return classes[kind](**spec)
+    cls, params = _by_kind(_kernel_classes(), spec, where, "kernel")
+    return cls(**params)
 
 
 def build_kernels(**params):
