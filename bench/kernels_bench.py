@@ -63,8 +63,7 @@ async def measure_kernels(dut):
     else:
         tb = KernelsTB(dut, seed=1)
         await tb.reset()
-        tb.set_idle_generator(0)
-        tb.set_backpressure_generator(0)
+        tb.set_pauses(0, 0)
         image = golden.load_image("coffee_640x480.png")
         for name, k in tb.kernels.items():
             start = tb.cycle

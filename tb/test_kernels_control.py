@@ -17,6 +17,7 @@ from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
+from hdl.kernels.pid import PID_INPUT
 from tb.harness import bench_params, cocotb_bench
 from tb.models import inverse_kinematics as ik_model
 from tb.models.pid import AvrPid, FirstOrderPlant
@@ -99,7 +100,7 @@ class ControlTB:
 
 
 def pid_word(sp, pv):
-    return (sp & 0xFFFF) | (pv & 0xFFFF) << 16
+    return PID_INPUT.const({"set_point": sp, "measurement": pv}).as_value().value
 
 
 def int16(v):

@@ -18,11 +18,12 @@ import cocotb
 import numpy as np
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
-from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
+from cocotbext.axi import AxiStreamFrame
 
+from hdl.kernels.colour import TRAFFIC_DETECTION
 from tb.harness import bench_params, cocotb_bench
 from tb.models import image as golden
-from tb.streams import PacketSink, count_pulses, random_pauses, reset_aresetn
+from tb.streams import StreamPort, count_pulses, reset_aresetn
 
 CLOCK_NS = 10
 MAX_W, MAX_H = 96, 72
@@ -73,11 +74,9 @@ class KernelPort:
         self.kind = spec["kind"]
         self.p = spec.get("pixels_per_beat", 1)
         self.max_width, self.max_height = spec["max_width"], spec["max_height"]
-        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
-                                      dut.aresetn, reset_active_level=False)
-        self.source.log.setLevel(logging.WARNING)
-        out = "det" if self.kind == "traffic_light" else "o"
-        self.sink = PacketSink(dut, f"{name}_{out}", dut.aclk)
+        self.port = StreamPort(dut, name, random.Random(tb.rng.random()),
+                               out="det" if self.kind == "traffic_light" else "o")
+        self.source, self.sink = self.port.source, self.port.sink
         self.width = getattr(dut, f"{name}_width")
         self.height = getattr(dut, f"{name}_height")
         self.errors = {"short": 0, "long": 0, "size": 0}
@@ -141,7 +140,8 @@ class KernelPort:
         if self.kind == "inrange":
             return golden.in_range(pixels, self.lower, self.upper).tobytes()
         rc, red, gc, green = golden.traffic_lights(pixels, RED_RANGES, GREEN_RANGE, MIN_PIXELS)
-        word = rc | red << 31 | gc << 32 | green << 63
+        word = TRAFFIC_DETECTION.const({"red_pixels": rc, "red": red, "green_pixels": gc,
+                                        "green": green}).as_value().value
         return word.to_bytes(8, "little")
 
     def frame_bytes(self, width, height):
@@ -208,19 +208,10 @@ class KernelsTB:
             await RisingEdge(self.dut.aclk)
             self.cycle += 1
 
-    def set_idle_generator(self, probability):
+    def set_pauses(self, idle, backpressure):
+        """Random idle at every kernel's input, backpressure at every output (0: none)."""
         for k in self.kernels.values():
-            k.source.set_pause_generator(
-                random_pauses(random.Random(self.rng.random()), probability)
-                if probability else None)
-            if not probability:
-                k.source.pause = False
-
-    def set_backpressure_generator(self, probability):
-        for k in self.kernels.values():
-            k.sink.set_pause_generator(
-                random_pauses(random.Random(self.rng.random()), probability)
-                if probability else None)
+            k.port.set_pauses(idle, backpressure)
 
     async def reset(self):
         await reset_aresetn(self.dut)
@@ -276,8 +267,7 @@ async def photos_and_random_frames_idle_backpressure(dut):
     640x480 one.)"""
     tb = KernelsTB(dut)
     await tb.reset()
-    tb.set_idle_generator(0.3)
-    tb.set_backpressure_generator(0.3)
+    tb.set_pauses(0.3, 0.3)
     photos = [golden.load_image("chelsea_96x72.png")]
     rng = np.random.default_rng(tb.rng.randrange(1 << 30))
     frames = {}
@@ -292,8 +282,9 @@ async def photos_and_random_frames_idle_backpressure(dut):
     for k in tb.kernels.values():
         assert k.errors == {"short": 0, "long": 0, "size": 0}, (k.name, k.errors)
     det = tb.kernels["traffic"]
-    flags = [(int.from_bytes(p.data, "little") >> 31 & 1, int.from_bytes(p.data, "little") >> 63)
+    beats = [TRAFFIC_DETECTION.from_bits(int.from_bytes(p.data, "little"))
              for p in det.sink.packets]
+    flags = [(b.red, b.green) for b in beats]
     assert flags[1] == (1, 0) and flags[2] == (0, 1), f"traffic scenes detected as {flags[1:3]}"
 
 
@@ -304,8 +295,7 @@ async def bad_frames_are_flagged_and_resynchronised(dut):
     each error pulses once and every output frame is well-formed and correct."""
     tb = KernelsTB(dut)
     await tb.reset()
-    tb.set_idle_generator(0.2)
-    tb.set_backpressure_generator(0.2)
+    tb.set_pauses(0.2, 0.2)
     frames = {}
     for name, k in tb.kernels.items():
         image = tb.random_image(k)
@@ -330,8 +320,7 @@ async def full_rate_frame_time(dut):
     the budget of the spec (see the module docstring)."""
     tb = KernelsTB(dut)
     await tb.reset()
-    tb.set_idle_generator(0)
-    tb.set_backpressure_generator(0)
+    tb.set_pauses(0, 0)
     image = golden.load_image("coffee_80x60.png")
     start = tb.cycle
     await tb.run_frames({n: [(image, {}), (image, {})] for n in tb.kernels},

@@ -16,6 +16,7 @@ from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamFrame
 
 from gen import mnist
+from hdl.kernels.mnist import MNIST_RESULT
 from tb.harness import bench_params, cocotb_bench
 from tb.streams import StreamPort, count_pulses, reset_aresetn
 
@@ -66,10 +67,8 @@ class MnistTB:
             else:
                 raise AssertionError(f"no result within {timeout_cycles} cycles")
             packet = self.sink.packets[-1]
-            data = bytes(packet.data)
-            scores = [int.from_bytes(data[2 + 2 * k:4 + 2 * k], "little", signed=True)
-                      for k in range(10)]
-            results.append((data[0], scores))
+            result = MNIST_RESULT.from_bits(int.from_bytes(packet.data, "little"))
+            results.append((result.digit, [result.scores[k] for k in range(10)]))
             latencies.append(packet.cycles[-1] - start)
         return results, latencies
 

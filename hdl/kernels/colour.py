@@ -2,7 +2,7 @@
 BGR to HSV, ``inRange``, and a traffic-light detector built from them."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal, signed
-from amaranth.lib import wiring
+from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
@@ -12,12 +12,16 @@ from .image import (FrameGuard, check_image_params, image_kernel_members,
                     image_stream_signature)
 
 __all__ = ["PixelKernel", "BgrToGray", "BgrToHsv", "InRange", "TrafficLightDetector",
-           "GRAY_WEIGHTS", "HSV_SHIFT", "hsv_tables"]
+           "GRAY_WEIGHTS", "HSV_SHIFT", "TRAFFIC_DETECTION", "hsv_tables"]
 
 #: (B, G, R) weights of OpenCV's 8-bit BGR to GRAY: ``(sum(w * c) + 2**14) >> 15``
 GRAY_WEIGHTS = (3735, 19235, 9798)
 
 HSV_SHIFT = 12
+
+#: the detection beat of :class:`TrafficLightDetector` (64 bits, first member lowest)
+TRAFFIC_DETECTION = data.StructLayout({"red_pixels": 31, "red": 1, "green_pixels": 31,
+                                       "green": 1})
 
 
 def hsv_tables(hue_range=180):
@@ -213,8 +217,8 @@ class TrafficLightDetector(wiring.Component):
     detector): per frame, count the pixels whose HSV lies in the red ranges (two, for the hue
     wrap) and in the green range (``inRange`` semantics), and send one detection beat.
 
-    Detection beat (``det``, 64 bits, ``tlast`` set): bits 0..30 red pixel count, bit 31
-    red detected (count >= ``min_pixels``), bits 32..62 green count, bit 63 green detected.
+    Detection beat (``det``, :data:`TRAFFIC_DETECTION`, ``tlast`` set): red pixel count,
+    red detected (count >= ``min_pixels``), green count, green detected.
     If the previous detection has not been taken when a frame ends, the pixel stream stalls.
 
     Parameters
@@ -282,10 +286,12 @@ class TrafficLightDetector(wiring.Component):
             m.d.sync += det_valid.eq(0)
         with m.If(hsv.o.tvalid & hsv.o.tready):
             with m.If(hsv.o.tlast):
+                det = data.View(TRAFFIC_DETECTION, self.det.tdata)
                 m.d.sync += [red.eq(0), green.eq(0), det_valid.eq(1),
-                             self.det.tdata.eq(Cat(red_n[:31], red_n[:31] >= self.min_pixels,
-                                                   green_n[:31],
-                                                   green_n[:31] >= self.min_pixels))]
+                             det.red_pixels.eq(red_n[:31]),
+                             det.red.eq(red_n[:31] >= self.min_pixels),
+                             det.green_pixels.eq(green_n[:31]),
+                             det.green.eq(green_n[:31] >= self.min_pixels)]
             with m.Else():
                 m.d.sync += [red.eq(red_n), green.eq(green_n)]
         return m

@@ -1,7 +1,7 @@
 """Integer MNIST CNN: 3 x (conv3x3 + ReLU + maxpool2), FC + ReLU, FC (spec kernels.md §8)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
-from amaranth.lib import wiring
+from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
@@ -9,10 +9,11 @@ from ..params import ParameterError, check_choice
 from ..stream import AXIStreamSignature
 from .image import FrameGuard, image_stream_signature
 
-__all__ = ["MnistCnn", "MNIST_RESULT_BYTES"]
+__all__ = ["MnistCnn", "MNIST_RESULT"]
 
-#: result beat: byte 0 the digit, bytes 2 + 2k..3 + 2k the int16 score of digit k
-MNIST_RESULT_BYTES = 22
+#: the result beat (176 bits, first member lowest)
+MNIST_RESULT = data.StructLayout({"digit": 8, "reserved": 8,
+                                  "scores": data.ArrayLayout(signed(16), 10)})
 
 _CONVS = (("conv1", 1, 8, 28), ("conv2", 8, 16, 14), ("conv3", 16, 32, 7))
 _FCS = (("fc1", 288, 64), ("fc2", 64, 10))
@@ -50,8 +51,8 @@ class MnistCnn(wiring.Component):
         A 28x28 image, row by row, ``tlast`` on the last beat. Shorter images are padded
         with black, longer ones cut (``err_short``, ``err_long``).
     o : Out(AXIStreamSignature(176, keep=False))
-        One result per image (:data:`MNIST_RESULT_BYTES`): the digit (first maximum score)
-        and the ten int16 scores; ``tlast`` set.
+        One :data:`MNIST_RESULT` per image: the digit (first maximum score) and the ten
+        int16 scores; ``tlast`` set.
     err_short, err_long : Out(1)
         One-cycle pulses (:class:`~hdl.kernels.image.FrameGuard`).
     """
@@ -68,7 +69,7 @@ class MnistCnn(wiring.Component):
         self._p = pixels_per_beat
         super().__init__({
             "i": In(image_stream_signature(1, pixels_per_beat)),
-            "o": Out(AXIStreamSignature(8 * MNIST_RESULT_BYTES, keep=False)),
+            "o": Out(AXIStreamSignature(MNIST_RESULT.size, keep=False)),
             "err_short": Out(1),
             "err_long": Out(1),
         })
@@ -87,7 +88,6 @@ class MnistCnn(wiring.Component):
             acts.append(Memory(shape=8 * c_out, depth=(size // 2) ** 2, init=[]))
         for n, mem in enumerate(acts):
             m.submodules[f"act{n}"] = mem
-        self._acts = acts               # for white-box inspection in amaranth.sim
 
         # loading the image
         load_addr = Signal(range(784 // P + 1))
@@ -115,8 +115,9 @@ class MnistCnn(wiring.Component):
         with m.If(self.o.tvalid & self.o.tready):
             m.d.sync += o_valid.eq(0)
         with m.If(done[4]):
-            m.d.sync += [o_valid.eq(1), busy.eq(0),
-                         self.o.tdata.eq(Cat(digit, Const(0, 12), *[s[:16] for s in scores]))]
+            result = data.View(MNIST_RESULT, self.o.tdata)
+            m.d.sync += [o_valid.eq(1), busy.eq(0), result.digit.eq(digit),
+                         *[result.scores[k].eq(score) for k, score in enumerate(scores)]]
         # a new image is taken only once the result has left
         with m.If(o_valid & ~(self.o.tready)):
             m.d.comb += guard.o.tready.eq(0)
@@ -242,7 +243,6 @@ class MnistCnn(wiring.Component):
         a = port.data.word_select(ch1, 8)
         acc1 = [Signal(signed(32), name=f"fc1_acc{o}") for o in range(64)]
         hidden = [Signal(7, name=f"fc1_h{o}") for o in range(64)]
-        self._hidden = hidden
         first = Signal()
         m.d.sync += first.eq(i == 0)
         for o in range(64):

@@ -1,18 +1,21 @@
 """Discrete PID controller with AVR221 semantics (spec finemb.md §6.1), one update per clock."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal, signed
-from amaranth.lib import wiring
+from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..stream import AXIStreamSignature
 
-__all__ = ["PidController", "PID_SCALING", "PID_MAX_INT", "PID_MAX_LONG"]
+__all__ = ["PidController", "PID_INPUT", "PID_SCALING", "PID_MAX_INT", "PID_MAX_LONG"]
 
 #: gains are real gains times this
 PID_SCALING = 128
 PID_MAX_INT = 32767
 PID_MAX_LONG = (1 << 31) - 1
 PID_MAX_I_TERM = PID_MAX_LONG // 2
+
+#: an input beat: set point and measurement, int16 each
+PID_INPUT = data.StructLayout({"set_point": signed(16), "measurement": signed(16)})
 
 
 class PidController(wiring.Component):
@@ -34,7 +37,7 @@ class PidController(wiring.Component):
     Members
     -------
     i : In(AXIStreamSignature(32, keep=False))
-        ``tdata[0:16]`` set point, ``tdata[16:32]`` measurement, both int16. ``tlast`` is
+        ``tdata`` is a :data:`PID_INPUT` (set point, measurement). ``tlast`` is
         passed through to the output of the same update.
     o : Out(AXIStreamSignature(16, keep=False))
         Control output, int16.
@@ -103,7 +106,8 @@ class PidController(wiring.Component):
         m.d.comb += [adv.eq(~o_valid | self.o.tready),
                      self.i.tready.eq(adv & ~dividing & ~self.load)]
         take = self.i.tvalid & self.i.tready
-        sp, pv = self.i.tdata[:16].as_signed(), self.i.tdata[16:].as_signed()
+        beat = data.View(PID_INPUT, self.i.tdata)
+        sp, pv = beat.set_point, beat.measurement
         e = Signal(signed(16))
         m.d.comb += e.eq(sp - pv)
         base = Mux(self.reset_integrator, 0, total)
