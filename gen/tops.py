@@ -103,8 +103,15 @@ def build_kernels(**params):
                         for name, spec in params.pop("kernels").items()})
 
 
+def build_net(**params):
+    """A :class:`hdl.net.NetStack` (MAC, ARP, IPv4, ICMP, RBCP, ``sessions`` TCP sessions)."""
+    from hdl.net import NetStack
+    return NetStack(**params)
+
+
 #: name -> builder
 TOPS = {
+    "net": build_net,
     "kernels": build_kernels,
     "topic": build_topic,
     "msg_codec": build_msg_codec,

@@ -2,5 +2,13 @@
 
 from .checksum import InternetChecksum
 from .crc import CRC32_RESIDUE, Crc32
+from .mac import GmiiRx, GmiiTx
+from .rbcp import RbcpBusSignature, RbcpServer
+from .rx import FrameParser
+from .stack import NetStack
+from .tcp import TcpSession, TcpState
+from .tx import FrameBuilder
 
-__all__ = ["CRC32_RESIDUE", "Crc32", "InternetChecksum"]
+__all__ = ["CRC32_RESIDUE", "Crc32", "InternetChecksum", "GmiiRx", "GmiiTx", "FrameParser",
+           "FrameBuilder", "RbcpBusSignature", "RbcpServer", "TcpSession", "TcpState",
+           "NetStack"]

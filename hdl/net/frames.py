@@ -1,0 +1,101 @@
+"""Wire constants of the network engine, defined once (spec net.md §1, §2.2).
+
+Offsets are byte offsets from the first byte of the destination MAC address (the byte after
+the SFD). The hardware parser and builder and the Python models import them from here.
+"""
+
+__all__ = [
+    "ETH_HEADER", "ETHERTYPE_IPV4", "ETHERTYPE_ARP", "MIN_FRAME", "MAX_FRAME", "PREAMBLE",
+    "SFD", "IFG", "ARP_OFFSET", "ARP_REQUEST", "ARP_REPLY", "IP_OFFSET", "IP_PROTO_ICMP",
+    "IP_PROTO_TCP", "IP_PROTO_UDP", "IP_TTL", "ICMP_ECHO_REQUEST", "ICMP_ECHO_REPLY",
+    "TCP_FIN", "TCP_SYN", "TCP_RST", "TCP_PSH", "TCP_ACK", "TCP_OPT_MSS", "TCP_MSS",
+    "TCP_MSS_DEFAULT", "RBCP_VERSION", "RBCP_WRITE", "RBCP_READ", "RBCP_REPLY",
+    "RBCP_BUS_ERROR", "RBCP_HEADER", "DEFAULT_IP", "DEFAULT_MAC", "DEFAULT_TCP_PORT",
+    "DEFAULT_RBCP_PORT", "ip_to_int", "int_to_ip", "mac_to_int", "int_to_mac",
+    "DROP_REASONS",
+]
+
+PREAMBLE = 7                  # 0x55 bytes before the SFD
+SFD = 0xD5
+IFG = 12                      # byte times between frames at the transmitter
+ETH_HEADER = 14
+MIN_FRAME = 64                # dst MAC .. FCS
+MAX_FRAME = 1518
+ETHERTYPE_IPV4 = 0x0800
+ETHERTYPE_ARP = 0x0806
+
+ARP_OFFSET = ETH_HEADER       # htype 0, ptype 2, hlen 4, plen 5, oper 6, sha 8, spa 14, tha 18, tpa 24
+ARP_REQUEST = 1
+ARP_REPLY = 2
+
+IP_OFFSET = ETH_HEADER
+IP_PROTO_ICMP = 1
+IP_PROTO_TCP = 6
+IP_PROTO_UDP = 17
+IP_TTL = 64
+
+ICMP_ECHO_REQUEST = 8
+ICMP_ECHO_REPLY = 0
+
+TCP_FIN = 0x01
+TCP_SYN = 0x02
+TCP_RST = 0x04
+TCP_PSH = 0x08
+TCP_ACK = 0x10
+TCP_OPT_MSS = 2
+TCP_MSS = 1460                # sent in SYN and SYN-ACK
+TCP_MSS_DEFAULT = 536         # assumed when the peer's SYN has no MSS option (RFC 9293 §3.7.1)
+
+RBCP_VERSION = 0xFF
+RBCP_WRITE = 0x80
+RBCP_READ = 0xC0
+RBCP_REPLY = 0x08             # set in the reply's CMD/flag byte
+RBCP_BUS_ERROR = 0x01
+RBCP_HEADER = 8
+
+DEFAULT_IP = "192.168.10.16"
+DEFAULT_MAC = "02:00:c0:a8:0a:10"   # locally administered; SiTCP reads its MAC from an EEPROM
+DEFAULT_TCP_PORT = 24
+DEFAULT_RBCP_PORT = 4660
+
+#: Why a received frame was dropped, in the order of the stack's drop counters (net.md §7.2
+#: "drop counters per reason").
+DROP_REASONS = (
+    "fcs",          # bad FCS
+    "rx_er",        # RX_ER inside the frame
+    "size",         # shorter than 64 or longer than 1518 bytes
+    "not_mine",     # destination MAC or IP not ours, unknown EtherType, ARP not for us
+    "ip_header",    # bad IPv4 version, IHL, total length or header checksum
+    "fragment",     # MF set or fragment offset not 0
+    "protocol",     # IP protocol other than ICMP, UDP, TCP; ICMP other than echo request
+    "l4_checksum",  # bad ICMP, UDP or TCP checksum or length
+    "no_port",      # UDP to a closed port, TCP answered with RST
+    "busy",         # reply buffer or reply slot in use
+)
+
+
+def ip_to_int(text):
+    """``"192.168.10.16"`` -> ``0xC0A80A10``; raise ``ValueError`` naming a bad address."""
+    parts = str(text).split(".")
+    if len(parts) != 4 or not all(p.isdigit() and int(p) < 256 for p in parts):
+        raise ValueError(f"not an IPv4 address: {text!r}")
+    return int.from_bytes(bytes(int(p) for p in parts), "big")
+
+
+def int_to_ip(value):
+    return ".".join(str(b) for b in value.to_bytes(4, "big"))
+
+
+def mac_to_int(text):
+    """``"02:00:c0:a8:0a:10"`` -> 48-bit integer; raise ``ValueError`` naming a bad address."""
+    parts = str(text).split(":")
+    if len(parts) != 6 or not all(len(p) == 2 for p in parts):
+        raise ValueError(f"not a MAC address: {text!r}")
+    try:
+        return int.from_bytes(bytes(int(p, 16) for p in parts), "big")
+    except ValueError:
+        raise ValueError(f"not a MAC address: {text!r}") from None
+
+
+def int_to_mac(value):
+    return ":".join(f"{b:02x}" for b in value.to_bytes(6, "big"))

@@ -1,0 +1,301 @@
+"""Receive-side frame parser: Ethernet, ARP, IPv4, ICMP, UDP and TCP headers and checksums,
+checked on the fly at one byte per cycle (spec net.md §1.1-§1.3)."""
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import data, enum, wiring
+from amaranth.lib.wiring import In, Out
+
+from .checksum import ones_complement_add
+from .frames import (
+    ARP_REPLY, ARP_REQUEST, DROP_REASONS, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4,
+    ICMP_ECHO_REQUEST, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, TCP_OPT_MSS,
+)
+from .mac import RxByteSignature
+
+__all__ = ["RX_FIELDS", "FrameKind", "DROP_CODE", "FrameParser"]
+
+#: Header fields of the frame being received, valid from the byte that completes them until
+#: the next frame's bytes overwrite them (at least 4 cycles after ``done``).
+RX_FIELDS = data.StructLayout({
+    "eth_src": 48,
+    "arp_oper": 16, "arp_sha": 48, "arp_spa": 32, "arp_tpa": 32,
+    "ip_src": 32, "ip_dst": 32, "ip_proto": 8, "ip_len": 16, "l4_len": 16,
+    "src_port": 16, "dst_port": 16, "udp_len": 16, "udp_csum": 16,
+    "seq": 32, "ack": 32, "flags": 8, "window": 16, "doff": 4, "mss": 16, "has_mss": 1,
+    "icmp_type": 8, "icmp_code": 8, "icmp_csum": 16,
+    "payload_len": 16,
+})
+
+
+class FrameKind(enum.Enum, shape=2):
+    ARP = 0
+    ICMP = 1
+    UDP = 2
+    TCP = 3
+
+
+#: drop reason -> code of the ``reason`` output
+DROP_CODE = {name: code for code, name in enumerate(DROP_REASONS)}
+
+
+def _shift_in(field, byte):
+    return field.eq(Cat(byte, field[:-8]))
+
+
+class FrameParser(wiring.Component):
+    """Parse a received frame's headers while it arrives; after its last byte tell whether
+    it is for this node and well formed, and what it is.
+
+    Members
+    -------
+    rx : In(RxByteSignature())
+        Bytes and end status from :class:`GmiiRx`.
+    local_mac, local_ip : In(48), In(32)
+        This node's addresses.
+    fields : Out(RX_FIELDS)
+        Header fields, captured in place.
+    payload_data, payload_valid, payload_offset : Out
+        The L4 payload's bytes as they pass: the whole ICMP message, the UDP data, the TCP
+        data (after the options); ``payload_offset`` counts from 0. Bytes beyond the IP total
+        length (Ethernet padding, FCS) are not payload.
+    kind : Out(FrameKind)
+        What the frame is, from its EtherType and IP protocol (valid during the payload).
+    done : Out(1)
+        One-cycle pulse after the frame: ``accept``, ``reason`` and ``kind`` are valid.
+    accept : Out(1)
+        The frame passed every check: an ARP request or reply for ``local_ip``, an ICMP echo
+        request, a UDP datagram or a TCP segment to ``local_ip`` with correct checksums.
+    reason : Out(range(len(DROP_REASONS)))
+        Why it was dropped, when ``accept`` is low (net.md §7.2 counters).
+    """
+
+    def __init__(self):
+        super().__init__({
+            "rx": In(RxByteSignature()),
+            "local_mac": In(48), "local_ip": In(32),
+            "fields": Out(RX_FIELDS),
+            "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
+            "kind": Out(FrameKind),
+            "done": Out(1), "accept": Out(1), "reason": Out(range(len(DROP_REASONS))),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        f = self.fields
+        rx = self.rx
+        i = rx.index
+        byte = rx.data
+        v = rx.valid
+
+        dst_mine = Signal()
+        dst_bcast = Signal()
+        ethertype = Signal(16)
+        arp_fixed = Signal(48)          # htype, ptype, hlen, plen
+        ver_ihl = Signal(8)
+        frag = Signal(16)
+        ip_acc = Signal(16)
+        l4_acc = Signal(16)
+        pseudo_acc = Signal(16)
+        l4_off = Signal(11, init=2047)
+        pl_start = Signal(11, init=2047)
+        tcp_csum = Signal(16)
+        ihl4 = Cat(Const(0, 2), ver_ihl[0:4])
+        ip_end = Signal(12)
+        m.d.comb += ip_end.eq(ETH_HEADER + f.ip_len)
+
+        j = Signal(11)
+        m.d.comb += j.eq(i - l4_off)
+        in_l4 = Signal()
+        m.d.comb += in_l4.eq((i >= l4_off) & (i < ip_end) & (i >= 18))
+        word = Mux(i[0], Cat(byte, Const(0, 8)), Cat(Const(0, 8), byte))
+
+        with m.If(v & (i == 0)):
+            m.d.sync += [dst_mine.eq(1), dst_bcast.eq(1), l4_off.eq(2047), pl_start.eq(2047),
+                         ip_acc.eq(0), l4_acc.eq(0), pseudo_acc.eq(0), f.has_mss.eq(0),
+                         f.ip_len.eq(0xFFFF), f.doff.eq(0), f.mss.eq(0)]
+        with m.If(v & (i < 6)):
+            own = self.local_mac.word_select((5 - i[:3]).as_unsigned()[:3], 8)
+            with m.If(byte != own):
+                m.d.sync += dst_mine.eq(0)
+            with m.If(byte != 0xFF):
+                m.d.sync += dst_bcast.eq(0)
+            with m.If(i == 0):
+                m.d.sync += [dst_mine.eq(byte == self.local_mac[40:48]),
+                             dst_bcast.eq(byte == 0xFF)]
+
+        def capture(field, offset, nbytes, index=i, valid=v):
+            with m.If(valid & (index >= offset) & (index < offset + nbytes)):
+                m.d.sync += _shift_in(field, byte)
+
+        capture(f.eth_src, 6, 6)
+        capture(ethertype, 12, 2)
+        # ARP (RFC 826)
+        capture(arp_fixed, 14, 6)
+        capture(f.arp_oper, 20, 2)
+        capture(f.arp_sha, 22, 6)
+        capture(f.arp_spa, 28, 4)
+        capture(f.arp_tpa, 38, 4)
+        # IPv4 (RFC 791)
+        capture(ver_ihl, 14, 1)
+        capture(f.ip_len, 16, 2)
+        capture(frag, 20, 2)
+        capture(f.ip_proto, 23, 1)
+        capture(f.ip_src, 26, 4)
+        capture(f.ip_dst, 30, 4)
+        with m.If(v & (i == 14)):
+            m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))
+        with m.If(v & (i >= 14) & (i < l4_off)):
+            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, word))
+        with m.If(v & (i >= 26) & (i < 34)):
+            m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, word))
+        with m.If(v & (i == 24)):
+            m.d.sync += [pseudo_acc.eq(ones_complement_add(pseudo_acc, f.ip_proto)),
+                         f.l4_len.eq(f.ip_len - ihl4)]
+        with m.If(v & (i == 25)):
+            m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, f.l4_len))
+
+        kind = self.kind
+        with m.Switch(ethertype):
+            with m.Case(ETHERTYPE_ARP):
+                m.d.comb += kind.eq(FrameKind.ARP)
+            with m.Default():
+                with m.Switch(f.ip_proto):
+                    with m.Case(IP_PROTO_ICMP):
+                        m.d.comb += kind.eq(FrameKind.ICMP)
+                    with m.Case(IP_PROTO_UDP):
+                        m.d.comb += kind.eq(FrameKind.UDP)
+                    with m.Default():
+                        m.d.comb += kind.eq(FrameKind.TCP)
+        with m.If(v & (i == 24)):
+            with m.Switch(f.ip_proto):
+                with m.Case(IP_PROTO_ICMP):
+                    m.d.sync += pl_start.eq(0)
+                with m.Case(IP_PROTO_UDP):
+                    m.d.sync += pl_start.eq(8)
+
+        # L4 headers, relative to the end of the IP header
+        lv = v & in_l4
+        with m.If(lv):
+            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, word))
+        capture(f.icmp_type, 0, 1, j, lv)
+        capture(f.icmp_code, 1, 1, j, lv)
+        capture(f.icmp_csum, 2, 2, j, lv)
+        capture(f.src_port, 0, 2, j, lv)
+        capture(f.dst_port, 2, 2, j, lv)
+        capture(f.udp_len, 4, 2, j, lv)
+        capture(f.udp_csum, 6, 2, j, lv)
+        capture(f.seq, 4, 4, j, lv)
+        capture(f.ack, 8, 4, j, lv)
+        capture(f.flags, 13, 1, j, lv)
+        capture(f.window, 14, 2, j, lv)
+        capture(tcp_csum, 16, 2, j, lv)
+        is_tcp = f.ip_proto == IP_PROTO_TCP
+        with m.If(lv & (j == 12)):
+            m.d.sync += f.doff.eq(byte[4:8])
+            with m.If(is_tcp):
+                m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
+
+        # TCP options (RFC 9293 §3.2): only MSS is used; everything else is skipped by length
+        opt_kind = Signal(8)
+        opt_left = Signal(8)
+        opt_mss = Signal(16)
+        with m.FSM(name="options"):
+            with m.State("WAIT"):
+                with m.If(lv & is_tcp & (j == 19)):
+                    m.next = "KIND"
+            with m.State("KIND"):
+                with m.If(v & (i == 0)):
+                    m.next = "WAIT"
+                with m.Elif(lv & (j < pl_start)):
+                    m.d.sync += opt_kind.eq(byte)
+                    with m.If(byte == 0):
+                        m.next = "WAIT"
+                    with m.Elif(byte != 1):
+                        m.next = "LENGTH"
+            with m.State("LENGTH"):
+                with m.If(v & (i == 0)):
+                    m.next = "WAIT"
+                with m.Elif(lv & (j < pl_start)):
+                    m.d.sync += opt_left.eq(byte - 2)
+                    with m.If(byte < 2):
+                        m.next = "WAIT"         # malformed: stop parsing, keep the segment
+                    with m.Elif(byte == 2):
+                        m.next = "KIND"
+                    with m.Else():
+                        m.next = "BODY"
+            with m.State("BODY"):
+                with m.If(v & (i == 0)):
+                    m.next = "WAIT"
+                with m.Elif(lv & (j < pl_start)):
+                    m.d.sync += [opt_left.eq(opt_left - 1), opt_mss.eq(Cat(byte, opt_mss[:8]))]
+                    with m.If(opt_left == 1):
+                        m.next = "KIND"
+                        with m.If(opt_kind == TCP_OPT_MSS):
+                            m.d.sync += [f.mss.eq(Cat(byte, opt_mss[:8])), f.has_mss.eq(1)]
+
+        m.d.comb += [
+            self.payload_data.eq(byte),
+            self.payload_offset.eq(j - pl_start),
+            self.payload_valid.eq(lv & (j >= pl_start)),
+        ]
+
+        # verdict, one cycle after the end pulse
+        frame_bytes = rx.index - 4
+        l4_sum = ones_complement_add(l4_acc, pseudo_acc)
+        arp_ok = ((arp_fixed == 0x000108000604) & (f.arp_tpa == self.local_ip) &
+                  ((f.arp_oper == ARP_REQUEST) | (f.arp_oper == ARP_REPLY)))
+        ip_ok = ((ver_ihl[4:8] == 4) & (ver_ihl[0:4] >= 5) & (f.ip_len >= ihl4) &
+                 (ip_end <= frame_bytes) & (ip_acc == 0xFFFF))
+        proto_ok = Signal()
+        l4_ok = Signal()
+        with m.Switch(f.ip_proto):
+            with m.Case(IP_PROTO_ICMP):
+                m.d.comb += [proto_ok.eq((f.icmp_type == ICMP_ECHO_REQUEST) & (f.icmp_code == 0)),
+                             l4_ok.eq((l4_acc == 0xFFFF) & (f.l4_len >= 8))]
+            with m.Case(IP_PROTO_UDP):
+                m.d.comb += [proto_ok.eq(1),
+                             l4_ok.eq((f.udp_len == f.l4_len) & (f.l4_len >= 8) &
+                                      ((f.udp_csum == 0) | (l4_sum == 0xFFFF)))]
+            with m.Case(IP_PROTO_TCP):
+                m.d.comb += [proto_ok.eq(1),
+                             l4_ok.eq((f.doff >= 5) & (Cat(Const(0, 2), f.doff) <= f.l4_len) &
+                                      (l4_sum == 0xFFFF))]
+        with m.Switch(f.ip_proto):
+            with m.Case(IP_PROTO_ICMP):
+                m.d.comb += f.payload_len.eq(f.l4_len)
+            with m.Case(IP_PROTO_UDP):
+                m.d.comb += f.payload_len.eq(f.l4_len - 8)
+            with m.Default():
+                m.d.comb += f.payload_len.eq(f.l4_len - Cat(Const(0, 2), f.doff))
+
+        reason = Signal(range(len(DROP_REASONS)))
+        accept = Signal()
+        with m.If(rx.err_size):
+            m.d.comb += reason.eq(DROP_CODE["size"])
+        with m.Elif(rx.err_rx_er):
+            m.d.comb += reason.eq(DROP_CODE["rx_er"])
+        with m.Elif(~rx.ok):
+            m.d.comb += reason.eq(DROP_CODE["fcs"])
+        with m.Elif(~(dst_mine | dst_bcast)):
+            m.d.comb += reason.eq(DROP_CODE["not_mine"])
+        with m.Elif(ethertype == ETHERTYPE_ARP):
+            with m.If(arp_ok):
+                m.d.comb += accept.eq(1)
+            with m.Else():
+                m.d.comb += reason.eq(DROP_CODE["not_mine"])
+        with m.Elif(ethertype != ETHERTYPE_IPV4):
+            m.d.comb += reason.eq(DROP_CODE["not_mine"])
+        with m.Elif(~ip_ok):
+            m.d.comb += reason.eq(DROP_CODE["ip_header"])
+        with m.Elif(frag[13] | (frag[0:13] != 0)):
+            m.d.comb += reason.eq(DROP_CODE["fragment"])
+        with m.Elif(f.ip_dst != self.local_ip):
+            m.d.comb += reason.eq(DROP_CODE["not_mine"])
+        with m.Elif(~proto_ok):
+            m.d.comb += reason.eq(DROP_CODE["protocol"])
+        with m.Elif(~l4_ok):
+            m.d.comb += reason.eq(DROP_CODE["l4_checksum"])
+        with m.Else():
+            m.d.comb += accept.eq(1)
+        m.d.sync += [self.done.eq(rx.end), self.accept.eq(accept), self.reason.eq(reason)]
+        return m

@@ -1,0 +1,137 @@
+"""Shared cocotb harness of the network-engine benches (spec net.md §5.2): GMII models from
+cocotbext-eth, scapy frames, an RBCP register-bus model and counter decoding."""
+
+import logging
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, First, RisingEdge, Timer
+from cocotbext.eth import GmiiFrame, GmiiSink, GmiiSource
+from scapy.layers.inet import IP
+from scapy.layers.l2 import Ether
+
+from hdl.net.frames import int_to_ip, int_to_mac
+from hdl.net.stack import STACK_COUNTERS
+from hdl.net.tcp import TCP_COUNTERS
+from tb.harness import bench_params
+from tb.streams import reset_aresetn
+
+__all__ = ["NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel"]
+
+CLOCK_NS = 8
+PEER_MAC = "02:00:00:00:00:01"
+PEER_IP = "192.168.10.1"
+
+
+def _fields(value, names):
+    value = int(value)
+    return {name: (value >> (32 * k)) & 0xFFFFFFFF for k, name in enumerate(names)}
+
+
+class RegisterBusModel:
+    """User registers on the RBCP bus: a byte store for addresses below ``size``, acked
+    ``latency`` cycles after each strobe (SiTCP's sample acks after 3); addresses at or above
+    ``size`` are never acked (the stack's decoder rejects them first)."""
+
+    def __init__(self, dut, size=0x10000, latency=3):
+        self.dut = dut
+        self.size = size
+        self.latency = latency
+        self.mem = bytearray(size)
+        self.writes = 0
+        dut.rbcp_ack.value = 0
+        dut.rbcp_rd.value = 0
+        cocotb.start_soon(self._run())
+
+    async def _run(self):
+        dut = self.dut
+        while True:
+            await First(RisingEdge(dut.rbcp_we), RisingEdge(dut.rbcp_re))
+            await Timer(1, "ns")
+            addr = int(dut.rbcp_addr.value)
+            write = int(dut.rbcp_we.value)
+            data = int(dut.rbcp_wd.value)
+            await ClockCycles(dut.aclk, self.latency)
+            if addr >= self.size:
+                continue
+            if write:
+                self.mem[addr] = data
+                self.writes += 1
+            else:
+                dut.rbcp_rd.value = self.mem[addr]
+            dut.rbcp_ack.value = 1
+            await RisingEdge(dut.aclk)
+            dut.rbcp_ack.value = 0
+
+
+class NetTB:
+    """Clock, reset, GMII source and sink, frame helpers for a ``net`` top."""
+
+    def __init__(self, dut):
+        self.dut = dut
+        self.params = bench_params()
+        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        self.source = GmiiSource(dut.gmii_rxd, dut.gmii_rx_er, dut.gmii_rx_dv, dut.aclk,
+                                 dut.aresetn, reset_active_level=False)
+        self.sink = GmiiSink(dut.gmii_txd, dut.gmii_tx_er, dut.gmii_tx_en, dut.aclk,
+                             dut.aresetn, reset_active_level=False)
+        for model in (self.source, self.sink):
+            model.log.setLevel(logging.WARNING)
+        self.sessions = self.params.get("sessions", 1)
+        for k in range(self.sessions):
+            for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
+                         "close_ack", "abort", "tx_tvalid", "tx_tdata", "tx_tlast",
+                         "rx_tready"):
+                getattr(dut, f"tcp{k}_{name}").value = 0
+        self.bus = RegisterBusModel(dut)
+
+    async def reset(self):
+        await reset_aresetn(self.dut)
+
+    @property
+    def mac(self):
+        return int_to_mac(int(self.dut.local_mac.value))
+
+    @property
+    def ip(self):
+        return int_to_ip(int(self.dut.local_ip.value))
+
+    def counters(self):
+        return _fields(self.dut.counters.value, STACK_COUNTERS)
+
+    def session_counters(self, k=0):
+        return _fields(getattr(self.dut, f"tcp{k}_counters").value, TCP_COUNTERS)
+
+    async def send(self, frame, *, fcs=True, error=False):
+        """Send ``frame`` (scapy packet or bytes, without FCS) into the engine."""
+        raw = bytes(frame)
+        gf = GmiiFrame.from_payload(raw) if fcs else GmiiFrame.from_raw_payload(raw)
+        if error:
+            gf.error = [0] * len(gf.data)
+            gf.error[len(gf.data) // 2] = 1
+        await self.source.send(gf)
+
+    async def recv(self, timeout_cycles=5000):
+        """The next frame the engine sends, as a scapy ``Ether`` (FCS checked and removed),
+        or ``None`` after ``timeout_cycles``."""
+        for _ in range(timeout_cycles // 16):
+            if not self.sink.empty():
+                gf = self.sink.recv_nowait()
+                assert gf.check_fcs(), "frame from the engine with a bad FCS"
+                assert not any(gf.error or []), "frame from the engine with TX_ER"
+                payload = bytes(gf.get_payload())
+                assert len(payload) >= 60, f"frame of {len(payload)} bytes is not padded"
+                frame = Ether(payload[:-4])
+                if IP in frame:             # drop the Ethernet padding
+                    frame = Ether(payload[:14 + frame[IP].len])
+                return frame
+            await ClockCycles(self.dut.aclk, 16)
+        return None
+
+    async def expect_silence(self, cycles=2000):
+        await self.source.wait()
+        frame = await self.recv(cycles)
+        assert frame is None, f"unexpected frame {frame!r}"
+
+    async def idle(self, cycles):
+        await ClockCycles(self.dut.aclk, cycles)
