@@ -14,9 +14,9 @@ from hdl.net.frames import int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
-from tb.streams import reset_aresetn
+from tb.streams import PacketSink, random_pauses, reset_aresetn
 
-__all__ = ["NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel"]
+__all__ = ["NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
 PEER_MAC = "02:00:00:00:00:01"
@@ -135,3 +135,59 @@ class NetTB:
 
     async def idle(self, cycles):
         await ClockCycles(self.dut.aclk, cycles)
+
+
+class SessionPort:
+    """Session ``k``'s user streams: a cocotbext-axi source on ``tcp<k>_tx`` (one
+    ``tlast`` per written chunk) and a :class:`PacketSink` on ``tcp<k>_rx``, both with
+    optional random idle and backpressure."""
+
+    def __init__(self, dut, k, rng):
+        from cocotbext.axi import AxiStreamBus, AxiStreamSource
+        self.dut = dut
+        self.k = k
+        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"tcp{k}_tx"), dut.aclk,
+                                      dut.aresetn, reset_active_level=False)
+        self.source.log.setLevel(logging.WARNING)
+        self.sink = PacketSink(dut, f"tcp{k}_rx", dut.aclk)
+        self.rng = rng
+
+    def set_pauses(self, idle, backpressure):
+        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
+        if not idle:
+            self.source.pause = False
+        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
+                                      if backpressure else None)
+
+    def signal(self, name):
+        return getattr(self.dut, f"tcp{self.k}_{name}")
+
+    def set(self, **values):
+        for name, value in values.items():
+            self.signal(name).value = value
+
+    def get(self, name):
+        return int(self.signal(name).value)
+
+    @property
+    def received(self):
+        return bytes(self.sink.current.data)
+
+    async def write(self, data):
+        from cocotbext.axi import AxiStreamFrame
+        await self.source.send(AxiStreamFrame(data))
+
+    async def wait_received(self, count, timeout_cycles):
+        for _ in range(timeout_cycles // 64):
+            if len(self.sink.current.data) >= count:
+                return self.received
+            await ClockCycles(self.dut.aclk, 64)
+        raise AssertionError(f"session {self.k}: {len(self.sink.current.data)} of {count} "
+                             f"bytes received in {timeout_cycles} cycles")
+
+    async def wait_state(self, state, timeout_cycles=100000):
+        for _ in range(timeout_cycles // 16):
+            if self.get("state") == state.value:
+                return
+            await ClockCycles(self.dut.aclk, 16)
+        raise AssertionError(f"session {self.k}: state {self.get('state')}, not {state!r}")

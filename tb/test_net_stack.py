@@ -178,3 +178,95 @@ async def run_rbcp(dut):
     reply = await rbcp(tb, rbcp_request(0xC0, 10, GLOBAL_BASE + cnt_off, 8))
     frames_in = int.from_bytes(reply[8:12], "big")
     assert frames_in == tb.counters()["frames_in"] - 1 or frames_in == tb.counters()["frames_in"]
+
+
+class ScriptedPeer:
+    """A TCP peer whose every segment the test writes: it tracks its own sequence number
+    and builds scapy segments to the engine."""
+
+    def __init__(self, tb, sport, dport, isn):
+        self.tb, self.sport, self.dport = tb, sport, dport
+        self.seq = isn
+        self.ack = 0
+
+    def segment(self, flags, data=b"", *, seq=None, ack=None, options=(), window=65535):
+        return (eth(self.tb) / IP(src=PEER_IP, dst=self.tb.ip) /
+                TCP(sport=self.sport, dport=self.dport, flags=flags,
+                    seq=(self.seq if seq is None else seq) % 2**32,
+                    ack=(self.ack if ack is None else ack) % 2**32,
+                    window=window, options=list(options)) / Raw(data))
+
+    async def send(self, flags, data=b"", advance=True, **kw):
+        await self.tb.send(self.segment(flags, data, **kw))
+        if advance and "seq" not in kw:
+            self.seq += len(data) + ("S" in flags) + ("F" in flags)
+
+    async def expect(self, flags, *, seq=None, ack=None, data=b"", timeout=6000):
+        frame = await self.tb.recv(timeout)
+        assert frame is not None, f"no segment (expected {flags})"
+        assert checksums_ok(frame), frame.show(dump=True)
+        tcp = frame[TCP]
+        assert str(tcp.flags) == flags, f"flags {tcp.flags}, expected {flags}"
+        assert (tcp.sport, tcp.dport) == (self.dport, self.sport)
+        if seq is not None:
+            assert tcp.seq == seq % 2**32, f"seq {tcp.seq}, expected {seq % 2**32}"
+        if ack is not None:
+            assert tcp.ack == ack % 2**32, f"ack {tcp.ack}, expected {ack % 2**32}"
+        assert bytes(tcp.payload) == data, (bytes(tcp.payload), data)
+        return tcp
+
+
+@cocotb.test()
+async def run_tcp_server_scripted(dut):
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 0, random.Random(3))
+    s.set(active=0, local_port=24, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    peer = ScriptedPeer(tb, 40000, 24, isn=0xFFFFFFF0)     # wraps 2**32 during the test
+    await peer.send("S", options=[("MSS", 1400), ("NOP", None), ("WScale", 7),
+                                  ("SAckOK", b""), ("Timestamp", (1, 0))])
+    synack = await peer.expect("SA", ack=peer.seq)
+    assert synack.options == [("MSS", 1460)], synack.options
+    assert synack.window == 16383
+    iss = synack.seq
+    peer.ack = iss + 1
+    await peer.send("A")
+    await s.wait_state(TcpState.ESTABLISHED)
+    assert s.get("open_ack") == 1
+    # data in, acknowledged at once because of PSH
+    await peer.send("PA", b"hello world, ")
+    await peer.expect("A", ack=peer.seq, seq=iss + 1)
+    assert await s.wait_received(13, 2000) == b"hello world, "
+    # data out
+    await s.write(b"reply")
+    await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=b"reply")
+    peer.ack += 5
+    # a duplicate and an out-of-order segment: duplicate ACKs, nothing delivered twice
+    await peer.send("PA", b"world, ", seq=peer.seq - 7)
+    await peer.expect("A", ack=peer.seq)
+    await peer.send("PA", b"later", seq=peer.seq + 100)
+    await peer.expect("A", ack=peer.seq)
+    await peer.send("PA", b"again")
+    await peer.expect("A", ack=peer.seq)
+    assert s.received == b"hello world, again"
+    # peer closes: ACK of the FIN, CLOSE-WAIT, user's close_ack sends our FIN
+    await peer.send("FA")
+    await peer.expect("A", ack=peer.seq)
+    await s.wait_state(TcpState.CLOSE_WAIT)
+    assert s.get("close_req") == 1
+    s.set(close_ack=1)
+    await peer.expect("FA", seq=iss + 6, ack=peer.seq)
+    s.set(close_ack=0)
+    peer.ack += 1
+    await peer.send("A")
+    await s.wait_state(TcpState.LISTEN)
+    # a segment for a port nobody listens on gets RST (RFC 9293 §3.10.7.1)
+    other = ScriptedPeer(tb, 40001, 25, isn=77)
+    await other.send("A", ack=1234)
+    await other.expect("R", seq=1234)
+    await other.send("S")
+    await other.expect("RA", seq=0, ack=78)
+    assert tb.session_counters(0)["bytes_rx"] == 18
