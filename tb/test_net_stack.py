@@ -16,11 +16,9 @@ from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 from hdl.net.frames import DEFAULT_RBCP_PORT
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
-from tb.net_tb import PEER_IP, PEER_MAC, NetTB
+from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
 
-CONFIGS = {"stack": dict(sessions=2, tx_depth=16384, rx_depth=16384, rto_us=100, msl_us=20)}
-
-test_net = cocotb_bench("net", CONFIGS)
+test_net = cocotb_bench("net", NET_CONFIGS)
 
 
 def checksums_ok(pkt):
@@ -173,7 +171,7 @@ async def run_rbcp(dut):
     # the stack's own registers: read the IP, write it, read the counters
     ip_off = [off for off, (name, _, _) in GLOBAL_REGS.items() if name == "ip"][0]
     reply = await rbcp(tb, rbcp_request(0xC0, 9, GLOBAL_BASE + ip_off, 4))
-    assert reply[8:] == bytes([192, 168, 10, 16])
+    assert reply[8:] == bytes(int(b) for b in tb.ip.split("."))
     cnt_off = [off for off, (name, _, _) in GLOBAL_REGS.items() if name == "counters"][0]
     reply = await rbcp(tb, rbcp_request(0xC0, 10, GLOBAL_BASE + cnt_off, 8))
     frames_in = int.from_bytes(reply[8:12], "big")

@@ -1,0 +1,153 @@
+"""The Linux kernel as a network peer (spec net.md §5.2 "Real peer", toolchain.md): a private
+network namespace with a TAP device, and a cocotb pump between the simulated GMII and the TAP
+file descriptor, with optional seeded loss, duplication and reordering."""
+
+import contextlib
+import ctypes
+import fcntl
+import os
+import shutil
+import struct
+import subprocess
+import uuid
+import zlib
+
+__all__ = ["namespace_unavailable", "network_namespace", "TapPump", "KERNEL_IP", "ENGINE_IP",
+           "TAP_NAME"]
+
+KERNEL_IP = "198.18.0.1"      # RFC 2544 benchmarking block, only inside the namespace
+ENGINE_IP = "198.18.0.16"
+TAP_NAME = "tap0"
+_CLONE_NEWNET = 0x40000000
+_TUNSETIFF = 0x400454CA
+_IFF_TAP = 0x0002
+_IFF_NO_PI = 0x1000
+
+
+def namespace_unavailable():
+    """Why this machine cannot run the TAP benches, or ``None``."""
+    if os.geteuid() != 0:
+        return "needs root to create a network namespace and a TAP device"
+    if not os.path.exists("/dev/net/tun"):
+        return "no /dev/net/tun"
+    if shutil.which("ip") is None:
+        return "no ip command (iproute2)"
+    return None
+
+
+def _ip(*args):
+    subprocess.run(["ip", *args], check=True, capture_output=True, timeout=10)
+
+
+@contextlib.contextmanager
+def network_namespace():
+    """Create namespace ``rg<random>`` with ``lo`` and ``tap0`` (``KERNEL_IP``/24, no default
+    route), move this thread into it (child processes such as the simulator inherit it), and
+    undo everything on exit."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    name = f"rg{uuid.uuid4().hex[:8]}"
+    _ip("netns", "add", name)
+    original = os.open("/proc/self/ns/net", os.O_RDONLY)
+    try:
+        target = os.open(f"/var/run/netns/{name}", os.O_RDONLY)
+        try:
+            if libc.setns(target, _CLONE_NEWNET) != 0:
+                raise OSError(ctypes.get_errno(), "setns into the test namespace failed")
+        finally:
+            os.close(target)
+        try:
+            _ip("link", "set", "lo", "up")
+            _ip("tuntap", "add", "dev", TAP_NAME, "mode", "tap")
+            _ip("addr", "add", f"{KERNEL_IP}/24", "dev", TAP_NAME)
+            _ip("link", "set", TAP_NAME, "up")
+            yield name
+        finally:
+            if libc.setns(original, _CLONE_NEWNET) != 0:
+                raise OSError(ctypes.get_errno(), "setns back to the original namespace failed")
+    finally:
+        os.close(original)
+        subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
+
+
+class TapPump:
+    """Moves frames between ``tap0`` and the engine's GMII models, inside a cocotb test.
+
+    Kernel frames are polled every ``poll_cycles`` cycles (at most 8 per poll) and sent with
+    preamble, padding and FCS; engine frames have their FCS checked and removed. With
+    ``loss``, ``duplicate`` and ``reorder`` probabilities, each direction drops a frame, sends
+    it twice, or holds it back behind the next one, from a seeded generator.
+    """
+
+    def __init__(self, tb, rng, *, loss=0.0, duplicate=0.0, reorder=0.0, poll_cycles=128):
+        import cocotb
+        self.tb = tb
+        self.rng = rng
+        self.loss, self.duplicate, self.reorder = loss, duplicate, reorder
+        self.poll_cycles = poll_cycles
+        self.fd = self._open()
+        self.stats = {"to_engine": 0, "from_engine": 0, "dropped": 0, "duplicated": 0,
+                      "reordered": 0}
+        self._held = {"in": None, "out": None}
+        cocotb.start_soon(self._kernel_to_engine())
+        cocotb.start_soon(self._engine_to_kernel())
+
+    _fd = None
+
+    @classmethod
+    def _open(cls):
+        """The TAP file descriptor, opened once per simulator process (a TAP device takes one
+        attachment; every cocotb test of the run reuses it)."""
+        if cls._fd is None:
+            fd = os.open("/dev/net/tun", os.O_RDWR | os.O_NONBLOCK)
+            fcntl.ioctl(fd, _TUNSETIFF, struct.pack("16sH", TAP_NAME.encode(),
+                                                     _IFF_TAP | _IFF_NO_PI))
+            cls._fd = fd
+        return cls._fd
+
+    def _impair(self, direction, frame):
+        """Frames to pass on now for ``frame`` under the configured impairments."""
+        rng = self.rng
+        if rng.random() < self.loss:
+            self.stats["dropped"] += 1
+            return []
+        out = [frame]
+        if rng.random() < self.duplicate:
+            self.stats["duplicated"] += 1
+            out.append(frame)
+        held = self._held[direction]
+        if held is not None:
+            self._held[direction] = None
+            return out + [held]
+        if rng.random() < self.reorder:
+            self.stats["reordered"] += 1
+            self._held[direction] = frame
+            return out[1:]
+        return out
+
+    async def _kernel_to_engine(self):
+        from cocotb.triggers import ClockCycles
+        from cocotbext.eth import GmiiFrame
+        while True:
+            for _ in range(8):
+                try:
+                    frame = os.read(self.fd, 2048)
+                except BlockingIOError:
+                    break
+                for f in self._impair("in", frame):
+                    self.stats["to_engine"] += 1
+                    self.tb.source.send_nowait(GmiiFrame.from_payload(f))
+            await ClockCycles(self.tb.dut.aclk, self.poll_cycles)
+
+    async def _engine_to_kernel(self):
+        while True:
+            gf = await self.tb.sink.recv()
+            payload = bytes(gf.get_payload(strip_fcs=False))
+            body, fcs = payload[:-4], payload[-4:]
+            assert zlib.crc32(body).to_bytes(4, "little") == fcs, "engine frame with bad FCS"
+            assert not any(gf.error or []), "engine frame with TX_ER"
+            for f in self._impair("out", body):
+                self.stats["from_engine"] += 1
+                try:
+                    os.write(self.fd, f)
+                except BlockingIOError:
+                    self.stats["dropped"] += 1

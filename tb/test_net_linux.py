@@ -1,0 +1,237 @@
+"""The engine against the Linux kernel's own network stack (spec net.md §5.2 "Real peer"):
+the bench runs the simulator inside a private network namespace whose TAP device carries the
+simulated GMII, and the kernel's ARP, ICMP, UDP and TCP answer through ordinary sockets,
+``ping`` and sitcpy's RBCP client. Kernel timers run on wall time while the simulation is
+thousands of times slower, so the engine sees retransmitted SYNs and duplicate segments.
+
+Verilator only (megabytes at one byte per cycle); the same top runs on both simulators in
+tb/test_net_stack.py. Skipped with the reason where the machine cannot create namespaces.
+"""
+
+import concurrent.futures
+import errno
+import os
+import random
+import socket
+import subprocess
+import time
+
+import cocotb
+import pytest
+from cocotb.triggers import ClockCycles
+
+from hdl.net.tcp import TcpState
+from tb.harness import run_bench
+from tb.net_tb import NET_CONFIGS, NetTB, SessionPort
+from tb.tap import KERNEL_IP, TapPump, namespace_unavailable, network_namespace
+
+#: bytes per direction in make test; test-full moves MEGABYTES with and without impairments
+TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 256 * 1024))
+WALL_LIMIT_S = 600
+
+
+@pytest.mark.parametrize("impaired", [False, pytest.param(True, marks=pytest.mark.full)],
+                         ids=["clean", "impaired"])
+def test_net_linux(impaired):
+    why = namespace_unavailable()
+    if why:
+        pytest.skip(f"Linux peer bench skipped: {why}")
+    params = NET_CONFIGS["stack"]
+    env = {"ROSGATE_NET_IMPAIRED": "1" if impaired else "0"}
+    with network_namespace():
+        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env,
+                  testcase=None)
+
+
+class LinuxTB(NetTB):
+    def __init__(self, dut):
+        super().__init__(dut)
+        self.rng = random.Random(cocotb.RANDOM_SEED)
+        impaired = os.environ.get("ROSGATE_NET_IMPAIRED") == "1"
+        p = 0.02 if impaired else 0.0
+        self.pump = TapPump(self, random.Random(self.rng.random()), loss=p, duplicate=p,
+                            reorder=p)
+        self.started = time.monotonic()
+
+    async def poll(self, what, predicate, limit_cycles, step=256):
+        """Wait until ``predicate()``, in steps of ``step`` cycles, bounded in cycles and wall
+        time."""
+        for _ in range(limit_cycles // step):
+            if predicate():
+                return
+            assert time.monotonic() - self.started < WALL_LIMIT_S, f"wall-clock limit: {what}"
+            await ClockCycles(self.dut.aclk, step)
+        raise AssertionError(f"{what}: not within {limit_cycles} cycles")
+
+    async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):
+        with concurrent.futures.ThreadPoolExecutor(1) as pool:
+            future = pool.submit(fn, *args)
+            await self.poll(what, future.done, limit_cycles, step=1024)
+            return future.result()
+
+    async def transfer(self, sock, session, to_engine, from_engine, limit_cycles):
+        """Move ``to_engine`` from the kernel socket into the session and ``from_engine``
+        back at the same time; return what each side received."""
+        sock.setblocking(False)
+        cocotb.start_soon(self._feed(session, from_engine))
+        sent = 0
+        got = bytearray()
+
+        def step():
+            nonlocal sent
+            while sent < len(to_engine):
+                try:
+                    n = sock.send(to_engine[sent:sent + 65536])
+                except BlockingIOError:
+                    break
+                sent += n
+            while True:
+                try:
+                    chunk = sock.recv(65536)
+                except BlockingIOError:
+                    break
+                if not chunk:
+                    break
+                got.extend(chunk)
+            return (sent == len(to_engine) and len(got) >= len(from_engine) and
+                    len(session.received) >= len(to_engine))
+
+        await self.poll("transfer", step, limit_cycles)
+        return bytes(session.received), bytes(got)
+
+    async def _feed(self, session, data):
+        for i in range(0, len(data), 4096):
+            await session.write(data[i:i + 4096])
+
+
+async def connect(tb, sock, addr):
+    sock.setblocking(False)
+    err = sock.connect_ex(addr)
+    assert err in (0, errno.EINPROGRESS), os.strerror(err)
+
+    def connected():
+        return sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR) == 0 and _peer(sock)
+    await tb.poll(f"connect to {addr}", connected, 2_000_000)
+
+
+def _peer(sock):
+    try:
+        sock.getpeername()
+        return True
+    except OSError:
+        return False
+
+
+@cocotb.test()
+async def run_linux_ping_and_rbcp(dut):
+    tb = LinuxTB(dut)
+    await tb.reset()
+    ping = subprocess.Popen(["ping", "-c", "3", "-i", "0.2", "-W", "5", tb.ip],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    await tb.poll("ping", lambda: ping.poll() is not None, 3_000_000, step=1024)
+    out = ping.stdout.read()
+    if os.environ.get("ROSGATE_NET_IMPAIRED") != "1":
+        assert ping.returncode == 0 and " 0% packet loss" in out, out
+    from sitcpy.rbcp import Rbcp, RbcpBusError
+    client = Rbcp(tb.ip, 4660, 20000)
+    data = bytes(tb.rng.randrange(256) for _ in range(64))
+    await tb.run_in_thread("rbcp write", client.write, 0x1200, data)
+    assert bytes(tb.bus.mem[0x1200:0x1240]) == data
+    got = await tb.run_in_thread("rbcp read", client.read, 0x1200, 64)
+    assert bytes(got) == data
+
+    def unmapped():
+        try:
+            client.write(0x00100000, b"\x01\x02")
+        except RbcpBusError:
+            return "bus error"
+        return "no error"
+    assert await tb.run_in_thread("rbcp bus error", unmapped) == "bus error"
+
+
+@cocotb.test()
+async def run_linux_client_engine_server(dut):
+    """A kernel client connects to session 0 listening on port 24; both directions."""
+    tb = LinuxTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 0, random.Random(tb.rng.random()))
+    s.set_pauses(0.2, 0.2)
+    s.set(active=0, local_port=24, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    sock = socket.socket()
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    try:
+        await connect(tb, sock, (tb.ip, 24))
+        await s.wait_state(TcpState.ESTABLISHED)
+        up = tb.rng.randbytes(TRANSFER)
+        down = tb.rng.randbytes(TRANSFER)
+        got_engine, got_kernel = await tb.transfer(sock, s, up, down, 40 * TRANSFER + 2_000_000)
+        assert got_engine == up, "engine received other bytes than the kernel sent"
+        assert got_kernel == down, "kernel received other bytes than the engine sent"
+        # the kernel closes; the engine answers close_req with close_ack and its own FIN
+        sock.shutdown(socket.SHUT_WR)
+        await s.wait_state(TcpState.CLOSE_WAIT, 2_000_000)
+        s.set(close_ack=1)
+
+        def eof():
+            try:
+                return sock.recv(1) == b""
+            except BlockingIOError:
+                return False
+        await tb.poll("FIN from the engine", eof, 2_000_000)
+        s.set(close_ack=0)
+        await s.wait_state(TcpState.LISTEN, 2_000_000)
+    finally:
+        sock.close()
+    dut._log.info("pump %s, session %s", tb.pump.stats, tb.session_counters(0))
+
+
+@cocotb.test()
+async def run_linux_server_engine_client(dut):
+    """Session 1 connects as a client to a kernel listener; both directions; the engine
+    closes first."""
+    tb = LinuxTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 1, random.Random(tb.rng.random()))
+    s.set_pauses(0.2, 0.2)
+    listener = socket.socket()
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    listener.bind((KERNEL_IP, 5000))
+    listener.listen(1)
+    listener.setblocking(False)
+    conn = None
+    try:
+        s.set(active=1, remote_ip=int.from_bytes(socket.inet_aton(KERNEL_IP), "big"),
+              remote_port=5000, local_port=0, open_req=1)
+        accepted = []
+
+        def accept():
+            try:
+                accepted.append(listener.accept()[0])
+            except BlockingIOError:
+                return False
+            return True
+        await tb.poll("accept", accept, 3_000_000)
+        conn = accepted[0]
+        await s.wait_state(TcpState.ESTABLISHED, 2_000_000)
+        assert conn.getpeername()[1] >= 49152, "client port not ephemeral"
+        up = tb.rng.randbytes(TRANSFER)
+        down = tb.rng.randbytes(TRANSFER)
+        got_engine, got_kernel = await tb.transfer(conn, s, up, down, 40 * TRANSFER + 2_000_000)
+        assert got_engine == up and got_kernel == down
+        s.set(open_req=0)                       # engine closes: FIN after its data
+
+        def eof():
+            try:
+                return conn.recv(1) == b""
+            except BlockingIOError:
+                return False
+        await tb.poll("FIN from the engine", eof, 2_000_000)
+        conn.close()
+        conn = None
+        await s.wait_state(TcpState.CLOSED, 3_000_000)
+    finally:
+        listener.close()
+        if conn is not None:
+            conn.close()
+    dut._log.info("pump %s, session %s", tb.pump.stats, tb.session_counters(1))
