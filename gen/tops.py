@@ -109,8 +109,15 @@ def build_net(**params):
     return NetStack(**params)
 
 
+def build_ros1_node(**params):
+    """A :class:`hdl.ros1.TcprosNode`: network engine plus TCPROS endpoints."""
+    from hdl.ros1 import TcprosNode
+    return TcprosNode(**params)
+
+
 #: name -> builder
 TOPS = {
+    "ros1_node": build_ros1_node,
     "net": build_net,
     "kernels": build_kernels,
     "topic": build_topic,

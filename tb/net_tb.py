@@ -81,13 +81,13 @@ class NetTB:
                              dut.aresetn, reset_active_level=False)
         for model in (self.source, self.sink):
             model.log.setLevel(logging.WARNING)
-        self.sessions = self.params.get("sessions", 1)
+        self.sessions = self.params.get("sessions", 0) if hasattr(dut, "tcp0_state") else 0
         for k in range(self.sessions):
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
                          "close_ack", "abort", "tx_tvalid", "tx_tdata", "tx_tlast",
                          "rx_tready"):
                 getattr(dut, f"tcp{k}_{name}").value = 0
-        self.bus = RegisterBusModel(dut)
+        self.bus = RegisterBusModel(dut) if hasattr(dut, "rbcp_ack") else None
 
     async def reset(self):
         await reset_aresetn(self.dut)

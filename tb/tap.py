@@ -11,9 +11,20 @@ import struct
 import subprocess
 import uuid
 import zlib
+import concurrent.futures
+import random
+import time
 
-__all__ = ["namespace_unavailable", "network_namespace", "TapPump", "KERNEL_IP", "ENGINE_IP",
-           "TAP_NAME"]
+import cocotb
+from cocotb.triggers import ClockCycles
+
+from tb.net_tb import NetTB
+
+__all__ = ["namespace_unavailable", "network_namespace", "TapPump", "LinuxTB", "KERNEL_IP",
+           "ENGINE_IP", "TAP_NAME", "WALL_LIMIT_S"]
+
+#: wall-clock bound of every wait in a Linux-peer bench
+WALL_LIMIT_S = 900
 
 KERNEL_IP = "198.18.0.1"      # RFC 2544 benchmarking block, only inside the namespace
 ENGINE_IP = "198.18.0.16"
@@ -79,7 +90,6 @@ class TapPump:
     """
 
     def __init__(self, tb, rng, *, loss=0.0, duplicate=0.0, reorder=0.0, poll_cycles=128):
-        import cocotb
         self.tb = tb
         self.rng = rng
         self.loss, self.duplicate, self.reorder = loss, duplicate, reorder
@@ -125,7 +135,6 @@ class TapPump:
         return out
 
     async def _kernel_to_engine(self):
-        from cocotb.triggers import ClockCycles
         from cocotbext.eth import GmiiFrame
         while True:
             for _ in range(8):
@@ -151,3 +160,68 @@ class TapPump:
                     os.write(self.fd, f)
                 except BlockingIOError:
                     self.stats["dropped"] += 1
+
+
+class LinuxTB(NetTB):
+    """:class:`~tb.net_tb.NetTB` with the kernel as the peer through a :class:`TapPump`
+    (impairment probability from ``ROSGATE_NET_IMPAIRMENT``), and bounded waits."""
+
+    def __init__(self, dut):
+        super().__init__(dut)
+        self.rng = random.Random(cocotb.RANDOM_SEED)
+        p = float(os.environ.get("ROSGATE_NET_IMPAIRMENT", "0"))
+        self.pump = TapPump(self, random.Random(self.rng.random()), loss=p, duplicate=p,
+                            reorder=p)
+        self.started = time.monotonic()
+
+    async def poll(self, what, predicate, limit_cycles, step=256):
+        """Wait until ``predicate()``, in steps of ``step`` cycles, bounded in cycles and wall
+        time."""
+        for _ in range(limit_cycles // step):
+            if predicate():
+                return
+            assert time.monotonic() - self.started < WALL_LIMIT_S, f"wall-clock limit: {what}"
+            await ClockCycles(self.dut.aclk, step)
+        raise AssertionError(f"{what}: not within {limit_cycles} cycles")
+
+    async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):
+        with concurrent.futures.ThreadPoolExecutor(1) as pool:
+            future = pool.submit(fn, *args)
+            await self.poll(what, future.done, limit_cycles, step=1024)
+            return future.result()
+
+    async def transfer(self, sock, session, to_engine, from_engine, limit_cycles):
+        """Move ``to_engine`` from the kernel socket into the session and ``from_engine``
+        back at the same time; return what each side received."""
+        sock.setblocking(False)
+        cocotb.start_soon(self._feed(session, from_engine))
+        sent = 0
+        got = bytearray()
+
+        def step():
+            nonlocal sent
+            while sent < len(to_engine):
+                try:
+                    n = sock.send(to_engine[sent:sent + 65536])
+                except BlockingIOError:
+                    break
+                sent += n
+            while True:
+                try:
+                    chunk = sock.recv(65536)
+                except BlockingIOError:
+                    break
+                if not chunk:
+                    break
+                got.extend(chunk)
+            return (sent == len(to_engine) and len(got) >= len(from_engine) and
+                    len(session.received) >= len(to_engine))
+
+        await self.poll("transfer", step, limit_cycles)
+        return bytes(session.received), bytes(got)
+
+    async def _feed(self, session, data):
+        for i in range(0, len(data), 4096):
+            await session.write(data[i:i + 4096])
+
+

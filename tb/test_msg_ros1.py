@@ -81,3 +81,23 @@ def test_message_definition_of_parsed_message(ros1):
     ts.register(get_types_from_msg(text, "my_msgs/msg/Thing"))
     assert message_definition(library, "my_msgs/msg/Thing") == \
         ts.generate_msgdef("my_msgs/msg/Thing")[0]
+
+
+def test_connection_header_wiki_example():
+    """ros_wire.md §1.1: the ROS wiki's /chatter header, byte for byte (176-byte body)."""
+    from gen.msg.ros1 import decode_connection_header, encode_connection_header, frame_message
+    fields = [("message_definition", "string data\n\n"),
+              ("callerid", "/rostopic_4767_1316912741557"), ("latching", "1"),
+              ("md5sum", "992ce8a1687cec8c8bd883ec73ca41d1"), ("topic", "/chatter"),
+              ("type", "std_msgs/String")]
+    header = encode_connection_header(fields)
+    assert header[:4] == bytes.fromhex("b0000000") and len(header) == 4 + 176
+    assert header[4:8] == (len("message_definition=string data\n\n")).to_bytes(4, "little")
+    assert decode_connection_header(header, prefixed=True) == dict(fields)
+    assert decode_connection_header(header[4:]) == dict(fields)
+    assert frame_message((5).to_bytes(4, "little") + b"hello") == bytes.fromhex(
+        "09000000" "05000000" "68656c6c6f")
+    import pytest
+    from gen.msg.ros1 import ConnectionHeaderError
+    with pytest.raises(ConnectionHeaderError, match="offset 0"):
+        decode_connection_header(b"\x05\x00\x00\x00abc")

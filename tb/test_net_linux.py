@@ -8,100 +8,39 @@ Verilator only (megabytes at one byte per cycle); the same top runs on both simu
 tb/test_net_stack.py. Skipped with the reason where the machine cannot create namespaces.
 """
 
-import concurrent.futures
 import errno
 import os
 import random
 import socket
 import subprocess
-import time
 
 import cocotb
 import pytest
-from cocotb.triggers import ClockCycles
 
 from hdl.net.tcp import TcpState
 from tb.harness import run_bench
-from tb.net_tb import NET_CONFIGS, NetTB, SessionPort
-from tb.tap import KERNEL_IP, TapPump, namespace_unavailable, network_namespace
+from tb.net_tb import NET_CONFIGS, SessionPort
+from tb.tap import KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
 
-#: bytes per direction in make test; test-full moves MEGABYTES with and without impairments
-TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 256 * 1024))
-WALL_LIMIT_S = 600
+#: bytes per direction, set by the pytest case
+TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 65536))
+
+#: (id, impairment probability, bytes per direction); make test runs the first
+CASES = [("clean", 0.0, 64 * 1024), ("megabytes", 0.0, 2 * 1024 * 1024),
+         ("impaired", 0.02, 1024 * 1024)]
 
 
-@pytest.mark.parametrize("impaired", [False, pytest.param(True, marks=pytest.mark.full)],
-                         ids=["clean", "impaired"])
-def test_net_linux(impaired):
+@pytest.mark.parametrize("impairment,transfer", [
+    pytest.param(p, n, id=name, marks=() if name == "clean" else (pytest.mark.full,))
+    for name, p, n in CASES])
+def test_net_linux(impairment, transfer):
     why = namespace_unavailable()
     if why:
         pytest.skip(f"Linux peer bench skipped: {why}")
     params = NET_CONFIGS["stack"]
-    env = {"ROSGATE_NET_IMPAIRED": "1" if impaired else "0"}
+    env = {"ROSGATE_NET_IMPAIRMENT": str(impairment), "ROSGATE_NET_TRANSFER": str(transfer)}
     with network_namespace():
-        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env,
-                  testcase=None)
-
-
-class LinuxTB(NetTB):
-    def __init__(self, dut):
-        super().__init__(dut)
-        self.rng = random.Random(cocotb.RANDOM_SEED)
-        impaired = os.environ.get("ROSGATE_NET_IMPAIRED") == "1"
-        p = 0.02 if impaired else 0.0
-        self.pump = TapPump(self, random.Random(self.rng.random()), loss=p, duplicate=p,
-                            reorder=p)
-        self.started = time.monotonic()
-
-    async def poll(self, what, predicate, limit_cycles, step=256):
-        """Wait until ``predicate()``, in steps of ``step`` cycles, bounded in cycles and wall
-        time."""
-        for _ in range(limit_cycles // step):
-            if predicate():
-                return
-            assert time.monotonic() - self.started < WALL_LIMIT_S, f"wall-clock limit: {what}"
-            await ClockCycles(self.dut.aclk, step)
-        raise AssertionError(f"{what}: not within {limit_cycles} cycles")
-
-    async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):
-        with concurrent.futures.ThreadPoolExecutor(1) as pool:
-            future = pool.submit(fn, *args)
-            await self.poll(what, future.done, limit_cycles, step=1024)
-            return future.result()
-
-    async def transfer(self, sock, session, to_engine, from_engine, limit_cycles):
-        """Move ``to_engine`` from the kernel socket into the session and ``from_engine``
-        back at the same time; return what each side received."""
-        sock.setblocking(False)
-        cocotb.start_soon(self._feed(session, from_engine))
-        sent = 0
-        got = bytearray()
-
-        def step():
-            nonlocal sent
-            while sent < len(to_engine):
-                try:
-                    n = sock.send(to_engine[sent:sent + 65536])
-                except BlockingIOError:
-                    break
-                sent += n
-            while True:
-                try:
-                    chunk = sock.recv(65536)
-                except BlockingIOError:
-                    break
-                if not chunk:
-                    break
-                got.extend(chunk)
-            return (sent == len(to_engine) and len(got) >= len(from_engine) and
-                    len(session.received) >= len(to_engine))
-
-        await self.poll("transfer", step, limit_cycles)
-        return bytes(session.received), bytes(got)
-
-    async def _feed(self, session, data):
-        for i in range(0, len(data), 4096):
-            await session.write(data[i:i + 4096])
+        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env)
 
 
 async def connect(tb, sock, addr):
@@ -130,7 +69,7 @@ async def run_linux_ping_and_rbcp(dut):
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     await tb.poll("ping", lambda: ping.poll() is not None, 3_000_000, step=1024)
     out = ping.stdout.read()
-    if os.environ.get("ROSGATE_NET_IMPAIRED") != "1":
+    if float(os.environ.get("ROSGATE_NET_IMPAIRMENT", "0")) == 0:
         assert ping.returncode == 0 and " 0% packet loss" in out, out
     from sitcpy.rbcp import Rbcp, RbcpBusError
     client = Rbcp(tb.ip, 4660, 20000)

@@ -12,7 +12,9 @@ import hashlib
 
 from .model import Array, Named, Primitive, Sequence
 
-__all__ = ["md5_text", "md5sum", "service_md5sum", "message_definition", "ros1_name"]
+__all__ = ["md5_text", "md5sum", "service_md5sum", "message_definition", "ros1_name",
+           "encode_connection_header", "decode_connection_header", "frame_message",
+           "ConnectionHeaderError"]
 
 _BUILTIN_NAMED = {"builtin_interfaces/msg/Time": "time",
                   "builtin_interfaces/msg/Duration": "duration"}
@@ -100,3 +102,53 @@ def message_definition(library, typename):
     for name in order:
         text += f"{_SEPARATOR}\nMSG: {ros1_name(name)}\n{_definition_text(library, name)}"
     return text
+
+
+class ConnectionHeaderError(ValueError):
+    """A TCPROS connection header that cannot be decoded; the message names the offset."""
+
+
+def encode_connection_header(fields):
+    """TCPROS connection header (ros_wire.md §1.1): ``uint32_le`` total length, then per field
+    ``uint32_le`` length + ``key=value``. ``fields`` is a mapping or a sequence of pairs, kept
+    in order."""
+    items = fields.items() if hasattr(fields, "items") else fields
+    body = b""
+    for key, value in items:
+        key = str(key)
+        if not key or "=" in key:
+            raise ValueError(f"connection header key {key!r} is empty or contains '='")
+        raw = key.encode() + b"=" + (value if isinstance(value, bytes) else str(value).encode())
+        body += len(raw).to_bytes(4, "little") + raw
+    return len(body).to_bytes(4, "little") + body
+
+
+def decode_connection_header(data, *, prefixed=False):
+    """Inverse of :func:`encode_connection_header`: ``{key: value}``, each field split at its
+    first ``=``. ``data`` is the header body, or with ``prefixed`` the whole header with its
+    total length (which must match)."""
+    data = bytes(data)
+    if prefixed:
+        if len(data) < 4 or int.from_bytes(data[:4], "little") != len(data) - 4:
+            raise ConnectionHeaderError("total length at offset 0 does not match the data")
+        data = data[4:]
+    fields = {}
+    pos = 0
+    while pos < len(data):
+        if pos + 4 > len(data):
+            raise ConnectionHeaderError(f"field length cut off at offset {pos}")
+        n = int.from_bytes(data[pos:pos + 4], "little")
+        raw = data[pos + 4:pos + 4 + n]
+        if len(raw) != n:
+            raise ConnectionHeaderError(f"field of {n} bytes at offset {pos} runs past the end")
+        if b"=" not in raw:
+            raise ConnectionHeaderError(f"field at offset {pos} has no '=': {raw[:40]!r}")
+        key, value = raw.split(b"=", 1)
+        fields[key.decode()] = value.decode(errors="replace")
+        pos += 4 + n
+    return fields
+
+
+def frame_message(body):
+    """A TCPROS message on the wire: ``uint32_le`` length + the serialized body."""
+    return len(body).to_bytes(4, "little") + bytes(body)

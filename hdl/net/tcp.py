@@ -500,6 +500,7 @@ class TcpSession(wiring.Component):
         with m.If(seg & conn_hit):
             m.d.sync += count("segments_rx")
         with m.If(seg & listen_hit):
+            m.d.sync += rx_rptr.eq(rx_commit)      # a new connection starts with no old bytes
             m.d.sync += [state.eq(S.SYN_RECEIVED), remote_mac.eq(f.eth_src),
                          remote_ip.eq(f.ip_src), remote_port.eq(f.src_port),
                          rcv_nxt.eq(f.seq + 1), mss.eq(self._mss(f)), snd_wnd.eq(f.window),
@@ -629,6 +630,7 @@ class TcpSession(wiring.Component):
         with m.If(self.seg_done & self.seg_accept & (self.seg_kind == FrameKind.ARP) &
                   (state == S.ARP) & (f.arp_spa == remote_ip) &
                   ((f.arp_oper == ARP_REPLY) | (f.arp_oper == ARP_REQUEST))):
+            m.d.sync += rx_rptr.eq(rx_commit)
             m.d.sync += [remote_mac.eq(f.arp_sha), state.eq(S.SYN_SENT), syn_due.eq(1),
                          iss.eq(iss_clock), snd_una.eq(iss_clock), snd_nxt.eq(iss_clock),
                          snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1), timer.eq(0),

@@ -1,0 +1,153 @@
+"""The seed paper's setup (sitcp_ros_component_en.md §4, Fig. 8; spec net.md §7): a software
+publisher ``snd_data``, the hardware node between them, a software subscriber ``rcv_data``,
+and a ROS master, all real sockets inside the TAP namespace.
+
+The hardware node's subscriber endpoint connects (as a TCP client) to ``snd_data`` after the
+software half learned it through ``publisherUpdate``/``requestTopic``; its publisher endpoint
+listens, and ``rcv_data`` connects to it after ``requestTopic`` on the hardware node. Received
+messages are published again unchanged in hardware (loopback). Golden models: rosbags (ROS 1
+serialization, md5sum, definitions), the software peers of tb/models/ros1_peers.py written
+from ros_wire.md, and the Linux TCP stack.
+"""
+
+import os
+import random
+
+import cocotb
+import numpy as np
+import pytest
+
+from gen.msg import MessageLibrary
+from gen.msg.ros1 import md5sum, message_definition
+from gen.ros1 import HardwareNode, RbcpClient, RosMaster
+from tb.harness import run_bench
+from tb.models.ros1_peers import SoftwarePublisher, SoftwareSubscriber
+from tb.tap import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
+
+NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=ENGINE_IP,
+                   tx_depth=16384, rx_depth=16384, rto_us=500, msl_us=20)
+IMAGE = "sensor_msgs/msg/Image"
+
+
+def test_ros1_node():
+    why = namespace_unavailable()
+    if why:
+        pytest.skip(f"ROS 1 node bench skipped: {why}")
+    with network_namespace():
+        run_bench(__name__, "ros1_node", "loopback", NODE_CONFIG, "verilator")
+
+
+class RosWorld:
+    """Master, hardware node and the software peers of one test."""
+
+    def __init__(self, tb, *, sub_md5=None, pub_md5=None):
+        from rosbags.typesys import Stores, get_typestore
+        self.tb = tb
+        self.ts = get_typestore(Stores.ROS1_NOETIC)
+        lib = MessageLibrary(store="ros1_noetic")
+        self.md5 = md5sum(lib, IMAGE)
+        self.definition = message_definition(lib, IMAGE)
+        self.master = RosMaster(KERNEL_IP, 0).start()
+        self.rbcp = RbcpClient(ENGINE_IP, timeout=2.0, retries=5)
+        spec = dict(type="sensor_msgs/Image", md5sum=self.md5, definition=self.definition)
+        self.node = HardwareNode("/fpga", self.master.uri, KERNEL_IP, ENGINE_IP, self.rbcp,
+                                 [dict(spec, topic="/image_raw"),
+                                  dict(spec, topic="/image_processed", port=24)])
+        self.snd = SoftwarePublisher("/snd_data", self.master.uri, KERNEL_IP, "/image_raw",
+                                     "sensor_msgs/Image", pub_md5 or self.md5, self.definition)
+        self.rcv = SoftwareSubscriber("/rcv_data", self.master.uri, KERNEL_IP,
+                                      "/image_processed", "sensor_msgs/Image",
+                                      sub_md5 or self.md5, self.definition)
+
+    def image(self, seq, width, height):
+        rng = np.random.default_rng(seq)
+        t = self.ts.types
+        msg = t["sensor_msgs/msg/Image"](
+            header=t["std_msgs/msg/Header"](seq=seq, stamp=t["builtin_interfaces/msg/Time"](
+                sec=seq, nanosec=7), frame_id="cam"),
+            height=height, width=width, encoding="rgb8", is_bigendian=0, step=3 * width,
+            data=rng.integers(0, 256, 3 * width * height, dtype=np.uint8))
+        return bytes(self.ts.serialize_ros1(msg, IMAGE))
+
+    def close(self):
+        for closer in (self.node.stop, self.snd.close, self.rcv.close, self.master.stop,
+                       self.rbcp.close):
+            try:
+                closer()
+            except OSError:
+                pass
+
+
+async def start_world(tb, **kw):
+    world = RosWorld(tb, **kw)
+    await tb.run_in_thread("hardware node start", world.node.start)
+    await tb.run_in_thread("snd_data registers", world.snd.register)
+    return world
+
+
+@cocotb.test()
+async def run_snd_process_rcv(dut):
+    """snd_data -> hardware subscriber -> loopback -> hardware publisher -> rcv_data."""
+    tb = LinuxTB(dut)
+    await tb.reset()
+    world = await start_world(tb)
+    try:
+        await tb.poll("hardware subscriber streaming", lambda: int(dut.phase0.value) == 5,
+                      3_000_000)
+        await tb.run_in_thread("rcv_data registers", world.rcv.register)
+        await tb.poll("hardware publisher streaming", lambda: int(dut.phase1.value) == 5,
+                      3_000_000)
+        # a second subscriber is refused: one TCP session per hardware publisher
+        code, msg, _ = await tb.run_in_thread("second requestTopic", world.node.requestTopic,
+                                              "/other", "/image_processed", [["TCPROS"]])
+        assert code == 0, msg
+        state = world.master.getSystemState("/test")[2]
+        assert ["/image_raw", ["/fpga"]] in state[1] and ["/image_processed", ["/fpga"]] in state[0]
+        sizes = [(8, 6), (64, 48), (1, 1), (33, 17), (160, 120)]
+        sent = [world.image(seq, w, h) for seq, (w, h) in enumerate(sizes)]
+        for body in sent:
+            await tb.run_in_thread("publish", world.snd.publish, body)
+        await tb.poll("messages at rcv_data", lambda: len(world.rcv.messages) >= len(sent),
+                      40 * sum(len(b) for b in sent) + 1_000_000)
+        assert world.rcv.messages == sent, "messages changed on their way through hardware"
+        for body in world.rcv.messages:
+            world.ts.deserialize_ros1(body, IMAGE)
+        header = world.rcv.headers[0]
+        assert (header["type"], header["md5sum"], header["topic"], header["callerid"]) == (
+            "sensor_msgs/Image", world.md5, "/image_processed", "/fpga")
+        assert header["message_definition"] == world.definition
+        # what the hardware subscriber received from snd_data, as software reads it back
+        pub_header = await tb.run_in_thread("read HDR_RX", world.node.clients[0].received_header)
+        assert pub_header["callerid"] == "/snd_data" and pub_header["md5sum"] == world.md5
+        counts = await tb.run_in_thread("counters", world.node.clients[1].counters)
+        assert counts["messages_tx"] == len(sent) and counts["header_rejects"] == 0, counts
+        assert not world.rcv.errors and not world.snd.errors and not world.node.errors
+    finally:
+        world.close()
+
+
+@cocotb.test()
+async def run_header_mismatch(dut):
+    """A subscriber with a wrong md5sum gets the hardware publisher's ``error=`` header and a
+    close; a publisher that refuses the hardware subscriber's md5sum is reported."""
+    tb = LinuxTB(dut)
+    await tb.reset()
+    world = await start_world(tb, sub_md5="0" * 32, pub_md5="1" * 32)
+    try:
+        await tb.run_in_thread("rcv_data registers", world.rcv.register)
+        await tb.poll("error header at rcv_data", lambda: world.rcv.closed.is_set(), 3_000_000)
+        assert world.rcv.headers and "error" in world.rcv.headers[0], (world.rcv.headers,
+                                                                        world.rcv.errors)
+        client = world.node.clients[1]
+        await tb.poll("publisher listening again", lambda: int(dut.phase1.value) in (0, 1),
+                      3_000_000)
+        counts = await tb.run_in_thread("counters", client.counters)
+        assert counts["header_rejects"] == 1, counts
+        errors = await tb.run_in_thread("errors", lambda: client.errors)
+        assert "header_rejected" in errors, errors
+        # snd_data (md5 1111...) refused the hardware subscriber's header with error=
+        await tb.poll("snd_data refused", lambda: len(world.snd.rejected) >= 1, 3_000_000)
+        sub_errors = await tb.run_in_thread("errors", lambda: world.node.clients[0].errors)
+        assert "peer_error" in sub_errors or "header_rejected" in sub_errors, sub_errors
+    finally:
+        world.close()
