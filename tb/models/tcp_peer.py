@@ -84,10 +84,17 @@ class TcpPeerModel:
         Cycles before a delayed ACK.
     rto : int
         Cycles without progress before resending from SND.UNA.
+    ack_latency : int
+        Cycles between deciding to acknowledge and the ACK leaving (host turnaround,
+        interrupt moderation).
+    delay_from_last : bool
+        The delayed-ACK timer restarts with every segment (an ACK only after a burst, as the
+        seed paper's capture shows), instead of running from the first unacknowledged one.
     """
 
     def __init__(self, *, mac, ip, port, engine_mac, engine_ip, engine_port, isn=1000,
-                 window=65535, ack_every=2, ack_delay=2500, rto=200_000, mss=TCP_MSS):
+                 window=65535, ack_every=2, ack_delay=2500, rto=200_000, mss=TCP_MSS,
+                 ack_latency=0, delay_from_last=False):
         self.mac, self.ip, self.port = mac_to_int(mac), ip_to_int(ip), port
         self.emac, self.eip, self.eport = mac_to_int(engine_mac), ip_to_int(engine_ip), \
             engine_port
@@ -111,6 +118,10 @@ class TcpPeerModel:
         self.segments_received = 0
         self.rst_received = 0
         self.ip_id = 0
+        self.ack_latency = ack_latency
+        self.delay_from_last = delay_from_last
+        self.scheduled = []                # cycles at which decided ACKs leave the host
+        self.listening = False
 
     # ---- frames
     def _frame(self, flags, seq, payload=b"", options=b""):
@@ -131,6 +142,19 @@ class TcpPeerModel:
         self.acks_sent += 1
         return self._frame(TCP_ACK, self.snd_nxt)
 
+    def listen(self):
+        """Accept the engine's SYN (passive open) instead of sending one."""
+        self.listening = True
+
+    def _ack(self, cycle):
+        """An ACK now, or one built ``ack_latency`` cycles later (with the numbers then)."""
+        if not self.ack_latency:
+            return [self.ack_frame()]
+        self.unacked_segments = 0
+        self.ack_due_at = None
+        self.scheduled.append(cycle + self.ack_latency)
+        return []
+
     def queue(self, data):
         self.send_data += data
 
@@ -141,7 +165,8 @@ class TcpPeerModel:
     # ---- engine -> peer
     def on_frame(self, frame, cycle):
         seg = parse_tcp_frame(frame)
-        if seg is None or seg["dport"] != self.port or seg["sport"] != self.eport:
+        if seg is None or seg["dport"] != self.port or (self.eport and
+                                                         seg["sport"] != self.eport):
             return []
         flags = seg["flags"]
         out = []
@@ -153,6 +178,12 @@ class TcpPeerModel:
             if len(opts) >= 4 and opts[0] == 2:
                 self.peer_mss = struct.unpack("!H", opts[2:4])[0]
             self.rcv_nxt = (seg["seq"] + 1) & 0xFFFFFFFF
+            if self.listening and not flags & TCP_ACK:
+                self.eport = seg["sport"]          # a client's port is only known now
+                self.peer_window = seg["window"]
+                self.snd_nxt = self.iss + 1
+                opts = struct.pack("!BBH", 2, 4, self.mss)
+                return [self._frame(TCP_SYN | TCP_ACK, self.iss, options=opts)]
             if flags & TCP_ACK and seg["ack"] == (self.iss + 1) & 0xFFFFFFFF:
                 self.snd_una = seg["ack"]
                 self.established = True
@@ -181,17 +212,17 @@ class TcpPeerModel:
                 if flags & TCP_FIN:
                     self.rcv_nxt = (self.rcv_nxt + 1) & 0xFFFFFFFF
                     self.fin_received = True
-                    out.append(self.ack_frame())
+                    out += self._ack(cycle)
                     return out
                 self.unacked_segments += 1
                 if self.unacked_segments >= self.ack_every or self.ooo:
-                    out.append(self.ack_frame())
-                elif self.ack_due_at is None:
+                    out += self._ack(cycle)
+                elif self.ack_due_at is None or self.delay_from_last:
                     self.ack_due_at = cycle + self.ack_delay
             else:
                 if _lt(self.rcv_nxt, seq):
                     self.ooo.setdefault(seq, payload)
-                out.append(self.ack_frame())       # duplicate or out of order: at once
+                out += self._ack(cycle)            # duplicate or out of order: at once
         return out
 
     # ---- peer -> engine
@@ -199,8 +230,12 @@ class TcpPeerModel:
         """Frames to send now: a due delayed ACK, a retransmission after ``rto``, then new
         data up to the engine's window."""
         out = []
-        if self.ack_due_at is not None and cycle >= self.ack_due_at:
+        if self.scheduled and self.scheduled[0] <= cycle:
+            while self.scheduled and self.scheduled[0] <= cycle:
+                self.scheduled.pop(0)
             out.append(self.ack_frame())
+        if self.ack_due_at is not None and cycle >= self.ack_due_at:
+            out += self._ack(cycle)
         if not self.established:
             return out
         in_flight = (self.snd_nxt - self.snd_una) & 0xFFFFFFFF

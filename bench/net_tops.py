@@ -1,0 +1,287 @@
+"""Bench-only hardware around the network engine: a GMII peer port that moves whole frames
+as wide words (so the Python peer wakes once per word, not once per byte), a byte-pattern
+generator and a checking sink for session streams, and a message generator and CRC sink for
+TCPROS endpoints. Not part of rosgate's hardware; the benches measure the engine inside."""
+
+from amaranth.hdl import Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from hdl.net import NetStack
+from hdl.net.stack import STACK_COUNTERS
+from hdl.net.crc import Crc32
+from hdl.net.frames import IFG, PREAMBLE, SFD
+from hdl.ros1 import TcprosNode
+from hdl.stream import AXIStreamSignature, StreamFIFO
+
+__all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_byte"]
+
+WORD_BYTES = 64
+
+
+def pattern_byte(i):
+    """Byte ``i`` of the bench's data pattern (the generator and the sink compute the same)."""
+    return ((i & 0xFF) * 131 + ((i >> 8) & 0xFF)) & 0xFF
+
+
+def _pattern(i):
+    return (i[0:8] * 131 + i[8:16])[0:8]
+
+
+class GmiiWordPeer(wiring.Component):
+    """Frames to and from a GMII port as ``WORD_BYTES``-byte words.
+
+    ``peer_in``: frames for the device (destination MAC .. FCS), ``tkeep`` marks the bytes
+    of the last word; a frame starts on GMII only once all its words are stored, so the
+    Python side can never underrun it. ``peer_out``: the device's frames after the SFD, FCS
+    included, one message per frame. ``out_overflow`` counts words lost to a full FIFO.
+    """
+
+    def __init__(self):
+        sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
+        super().__init__({
+            "peer_in": In(sig), "peer_out": Out(sig),
+            "txd": Out(8), "tx_en": Out(1),              # towards the device's GMII RX
+            "rxd": In(8), "rx_en": In(1), "rx_er": In(1),  # from the device's GMII TX
+            "out_overflow": Out(16), "out_errors": Out(16),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
+        m.submodules.in_fifo = in_fifo = StreamFIFO(sig, 64, packet=True)
+        m.submodules.out_fifo = out_fifo = StreamFIFO(sig, 256)
+        wiring.connect(m, wiring.flipped(self.peer_in), in_fifo.s_axis)
+        wiring.connect(m, out_fifo.m_axis, wiring.flipped(self.peer_out))
+
+        # words -> GMII
+        w = in_fifo.m_axis
+        k = Signal(range(WORD_BYTES))
+        count = Signal(range(16))
+        byte = Signal(8)
+        en = Signal()
+        m.d.sync += [self.txd.eq(byte), self.tx_en.eq(en)]
+        last_byte = (k == WORD_BYTES - 1) | ~w.tkeep.bit_select(k + 1, 1)
+        with m.FSM(name="tx"):
+            with m.State("IDLE"):
+                with m.If(w.tvalid):
+                    m.d.sync += count.eq(0)
+                    m.next = "PREAMBLE"
+            with m.State("PREAMBLE"):
+                m.d.comb += [en.eq(1), byte.eq(Mux(count == PREAMBLE, SFD, 0x55))]
+                m.d.sync += count.eq(count + 1)
+                with m.If(count == PREAMBLE):
+                    m.d.sync += k.eq(0)
+                    m.next = "DATA"
+            with m.State("DATA"):
+                m.d.comb += [en.eq(1), byte.eq(w.tdata.word_select(k, 8))]
+                m.d.sync += k.eq(k + 1)
+                with m.If(last_byte):
+                    m.d.comb += w.tready.eq(1)
+                    m.d.sync += k.eq(0)
+                    with m.If(w.tlast):
+                        m.d.sync += count.eq(0)
+                        m.next = "GAP"
+            with m.State("GAP"):
+                m.d.sync += count.eq(count + 1)
+                with m.If(count == IFG - 1):
+                    m.next = "IDLE"
+
+        # GMII -> words; a full word waits until the next byte shows whether it is the last
+        o = out_fifo.s_axis
+        word = Signal(8 * WORD_BYTES)
+        keep = Signal(WORD_BYTES)
+        j = Signal(range(WORD_BYTES + 1))
+        in_frame = Signal()
+        rxd = Signal(8)
+        rx_en = Signal()
+        m.d.sync += [rxd.eq(self.rxd), rx_en.eq(self.rx_en)]
+        with m.If(self.rx_er):
+            m.d.sync += self.out_errors.eq(self.out_errors + 1)
+        m.d.comb += [o.tdata.eq(word), o.tkeep.eq(keep)]
+        with m.If(~in_frame):
+            with m.If(rx_en & (rxd == SFD)):
+                m.d.sync += [in_frame.eq(1), j.eq(0), keep.eq(0)]
+        with m.Elif(rx_en):
+            with m.If(j == WORD_BYTES):
+                m.d.comb += o.tvalid.eq(1)
+                m.d.sync += [word.word_select(0, 8).eq(rxd), keep.eq(1), j.eq(1)]
+            with m.Else():
+                m.d.sync += [word.word_select(j[:6], 8).eq(rxd),
+                             keep.bit_select(j[:6], 1).eq(1), j.eq(j + 1)]
+        with m.Else():
+            m.d.sync += in_frame.eq(0)
+            m.d.comb += [o.tvalid.eq(j != 0), o.tlast.eq(1)]
+        with m.If(o.tvalid & ~o.tready):
+            m.d.sync += self.out_overflow.eq(self.out_overflow + 1)
+        return m
+
+
+class _PatternSource(wiring.Component):
+    """``count`` bytes of :func:`pattern_byte` on ``m_axis`` after each ``start`` pulse."""
+
+    def __init__(self):
+        super().__init__({"start": In(1), "count": In(32), "m_axis":
+                          Out(AXIStreamSignature(8, keep=False)), "sent": Out(32)})
+
+    def elaborate(self, platform):
+        m = Module()
+        left = Signal(32)
+        with m.If(self.start):
+            m.d.sync += left.eq(self.count)
+        m.d.comb += [self.m_axis.tvalid.eq(left != 0), self.m_axis.tdata.eq(_pattern(self.sent)),
+                     self.m_axis.tlast.eq(left == 1)]
+        with m.If(self.m_axis.tvalid & self.m_axis.tready):
+            m.d.sync += [left.eq(left - 1), self.sent.eq(self.sent + 1)]
+        return m
+
+
+class _PatternSink(wiring.Component):
+    """Always ready; counts bytes and those that differ from :func:`pattern_byte`."""
+
+    def __init__(self):
+        super().__init__({"s_axis": In(AXIStreamSignature(8, keep=False)),
+                          "received": Out(32), "mismatches": Out(32)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.d.comb += self.s_axis.tready.eq(1)
+        with m.If(self.s_axis.tvalid):
+            m.d.sync += self.received.eq(self.received + 1)
+            with m.If(self.s_axis.tdata != _pattern(self.received)):
+                m.d.sync += self.mismatches.eq(self.mismatches + 1)
+        return m
+
+
+def _bridge(m, peer, device):
+    m.d.comb += [device.gmii_rxd.eq(peer.txd), device.gmii_rx_dv.eq(peer.tx_en),
+                 device.gmii_rx_er.eq(0), peer.rxd.eq(device.gmii_txd),
+                 peer.rx_en.eq(device.gmii_tx_en), peer.rx_er.eq(device.gmii_tx_er)]
+
+
+class NetBenchTop(wiring.Component):
+    """A :class:`NetStack` with one session, its GMII on a :class:`GmiiWordPeer`, a pattern
+    generator on its transmit stream and a checking sink on its receive stream."""
+
+    def __init__(self, **stack):
+        self._stack = NetStack(sessions=1, **stack)
+        sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
+        super().__init__({
+            "peer_in": In(sig), "peer_out": Out(sig),
+            "out_overflow": Out(16), "out_errors": Out(16),
+            "gen_start": In(1), "gen_count": In(32), "gen_sent": Out(32),
+            "sink_received": Out(32), "sink_mismatches": Out(32),
+            "open_req": In(1), "active": In(1), "local_port": In(16), "remote_ip": In(32),
+            "remote_port": In(16), "state": Out(4), "tcp_counters": Out(32 * 9),
+            "counters": Out(32 * len(STACK_COUNTERS)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.stack = stack = self._stack
+        m.submodules.peer = peer = GmiiWordPeer()
+        m.submodules.gen = gen = _PatternSource()
+        m.submodules.sink = sink = _PatternSink()
+        _bridge(m, peer, stack)
+        wiring.connect(m, wiring.flipped(self.peer_in), peer.peer_in)
+        wiring.connect(m, peer.peer_out, wiring.flipped(self.peer_out))
+        s = stack.tcp0
+        wiring.connect(m, gen.m_axis, s.tx)
+        wiring.connect(m, s.rx, sink.s_axis)
+        m.d.comb += [gen.start.eq(self.gen_start), gen.count.eq(self.gen_count),
+                     self.gen_sent.eq(gen.sent), self.sink_received.eq(sink.received),
+                     self.sink_mismatches.eq(sink.mismatches),
+                     self.out_overflow.eq(peer.out_overflow), self.out_errors.eq(peer.out_errors),
+                     s.open_req.eq(self.open_req), s.active.eq(self.active),
+                     s.local_port.eq(self.local_port), s.remote_ip.eq(self.remote_ip),
+                     s.remote_port.eq(self.remote_port), s.close_ack.eq(s.close_req),
+                     self.state.eq(s.state), self.tcp_counters.eq(s.counters),
+                     self.counters.eq(stack.counters)]
+        return m
+
+
+class _MessageSource(wiring.Component):
+    """One message of ``length`` bytes per ``start``: ``prefix`` (``prefix_len`` bytes) then
+    :func:`pattern_byte` bytes; ``tuser`` = ``length``."""
+
+    def __init__(self):
+        from hdl.ros1 import message_stream_signature
+        super().__init__({"start": In(1), "length": In(32), "prefix": In(8 * 64),
+                          "prefix_len": In(7), "m_axis": Out(message_stream_signature())})
+
+    def elaborate(self, platform):
+        m = Module()
+        left = Signal(32)
+        i = Signal(32)
+        with m.If(self.start):
+            m.d.sync += [left.eq(self.length), i.eq(0)]
+        data = Mux(i < self.prefix_len, self.prefix.word_select(i[:6], 8), _pattern(i))
+        m.d.comb += [self.m_axis.tvalid.eq(left != 0), self.m_axis.tdata.eq(data),
+                     self.m_axis.tlast.eq(left == 1), self.m_axis.tuser.eq(self.length)]
+        with m.If(self.m_axis.tvalid & self.m_axis.tready):
+            m.d.sync += [left.eq(left - 1), i.eq(i + 1)]
+        return m
+
+
+class _MessageSink(wiring.Component):
+    """Always ready; counts bytes and messages and keeps the CRC-32 (``zlib.crc32``) of the
+    last complete message."""
+
+    def __init__(self):
+        from hdl.ros1 import message_stream_signature
+        super().__init__({"s_axis": In(message_stream_signature()), "received": Out(32),
+                          "messages": Out(32), "crc": Out(32)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.crc = crc = Crc32(1)
+        s = self.s_axis
+        done = Signal()
+        m.d.comb += [s.tready.eq(1), crc.data.eq(s.tdata), crc.valid.eq(s.tvalid),
+                     crc.clear.eq(done)]
+        m.d.sync += done.eq(s.tvalid & s.tlast)
+        with m.If(s.tvalid):
+            m.d.sync += self.received.eq(self.received + 1)
+            with m.If(s.tlast):
+                m.d.sync += self.messages.eq(self.messages + 1)
+        with m.If(done):
+            m.d.sync += self.crc.eq(crc.crc)
+        return m
+
+
+class Ros1BenchTop(wiring.Component):
+    """The seed paper's measurement rig: a :class:`TcprosNode` with endpoints 0 subscriber
+    (into a CRC sink: receive-only), 1 publisher (from a message generator: send-only),
+    2 subscriber looped to 3 publisher (round trip), on a :class:`GmiiWordPeer`."""
+
+    ENDPOINTS = ["subscriber", "publisher", "subscriber", "publisher"]
+
+    def __init__(self, **stack):
+        self._node = TcprosNode(self.ENDPOINTS, loopback=[(2, 3)], **stack)
+        sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
+        super().__init__({
+            "peer_in": In(sig), "peer_out": Out(sig), "out_overflow": Out(16),
+            "gen_start": In(1), "gen_length": In(32), "gen_prefix": In(8 * 64),
+            "gen_prefix_len": In(7),
+            "sink_received": Out(32), "sink_messages": Out(32), "sink_crc": Out(32),
+            **{f"phase{k}": Out(3) for k in range(4)},
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.node = node = self._node
+        m.submodules.peer = peer = GmiiWordPeer()
+        m.submodules.gen = gen = _MessageSource()
+        m.submodules.sink = sink = _MessageSink()
+        _bridge(m, peer, node)
+        wiring.connect(m, wiring.flipped(self.peer_in), peer.peer_in)
+        wiring.connect(m, peer.peer_out, wiring.flipped(self.peer_out))
+        wiring.connect(m, node.sub0, sink.s_axis)
+        wiring.connect(m, gen.m_axis, node.pub1)
+        m.d.comb += [gen.start.eq(self.gen_start), gen.length.eq(self.gen_length),
+                     gen.prefix.eq(self.gen_prefix), gen.prefix_len.eq(self.gen_prefix_len),
+                     self.sink_received.eq(sink.received), self.sink_messages.eq(sink.messages),
+                     self.sink_crc.eq(sink.crc), self.out_overflow.eq(peer.out_overflow)]
+        for k in range(4):
+            m.d.comb += getattr(self, f"phase{k}").eq(getattr(node, f"phase{k}"))
+        return m
