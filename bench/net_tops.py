@@ -234,7 +234,7 @@ class _MessageSink(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.crc = crc = Crc32(1)
+        m.submodules.fcs = crc = Crc32(1)
         s = self.s_axis
         done = Signal()
         m.d.comb += [s.tready.eq(1), crc.data.eq(s.tdata), crc.valid.eq(s.tvalid),

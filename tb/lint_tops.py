@@ -13,7 +13,8 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
            "tb.test_reconos_pingpong": "reconos", "tb.test_reconos_memory": "reconos",
            "tb.test_reconos_calls": "reconos", "tb.test_reconos_apps": "reconos",
            "tb.test_kernels_image": "kernels", "tb.test_kernels_control": "kernels",
-           "tb.test_kernels_mnist": "kernels"}
+           "tb.test_kernels_mnist": "kernels", "tb.test_net_stack": "net",
+           "tb.test_ros1_registers": "ros1_node"}
 
 
 def main():

@@ -94,6 +94,13 @@ def fix_tcp_checksum(raw):
     raw[50:52] = checksum(pseudo + bytes(seg)).to_bytes(2, "big")
 
 
+def difference(got, want):
+    """Where ``got`` first differs from ``want``, for the failure message."""
+    n = next((i for i, (x, y) in enumerate(zip(got, want)) if x != y), min(len(got), len(want)))
+    return (f"{len(got)} bytes, expected {len(want)}; first difference at {n}: "
+            f"{got[n:n + 16].hex()} instead of {want[n:n + 16].hex()}")
+
+
 def is_live_segment(frame, peer):
     """Whether ``frame`` is a well-formed data or FIN segment of the live connection: the
     engine must take it as data if it lands at RCV.NXT, so such a mutant (bit flips that
@@ -210,6 +217,9 @@ async def run_fuzz_live_session(dut):
         frame, good_fcs = mutant(tb, peer, rng)
         while good_fcs and is_live_segment(frame, peer):
             frame, good_fcs = mutant(tb, peer, rng)
+        # fuzz shares the link with the peer: queue a frame only when the link is nearly idle
+        while tb.source.count() > 1:
+            await ClockCycles(dut.aclk, 32)
         await tb.put(frame, fcs=good_fcs, error=not good_fcs and rng.random() < 0.5)
         if i % 50 == 49:
             await ClockCycles(dut.aclk, rng.randrange(200, 2000))
@@ -217,8 +227,13 @@ async def run_fuzz_live_session(dut):
         if len(s.received) >= len(up) and len(peer.received) >= len(down):
             break
         await ClockCycles(dut.aclk, 500)
-    assert bytes(s.received) == up, "the engine delivered other bytes than the peer sent"
-    assert bytes(peer.received) == down, "the peer received other bytes than the engine sent"
+    dut._log.info("end: state %d, engine %s, stack %s, peer snd_una %d snd_nxt %d window %d "
+                  "retransmissions %d rst %d", s.get("state"), tb.session_counters(0),
+                  tb.counters(), peer.snd_una, peer.snd_nxt, peer.peer_window,
+                  peer.retransmissions, peer.rst_received)
+    assert bytes(s.received) == up, "engine received: " + difference(bytes(s.received), up)
+    assert bytes(peer.received) == down, "peer received: " + difference(bytes(peer.received),
+                                                                        down)
     peer_task.cancel()
     await ClockCycles(dut.aclk, 3000)
     # still answering

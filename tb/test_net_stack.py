@@ -18,7 +18,8 @@ from hdl.net.stack import GLOBAL_BASE, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
 from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
 
-test_net = cocotb_bench("net", NET_CONFIGS)
+CONFIGS = NET_CONFIGS
+test_net = cocotb_bench("net", CONFIGS)
 
 
 def checksums_ok(pkt):

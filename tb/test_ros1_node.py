@@ -10,9 +10,6 @@ serialization, md5sum, definitions), the software peers of tb/models/ros1_peers.
 from ros_wire.md, and the Linux TCP stack.
 """
 
-import os
-import random
-
 import cocotb
 import numpy as np
 import pytest
@@ -21,11 +18,10 @@ from gen.msg import MessageLibrary
 from gen.msg.ros1 import md5sum, message_definition
 from gen.ros1 import HardwareNode, RbcpClient, RosMaster
 from tb.harness import run_bench
+from tb.net_tb import NODE_CONFIG
 from tb.models.ros1_peers import SoftwarePublisher, SoftwareSubscriber
 from tb.tap import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
 
-NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=ENGINE_IP,
-                   tx_depth=16384, rx_depth=16384, rto_us=500, msl_us=20)
 IMAGE = "sensor_msgs/msg/Image"
 
 

@@ -80,7 +80,7 @@ class GmiiRx(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.crc = crc = Crc32(1)
+        m.submodules.fcs = crc = Crc32(1)
         rxd = Signal(8)
         dv = Signal()
         er = Signal()
@@ -159,7 +159,7 @@ class GmiiTx(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.crc = crc = Crc32(1)
+        m.submodules.fcs = crc = Crc32(1)
         count = Signal(range(2048))
         underrun = Signal()
         byte = Signal(8)

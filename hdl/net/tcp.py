@@ -251,7 +251,10 @@ class TcpSession(wiring.Component):
         first = pv & (po == 0)
         on = Mux(first, start_ok, wr_on)
         skip = Mux(first, ahead[:16], wr_skip)
-        room = (rx_spec - rx_rptr) < rxd - 1
+        # pointer and sequence differences are taken modulo their width (the counters wrap)
+        rx_spec_used = Signal(17)
+        m.d.comb += rx_spec_used.eq(rx_spec - rx_rptr)
+        room = rx_spec_used < rxd - 1
         wr_now = Signal()
         m.d.comb += wr_now.eq(pv & on & (po >= skip) & room)
         m.d.comb += [rx_w.addr.eq(rx_spec[:rx_bits]), rx_w.data.eq(self.seg_payload_data),
@@ -288,7 +291,9 @@ class TcpSession(wiring.Component):
         oldest = Mux(d_ack != d_wr, ack_seq, Mux(seg_len != 0, seg_start, wr_seq))
         used = Signal(17)
         m.d.comb += [used.eq(wr_seq - oldest), self.tx_fill.eq(used)]
-        ring_room = (d_wr - d_ack) < nd - 1
+        ring_used = Signal(ptr_bits)
+        m.d.comb += ring_used.eq(d_wr - d_ack)
+        ring_room = ring_used < nd - 1
         m.d.comb += self.s_axis.tready.eq(sending & ~fin_queued & ring_room & (used < txd - 1))
         take = self.s_axis.tvalid & self.s_axis.tready
         m.d.comb += [tx_w.addr.eq(wr_seq[:tx_bits]), tx_w.data.eq(self.s_axis.tdata),
@@ -310,7 +315,7 @@ class TcpSession(wiring.Component):
                 m.d.sync += [seg_len.eq(seg_len + 1), seg_sum.eq(new_sum)]
         with m.Elif(seg_len != 0):
             m.d.sync += idle.eq(idle + 1)
-            with m.If((idle == 15) & ((d_wr - d_ack) < nd)):
+            with m.If((idle == 15) & (ring_used < nd)):
                 m.d.comb += [close_seg.eq(1), close_len.eq(seg_len), close_sum.eq(seg_sum)]
                 m.d.sync += [seg_len.eq(0), seg_sum.eq(0), idle.eq(0)]
         start_of_closed = Mux(seg_len == 0, wr_seq, seg_start)
@@ -333,7 +338,9 @@ class TcpSession(wiring.Component):
         pending = Signal()          # a request is offered to the builder
         flight = snd_max - snd_una
         wnd_limit = Mux(cwnd < snd_wnd, cwnd, snd_wnd)
-        data_fits = (snd_seq + snd_len - snd_una) <= wnd_limit
+        data_end = Signal(32)
+        m.d.comb += data_end.eq(snd_seq + snd_len - snd_una)
+        data_fits = data_end <= wnd_limit
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
         all_sent = (d_snd == d_wr) & (seg_len == 0)
         m.d.comb += self.tx.valid.eq(pending)
@@ -553,7 +560,7 @@ class TcpSession(wiring.Component):
             with m.Else():
                 m.d.comb += commit.eq(1)
                 with m.If(new_ack):
-                    acked = f.ack - snd_una
+                    acked = (f.ack - snd_una)[:32]
                     m.d.sync += [snd_una.eq(f.ack), retries.eq(0), backoff.eq(0), timer.eq(0),
                                  timer_on.eq(f.ack != snd_max), dupacks.eq(0)]
                     with m.If(_seq_lt(snd_nxt, f.ack)):

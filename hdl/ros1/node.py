@@ -73,6 +73,7 @@ class TcprosNode(wiring.Component):
                 else:
                     members[f"sub{k}"] = Out(message_stream_signature())
             members[f"phase{k}"] = Out(range(len(PHASES)))
+        members["local_mac"] = Out(48)
         members["local_ip"] = Out(32)
         members["counters"] = Out(32 * len(STACK_COUNTERS))
         super().__init__(members)
@@ -82,7 +83,8 @@ class TcprosNode(wiring.Component):
         m.submodules.stack = stack = self._stack
         for name in ("gmii_rxd", "gmii_rx_dv", "gmii_rx_er"):
             m.d.comb += getattr(stack, name).eq(getattr(self, name))
-        for name in ("gmii_txd", "gmii_tx_en", "gmii_tx_er", "local_ip", "counters"):
+        for name in ("gmii_txd", "gmii_tx_en", "gmii_tx_er", "local_mac", "local_ip",
+                     "counters"):
             m.d.comb += getattr(self, name).eq(getattr(stack, name))
 
         endpoints = []

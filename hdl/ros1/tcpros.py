@@ -274,11 +274,9 @@ class TcprosEndpoint(wiring.Component):
 
         with m.FSM() as fsm:
             with m.State("IDLE"):
-                m.d.comb += phase.eq(_PHASE["idle"] if not pub else _PHASE["connecting"])
+                # a publisher listening or a subscriber connecting: "connecting"
+                m.d.comb += phase.eq(Mux(start, _PHASE["connecting"], _PHASE["idle"]))
                 m.d.sync += send_err.eq(0)
-                if not pub:
-                    with m.If(start):
-                        m.d.comb += phase.eq(_PHASE["connecting"])
                 with m.If(connected):
                     m.d.sync += [idx.eq(0), total_left.eq(0), lenbytes.eq(0), rx_pos.eq(0),
                                  present.eq(0), good.eq(0), key.eq(4), b_phase.eq(0),
