@@ -37,13 +37,13 @@ def _waves():
     return os.environ.get("WAVES", "0") not in ("", "0")
 
 
-def export_bench_top(top, params, build_dir, *, build=None):
+def export_bench_top(top, params, build_dir, *, build=None, icarus=False):
     """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path.
 
     ``build`` makes the component (default: the :data:`gen.tops.TOPS` builder of ``top``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    text, vtop = export_verilog(component, top)
+    text, vtop = export_verilog(component, top, icarus=icarus)
     vfile = Path(build_dir) / f"{top}.v"
     write_if_changed(vfile, text)
     write_manifest(Path(build_dir) / f"{top}.json", module=top, component=component, top=vtop)
@@ -98,7 +98,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     # are serialised across pytest workers, and each module gets its own results file.
     lock = open(build_dir / ".build.lock", "w")
     fcntl.flock(lock, fcntl.LOCK_EX)
-    vfile = export_bench_top(top, params, build_dir, build=build)
+    vfile = export_bench_top(top, params, build_dir, build=build, icarus=sim == "icarus")
     waves = _waves()
     runner = get_runner(sim)
     build_args = []

@@ -211,7 +211,8 @@ class ScriptedPeer:
             assert tcp.seq == seq % 2**32, f"seq {tcp.seq}, expected {seq % 2**32}"
         if ack is not None:
             assert tcp.ack == ack % 2**32, f"ack {tcp.ack}, expected {ack % 2**32}"
-        assert bytes(tcp.payload) == data, (bytes(tcp.payload), data)
+        if data is not None:
+            assert bytes(tcp.payload) == data, (bytes(tcp.payload), data)
         return tcp
 
 
@@ -229,7 +230,7 @@ async def run_tcp_server_scripted(dut):
                                   ("SAckOK", b""), ("Timestamp", (1, 0))])
     synack = await peer.expect("SA", ack=peer.seq)
     assert synack.options == [("MSS", 1460)], synack.options
-    assert synack.window == 16383
+    assert synack.window == NET_CONFIGS["stack"]["rx_depth"] - 1
     iss = synack.seq
     peer.ack = iss + 1
     await peer.send("A")
@@ -269,3 +270,129 @@ async def run_tcp_server_scripted(dut):
     await other.send("S")
     await other.expect("RA", seq=0, ack=78)
     assert tb.session_counters(0)["bytes_rx"] == 18
+
+
+async def establish(tb, k, port, peer, *, window=65535):
+    """Session ``k`` listening on ``port``; ``peer`` completes the handshake; returns ISS."""
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    s = SessionPort(tb.dut, k, random.Random(k))
+    s.set(active=0, local_port=port, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    await peer.send("S", options=[("MSS", 1460)], window=window)
+    synack = await peer.expect("SA", ack=peer.seq)
+    peer.ack = synack.seq + 1
+    await peer.send("A", window=window)
+    await s.wait_state(TcpState.ESTABLISHED)
+    return s, synack.seq
+
+
+@cocotb.test()
+async def run_tcp_rst_rules(dut):
+    """RFC 9293 §3.10.7.4 with RFC 5961: an in-window inexact RST and a SYN on a live
+    connection get challenge ACKs, an RST outside the window nothing, an exact RST aborts
+    (error RESET) and the listener comes back."""
+    from hdl.net.tcp import TcpError, TcpState
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 41000, 26, isn=5000)
+    s, iss = await establish(tb, 0, 26, peer)
+    await peer.send("R", seq=peer.seq + 100, advance=False)
+    await peer.expect("A", seq=iss + 1, ack=peer.seq)
+    await peer.send("S", seq=peer.seq + 7, advance=False)
+    await peer.expect("A", seq=iss + 1, ack=peer.seq)
+    await peer.send("R", seq=peer.seq + 100_000, advance=False)
+    await tb.expect_silence(1000)
+    assert s.get("state") == TcpState.ESTABLISHED.value
+    errors = {"n": 0}
+    from tb.streams import count_pulses
+    cocotb.start_soon(count_pulses(dut.tcp0_error, errors, "n"))
+    await peer.send("R", advance=False)
+    await s.wait_state(TcpState.LISTEN, 2000)
+    assert errors["n"] == 1 and s.get("error_code") == TcpError.RESET.value
+    assert tb.session_counters(0)["rst_rx"] >= 2
+    s.set(open_req=0)
+
+
+@cocotb.test()
+async def run_tcp_retransmit_and_zero_window(dut):
+    """An unacknowledged segment is sent again after the RTO with the same sequence number;
+    a zero window stops new data and brings window probes (SEG.SEQ = SND.UNA - 1) on the
+    persist timer; reopening the window lets the rest through, never beyond the window."""
+    from hdl.net.tcp import TcpState
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 41001, 27, isn=9000)
+    s, iss = await establish(tb, 0, 27, peer, window=3000)
+    data = bytes(range(256)) * 20                     # 5120 bytes
+    await s.write(data[:1000])
+    first = await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000])
+    again = await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000], timeout=40_000)
+    assert tb.session_counters(0)["rto"] >= 1 and first.seq == again.seq
+    # acknowledge it with a zero window; queue the rest
+    peer.ack = iss + 1001
+    await peer.send("A", window=0)
+    await s.write(data[1000:])
+    probe = await peer.expect("A", seq=iss + 1000, ack=peer.seq, timeout=80_000)
+    assert probe is not None
+    await peer.send("A", window=0)                    # still closed: keep probing
+    await peer.expect("A", seq=iss + 1000, ack=peer.seq, timeout=160_000)
+    # open 2000 bytes: the whole segments that fit come (segments are cut when written:
+    # 1460, 1460, 1200), nothing beyond the window
+    await peer.send("A", window=2000)
+    seg = await peer.expect("PA", seq=iss + 1001, ack=peer.seq, data=data[1000:2460],
+                            timeout=20_000)
+    got = bytearray(bytes(seg.payload))
+    await tb.expect_silence(3000)
+    peer.ack = iss + 2461
+    await peer.send("A", window=65535)
+    while len(got) < len(data) - 1000:
+        seg = await peer.expect("PA", ack=peer.seq, data=None, timeout=20_000)
+        got += bytes(seg.payload)
+    assert bytes(got) == data[1000:]
+    peer.ack = iss + 1 + len(data)
+    await peer.send("A")
+    assert s.get("state") == TcpState.ESTABLISHED.value
+    s.set(open_req=0)
+    await peer.expect("FA", seq=iss + 1 + len(data))
+
+
+@cocotb.test()
+async def run_tcp_client_refused_and_arp_timeout(dut):
+    """Client mode: ARP for the server, SYN, a RST acking the SYN -> CLOSED with error
+    REFUSED; a server that never answers ARP -> four requests, then error ARP."""
+    from hdl.net.frames import ip_to_int
+    from hdl.net.tcp import TcpError, TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 1, random.Random(1))
+    s.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5000, local_port=0, open_req=1)
+    request = await tb.recv()
+    assert ARP in request and request[ARP].op == 1 and request[ARP].pdst == PEER_IP
+    assert request.dst == "ff:ff:ff:ff:ff:ff"
+    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
+                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
+    syn = await tb.recv()
+    assert TCP in syn and str(syn[TCP].flags) == "S" and syn[TCP].dport == 5000
+    assert syn[TCP].sport >= 49152 and syn[TCP].options == [("MSS", 1460)]
+    await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) /
+                  TCP(sport=5000, dport=syn[TCP].sport, flags="RA", seq=0,
+                      ack=syn[TCP].seq + 1))
+    await s.wait_state(TcpState.CLOSED, 2000)
+    assert s.get("error_code") == TcpError.REFUSED.value
+    # nobody answers ARP for this address
+    s.set(open_req=0)
+    await tb.idle(10)
+    s.set(remote_ip=ip_to_int("198.18.0.99"), open_req=1)
+    requests = 0
+    for _ in range(6):
+        frame = await tb.recv(8000)
+        if frame is None:
+            break
+        assert ARP in frame and frame[ARP].pdst == "198.18.0.99"
+        requests += 1
+    assert requests == 4, requests
+    assert s.get("state") == TcpState.CLOSED.value
+    assert s.get("error_code") == TcpError.ARP.value
+    s.set(open_req=0)

@@ -101,19 +101,54 @@ class VivadoTop(Elaboratable):
 _AUTO_REG = re.compile(r"^(\s*)reg (\\\$auto\$\S+)\s+= (\S+);$", re.MULTILINE)
 
 
-def fix_icarus_t0(text):
-    """Move Yosys' ``reg \\$auto... = 0;`` initialisers into ``initial`` blocks (pitfall 3)."""
-    return _AUTO_REG.sub(lambda mo: (f"{mo.group(1)}reg {mo.group(2)} ;\n"
-                                     f"{mo.group(1)}initial {mo.group(2)} = {mo.group(3)};"),
+def fix_icarus_t0(text, *, delay=False):
+    """Move Yosys' ``reg \\$auto... = 0;`` initialisers into ``initial`` blocks (pitfall 3).
+
+    With ``delay`` (Icarus simulation only) the assignment waits ``#0``: an ``always @*`` block
+    that has not reached its event control when the ``initial`` runs would miss the event and
+    keep X until one of its inputs changes, which for a register that never leaves its reset
+    value is never (seen on an idle TCP session's acknowledgement number)."""
+    wait = "#0 " if delay else ""
+    text = _AUTO_REG.sub(lambda mo: (f"{mo.group(1)}reg {mo.group(2)} ;\n"
+                                     f"{mo.group(1)}initial {wait}{mo.group(2)} = "
+                                     f"{mo.group(3)};"),
                          text)
+    if delay:
+        text = _trigger_single_statement_blocks(text)
+    return text
 
 
-def export_verilog(component, name, *, clock="aclk", reset="aresetn"):
-    """Return ``(verilog_text, top)`` for ``component`` wrapped in a :class:`VivadoTop`."""
+_MODULE_HEADER = re.compile(r"^(module [^;]*;\n)", re.MULTILINE)
+_SINGLE_ALWAYS = re.compile(r"^(\s*)always @\*\n(\s*)(?!begin\b)([^\n]*;)$", re.MULTILINE)
+
+
+def _trigger_single_statement_blocks(text):
+    """Give every one-statement ``always @*`` block (Yosys writes ``x[7:0] = y;`` that way,
+    without its t=0 trigger) a trigger of its own module, so Icarus evaluates it at t=0 even
+    if ``y`` never changes (an idle session's acknowledgement number stayed X)."""
+    out = []
+    parts = _MODULE_HEADER.split(text)
+    out.append(parts[0])
+    for k in range(1, len(parts), 2):
+        header, body = parts[k], parts[k + 1]
+        if _SINGLE_ALWAYS.search(body):
+            trigger = f"\\$rosgate_t0$trigger_{k} "
+            body = (f"  reg {trigger};\n  initial #0 {trigger}= 0;\n" +
+                    _SINGLE_ALWAYS.sub(lambda mo: (f"{mo.group(1)}always @* begin\n"
+                                                   f"{mo.group(2)}if ({trigger}) begin end\n"
+                                                   f"{mo.group(2)}{mo.group(3)}\n"
+                                                   f"{mo.group(1)}end"), body))
+        out.append(header + body)
+    return "".join(out)
+
+
+def export_verilog(component, name, *, clock="aclk", reset="aresetn", icarus=False):
+    """Return ``(verilog_text, top)`` for ``component`` wrapped in a :class:`VivadoTop`;
+    ``icarus`` prepares the text for Icarus simulation (see :func:`fix_icarus_t0`)."""
     top = VivadoTop(component, clock=clock, reset=reset)
     text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
                            strip_internal_attrs=True)
-    return fix_icarus_t0(text), top
+    return fix_icarus_t0(text, delay=icarus), top
 
 
 def write_if_changed(path, text):

@@ -33,6 +33,8 @@ GLOBAL_REGS = {
     0x08: ("ip", 4, True),
     0x0C: ("rto_cycles", 4, True),
     0x10: ("msl_cycles", 4, True),
+    0x14: ("rbcp_port", 2, True),
+    0x18: ("arp_retry_cycles", 4, True),
     0x40: ("counters", 4 * len(STACK_COUNTERS), False),
 }
 
@@ -75,9 +77,10 @@ class NetStack(wiring.Component):
         TCP sessions, 1..8.
     tx_depth, rx_depth : int
         Per-session buffer bytes (see :class:`TcpSession`).
-    rto_us, msl_us : int
-        Initial retransmission timeout and maximum segment lifetime in microseconds at
-        125 MHz (defaults 200 ms and 1 s, net.md §1.4, §1.6).
+    rto_us, msl_us, arp_retry_us : int
+        Initial retransmission timeout, maximum segment lifetime and a client's ARP retry
+        interval in microseconds at 125 MHz (defaults 200 ms, 1 s and 2 s; net.md §1.2,
+        §1.4, §1.6); registers at :data:`GLOBAL_BASE` change them at run time.
     user_window : int
         Bytes of RBCP address space from 0 that the user bus decodes.
     iss_seed : int
@@ -101,7 +104,7 @@ class NetStack(wiring.Component):
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
                  sessions=1, tx_depth=65536, rx_depth=65536, rto_us=200_000, msl_us=1_000_000,
-                 user_window=0x10000, iss_seed=0x1000):
+                 arp_retry_us=2_000_000, user_window=0x10000, iss_seed=0x1000):
         try:
             self._mac = mac_to_int(mac)
         except ValueError as e:
@@ -114,6 +117,8 @@ class NetStack(wiring.Component):
         self._sessions = check_int("sessions", sessions, 1, 8)
         self._rto = check_int("rto_us", rto_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
         self._msl = check_int("msl_us", msl_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
+        self._arp_retry = (check_int("arp_retry_us", arp_retry_us, 1, 30_000_000) *
+                           (_CLOCK_HZ // 1_000_000))
         self._user_window = check_int("user_window", user_window, 1, GLOBAL_BASE)
         self._session_args = dict(tx_depth=tx_depth, rx_depth=rx_depth, iss_seed=iss_seed)
         check_power_of_two("tx_depth", tx_depth, 2048, 65536)
@@ -146,6 +151,8 @@ class NetStack(wiring.Component):
         local_ip = Signal(32, init=self._ip)
         rto = Signal(32, init=self._rto)
         msl = Signal(32, init=self._msl)
+        rbcp_port = Signal(16, init=self._rbcp_port)
+        arp_retry = Signal(32, init=self._arp_retry)
         m.d.comb += [self.local_mac.eq(local_mac), self.local_ip.eq(local_ip),
                      parser.local_mac.eq(local_mac), parser.local_ip.eq(local_ip),
                      builder.local_mac.eq(local_mac), builder.local_ip.eq(local_ip)]
@@ -165,7 +172,7 @@ class NetStack(wiring.Component):
                 s.seg_payload_offset.eq(parser.payload_offset),
                 s.seg_done.eq(parser.done), s.seg_accept.eq(parser.accept),
                 s.rto_cycles.eq(rto), s.msl_cycles.eq(msl),
-                s.arp_retry_cycles.eq(2 * _CLOCK_HZ),
+                s.arp_retry_cycles.eq(arp_retry),
             ]
             wiring.connect(m, s.tx, getattr(builder, f"req_{k + 1}"))
             wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
@@ -223,7 +230,8 @@ class NetStack(wiring.Component):
             m.d.sync += counters["frames_out"].eq(counters["frames_out"] + 1)
 
         global_values = {"mac": local_mac, "ip": local_ip, "rto_cycles": rto,
-                         "msl_cycles": msl,
+                         "msl_cycles": msl, "rbcp_port": rbcp_port,
+                         "arp_retry_cycles": arp_retry,
                          "counters": Cat(*(counters[n] for n in reversed(STACK_COUNTERS)))}
         offset = bus.addr[:16]
         with m.Switch(offset):
@@ -265,7 +273,7 @@ class NetStack(wiring.Component):
                                              icmp_csum.eq(f.icmp_csum)]
                                 m.next = "ICMP_TYPE"
                         with m.Case(FrameKind.UDP):
-                            with m.If(claim & (f.dst_port == self._rbcp_port)):
+                            with m.If(claim & (f.dst_port == rbcp_port)):
                                 m.d.sync += [r_kind.eq(FrameKind.UDP), r_eth.eq(f.eth_src),
                                              r_ip.eq(f.ip_src), r_sport.eq(f.dst_port),
                                              r_dport.eq(f.src_port)]
@@ -337,7 +345,7 @@ class NetStack(wiring.Component):
                         with m.Else():
                             m.d.sync += bump("delivered")
                     with m.Case(FrameKind.UDP):
-                        with m.If(f.dst_port != self._rbcp_port):
+                        with m.If(f.dst_port != rbcp_port):
                             m.d.sync += bump("no_port")
                         with m.Elif(busy_slot | ~claim):
                             m.d.sync += bump("busy")

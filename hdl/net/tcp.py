@@ -112,7 +112,8 @@ class TcpSession(wiring.Component):
     abort : In(1)
         Send RST and close now.
     error : Out(1)
-        Pulse when the connection fails; ``error_code`` keeps the reason until the next open.
+        Pulse when the connection fails; ``error_code`` keeps the reason until the next
+        connection (a server's next SYN, a client's next open).
     state : Out(TcpState)
     peer_ip, peer_port : Out
         The connected peer (a server learns it from the SYN).
@@ -450,8 +451,7 @@ class TcpSession(wiring.Component):
                              syn_due.eq(0), probe_due.eq(0), ack_now.eq(0), ack_owed.eq(0),
                              backoff.eq(0), retries.eq(0), dupacks.eq(0)]
                 with m.If(self.open_req & ~self.active):
-                    m.d.sync += [state.eq(S.LISTEN), local_port.eq(self.local_port),
-                                 self.error_code.eq(TcpError.NONE)]
+                    m.d.sync += [state.eq(S.LISTEN), local_port.eq(self.local_port)]
                 with m.Elif(self.open_req & self.active & armed):
                     m.d.sync += [state.eq(S.ARP), arp_due.eq(1), armed.eq(0),
                                  remote_ip.eq(self.remote_ip), remote_port.eq(self.remote_port),
@@ -514,7 +514,8 @@ class TcpSession(wiring.Component):
                          wl1.eq(f.seq), wl2.eq(0), iss.eq(iss_clock), snd_una.eq(iss_clock),
                          snd_nxt.eq(iss_clock), snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1),
                          syn_due.eq(1), retries.eq(0), backoff.eq(0), timer.eq(0),
-                         cwnd.eq(3 * TCP_MSS), ssthresh.eq(65535), dupacks.eq(0)]
+                         cwnd.eq(3 * TCP_MSS), ssthresh.eq(65535), dupacks.eq(0),
+                         self.error_code.eq(TcpError.NONE)]
         with m.Elif(seg & conn_hit & (state == S.SYN_SENT)):
             with m.If(f_ack & (f.ack != iss + 1)):
                 with m.If(~f_rst):
