@@ -214,4 +214,5 @@ async def armv7_section_mapping(dut):
 CONFIGS = system_configs()
 
 #: r32 on Verilator in test-full (make test: r32 on Icarus, r64 on both)
-test_reconos_memory = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator")])
+test_reconos_memory = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator"),
+                                                             ("system_r64", "icarus")])
