@@ -14,7 +14,7 @@ from hdl.net.frames import int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
-from tb.streams import PacketSink, random_pauses, reset_aresetn
+from tb.streams import StreamPort, reset_aresetn
 
 __all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
@@ -145,27 +145,15 @@ class NetTB:
         await ClockCycles(self.dut.aclk, cycles)
 
 
-class SessionPort:
-    """Session ``k``'s user streams: a cocotbext-axi source on ``tcp<k>_tx`` (one
-    ``tlast`` per written chunk) and a :class:`PacketSink` on ``tcp<k>_rx``, both with
-    optional random idle and backpressure."""
+class SessionPort(StreamPort):
+    """Session ``k``'s user streams: a cocotbext-axi source on ``tcp<k>_tx`` (one ``tlast``
+    per written chunk) and a :class:`PacketSink` on ``tcp<k>_rx``, with optional random idle
+    and backpressure, and its control signals."""
 
     def __init__(self, dut, k, rng):
-        from cocotbext.axi import AxiStreamBus, AxiStreamSource
+        super().__init__(dut, f"tcp{k}", rng, out="rx", into="tx")
         self.dut = dut
         self.k = k
-        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"tcp{k}_tx"), dut.aclk,
-                                      dut.aresetn, reset_active_level=False)
-        self.source.log.setLevel(logging.WARNING)
-        self.sink = PacketSink(dut, f"tcp{k}_rx", dut.aclk)
-        self.rng = rng
-
-    def set_pauses(self, idle, backpressure):
-        self.source.set_pause_generator(random_pauses(self.rng, idle) if idle else None)
-        if not idle:
-            self.source.pause = False
-        self.sink.set_pause_generator(random_pauses(self.rng, backpressure)
-                                      if backpressure else None)
 
     def signal(self, name):
         return getattr(self.dut, f"tcp{self.k}_{name}")

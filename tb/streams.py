@@ -47,10 +47,10 @@ class StreamPort:
     """A kernel's input and output streams (``<name>_i`` driven by a cocotbext-axi source,
     ``<name>_<out>`` taken by a :class:`PacketSink`), with idle and backpressure."""
 
-    def __init__(self, dut, name, rng, *, out="o"):
+    def __init__(self, dut, name, rng, *, out="o", into="i"):
         from cocotbext.axi import AxiStreamBus, AxiStreamSource
-        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_i"), dut.aclk,
-                                      dut.aresetn, reset_active_level=False)
+        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, f"{name}_{into}"),
+                                      dut.aclk, dut.aresetn, reset_active_level=False)
         self.source.log.setLevel(logging.WARNING)
         self.sink = PacketSink(dut, f"{name}_{out}", dut.aclk)
         self.rng = rng
