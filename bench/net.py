@@ -62,13 +62,28 @@ def measure(log=print):
 
 
 def measure_resources(log=print):
-    from hdl.net import NetStack
+    from hdl.net import FrameBuilder, FrameParser, GmiiRx, GmiiTx, NetStack, RbcpServer, TcpSession
+    from hdl.net.stack import GLOBAL_BASE
+    from hdl.ros1 import TcprosEndpoint
+    blocks = [
+        ("engine", "engine: MAC + ARP + ICMP + IPv4 + UDP/RBCP + 1 TCP session, 4 KiB buffers "
+                   "(64 KiB each way: + 30 RAMB36)",
+         lambda: NetStack(sessions=1, tx_depth=4096, rx_depth=4096)),
+        ("mac_rx", "  GmiiRx", GmiiRx),
+        ("mac_tx", "  GmiiTx", GmiiTx),
+        ("parser", "  FrameParser", FrameParser),
+        ("builder", "  FrameBuilder (2 requesters)", lambda: FrameBuilder(2)),
+        ("rbcp", "  RbcpServer", lambda: RbcpServer([(0, 0x10000), (GLOBAL_BASE, 0x10000)])),
+        ("tcp", "  TcpSession, 4 KiB buffers", lambda: TcpSession(tx_depth=4096, rx_depth=4096)),
+        ("publisher", "TCPROS publisher endpoint (header memories, registers)",
+         lambda: TcprosEndpoint("publisher")),
+        ("subscriber", "TCPROS subscriber endpoint", lambda: TcprosEndpoint("subscriber")),
+    ]
     rows = []
-    log(f"  yosys {YOSYS_COMMAND}: one engine...")
-    rows.append({"block": "engine: MAC + ARP + ICMP + IPv4 + UDP/RBCP + 1 TCP session "
-                          "(16 KiB buffers each way)",
-                 **component_resources(NetStack(sessions=1, tx_depth=16384, rx_depth=16384),
-                                       "net_engine", "net-engine-16k")})
+    for name, label, make in blocks:
+        log(f"  yosys {YOSYS_COMMAND}: {name}...")
+        rows.append({"block": label, **component_resources(make(), f"net_{name}",
+                                                           f"net-{name}")})
     return rows
 
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import hmt, kernels, msg, reconos, reconos_apps  # noqa: E402
+from bench import hmt, kernels, msg, net, reconos, reconos_apps  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -19,6 +19,7 @@ BENCHES = [
     ("ReconROS demo nodes (sort, Sobel) as hardware threads", reconos_apps),
     ("streaming kernels (Sobel, Gaussian, colour, equalization, sort, PID, inverse "
      "kinematics)", kernels),
+    ("network engine and TCPROS (goodput, seed paper's image transfers, resources)", net),
 ]
 
 
