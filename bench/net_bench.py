@@ -16,23 +16,26 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from bench.net_tops import WORD_BYTES, pattern_byte
+from bench.net_tops import WORD_BYTES, pattern_bytes
+from gen.ros1.rbcp import RbcpClient, rbcp_reply_ok
 from hdl.net.frames import (
-    ARP_REPLY, DEFAULT_RBCP_PORT, ETHERTYPE_ARP, RBCP_HEADER, RBCP_READ, RBCP_REPLY,
-    RBCP_WRITE, ip_to_int, mac_to_int,
+    ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, ETHERTYPE_ARP,
+    IP_PROTO_TCP, IP_PROTO_UDP, ip_to_int, mac_to_int,
 )
-from tb.models.tcp_peer import TcpPeerModel
+from hdl.net.tcp import TCP_COUNTERS
+from hdl.ros1.registers import PHASES
+from tb.models.tcp_peer import TcpPeerModel, udp_frame
+from tb.net_tb import CLOCK_NS, PEER_MAC
 from tb.streams import reset_aresetn
 
-CLOCK_NS = 8
-PEER_MAC = "02:00:00:00:00:01"
-PEER_IP = "192.168.10.1"
-ENGINE_MAC = "02:00:c0:a8:0a:10"
-ENGINE_IP = "192.168.10.16"
+PEER_IP = "192.168.10.1"            # the bench tops keep the engine's default addresses
+ENGINE_MAC = DEFAULT_MAC
+ENGINE_IP = DEFAULT_IP
+STREAMING = PHASES.index("streaming")
 
 
 def pattern(n, start=0):
-    return bytes(pattern_byte(i) for i in range(start, start + n))
+    return pattern_bytes(start, n)
 
 
 class WordLink:
@@ -123,18 +126,18 @@ class BenchPeer:
 
     def on_frame(self, frame, cycle):
         ethertype = struct.unpack("!H", frame[12:14])[0]
-        if ethertype == ETHERTYPE_ARP and struct.unpack("!H", frame[20:22])[0] == 1 and \
+        if ethertype == ETHERTYPE_ARP and struct.unpack("!H", frame[20:22])[0] == ARP_REQUEST and \
                 frame[38:42] == self.ip.to_bytes(4, "big"):
             reply = (frame[6:12] + self.mac.to_bytes(6, "big") + frame[12:14] +
                      frame[14:20] + ARP_REPLY.to_bytes(2, "big") + self.mac.to_bytes(6, "big") +
                      self.ip.to_bytes(4, "big") + frame[22:32])
             self.link.send(reply)
             return
-        if frame[23:24] == b"\x11" and len(frame) >= 42:           # UDP: RBCP reply
+        if frame[23] == IP_PROTO_UDP and len(frame) >= 42:          # RBCP reply
             payload = frame[42:14 + struct.unpack("!H", frame[16:18])[0]]
             self.rbcp_replies[payload[2]] = payload
             return
-        if frame[23:24] == b"\x06":
+        if frame[23] == IP_PROTO_TCP:
             dport = struct.unpack("!H", frame[36:38])[0]
             if dport in self.models:
                 for f in self.models[dport].on_frame(frame, cycle):
@@ -147,79 +150,40 @@ class BenchPeer:
             for f in mdl.poll(cycle, max_frames=2 - self.link.frames_queued):
                 self.link.send(f)
 
-    # ---- RBCP through the link, for blocking callers in a thread
-    def rbcp_frame(self, cmd, ident, address, length, data=b""):
-        from scapy.utils import checksum
-        payload = bytes([0xFF, cmd, ident, length]) + address.to_bytes(4, "big") + data
-        udp = struct.pack("!HHHH", 50000, DEFAULT_RBCP_PORT, 8 + len(payload), 0) + payload
-        src, dst = self.ip, ip_to_int(ENGINE_IP)
-        pseudo = struct.pack("!IIBBH", src, dst, 0, 17, len(udp))
-        udp = udp[:6] + struct.pack("!H", checksum(pseudo + udp) or 0xFFFF) + udp[8:]
-        ip = struct.pack("!BBHHHBBHII", 0x45, 0, 20 + len(udp), 0, 0x4000, 64, 17, 0, src, dst)
-        ip = ip[:10] + struct.pack("!H", checksum(ip)) + ip[12:]
-        return (mac_to_int(ENGINE_MAC).to_bytes(6, "big") + self.mac.to_bytes(6, "big") +
-                b"\x08\x00" + ip + udp)
 
 
-class LinkRbcp:
-    """An RBCP client (the :class:`gen.ros1.RbcpClient` interface) whose requests a cocotb
-    coroutine carries over the bench link: software code runs unchanged in a thread."""
+class LinkRbcp(RbcpClient):
+    """:class:`gen.ros1.RbcpClient` whose datagrams a cocotb coroutine carries over the bench
+    link, so software code (``EndpointClient``) runs unchanged in a thread."""
 
     def __init__(self, peer):
+        super().__init__(ENGINE_IP, sock=False)
         self.peer = peer
         self.requests = queue.Queue()
 
-    def _call(self, cmd, address, length, data=b""):
+    def _exchange(self, request, cmd, ident):
         done = threading.Event()
         box = {}
-        self.requests.put((cmd, address, length, data, done, box))
+        self.requests.put((request, ident, done, box))
         done.wait(600)
-        if "error" in box:
-            raise IOError(box["error"])
-        return box["data"]
-
-    def read(self, address, length):
-        out = bytearray()
-        while length:
-            n = min(length, 255)
-            out += self._call(RBCP_READ, address, n)
-            address += n
-            length -= n
-        return bytes(out)
-
-    def write(self, address, data):
-        for i in range(0, len(data), 255):
-            chunk = bytes(data[i:i + 255])
-            self._call(RBCP_WRITE, address + i, len(chunk), chunk)
-
-    def read_int(self, address, size):
-        return int.from_bytes(self.read(address, size), "big")
-
-    def write_int(self, address, size, value):
-        self.write(address, int(value).to_bytes(size, "big"))
+        reply = box.get("reply")
+        return reply if reply is not None and rbcp_reply_ok(reply, cmd, ident) else None
 
     async def serve(self, dut):
         peer = self.peer
         while True:
             try:
-                cmd, address, length, data, done, box = self.requests.get_nowait()
+                request, ident, done, box = self.requests.get_nowait()
             except queue.Empty:
                 await ClockCycles(dut.aclk, 256)
                 continue
-            peer.rbcp_id = (peer.rbcp_id + 1) & 0xFF
-            ident = peer.rbcp_id
-            peer.link.send(peer.rbcp_frame(cmd, ident, address, length, data))
+            peer.link.send(udp_frame(peer.mac, mac_to_int(ENGINE_MAC), peer.ip,
+                                     ip_to_int(ENGINE_IP), 50000, DEFAULT_RBCP_PORT, request))
             for _ in range(200):
                 await ClockCycles(dut.aclk, 64)
-                reply = peer.rbcp_replies.pop(ident, None)
-                if reply is not None:
+                box["reply"] = peer.rbcp_replies.pop(ident, None)
+                if box["reply"] is not None:
                     break
-            if reply is None:
-                box["error"] = f"no RBCP reply for 0x{address:08x}"
-            elif reply[1] != cmd | RBCP_REPLY:
-                box["error"] = f"RBCP bus error at 0x{address:08x}"
-            else:
-                box["data"] = reply[RBCP_HEADER:RBCP_HEADER + length]
             done.set()
 
 
@@ -291,10 +255,8 @@ async def measure_tcp(dut):
     assert int(dut.sink_mismatches.value) == 0, "engine delivered other bytes than sent"
     records["peer_to_engine"] = goodput_record(nbytes, cycles, start, marks)
     tcp = int(dut.tcp_counters.value)
-    records["engine_counters"] = {name: (tcp >> (32 * k)) & 0xFFFFFFFF for k, name in
-                                  enumerate(("bytes_tx", "bytes_rx", "segments_tx",
-                                             "segments_rx", "rto", "fast_retransmit",
-                                             "dup_acks", "rst_rx", "dropped_segments"))}
+    records["engine_counters"] = {name: (tcp >> (32 * k)) & 0xFFFFFFFF
+                                  for k, name in enumerate(TCP_COUNTERS)}
     records["peer_acks"] = mdl.acks_sent
     Path(os.environ["ROSGATE_BENCH_OUT"]).write_text(json.dumps(records))
 
@@ -317,8 +279,7 @@ def _image_body(ts, width, height, encoding, channels):
         data=np.zeros(n, dtype=np.uint8))
     body = bytearray(ts.serialize_ros1(msg, "sensor_msgs/msg/Image"))
     prefix = len(body) - n
-    idx = np.arange(prefix, len(body), dtype=np.int64)
-    body[prefix:] = (((idx & 0xFF) * 131 + ((idx >> 8) & 0xFF)) & 0xFF).astype(np.uint8).tobytes()
+    body[prefix:] = pattern_bytes(prefix, n)
     return bytes(body), prefix
 
 
@@ -389,7 +350,7 @@ async def measure_image(dut):
                        "hardware subscriber header")
         models[k].queue(pub_header(topics[k]))
         models[k].received.clear()
-    await wait_for(peer, lambda: all(int(getattr(dut, f"phase{k}").value) == 5
+    await wait_for(peer, lambda: all(int(getattr(dut, f"phase{k}").value) == STREAMING
                                      for k in range(4)), 2_000_000, "streaming")
     for k in (1, 3):
         await wait_for(peer, lambda k=k: _header_complete(models[k].received), 2_000_000,

@@ -9,19 +9,25 @@ from amaranth.lib.wiring import In, Out
 
 from hdl.net import NetStack
 from hdl.net.stack import STACK_COUNTERS
+from hdl.net.tcp import TCP_COUNTERS
+from hdl.ros1.registers import PHASES
 from hdl.net.crc import Crc32
 from hdl.net.frames import IFG, PREAMBLE, SFD
 from hdl.ros1 import TcprosNode
 from hdl.stream import AXIStreamSignature, StreamFIFO
 
-__all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_byte"]
+__all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_bytes"]
 
 WORD_BYTES = 64
 
 
-def pattern_byte(i):
-    """Byte ``i`` of the bench's data pattern (the generator and the sink compute the same)."""
-    return ((i & 0xFF) * 131 + ((i >> 8) & 0xFF)) & 0xFF
+def pattern_bytes(start, count):
+    """Bytes ``start .. start + count - 1`` of the bench's data pattern, byte ``i`` being
+    ``(i[7:0] * 131 + i[15:8]) mod 256``; the hardware generator and sink compute it with
+    :func:`_pattern`."""
+    import numpy as np
+    i = np.arange(start, start + count, dtype=np.int64)
+    return (((i & 0xFF) * 131 + ((i >> 8) & 0xFF)) & 0xFF).astype(np.uint8).tobytes()
 
 
 def _pattern(i):
@@ -118,7 +124,7 @@ class GmiiWordPeer(wiring.Component):
 
 
 class _PatternSource(wiring.Component):
-    """``count`` bytes of :func:`pattern_byte` on ``m_axis`` after each ``start`` pulse."""
+    """``count`` bytes of :func:`pattern_bytes` on ``m_axis`` after each ``start`` pulse."""
 
     def __init__(self):
         super().__init__({"start": In(1), "count": In(32), "m_axis":
@@ -137,7 +143,7 @@ class _PatternSource(wiring.Component):
 
 
 class _PatternSink(wiring.Component):
-    """Always ready; counts bytes and those that differ from :func:`pattern_byte`."""
+    """Always ready; counts bytes and those that differ from :func:`pattern_bytes`."""
 
     def __init__(self):
         super().__init__({"s_axis": In(AXIStreamSignature(8, keep=False)),
@@ -172,7 +178,7 @@ class NetBenchTop(wiring.Component):
             "gen_start": In(1), "gen_count": In(32), "gen_sent": Out(32),
             "sink_received": Out(32), "sink_mismatches": Out(32),
             "open_req": In(1), "active": In(1), "local_port": In(16), "remote_ip": In(32),
-            "remote_port": In(16), "state": Out(4), "tcp_counters": Out(32 * 9),
+            "remote_port": In(16), "state": Out(4), "tcp_counters": Out(32 * len(TCP_COUNTERS)),
             "counters": Out(32 * len(STACK_COUNTERS)),
         })
 
@@ -202,7 +208,7 @@ class NetBenchTop(wiring.Component):
 
 class _MessageSource(wiring.Component):
     """One message of ``length`` bytes per ``start``: ``prefix`` (``prefix_len`` bytes) then
-    :func:`pattern_byte` bytes; ``tuser`` = ``length``."""
+    :func:`pattern_bytes` bytes; ``tuser`` = ``length``."""
 
     def __init__(self):
         from hdl.ros1 import message_stream_signature
@@ -264,7 +270,7 @@ class Ros1BenchTop(wiring.Component):
             "gen_start": In(1), "gen_length": In(32), "gen_prefix": In(8 * 64),
             "gen_prefix_len": In(7),
             "sink_received": Out(32), "sink_messages": Out(32), "sink_crc": Out(32),
-            **{f"phase{k}": Out(3) for k in range(4)},
+            **{f"phase{k}": Out(range(len(PHASES))) for k in range(4)},
         })
 
     def elaborate(self, platform):

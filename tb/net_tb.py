@@ -16,19 +16,22 @@ from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
-__all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "PEER_MAC", "PEER_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
+__all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS",
+           "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
 #: The network benches' configuration: one build per simulator, shared by the scripted and
 #: the Linux benches (the address is the TAP namespace's; net.md §5.2).
-NET_CONFIGS = {"stack": dict(ip="198.18.0.16", sessions=2, tx_depth=4096, rx_depth=4096,
+#: the engine's and the peer's addresses (RFC 2544 block; on the TAP inside the namespace)
+ENGINE_IP = "198.18.0.16"
+PEER_IP = "198.18.0.1"
+NET_CONFIGS = {"stack": dict(ip=ENGINE_IP, sessions=2, tx_depth=4096, rx_depth=4096,
                              rto_us=200, msl_us=20, arp_retry_us=40)}
 #: The ROS 1 node benches' configuration (the seed paper's component: a subscriber looped
 #: back to a publisher), shared by tb/test_ros1_node.py and tb/test_ros1_registers.py.
-NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip="198.18.0.16",
+NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=ENGINE_IP,
                    tx_depth=4096, rx_depth=4096, rto_us=500, msl_us=20)
 PEER_MAC = "02:00:00:00:00:01"
-PEER_IP = "198.18.0.1"
 
 
 def _fields(value, names):

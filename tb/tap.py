@@ -2,23 +2,23 @@
 network namespace with a TAP device, and a cocotb pump between the simulated GMII and the TAP
 file descriptor, with optional seeded loss, duplication and reordering."""
 
+import concurrent.futures
 import contextlib
 import ctypes
 import fcntl
 import os
+import random
 import shutil
 import struct
 import subprocess
+import time
 import uuid
 import zlib
-import concurrent.futures
-import random
-import time
 
 import cocotb
 from cocotb.triggers import ClockCycles
 
-from tb.net_tb import NetTB
+from tb.net_tb import ENGINE_IP, PEER_IP, NetTB
 
 __all__ = ["namespace_unavailable", "network_namespace", "TapPump", "LinuxTB", "KERNEL_IP",
            "ENGINE_IP", "TAP_NAME", "WALL_LIMIT_S"]
@@ -26,8 +26,7 @@ __all__ = ["namespace_unavailable", "network_namespace", "TapPump", "LinuxTB", "
 #: wall-clock bound of every wait in a Linux-peer bench
 WALL_LIMIT_S = 900
 
-KERNEL_IP = "198.18.0.1"      # RFC 2544 benchmarking block, only inside the namespace
-ENGINE_IP = "198.18.0.16"
+KERNEL_IP = PEER_IP           # RFC 2544 benchmarking block, only inside the namespace
 TAP_NAME = "tap0"
 _CLONE_NEWNET = 0x40000000
 _TUNSETIFF = 0x400454CA

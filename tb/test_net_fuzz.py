@@ -25,9 +25,10 @@ from scapy.utils import checksum
 
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, TCP_ACK, TCP_FIN, TCP_RST, TCP_SYN
 from tb.harness import run_bench
-from tb.models.tcp_peer import TcpPeerModel, tcp_frame
+from tb.models.tcp_peer import TcpPeerModel, fix_ip_checksum, fix_tcp_checksum, tcp_frame
 from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB, SessionPort
-from tb.test_net_stack import checksums_ok, rbcp, rbcp_request
+from gen.ros1.rbcp import rbcp_request
+from tb.test_net_stack import checksums_ok, rbcp
 
 FRAMES = int(os.environ.get("ROSGATE_FUZZ_FRAMES", 500))
 
@@ -78,20 +79,6 @@ class FuzzTB(NetTB):
                 await self.put(f)
             await ClockCycles(self.dut.aclk, 64)
             self.cycle += 64
-
-
-def fix_ip_checksum(raw):
-    raw[24:26] = b"\x00\x00"
-    raw[24:26] = checksum(bytes(raw[14:34])).to_bytes(2, "big")
-
-
-def fix_tcp_checksum(raw):
-    """Recompute the TCP checksum of a 20-byte-IP-header frame over the IP payload."""
-    total = int.from_bytes(raw[16:18], "big")
-    seg = bytearray(raw[34:14 + total])
-    seg[16:18] = b"\x00\x00"
-    pseudo = bytes(raw[26:34]) + bytes([0, 6]) + len(seg).to_bytes(2, "big")
-    raw[50:52] = checksum(pseudo + bytes(seg)).to_bytes(2, "big")
 
 
 def difference(got, want):

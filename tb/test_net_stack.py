@@ -13,6 +13,7 @@ from scapy.layers.l2 import ARP, Ether
 from scapy.packet import Raw
 from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
+from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
@@ -125,10 +126,6 @@ async def run_bad_frames(dut):
     # still answering afterwards
     await tb.send(ping)
     assert (await tb.recv()) is not None
-
-
-def rbcp_request(cmd, ident, addr, length, data=b""):
-    return bytes([0xFF, cmd, ident, length]) + addr.to_bytes(4, "big") + data
 
 
 async def rbcp(tb, payload, sport=50000):

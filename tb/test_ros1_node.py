@@ -17,12 +17,14 @@ import pytest
 from gen.msg import MessageLibrary
 from gen.msg.ros1 import md5sum, message_definition
 from gen.ros1 import HardwareNode, RbcpClient, RosMaster
+from hdl.ros1.registers import PHASES
 from tb.harness import run_bench
 from tb.net_tb import NODE_CONFIG
 from tb.models.ros1_peers import SoftwarePublisher, SoftwareSubscriber
 from tb.tap import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
 
 IMAGE = "sensor_msgs/msg/Image"
+STREAMING = PHASES.index("streaming")
 
 
 def test_ros1_node():
@@ -88,10 +90,10 @@ async def run_snd_process_rcv(dut):
     await tb.reset()
     world = await start_world(tb)
     try:
-        await tb.poll("hardware subscriber streaming", lambda: int(dut.phase0.value) == 5,
+        await tb.poll("hardware subscriber streaming", lambda: int(dut.phase0.value) == STREAMING,
                       3_000_000)
         await tb.run_in_thread("rcv_data registers", world.rcv.register)
-        await tb.poll("hardware publisher streaming", lambda: int(dut.phase1.value) == 5,
+        await tb.poll("hardware publisher streaming", lambda: int(dut.phase1.value) == STREAMING,
                       3_000_000)
         # a second subscriber is refused: one TCP session per hardware publisher
         code, msg, _ = await tb.run_in_thread("second requestTopic", world.node.requestTopic,
@@ -135,7 +137,7 @@ async def run_header_mismatch(dut):
         assert world.rcv.headers and "error" in world.rcv.headers[0], (world.rcv.headers,
                                                                         world.rcv.errors)
         client = world.node.clients[1]
-        await tb.poll("publisher listening again", lambda: int(dut.phase1.value) in (0, 1),
+        await tb.poll("publisher listening again", lambda: PHASES[int(dut.phase1.value)] in ("idle", "connecting"),
                       3_000_000)
         counts = await tb.run_in_thread("counters", client.counters)
         assert counts["header_rejects"] == 1, counts

@@ -13,7 +13,8 @@ from hdl.ros1.registers import (
 )
 from tb.harness import cocotb_bench
 from tb.net_tb import NODE_CONFIG, NetTB
-from tb.test_net_stack import rbcp, rbcp_request
+from gen.ros1.rbcp import rbcp_request
+from tb.test_net_stack import rbcp
 
 CONFIGS = {"loopback": NODE_CONFIG}
 test_ros1_registers = cocotb_bench("ros1_node", CONFIGS, long=[("loopback", "verilator")])

@@ -1,5 +1,6 @@
 """Drive one hardware TCPROS endpoint through its RBCP registers (spec net.md §7.2)."""
 
+from hdl.net.frames import ip_to_int
 from hdl.ros1.registers import (
     CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, CTRL, ENDPOINT_STRIDE, ERRORS, EXPECTED, HDR_ERR,
     HDR_RX, HDR_TX, PHASES, REG,
@@ -86,7 +87,7 @@ class EndpointClient:
 
     def connect(self, ip, port):
         self.write("CTRL", 0)             # re-arm: START must rise
-        self.write("REMOTE_IP", int.from_bytes(bytes(int(b) for b in ip.split(".")), "big"))
+        self.write("REMOTE_IP", ip_to_int(ip))
         self.write("REMOTE_PORT", port)
         self.write("CTRL", CTRL["START"])
 

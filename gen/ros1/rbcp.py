@@ -8,9 +8,21 @@ from hdl.net.frames import (
     RBCP_WRITE,
 )
 
-__all__ = ["RbcpClient", "RbcpBusError", "RbcpTimeout"]
+__all__ = ["RbcpClient", "RbcpBusError", "RbcpTimeout", "rbcp_request", "rbcp_reply_ok"]
 
 MAX_CHUNK = 255
+
+
+def rbcp_request(cmd, ident, address, length, data=b""):
+    """An RBCP request datagram (spec net.md §2.2): Ver/Type, CMD/Flag, ID, Length, the
+    32-bit address MSB first, then the write data."""
+    return bytes([RBCP_VERSION, cmd, ident, length]) + address.to_bytes(4, "big") + bytes(data)
+
+
+def rbcp_reply_ok(reply, cmd, ident):
+    """Whether ``reply`` answers request ``ident`` of ``cmd`` (with or without bus error)."""
+    return (len(reply) >= RBCP_HEADER and reply[0] == RBCP_VERSION and reply[2] == ident and
+            reply[1] & ~RBCP_BUS_ERROR == cmd | RBCP_REPLY)
 
 
 class RbcpBusError(IOError):
@@ -28,16 +40,17 @@ class RbcpClient:
     ``retries`` times.
     """
 
-    def __init__(self, ip, port=DEFAULT_RBCP_PORT, *, timeout=1.0, retries=3):
+    def __init__(self, ip, port=DEFAULT_RBCP_PORT, *, timeout=1.0, retries=3, sock=True):
         self.address = (ip, port)
         self.timeout = timeout
         self.retries = retries
         self._id = 0
         self._lock = threading.Lock()
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM) if sock else None
 
     def close(self):
-        self._sock.close()
+        if self._sock is not None:
+            self._sock.close()
 
     def _transaction(self, cmd, address, length, data=b""):
         if not 1 <= length <= MAX_CHUNK:
@@ -47,24 +60,28 @@ class RbcpClient:
         with self._lock:
             ident = self._id
             self._id = (self._id + 1) & 0xFF
-            request = bytes([RBCP_VERSION, cmd, ident, length]) + address.to_bytes(4, "big") + data
-            self._sock.settimeout(self.timeout)
-            for _ in range(self.retries + 1):
-                self._sock.sendto(request, self.address)
-                try:
-                    while True:
-                        reply, _ = self._sock.recvfrom(2048)
-                        if (len(reply) >= RBCP_HEADER and reply[0] == RBCP_VERSION and
-                                reply[2] == ident and
-                                reply[1] & ~RBCP_BUS_ERROR == cmd | RBCP_REPLY):
-                            break
-                except socket.timeout:
-                    continue
-                if reply[1] & RBCP_BUS_ERROR:
-                    raise RbcpBusError(f"bus error at 0x{address:08x} (+{length} bytes)")
-                return reply[RBCP_HEADER:RBCP_HEADER + length]
+            reply = self._exchange(rbcp_request(cmd, ident, address, length, data), cmd, ident)
+        if reply is None:
             raise RbcpTimeout(f"no RBCP reply from {self.address[0]}:{self.address[1]} for "
                               f"0x{address:08x} after {self.retries + 1} tries")
+        if reply[1] & RBCP_BUS_ERROR:
+            raise RbcpBusError(f"bus error at 0x{address:08x} (+{length} bytes)")
+        return reply[RBCP_HEADER:RBCP_HEADER + length]
+
+    def _exchange(self, request, cmd, ident):
+        """Send ``request`` until a matching reply arrives; the reply, or ``None``. Other
+        transports (a simulation's link) override this."""
+        self._sock.settimeout(self.timeout)
+        for _ in range(self.retries + 1):
+            self._sock.sendto(request, self.address)
+            try:
+                while True:
+                    reply, _ = self._sock.recvfrom(2048)
+                    if rbcp_reply_ok(reply, cmd, ident):
+                        return reply
+            except socket.timeout:
+                continue
+        return None
 
     def read(self, address, length):
         out = bytearray()

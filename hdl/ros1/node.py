@@ -103,7 +103,8 @@ class TcprosNode(wiring.Component):
 
         # RBCP: endpoint k at k * 0x10000
         bus = stack.rbcp
-        sel = bus.addr[16:19]
+        low = ENDPOINT_STRIDE.bit_length() - 1
+        sel = bus.addr[low:low + 3]
         for k, ep in enumerate(endpoints):
             hit = sel == k
             m.d.comb += [ep.regs.addr.eq(bus.addr), ep.regs.wd.eq(bus.wd),

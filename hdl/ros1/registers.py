@@ -3,7 +3,7 @@ software that drives it. Endpoint ``k`` sits at ``k * ENDPOINT_STRIDE``; multi-b
 are big-endian."""
 
 __all__ = ["ENDPOINT_STRIDE", "REG", "PHASES", "ERRORS", "CTRL", "CHECK", "COUNTERS",
-           "EXPECTED", "COUNTERS_OFFSET", "HDR_TX", "HDR_ERR", "HDR_RX", "ENDPOINT_ID", "CHECK_DEFAULT"]
+           "EXPECTED", "EXPECTED_AREA", "COUNTERS_OFFSET", "HDR_TX", "HDR_ERR", "HDR_RX", "ENDPOINT_ID", "CHECK_DEFAULT"]
 
 ENDPOINT_STRIDE = 0x1_0000
 
@@ -46,6 +46,8 @@ COUNTERS = ("bytes_tx", "bytes_rx", "messages_tx", "messages_rx", "rto", "fast_r
             "dup_acks", "rst_rx", "header_rejects", "messages_dropped")
 COUNTERS_OFFSET = 0x20
 
+#: the memory holding the expected values below: (offset, bytes)
+EXPECTED_AREA = (0x100, 256)
 #: expected connection-header values: name -> (offset of the length byte, capacity). The
 #: spec's 32-byte md5sum slot at 0x180 cannot hold a length byte and 32 hex digits, so
 #: CALLERID moves from 0x1A0 to 0x1C0.

@@ -12,7 +12,7 @@ from ..net.tcp import TCP_COUNTERS, TcpError, TcpState
 from ..params import check_choice
 from ..stream import AXIStreamSignature
 from .registers import (
-    CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, CTRL, ENDPOINT_ID, ERRORS, EXPECTED,
+    CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, CTRL, ENDPOINT_ID, ERRORS, EXPECTED, EXPECTED_AREA,
     HDR_ERR, HDR_RX, HDR_TX, PHASES, REG,
 )
 
@@ -20,9 +20,17 @@ __all__ = ["TcprosEndpoint", "message_stream_signature", "ROLES"]
 
 ROLES = ("publisher", "subscriber")
 
-#: connection-header keys the hardware compares, in the order of EXPECTED's first three
-_KEYS = (b"topic=", b"type=", b"md5sum=", b"error=")
+#: connection-header fields compared with EXPECTED values; ``error=`` is only detected
+_COMPARED = ("topic", "type", "md5sum")
+_KEYS = tuple(f"{key}=".encode() for key in _COMPARED + ("error",))
 _PHASE = {name: code for code, name in enumerate(PHASES)}
+
+
+def _area(area):
+    """``m.Case`` pattern of the 16-bit register addresses of ``(base, size)``."""
+    base, size = area
+    low = size.bit_length() - 1
+    return f"{base >> low:0{16 - low}b}" + "-" * low
 
 
 def message_stream_signature():
@@ -111,7 +119,7 @@ class TcprosEndpoint(wiring.Component):
         m.submodules.hdr_tx = hdr_tx_mem = Memory(shape=8, depth=HDR_TX[1], init=[])
         m.submodules.hdr_err = hdr_err_mem = Memory(shape=8, depth=HDR_ERR[1], init=[])
         m.submodules.hdr_rx = hdr_rx_mem = Memory(shape=8, depth=HDR_RX[1], init=[])
-        m.submodules.expected = exp_mem = Memory(shape=8, depth=256, init=[])
+        m.submodules.expected = exp_mem = Memory(shape=8, depth=EXPECTED_AREA[1], init=[])
         tx_w = hdr_tx_mem.write_port()
         tx_r = hdr_tx_mem.read_port(transparent_for=())
         tx_rr = hdr_tx_mem.read_port(transparent_for=())
@@ -136,7 +144,7 @@ class TcprosEndpoint(wiring.Component):
             m.d.sync += [stage.eq(0), regs.ack.eq(1)]
         # memory read ports for register reads take the strobe's address directly
         a16 = regs.addr[:16]
-        m.d.comb += [tx_rr.addr.eq(a16[:12]), rx_rr.addr.eq(a16[:12]), exp_rr.addr.eq(a16[:8])]
+        m.d.comb += [tx_rr.addr.eq(a16), rx_rr.addr.eq(a16), exp_rr.addr.eq(a16)]
         ctrl_pulse = Signal(8)
         m.d.comb += ctrl_pulse.eq(0)
 
@@ -164,11 +172,11 @@ class TcprosEndpoint(wiring.Component):
                     for b in range(4):
                         with m.Case(COUNTERS_OFFSET + 4 * k + b):
                             m.d.sync += rd.eq(counters[name].word_select(3 - b, 8))
-                with m.Case("00000001--------"):
+                with m.Case(_area(EXPECTED_AREA)):
                     m.d.sync += rd.eq(exp_rr.data)
-                with m.Case("0001------------"):
+                with m.Case(_area(HDR_TX)):
                     m.d.sync += rd.eq(tx_rr.data)
-                with m.Case("0011------------"):
+                with m.Case(_area(HDR_RX)):
                     m.d.sync += rd.eq(rx_rr.data)
                 with m.Default():
                     m.d.sync += rd.eq(0)
@@ -187,15 +195,15 @@ class TcprosEndpoint(wiring.Component):
                                 m.d.sync += error.eq(error & ~wd)
                             if name == "CTRL":
                                 m.d.comb += ctrl_pulse.eq(wd)
-                with m.Case("00000001--------"):
-                    m.d.comb += [exp_w.addr.eq(a[:8]), exp_w.data.eq(wd), exp_w.en.eq(1)]
-                    for k, key in enumerate(("topic", "type", "md5sum")):
-                        with m.If(a[:8] == EXPECTED[key][0] - 0x100):
+                with m.Case(_area(EXPECTED_AREA)):
+                    m.d.comb += [exp_w.addr.eq(a), exp_w.data.eq(wd), exp_w.en.eq(1)]
+                    for k, key in enumerate(_COMPARED):
+                        with m.If(a[:8] == EXPECTED[key][0] - EXPECTED_AREA[0]):
                             m.d.sync += exp_len[k].eq(wd)
-                with m.Case("0001------------"):
-                    m.d.comb += [tx_w.addr.eq(a[:12]), tx_w.data.eq(wd), tx_w.en.eq(1)]
-                with m.Case("00100000--------"):
-                    m.d.comb += [err_w.addr.eq(a[:8]), err_w.data.eq(wd), err_w.en.eq(1)]
+                with m.Case(_area(HDR_TX)):
+                    m.d.comb += [tx_w.addr.eq(a), tx_w.data.eq(wd), tx_w.en.eq(1)]
+                with m.Case(_area(HDR_ERR)):
+                    m.d.comb += [err_w.addr.eq(a), err_w.data.eq(wd), err_w.en.eq(1)]
         with m.If(regs.we & (regs.addr[:16] == REG["CTRL"][0])):
             m.d.sync += ctrl.eq(regs.wd & (CTRL["START"] | CTRL["BLOCK"]))
         with m.If(regs.we & (regs.addr[:16] == REG["CTRL"][0]) & (regs.wd & CTRL["CLR_CNT"]).any()):
@@ -236,7 +244,7 @@ class TcprosEndpoint(wiring.Component):
         hdr_len = Mux(send_err, hdr_err_len, hdr_tx_len)
         hdr_go = tx.tvalid & tx.tready
         nidx = Mux(hdr_go, idx + 1, idx)
-        m.d.comb += [tx_r.addr.eq(nidx[:12]), err_r.addr.eq(nidx[:8])]
+        m.d.comb += [tx_r.addr.eq(nidx), err_r.addr.eq(nidx)]
 
         # ---- header receive: parser state
         total_left = Signal(32)
@@ -255,7 +263,7 @@ class TcprosEndpoint(wiring.Component):
         b_phase = Signal()
         malformed = Signal()
         key_len = [len(k) for k in _KEYS]
-        exp_base = [EXPECTED[name][0] - 0x100 + 1 for name in ("topic", "type", "md5sum")]
+        exp_base = [EXPECTED[name][0] - EXPECTED_AREA[0] + 1 for name in _COMPARED]
         pvalue = Signal(16)
         m.d.comb += pvalue.eq(q - Mux(key == 0, key_len[0], Mux(key == 1, key_len[1],
                                                                   Mux(key == 2, key_len[2],
@@ -424,7 +432,7 @@ class TcprosEndpoint(wiring.Component):
     def _store(m, port, pos, length, byte):
         """Keep a received header byte for software (HDR_RX), flag truncation."""
         with m.If(pos < HDR_RX[1]):
-            m.d.comb += [port.addr.eq(pos[:12]), port.data.eq(byte), port.en.eq(1)]
+            m.d.comb += [port.addr.eq(pos), port.data.eq(byte), port.en.eq(1)]
             m.d.sync += [pos.eq(pos + 1), length.eq(pos + 1)]
         with m.Else():
             m.d.sync += length[15].eq(1)

@@ -11,15 +11,27 @@ import struct
 from scapy.utils import checksum
 
 from hdl.net.frames import (
-    ETHERTYPE_IPV4, IP_PROTO_TCP, TCP_ACK, TCP_FIN, TCP_MSS, TCP_PSH, TCP_RST, TCP_SYN,
+    ETHERTYPE_IPV4, IP_PROTO_TCP, IP_PROTO_UDP, IP_TTL, TCP_ACK, TCP_FIN, TCP_MSS, TCP_PSH, TCP_RST, TCP_SYN,
     ip_to_int, mac_to_int,
 )
 
-__all__ = ["TcpPeerModel", "parse_tcp_frame", "tcp_frame"]
+__all__ = ["TcpPeerModel", "parse_tcp_frame", "tcp_frame", "udp_frame",
+           "fix_ip_checksum", "fix_tcp_checksum"]
 
 
 def _mac(value):
     return value.to_bytes(6, "big")
+
+
+def _ipv4_frame(src_mac, dst_mac, src_ip, dst_ip, proto, l4, ip_id):
+    ip = struct.pack("!BBHHHBBHII", 0x45, 0, 20 + len(l4), ip_id, 0x4000, IP_TTL, proto, 0,
+                     src_ip, dst_ip)
+    ip = ip[:10] + struct.pack("!H", checksum(ip)) + ip[12:]
+    return _mac(dst_mac) + _mac(src_mac) + struct.pack("!H", ETHERTYPE_IPV4) + ip + l4
+
+
+def _l4_checksum(src_ip, dst_ip, proto, l4):
+    return checksum(struct.pack("!IIBBH", src_ip, dst_ip, 0, proto, len(l4)) + l4)
 
 
 def tcp_frame(src_mac, dst_mac, src_ip, dst_ip, sport, dport, seq, ack, flags, window,
@@ -27,16 +39,34 @@ def tcp_frame(src_mac, dst_mac, src_ip, dst_ip, sport, dport, seq, ack, flags, w
     """An Ethernet/IPv4/TCP frame (no FCS) with correct checksums."""
     doff = (20 + len(options)) // 4
     tcp = struct.pack("!HHIIBBHHH", sport, dport, seq & 0xFFFFFFFF, ack & 0xFFFFFFFF,
-                      doff << 4, flags, window, 0, 0) + options
-    pseudo = struct.pack("!IIBBH", src_ip, dst_ip, 0, IP_PROTO_TCP, len(tcp) + len(payload))
-    csum = checksum(pseudo + tcp + payload)
+                      doff << 4, flags, window, 0, 0) + options + payload
+    csum = _l4_checksum(src_ip, dst_ip, IP_PROTO_TCP, tcp)
     tcp = tcp[:16] + struct.pack("!H", csum) + tcp[18:]
-    total = 20 + len(tcp) + len(payload)
-    ip = struct.pack("!BBHHHBBHII", 0x45, 0, total, ip_id, 0x4000, 64, IP_PROTO_TCP, 0,
-                     src_ip, dst_ip)
-    ip = ip[:10] + struct.pack("!H", checksum(ip)) + ip[12:]
-    return _mac(dst_mac) + _mac(src_mac) + struct.pack("!H", ETHERTYPE_IPV4) + ip + tcp + \
-        payload
+    return _ipv4_frame(src_mac, dst_mac, src_ip, dst_ip, IP_PROTO_TCP, tcp, ip_id)
+
+
+def udp_frame(src_mac, dst_mac, src_ip, dst_ip, sport, dport, payload, ip_id=0):
+    """An Ethernet/IPv4/UDP frame (no FCS) with its checksum (0 sent as 0xFFFF)."""
+    udp = struct.pack("!HHHH", sport, dport, 8 + len(payload), 0) + bytes(payload)
+    csum = _l4_checksum(src_ip, dst_ip, IP_PROTO_UDP, udp) or 0xFFFF
+    return _ipv4_frame(src_mac, dst_mac, src_ip, dst_ip, IP_PROTO_UDP,
+                       udp[:6] + struct.pack("!H", csum) + udp[8:], ip_id)
+
+
+def fix_ip_checksum(frame):
+    """Recompute the IPv4 header checksum of ``frame`` (a bytearray, 20-byte header) in
+    place, after a mutation."""
+    frame[24:26] = b"\x00\x00"
+    frame[24:26] = checksum(bytes(frame[14:34])).to_bytes(2, "big")
+
+
+def fix_tcp_checksum(frame):
+    """Recompute the TCP checksum of ``frame`` over its IP payload in place."""
+    total = int.from_bytes(frame[16:18], "big")
+    seg = bytearray(frame[34:14 + total])
+    seg[16:18] = b"\x00\x00"
+    src, dst = struct.unpack("!II", frame[26:34])
+    frame[50:52] = _l4_checksum(src, dst, IP_PROTO_TCP, bytes(seg)).to_bytes(2, "big")
 
 
 def parse_tcp_frame(frame):
