@@ -16,7 +16,7 @@ SIM ?= icarus
 CONFIG ?=
 WAVES ?= 0
 
-.PHONY: help setup debs demo test test-full sim lint bench train-mnist clean
+.PHONY: help setup debs demo test test-full sim lint bench bench-resources train-mnist clean
 
 help:
 	@echo "rosgate make targets:"
@@ -26,6 +26,7 @@ help:
 	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1]   one bench"
 	@echo "  make lint        verilator --lint-only -Wall on every exported top"
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
+	@echo "  make bench-resources   re-measure only the yosys estimates in bench/results/"
 	@echo "  make train-mnist retrain the MNIST kernel's network (installs PyTorch 2.13.0, CPU)"
 	@echo "  make clean       remove simulator output"
 
@@ -68,6 +69,9 @@ lint: setup
 
 bench: setup
 	$(PY) bench/run.py
+
+bench-resources: setup
+	$(PY) bench/run.py --resources-only
 
 train-mnist: setup
 	$(PY) -m pip install -q --disable-pip-version-check torch==2.13.0

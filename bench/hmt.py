@@ -9,7 +9,7 @@ import json
 import math
 
 from bench.trafficgen import TopicTrafficBench
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_top
 from tb.harness import run_bench
@@ -154,14 +154,9 @@ def markdown(results, resources):
             lines.append(f"| {r['pubs']}:{r['subs']} | {r['width']} | {r['size']} | "
                          f"{r['messages']} | {r['beats']} | {r['idle_cycles']} | "
                          f"{100 * r['efficiency']:.3f} % | {r['latency']} |")
-    lines += ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`; LUT includes INV cells)", "",
-              "| configuration | LUT | FF | BRAM18 eq. | LUTRAM | CARRY4 |",
-              "|---|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['config']} | {r['LUT']} | {r['FF']} | {r['BRAM18_equiv']} | "
-                     f"{r['LUTRAM']} | {r['CARRY4']} |")
+    lines += resource_table(resources, "config", "configuration")
     lines.append(f"| target: verilog-axis axis_arb_mux + axis_broadcast, 4:4 64 b (issue) | "
-                 f"{RESOURCE_TARGET['LUT']} | {RESOURCE_TARGET['FF']} | 0 | - | - |")
+                 f"{RESOURCE_TARGET['LUT']} | - | {RESOURCE_TARGET['FF']} | - | 0 | - | - |")
     lines.append("")
     return "\n".join(lines)
 

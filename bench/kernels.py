@@ -4,7 +4,7 @@ numbers and the issue's targets; yosys synth_xilinx resources of each kernel."""
 
 import json
 
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_kernel
 from tb.harness import run_bench
@@ -119,12 +119,7 @@ def markdown(results, resources):
         cycles = f"{r['cycles']:.1f}" if isinstance(r["cycles"], float) else str(r["cycles"])
         lines.append(f"| {r['label']} | {cycles} | {r.get('first_frame_cycles', '-')} | "
                      f"{r['ms']:.5f} | {target} | {paper} |")
-    lines += ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`, 640x480 maximum frame)", "",
-              "| kernel | LUT | FF | LUTRAM | BRAM18 eq. | DSP | CARRY4 |",
-              "|---|---|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['label']} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
-                     f"{r['BRAM18_equiv']} | {r.get('DSP', 0)} | {r['CARRY4']} |")
+    lines += resource_table(resources, "label", "kernel", detail=", 640x480 maximum frame")
     lines += ["", "Anchors (kernels.md §9): Vitis Vision xFSobel 3x3 1 px/clk 616 LUT, 609 FF, "
               "3 BRAM18; 8 px/clk 1892 LUT; ReconROS Sobel thread 13 625 LUT, 10 BRAM "
               "(Table 5).", ""]

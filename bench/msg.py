@@ -9,7 +9,7 @@ Yosys ``synth_xilinx -flatten -family xc7``.
 
 import json
 
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import message_plan
 from hdl.msg import Deserializer, Serializer
@@ -105,11 +105,8 @@ def markdown(results, resources):
     lines += ["", f"ReconROS framing (one 64-bit beat per primitive, hmt.md §5.2): the spec "
               f"derives {RECONROS_IMAGE_BEATS} beats = "
               f"{RECONROS_IMAGE_BEATS / (CLOCK_MHZ * 1e3):.3f} ms for the 640x480 bgr8 Image.",
-              "", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`; LUT includes INV cells)", "",
-              "| block | LUT | FF | BRAM18 eq. | CARRY4 |", "|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['config']} | {r['LUT']} | {r['FF']} | {r['BRAM18_equiv']} | "
-                     f"{r['CARRY4']} |")
+              ]
+    lines += resource_table(resources, "config", "block")
     lines.append("")
     return "\n".join(lines)
 

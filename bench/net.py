@@ -6,7 +6,7 @@ endpoints beside SiTCP's and LiteEth's published figures."""
 
 import json
 
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from tb.harness import run_bench
 from tb.toolchain import SIM_BUILD
@@ -115,12 +115,7 @@ def markdown(results, resources):
         lines += ["", "Seed paper (6 MB, GbE): round trip PC-PC 129 ms, PC-ARM 290 ms, PC-FPGA "
                   "175 ms (Fig. 12); receive-dominated FPGA 57 ms, PC-PC 67 ms (Fig. 13); "
                   "send-dominated FPGA 116 ms, PC-ARM 106 ms (Fig. 14).", ""]
-    lines += [f"## Resources (Debian Yosys `{YOSYS_COMMAND}`)", "",
-              "| block | LUT | FF | LUTRAM | BRAM18 eq. | DSP | CARRY4 |",
-              "|---|---|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['block']} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
-                     f"{r['BRAM18_equiv']} | {r.get('DSP', 0)} | {r['CARRY4']} |")
+    lines += resource_table(resources, "block", "block")
     lines += ["", "Anchors (net.md §4): seed paper Table 1, two SiTCP + pub/sub logic + FIFOs on "
               "a Spartan-6: 7110 LUT, 9035 registers, 129 RAMB16; LiteEth UDP core (MAC + ARP + "
               "ICMP + IP + UDP, GMII): 1938 LUT / 2119 FF; verilog-ethernet udp_complete + "

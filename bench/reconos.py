@@ -15,7 +15,7 @@ from amaranth.hdl import Module
 from amaranth.lib import wiring
 from amaranth.sim import Simulator
 
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from hdl.reconos import ReconosSystem
 from hdl.reconos.fifo import OSIF_FIFO_DEPTH, ReconosFifo
@@ -170,14 +170,10 @@ def markdown(results, resources):
         cmd = "-" if row["command"] is None else f"0x{row['command']:03X}"
         lines.append(f"| {name} | {cmd} | {row['words']} | {row['replies']} | "
                      f"{row['cycles']} | {r32[name]['cycles']} |")
-    lines += ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`; LUT includes INV cells)", "",
-              "Infrastructure only (empty slots): OSIF/MEMIF FIFOs, reconos_osif, osif_intc, "
-              "proc_control, arbiter, MMU with 16-entry TLB, AXI4 memory controller.", "",
-              "| configuration | LUT | FF | LUTRAM | BRAM18 eq. | CARRY4 |",
-              "|---|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['config']} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
-                     f"{r['BRAM18_equiv']} | {r['CARRY4']} |")
+    lines += resource_table(resources, "config", "configuration")
+    lines += ["", "Infrastructure only (empty slots): OSIF/MEMIF FIFOs, reconos_osif, "
+              "osif_intc, proc_control, arbiter, MMU with 16-entry TLB, AXI4 memory "
+              "controller."]
     lines.append("")
     return "\n".join(lines)
 

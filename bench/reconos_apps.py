@@ -5,7 +5,7 @@ threads beside P-RR Table 5."""
 
 import json
 
-from bench.report import component_resources, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_thread
 from tb.harness import run_bench
@@ -77,13 +77,10 @@ def markdown(results, resources):
     fb = [r for r in results["rows"] if r["case"] == "sort_action_feedbacks"]
     lines += ["", "Sort action feedback messages per goal: " +
               ", ".join(f"{r['arch']} {r['feedbacks']}" for r in fb) + ".", "",
-              f"## Resources (Debian Yosys `{YOSYS_COMMAND}`; thread alone, r64, without the "
-              "slot FIFOs and infrastructure)", "",
-              "| thread | LUT | FF | LUTRAM | BRAM18 eq. | CARRY4 | paper (Table 5) |",
-              "|---|---|---|---|---|---|---|"]
-    for r in resources:
-        lines.append(f"| {r['thread']} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
-                     f"{r['BRAM18_equiv']} | {r['CARRY4']} | {r['paper']} |")
+              ]
+    lines += resource_table(resources, "thread", "thread", extra=(("paper (Table 5)", "paper"),),
+                            detail="; thread alone, r64, without the slot FIFOs and "
+                                   "infrastructure")
     lines.append("")
     return "\n".join(lines)
 

@@ -8,7 +8,11 @@ from gen.export.resources import estimate_resources
 from gen.export.verilog import export_verilog, write_if_changed
 from tb.toolchain import SIM_BUILD
 
-__all__ = ["component_resources", "write_report"]
+__all__ = ["component_resources", "resource_table", "write_report"]
+
+#: Columns of every resource table: (heading, key of an estimate)
+RESOURCE_COLUMNS = (("LUT", "LUT"), ("INV", "INV"), ("FF", "FF"), ("LUTRAM", "LUTRAM"),
+                    ("BRAM18 eq.", "BRAM18_equiv"), ("DSP", "DSP"), ("CARRY4", "CARRY4"))
 
 
 def component_resources(component, top, file_stem):
@@ -19,6 +23,23 @@ def component_resources(component, top, file_stem):
     vfile = SIM_BUILD / "bench-resources" / f"{file_stem}.v"
     write_if_changed(vfile, text)
     return {k: v for k, v in estimate_resources(vfile, top).items() if k != "cells"}
+
+
+def resource_table(rows, label, title, *, detail="", extra=()):
+    """Markdown lines of a resource section: a heading naming the yosys flow and how LUTs are
+    counted (``detail`` adds to it), then one row per estimate in ``rows``, labelled by
+    ``row[label]`` under the column ``title``; ``extra`` is (heading, key) of further
+    columns."""
+    from gen.export.resources import YOSYS_COMMAND
+    columns = RESOURCE_COLUMNS + tuple(extra)
+    lines = ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`{detail}; LUT = LUT1..LUT6 as in "
+             "spec net.md §4, INV cells apart: see gen/export/resources.py)", "",
+             "| " + " | ".join([title] + [c for c, _ in columns]) + " |",
+             "|" + "---|" * (len(columns) + 1)]
+    for r in rows:
+        lines.append("| " + " | ".join([str(r[label])] + [str(r.get(k, "-"))
+                                                          for _, k in columns]) + " |")
+    return lines
 
 
 def write_report(folder, name, data, text):

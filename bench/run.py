@@ -1,5 +1,10 @@
-"""``make bench``: every benchmark, results to bench/results/ (JSON + Markdown)."""
+"""``make bench``: every benchmark, results to bench/results/ (JSON + Markdown).
 
+``--resources-only`` (``make bench-resources``) keeps the cycle results of the last run and
+re-measures only the yosys resource estimates; bench names (``hmt``, ``net``, ...) select
+some of them."""
+
+import json
 import sys
 import time
 from pathlib import Path
@@ -23,14 +28,24 @@ BENCHES = [
 ]
 
 
-def main():
+def main(argv=None):
+    args = sys.argv[1:] if argv is None else argv
+    resources_only = "--resources-only" in args
+    only = [a for a in args if not a.startswith("--")]
     for title, module in BENCHES:
         start = time.monotonic()
+        name = module.__name__.rsplit(".", 1)[-1]
+        if only and name not in only:
+            continue
         print(f"rosgate bench: {title}")
-        results = module.measure()
+        if resources_only:
+            # the cycle results of the last full run, with fresh yosys estimates
+            saved = json.loads((RESULTS / f"{name}.json").read_text())
+            results = {k: v for k, v in saved.items() if k != "resources"}
+        else:
+            results = module.measure()
         resources = module.measure_resources()
         print(module.write_results(results, resources, RESULTS))
-        name = module.__name__.rsplit(".", 1)[-1]
         print(f"wrote {RESULTS / (name + '.json')} and {RESULTS / (name + '.md')} "
               f"({time.monotonic() - start:.0f} s)")
     return 0

@@ -173,8 +173,9 @@ def test_frame_parser_matches_scapy():
         peer / UDP(sport=50000, dport=4660) / Raw(rng.randbytes(13)),
         peer / UDP(sport=1, dport=2, chksum=0) / Raw(b"no checksum"),
         peer / ICMP(type=8, id=3, seq=4) / Raw(rng.randbytes(57)),
+        # a sender hardware address other than the Ethernet source: the answer goes to it
         Ether(src="02:00:00:00:00:01", dst="ff:ff:ff:ff:ff:ff") /
-        ARP(op=1, hwsrc="02:00:00:00:00:01", psrc="192.168.10.1", pdst=ip),
+        ARP(op=1, hwsrc="02:00:00:00:00:2a", psrc="192.168.10.42", pdst=ip),
         Ether(src="02:00:00:00:00:01", dst=mac) / IP(src="192.168.10.1", dst=ip, ihl=7,
                                                    options=b"\x01" * 8) /
         TCP(sport=9, dport=10, flags="A") / Raw(b"ip options"),
@@ -191,13 +192,13 @@ def test_frame_parser_matches_scapy():
         if ARP in pkt:
             assert accept and kind == FrameKind.ARP
             a = pkt[ARP]
-            assert (f["arp_oper"], f["arp_spa"], f["arp_tpa"], f["arp_sha"]) == (
+            assert (f["arp_oper"], f["sender_ip"], f["arp_tpa"], f["sender_mac"]) == (
                 a.op, ip_to_int(a.psrc), ip_to_int(a.pdst), mac_to_int(a.hwsrc))
             continue
         i = pkt[IP]
-        assert (int_to_ip(f["ip_src"]), int_to_ip(f["ip_dst"]), f["ip_proto"], f["ip_len"]) \
+        assert (int_to_ip(f["sender_ip"]), int_to_ip(f["ip_dst"]), f["ip_proto"], f["ip_len"]) \
             == (i.src, i.dst, i.proto, i.len)
-        assert f["eth_src"] == mac_to_int(pkt.src)
+        assert f["sender_mac"] == mac_to_int(pkt.src)
         l4 = bytes(i.payload)[:i.len - i.ihl * 4]
         if TCP in pkt:
             t = pkt[TCP]

@@ -15,11 +15,14 @@ from .mac import RxByteSignature
 __all__ = ["RX_FIELDS", "FrameKind", "DROP_CODE", "FrameParser"]
 
 #: Header fields of the frame being received, valid from the byte that completes them until
-#: the next frame's bytes overwrite them (at least 4 cycles after ``done``).
+#: the next frame's bytes overwrite them (at least 4 cycles after ``done``). ``sender_mac``
+#: and ``sender_ip`` are where an answer goes: the ARP sender hardware and protocol addresses
+#: of an ARP frame, else the Ethernet and IPv4 source addresses (one register each, so the
+#: stack and the sessions need no selection between the two).
 RX_FIELDS = data.StructLayout({
-    "eth_src": 48,
-    "arp_oper": 16, "arp_sha": 48, "arp_spa": 32, "arp_tpa": 32,
-    "ip_src": 32, "ip_dst": 32, "ip_proto": 8, "ip_len": 16, "l4_len": 16,
+    "sender_mac": 48, "sender_ip": 32,
+    "arp_oper": 16, "arp_tpa": 32,
+    "ip_dst": 32, "ip_proto": 8, "ip_len": 16, "l4_len": 16,
     "src_port": 16, "dst_port": 16, "udp_len": 16, "udp_csum": 16,
     "seq": 32, "ack": 32, "flags": 8, "window": 16, "doff": 4, "mss": 16, "has_mss": 1,
     "icmp_type": 8, "icmp_code": 8, "icmp_csum": 16,
@@ -127,20 +130,21 @@ class FrameParser(wiring.Component):
             with m.If(valid & (index >= offset) & (index < offset + nbytes)):
                 m.d.sync += _shift_in(field, byte)
 
-        capture(f.eth_src, 6, 6)
         capture(ethertype, 12, 2)
+        arp_frame = ethertype == ETHERTYPE_ARP
+        with m.If(v & (((i >= 6) & (i < 12)) | (arp_frame & (i >= 22) & (i < 28)))):
+            m.d.sync += _shift_in(f.sender_mac, byte)
+        with m.If(v & Mux(arp_frame, (i >= 28) & (i < 32), (i >= 26) & (i < 30))):
+            m.d.sync += _shift_in(f.sender_ip, byte)
         # ARP (RFC 826)
         capture(arp_fixed, 14, 6)
         capture(f.arp_oper, 20, 2)
-        capture(f.arp_sha, 22, 6)
-        capture(f.arp_spa, 28, 4)
         capture(f.arp_tpa, 38, 4)
         # IPv4 (RFC 791)
         capture(ver_ihl, 14, 1)
         capture(f.ip_len, 16, 2)
         capture(frag, 20, 2)
         capture(f.ip_proto, 23, 1)
-        capture(f.ip_src, 26, 4)
         capture(f.ip_dst, 30, 4)
         with m.If(v & (i == 14)):
             m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))

@@ -263,19 +263,19 @@ class NetStack(wiring.Component):
                     with m.Switch(parser.kind):
                         with m.Case(FrameKind.ARP):
                             with m.If(f.arp_oper == ARP_REQUEST):
-                                m.d.sync += [r_kind.eq(FrameKind.ARP), r_eth.eq(f.arp_sha),
-                                             r_ip.eq(f.arp_spa)]
+                                m.d.sync += [r_kind.eq(FrameKind.ARP), r_eth.eq(f.sender_mac),
+                                             r_ip.eq(f.sender_ip)]
                                 m.next = "REQUEST"
                         with m.Case(FrameKind.ICMP):
                             with m.If(claim):
-                                m.d.sync += [r_kind.eq(FrameKind.ICMP), r_eth.eq(f.eth_src),
-                                             r_ip.eq(f.ip_src), r_len.eq(f.payload_len),
+                                m.d.sync += [r_kind.eq(FrameKind.ICMP), r_eth.eq(f.sender_mac),
+                                             r_ip.eq(f.sender_ip), r_len.eq(f.payload_len),
                                              icmp_csum.eq(f.icmp_csum)]
                                 m.next = "ICMP_TYPE"
                         with m.Case(FrameKind.UDP):
                             with m.If(claim & (f.dst_port == rbcp_port)):
-                                m.d.sync += [r_kind.eq(FrameKind.UDP), r_eth.eq(f.eth_src),
-                                             r_ip.eq(f.ip_src), r_sport.eq(f.dst_port),
+                                m.d.sync += [r_kind.eq(FrameKind.UDP), r_eth.eq(f.sender_mac),
+                                             r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
                                              r_dport.eq(f.src_port)]
                                 m.d.comb += [server.start.eq(1),
                                              server.length.eq(f.payload_len)]
@@ -283,8 +283,8 @@ class NetStack(wiring.Component):
                         with m.Case(FrameKind.TCP):
                             with m.If(~claimed & ~f.flags[2]):
                                 syn_fin = f.flags[1] + f.flags[0]
-                                m.d.sync += [r_kind.eq(FrameKind.TCP), r_eth.eq(f.eth_src),
-                                             r_ip.eq(f.ip_src), r_sport.eq(f.dst_port),
+                                m.d.sync += [r_kind.eq(FrameKind.TCP), r_eth.eq(f.sender_mac),
+                                             r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
                                              r_dport.eq(f.src_port), r_len.eq(0), r_sum.eq(0),
                                              r_seq.eq(Mux(f.flags[4], f.ack, 0)),
                                              r_ack.eq(f.seq + f.payload_len + syn_fin),

@@ -238,7 +238,7 @@ class TcpSession(wiring.Component):
         with m.If(out_go):
             m.d.sync += rx_rptr.eq(rx_rptr + 1)
 
-        tuple_match = ((f.ip_src == remote_ip) & (f.src_port == remote_port) &
+        tuple_match = ((f.sender_ip == remote_ip) & (f.src_port == remote_port) &
                        (f.dst_port == local_port))
         is_tcp = self.seg_kind == FrameKind.TCP
         wr_on = Signal()
@@ -508,8 +508,8 @@ class TcpSession(wiring.Component):
             m.d.sync += count("segments_rx")
         with m.If(seg & listen_hit):
             m.d.sync += rx_rptr.eq(rx_commit)      # a new connection starts with no old bytes
-            m.d.sync += [state.eq(S.SYN_RECEIVED), remote_mac.eq(f.eth_src),
-                         remote_ip.eq(f.ip_src), remote_port.eq(f.src_port),
+            m.d.sync += [state.eq(S.SYN_RECEIVED), remote_mac.eq(f.sender_mac),
+                         remote_ip.eq(f.sender_ip), remote_port.eq(f.src_port),
                          rcv_nxt.eq(f.seq + 1), mss.eq(self._mss(f)), snd_wnd.eq(f.window),
                          wl1.eq(f.seq), wl2.eq(0), iss.eq(iss_clock), snd_una.eq(iss_clock),
                          snd_nxt.eq(iss_clock), snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1),
@@ -636,10 +636,10 @@ class TcpSession(wiring.Component):
 
         # ARP resolution for a client
         with m.If(self.seg_done & self.seg_accept & (self.seg_kind == FrameKind.ARP) &
-                  (state == S.ARP) & (f.arp_spa == remote_ip) &
+                  (state == S.ARP) & (f.sender_ip == remote_ip) &
                   ((f.arp_oper == ARP_REPLY) | (f.arp_oper == ARP_REQUEST))):
             m.d.sync += rx_rptr.eq(rx_commit)
-            m.d.sync += [remote_mac.eq(f.arp_sha), state.eq(S.SYN_SENT), syn_due.eq(1),
+            m.d.sync += [remote_mac.eq(f.sender_mac), state.eq(S.SYN_SENT), syn_due.eq(1),
                          iss.eq(iss_clock), snd_una.eq(iss_clock), snd_nxt.eq(iss_clock),
                          snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1), timer.eq(0),
                          timer_on.eq(0), retries.eq(0), backoff.eq(0), cwnd.eq(3 * TCP_MSS),
