@@ -1,7 +1,7 @@
 """One TCP session: server or client, sliding window, retransmission, both directions
 (spec net.md §1.3-§1.6, §2.1; RFC 9293, RFC 5681, RFC 6298)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import enum, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -50,15 +50,6 @@ TCP_COUNTERS = ("bytes_tx", "bytes_rx", "segments_tx", "segments_rx", "rto", "fa
                 "dup_acks", "rst_rx", "dropped_segments")
 
 
-def _seq_lt(a, b):
-    """a < b modulo 2**32 (RFC 9293 §3.4)."""
-    return (a - b)[31]
-
-
-def _seq_le(a, b):
-    return ~_seq_lt(b, a)
-
-
 class TcpSession(wiring.Component):
     """One TCP connection with a SiTCP-like user side.
 
@@ -69,6 +60,13 @@ class TcpSession(wiring.Component):
     in-order data is written into a ``rx_depth``-byte ring while the frame arrives and
     committed when the frame's FCS and checksum are known good; the ring's free space is the
     advertised window. Out-of-order segments are dropped and answered with a duplicate ACK.
+
+    The 32-bit sequence numbers (SND.UNA, SND.NXT, SND.MAX, RCV.NXT, SND.WL1, SND.WL2) are
+    written only by a sequence engine with one adder: a received segment's fields are latched
+    at the verdict, compared with them one per cycle, and the outcome is applied 10 cycles
+    later, the new sequence numbers over the next 4 (the next segment's payload cannot start
+    within 54 cycles). While the engine runs, no request leaves for the builder and no
+    retransmission timer fires, so what it compared stays true.
 
     Parameters
     ----------
@@ -169,14 +167,7 @@ class TcpSession(wiring.Component):
         ephemeral = Signal(16, init=49152)
         iss_clock = Signal(32, init=self._iss_seed)
         m.d.sync += iss_clock.eq(iss_clock + 1)
-        iss = Signal(32)
-        snd_una = Signal(32)
-        snd_nxt = Signal(32)
-        snd_max = Signal(32)
         snd_wnd = Signal(16)
-        wl1 = Signal(32)
-        wl2 = Signal(32)
-        rcv_nxt = Signal(32)
         mss = Signal(11, init=TCP_MSS_DEFAULT)
         cwnd = Signal(17)
         ssthresh = Signal(17, init=65535)
@@ -184,17 +175,27 @@ class TcpSession(wiring.Component):
         dupacks = Signal(2)
         m.d.comb += [self.peer_ip.eq(remote_ip), self.peer_port.eq(remote_port)]
 
+        # Sequence-space registers are written only from the sequence engine's write bus
+        # (below). SND.UNA holds the ISS until the SYN is acknowledged; the FIN's sequence
+        # number is the write pointer, which stops when the FIN is queued; ``spec_seq`` is
+        # the sequence number of a RST answering a segment, or of a zero-window probe.
+        seq_names = ("snd_una", "snd_nxt", "snd_max", "rcv_nxt", "wl1", "wl2", "spec_seq")
+        seq = {name: Signal(32, name=name) for name in seq_names}
+        snd_una, snd_nxt, snd_max, rcv_nxt = (seq[n] for n in seq_names[:4])
+        wl1, wl2, spec_seq = seq["wl1"], seq["wl2"], seq["spec_seq"]
+        wbus = Signal(32)
+        write = {name: Signal(name=f"write_{name}") for name in seq_names + ("wr_seq",)}
+
         syn_due = Signal()
         arp_due = Signal()
         ack_now = Signal()          # send an ACK as soon as possible
         ack_owed = Signal()         # one in-order segment not yet acknowledged
         delack = Signal(12)
         rst_due = Signal()
-        rst_seq = Signal(32)
+        rst_at_nxt = Signal()       # the pending RST carries SND.NXT (else ``spec_seq``)
         fin_queued = Signal()
         fin_sent = Signal()
         fin_acked = Signal()
-        fin_seq = Signal(32)
         probe_due = Signal()
         armed = Signal(init=1)
 
@@ -247,7 +248,7 @@ class TcpSession(wiring.Component):
         pv = self.seg_payload_valid
         ahead = Signal(32)
         m.d.comb += ahead.eq(rcv_nxt - f.seq)
-        start_ok = (is_tcp & receiving & tuple_match & _seq_le(f.seq, rcv_nxt) &
+        start_ok = (is_tcp & receiving & tuple_match & ~ahead[31] &
                     (ahead[16:] == 0) & ~f.flags[2] & f.flags[4])
         first = pv & (po == 0)
         on = Mux(first, start_ok, wr_on)
@@ -319,15 +320,24 @@ class TcpSession(wiring.Component):
             with m.If((idle == 15) & (ring_used < nd)):
                 m.d.comb += [close_seg.eq(1), close_len.eq(seg_len), close_sum.eq(seg_sum)]
                 m.d.sync += [seg_len.eq(0), seg_sum.eq(0), idle.eq(0)]
+        with m.If(write["wr_seq"]):
+            m.d.sync += wr_seq.eq(wbus)
         start_of_closed = Mux(seg_len == 0, wr_seq, seg_start)
         m.d.comb += [d_w.addr.eq(d_wr[:-1]), d_w.data.eq(Cat(start_of_closed, close_len, close_sum)),
                      d_w.en.eq(close_seg)]
         with m.If(close_seg):
             m.d.sync += d_wr.eq(d_wr + 1)
 
+        # Distances between sequence numbers of the transmit side stay below the buffer size
+        # (2**16), so they are taken modulo 2**18 and their bit 17 is the sign.
+        def distance(a, b, c=0):
+            d = Signal(18)
+            m.d.comb += d.eq(a[:18] - b[:18] - c)
+            return d
+
         # free acknowledged segments, one per cycle
         free_now = Signal()
-        m.d.comb += free_now.eq((d_ack != d_wr) & _seq_le(ack_seq + ack_len, snd_una))
+        m.d.comb += free_now.eq((d_ack != d_wr) & ~distance(snd_una, ack_seq, ack_len)[17])
         d_ack_next = d_ack + free_now
         with m.If(free_now):
             m.d.sync += d_ack.eq(d_ack + 1)
@@ -337,14 +347,13 @@ class TcpSession(wiring.Component):
         # ---- transmit requests
         req = self.tx.request
         pending = Signal()          # a request is offered to the builder
-        flight = snd_max - snd_una
+        busy = Signal()             # the sequence engine runs a program (requests wait)
+        flight = distance(snd_max, snd_una)
         wnd_limit = Mux(cwnd < snd_wnd, cwnd, snd_wnd)
-        data_end = Signal(32)
-        m.d.comb += data_end.eq(snd_seq + snd_len - snd_una)
-        data_fits = data_end <= wnd_limit
+        data_fits = distance(snd_seq + snd_len, snd_una) <= wnd_limit
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
         all_sent = (d_snd == d_wr) & (seg_len == 0)
-        m.d.comb += self.tx.valid.eq(pending)
+        m.d.comb += self.tx.valid.eq(pending & ~busy)
         kind_ = Signal(3)           # what the pending request is
         K_RST, K_ARP, K_SYN, K_DATA, K_FIN, K_PROBE, K_ACK = range(7)
 
@@ -353,26 +362,27 @@ class TcpSession(wiring.Component):
                      req.dst_port.eq(remote_port), req.ack.eq(rcv_nxt), req.window.eq(window)]
         with m.Switch(kind_):
             with m.Case(K_RST):
-                m.d.comb += [req.seq.eq(rst_seq), req.flags.eq(TCP_RST), req.window.eq(0)]
+                m.d.comb += [req.seq.eq(Mux(rst_at_nxt, snd_nxt, spec_seq)),
+                             req.flags.eq(TCP_RST), req.window.eq(0)]
             with m.Case(K_ARP):
                 m.d.comb += [req.kind.eq(FrameKind.ARP), req.arp_oper.eq(ARP_REQUEST),
                              req.eth_dst.eq(0xFFFFFFFFFFFF)]
             with m.Case(K_SYN):
-                m.d.comb += [req.seq.eq(iss), req.mss.eq(1),
+                m.d.comb += [req.seq.eq(snd_una), req.mss.eq(1),
                              req.flags.eq(Mux(state == S.SYN_SENT, TCP_SYN, TCP_SYN | TCP_ACK))]
             with m.Case(K_DATA):
                 m.d.comb += [req.seq.eq(snd_seq), req.flags.eq(TCP_ACK | TCP_PSH),
                              req.length.eq(snd_len), req.payload_sum.eq(snd_sum),
                              req.payload_addr.eq(snd_seq[:16])]
             with m.Case(K_FIN):
-                m.d.comb += [req.seq.eq(fin_seq), req.flags.eq(TCP_FIN | TCP_ACK)]
+                m.d.comb += [req.seq.eq(wr_seq), req.flags.eq(TCP_FIN | TCP_ACK)]
             with m.Case(K_PROBE):
-                m.d.comb += [req.seq.eq(snd_una - 1), req.flags.eq(TCP_ACK)]
+                m.d.comb += [req.seq.eq(spec_seq), req.flags.eq(TCP_ACK)]
             with m.Case(K_ACK):
                 m.d.comb += [req.seq.eq(snd_nxt), req.flags.eq(TCP_ACK)]
 
         # choose the next request when none is pending
-        fin_may = fin_queued & all_sent & (~fin_sent | (snd_nxt == fin_seq))
+        fin_may = fin_queued & all_sent & (~fin_sent | (snd_nxt == wr_seq))
         with m.If(~pending):
             with m.If(rst_due):
                 m.d.sync += [pending.eq(1), kind_.eq(K_RST)]
@@ -390,7 +400,7 @@ class TcpSession(wiring.Component):
             with m.Elif(ack_now & synchronized):
                 m.d.sync += [pending.eq(1), kind_.eq(K_ACK)]
 
-        sent = pending & self.tx.ready
+        sent = self.tx.valid & self.tx.ready
         with m.If(sent):
             m.d.sync += [pending.eq(0), count("segments_tx")]
             with m.If(kind_ != K_ARP):
@@ -403,19 +413,13 @@ class TcpSession(wiring.Component):
                 with m.Case(K_ARP):
                     m.d.sync += [arp_due.eq(0), timer.eq(0), timer_on.eq(1)]
                 with m.Case(K_SYN):
-                    m.d.sync += [syn_due.eq(0), snd_nxt.eq(iss + 1), snd_max.eq(iss + 1),
-                                 timer_on.eq(1), timer.eq(0)]
+                    m.d.sync += [syn_due.eq(0), timer_on.eq(1), timer.eq(0)]
                 with m.Case(K_DATA):
-                    nxt = snd_seq + snd_len
-                    m.d.sync += [snd_nxt.eq(nxt), d_snd.eq(d_snd + 1)]
-                    with m.If(_seq_lt(snd_max, nxt)):
-                        m.d.sync += snd_max.eq(nxt)
+                    m.d.sync += d_snd.eq(d_snd + 1)
                     with m.If(~timer_on):
                         m.d.sync += [timer_on.eq(1), timer.eq(0)]
                 with m.Case(K_FIN):
-                    m.d.sync += [fin_sent.eq(1), snd_nxt.eq(fin_seq + 1)]
-                    with m.If(_seq_lt(snd_max, fin_seq + 1)):
-                        m.d.sync += snd_max.eq(fin_seq + 1)
+                    m.d.sync += fin_sent.eq(1)
                     with m.If(~timer_on):
                         m.d.sync += [timer_on.eq(1), timer.eq(0)]
                 with m.Case(K_PROBE):
@@ -468,112 +472,304 @@ class TcpSession(wiring.Component):
             m.d.sync += fin_queued.eq(1)
         with m.If((state == S.CLOSE_WAIT) & self.close_ack):
             m.d.sync += fin_queued.eq(1)
-        with m.If(fin_queued & ~fin_sent & all_sent & (fin_seq != wr_seq)):
-            m.d.sync += fin_seq.eq(wr_seq)
         with m.If(fin_queued & all_sent & ~fin_sent):
             with m.If(state == S.ESTABLISHED):
-                m.d.sync += [state.eq(S.FIN_WAIT_1), fin_seq.eq(wr_seq)]
+                m.d.sync += state.eq(S.FIN_WAIT_1)
             with m.If(state == S.CLOSE_WAIT):
-                m.d.sync += [state.eq(S.LAST_ACK), fin_seq.eq(wr_seq)]
+                m.d.sync += state.eq(S.LAST_ACK)
 
-        # ---- segment arrival
+        # ---- segment arrival: the verdict's fields are latched; the sequence engine
+        # compares them and applies the outcome (DECIDE) and the new sequence numbers
         seg = self.seg_done & self.seg_accept & is_tcp
-        flags = f.flags
-        f_fin, f_syn, f_rst, f_ack = flags[0], flags[1], flags[2], flags[4]
-        plen = f.payload_len
-
-        def in_wnd(x):
-            return (x - rcv_nxt)[:32] < window
-
-        seg_seqlen = plen + f_fin
-        acceptable = Mux(seg_seqlen == 0,
-                         Mux(window == 0, f.seq == rcv_nxt, in_wnd(f.seq)),
-                         (window != 0) & (in_wnd(f.seq) | in_wnd(f.seq + seg_seqlen - 1)))
-        listen_hit = (state == S.LISTEN) & (f.dst_port == local_port) & f_syn & ~f_rst & ~f_ack
+        listen_hit = ((state == S.LISTEN) & (f.dst_port == local_port) & f.flags[1] &
+                      ~f.flags[2] & ~f.flags[4])
         conn_hit = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP) & tuple_match
         m.d.comb += self.claim.eq(listen_hit | conn_hit)
-        new_ack = _seq_lt(snd_una, f.ack) & _seq_le(f.ack, snd_max)
-        too_new = _seq_lt(snd_max, f.ack)
-        committed = Signal(11)
-        m.d.comb += committed.eq(rx_written)
-        commit = Signal()
+        arp_hit = (self.seg_done & self.seg_accept & (self.seg_kind == FrameKind.ARP) &
+                   (state == S.ARP) & (f.sender_ip == remote_ip) &
+                   ((f.arp_oper == ARP_REPLY) | (f.arp_oper == ARP_REQUEST)))
+
+        s_seq = Signal(32)
+        s_ack = Signal(32)
+        s_flags = Signal(8)
+        s_window = Signal(16)
+        s_plen = Signal(11)
+        s_committed = Signal(11)
+        s_mss = Signal(11)
+        s_listen = Signal()         # the pending initialisation is a server's (from a SYN)
+        arrival_pending = Signal()
+        init_pending = Signal()
+        with m.If(seg & (conn_hit | listen_hit)):
+            m.d.sync += [s_seq.eq(f.seq), s_ack.eq(f.ack), s_flags.eq(f.flags),
+                         s_window.eq(f.window), s_plen.eq(f.payload_len),
+                         s_committed.eq(rx_written), s_mss.eq(self._mss(f))]
+        with m.If(seg & conn_hit):
+            m.d.sync += [arrival_pending.eq(1), count("segments_rx")]
+
+        m.d.sync += self.error.eq(0)
 
         def abort_to(code):
             return [state.eq(Mux(~self.active & self.open_req & (state == S.SYN_RECEIVED),
                                  S.LISTEN, S.CLOSED)),
                     self.error_code.eq(code), self.error.eq(1)]
 
-        m.d.sync += self.error.eq(0)
-        with m.If(seg & conn_hit):
-            m.d.sync += count("segments_rx")
+        def initialise():
+            return [init_pending.eq(1), timer.eq(0), retries.eq(0), backoff.eq(0),
+                    cwnd.eq(3 * TCP_MSS), ssthresh.eq(65535), dupacks.eq(0)]
+
         with m.If(seg & listen_hit):
             m.d.sync += rx_rptr.eq(rx_commit)      # a new connection starts with no old bytes
             m.d.sync += [state.eq(S.SYN_RECEIVED), remote_mac.eq(f.sender_mac),
                          remote_ip.eq(f.sender_ip), remote_port.eq(f.src_port),
-                         rcv_nxt.eq(f.seq + 1), mss.eq(self._mss(f)), snd_wnd.eq(f.window),
-                         wl1.eq(f.seq), wl2.eq(0), iss.eq(iss_clock), snd_una.eq(iss_clock),
-                         snd_nxt.eq(iss_clock), snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1),
-                         syn_due.eq(1), retries.eq(0), backoff.eq(0), timer.eq(0),
-                         cwnd.eq(3 * TCP_MSS), ssthresh.eq(65535), dupacks.eq(0),
-                         self.error_code.eq(TcpError.NONE)]
-        with m.Elif(seg & conn_hit & (state == S.SYN_SENT)):
-            with m.If(f_ack & (f.ack != iss + 1)):
-                with m.If(~f_rst):
-                    m.d.sync += [rst_due.eq(1), rst_seq.eq(f.ack)]
-            with m.Elif(f_rst):
-                with m.If(f_ack):
+                         mss.eq(self._mss(f)), snd_wnd.eq(f.window), syn_due.eq(1),
+                         s_listen.eq(1), self.error_code.eq(TcpError.NONE)] + initialise()
+        # ARP resolution for a client
+        with m.If(arp_hit):
+            m.d.sync += rx_rptr.eq(rx_commit)
+            m.d.sync += [remote_mac.eq(f.sender_mac), state.eq(S.SYN_SENT), syn_due.eq(1),
+                         timer_on.eq(0), snd_wnd.eq(0), s_listen.eq(0)] + initialise()
+
+        # the sequence engine: one adder, result = a + b (+ carry), or a - b (- 1)
+        alu_a = Signal(32)
+        alu_b = Signal(32)
+        alu_sub = Signal()
+        alu_minus_1 = Signal()
+        alu = Signal(32)
+        m.d.comb += [alu.eq(alu_a + Mux(alu_sub, ~alu_b, alu_b) + (alu_sub & ~alu_minus_1)),
+                     wbus.eq(alu)]
+        alu_zero = alu == 0
+        alu_positive = ~alu[31] & ~alu_zero
+        alu_in_window = (alu[16:] == 0) & (alu[:16] < window)
+        flag = {name: Signal(name=f"arrival_{name}") for name in (
+            "seq_is_rcv_nxt", "seq_is_rcv_nxt_minus_1", "seq_in_window", "ack_is_snd_una",
+            "ack_after_snd_una", "ack_is_snd_una_plus_1", "ack_after_snd_max",
+            "ack_is_fin_plus_1", "seq_after_wl1", "seq_is_wl1", "ack_not_before_wl2",
+            "ack_after_snd_nxt", "last_in_window", "fin_at_end", "snd_max_behind",
+            "ack_is_snd_max")}
+        d = Signal(32)              # SEG.SEQ - RCV.NXT
+        acked = Signal(17)
+        acked_big = Signal()
+        seg_seqlen = Signal(12)
+        m.d.comb += seg_seqlen.eq(s_plen + s_flags[0])
+        a_fin, a_syn, a_rst, a_ack = s_flags[0], s_flags[1], s_flags[2], s_flags[4]
+
+        # operands: one of a few wide registers, or a small signed value
+        small_a = Signal(signed(13))
+        small_b = Signal(signed(13))
+        a_sources = {"small": small_a, "snd_seq": snd_seq, "iss_clock": iss_clock,
+                     "s_seq": s_seq, "s_ack": s_ack, "snd_nxt": snd_nxt, "d": d}
+        b_sources = {"small": small_b, "snd_una": snd_una, "snd_nxt": snd_nxt,
+                     "snd_max": snd_max, "rcv_nxt": rcv_nxt, "wr_seq": wr_seq, "wl1": wl1,
+                     "wl2": wl2}
+        a_sel = Signal(range(len(a_sources)))
+        b_sel = Signal(range(len(b_sources)))
+        for sel, target, sources in ((a_sel, alu_a, a_sources), (b_sel, alu_b, b_sources)):
+            with m.Switch(sel):
+                for k, value in enumerate(sources.values()):
+                    with m.Case(k):
+                        m.d.comb += target.eq(value)
+
+        def op(a, b, *, sub=False, minus_1=False, writes=(), results=()):
+            """Drive the adder this cycle with ``a`` and ``b`` (names of wide sources, or small
+            values); store ``results`` and write ``writes`` (names of sequence registers, or
+            (name, condition)) from its output."""
+            for operand, sel, small, sources in ((a, a_sel, small_a, a_sources),
+                                                 (b, b_sel, small_b, b_sources)):
+                if isinstance(operand, str):
+                    m.d.comb += sel.eq(list(sources).index(operand))
+                else:
+                    m.d.comb += [sel.eq(0), small.eq(operand)]
+            m.d.comb += [alu_sub.eq(sub), alu_minus_1.eq(minus_1)]
+            for w in writes:
+                name, cond = (w, 1) if isinstance(w, str) else w
+                m.d.comb += write[name].eq(cond)
+            m.d.sync += list(results)
+
+        intent = {name: Signal(name=f"intent_{name}") for name in (
+            "una", "nxt", "wl", "rst", "rcv", "rcv_syn", "retransmit")}
+        rcv_add = Signal(12)        # bytes (and FIN) RCV.NXT advances by
+        commit = Signal()
+        # engine work outside programs, in an idle cycle: a sent frame's SND.NXT, a
+        # retransmission timeout's SND.NXT, a zero-window probe's sequence number
+        sent_op = Signal()
+        m.d.comb += sent_op.eq(sent & ((kind_ == K_SYN) | (kind_ == K_DATA) | (kind_ == K_FIN)))
+        rto_op = Signal()
+        probe_op = Signal()
+
+        with m.FSM(name="sequence_engine") as engine:
+            with m.State("IDLE"):
+                with m.If(sent_op):
+                    with m.Switch(kind_):
+                        with m.Case(K_SYN):
+                            op(1, "snd_una", writes=("snd_nxt",))
+                        with m.Case(K_DATA):
+                            op("snd_seq", snd_len, writes=("snd_nxt",))
+                        with m.Case(K_FIN):
+                            op(1, "wr_seq", writes=("snd_nxt",))
+                with m.Elif(rto_op):
+                    op(0, "snd_una", writes=("snd_nxt",))
+                with m.Elif(probe_op):
+                    op(-1, "snd_una", writes=("spec_seq",))
+                with m.If(sent_op):
+                    m.next = "MAX_COMPARE"
+                with m.Elif(arrival_pending):
+                    m.d.sync += arrival_pending.eq(0)
+                    m.next = "COMPARE_RCV_NXT"
+                with m.Elif(init_pending):
+                    m.d.sync += init_pending.eq(0)
+                    m.next = "INIT_ISS"
+            # SND.MAX follows SND.NXT forward
+            with m.State("MAX_COMPARE"):
+                op("snd_nxt", "snd_max", sub=True, results=[flag["snd_max_behind"].eq(alu_positive)])
+                m.next = "MAX_WRITE"
+            with m.State("MAX_WRITE"):
+                op(0, "snd_nxt", writes=[("snd_max", flag["snd_max_behind"])])
+                m.next = "IDLE"
+            # a new connection's sequence numbers
+            with m.State("INIT_ISS"):
+                op("iss_clock", 0, writes=("snd_una", "snd_nxt", "snd_max"))
+                m.next = "INIT_WR_SEQ"
+            with m.State("INIT_WR_SEQ"):
+                op(1, "snd_una", writes=("wr_seq",))
+                m.next = "INIT_RCV_NXT"
+            with m.State("INIT_RCV_NXT"):
+                op("s_seq", 1, writes=[("rcv_nxt", s_listen)])
+                m.next = "INIT_WL1"
+            with m.State("INIT_WL1"):
+                with m.If(s_listen):
+                    op("s_seq", 0, writes=("wl1",))
+                with m.Else():
+                    op(0, 0, writes=("wl1",))
+                m.next = "INIT_WL2"
+            with m.State("INIT_WL2"):
+                op(0, 0, writes=("wl2",))
+                m.next = "IDLE"
+            # a segment of the connection: its comparisons, one per cycle ...
+            compares = [
+                ("COMPARE_RCV_NXT", "s_seq", "rcv_nxt", False, [
+                    d.eq(alu), flag["seq_is_rcv_nxt"].eq(alu_zero),
+                    flag["seq_is_rcv_nxt_minus_1"].eq(alu == 0xFFFFFFFF),
+                    flag["seq_in_window"].eq(alu_in_window)]),
+                ("COMPARE_SND_UNA", "s_ack", "snd_una", False, [
+                    acked.eq(alu[:17]), acked_big.eq(alu[16:] != 0),
+                    flag["ack_is_snd_una"].eq(alu_zero),
+                    flag["ack_after_snd_una"].eq(alu_positive),
+                    flag["ack_is_snd_una_plus_1"].eq(alu == 1)]),
+                ("COMPARE_SND_MAX", "s_ack", "snd_max", False, [
+                    flag["ack_after_snd_max"].eq(alu_positive),
+                    flag["ack_is_snd_max"].eq(alu_zero)]),
+                ("COMPARE_FIN", "s_ack", "wr_seq", True, [
+                    flag["ack_is_fin_plus_1"].eq(alu_zero)]),
+                ("COMPARE_WL1", "s_seq", "wl1", False, [
+                    flag["seq_after_wl1"].eq(alu_positive), flag["seq_is_wl1"].eq(alu_zero)]),
+                ("COMPARE_WL2", "s_ack", "wl2", False, [
+                    flag["ack_not_before_wl2"].eq(~alu[31])]),
+                ("COMPARE_SND_NXT", "s_ack", "snd_nxt", False, [
+                    flag["ack_after_snd_nxt"].eq(alu_positive)]),
+            ]
+            for k, (name, a, b, minus_1, results) in enumerate(compares):
+                with m.State(name):
+                    op(a, b, sub=True, minus_1=minus_1, results=results)
+                    m.next = compares[k + 1][0] if k + 1 < len(compares) else "LAST_IN_WINDOW"
+            with m.State("LAST_IN_WINDOW"):
+                op("d", seg_seqlen - 1,
+                   results=[flag["last_in_window"].eq(alu_in_window)])
+                m.next = "FIN_AT_END"
+            with m.State("FIN_AT_END"):
+                op("d", s_plen - s_committed, results=[flag["fin_at_end"].eq(alu_zero)])
+                m.next = "DECIDE"
+            # ... the outcome (below) ...
+            with m.State("DECIDE"):
+                m.next = "WRITE_ACK"
+            # ... and the new sequence numbers
+            with m.State("WRITE_ACK"):
+                op("s_ack", 0, writes=[("snd_una", intent["una"]), ("snd_nxt", intent["nxt"]),
+                                     ("wl2", intent["wl"]), ("spec_seq", intent["rst"])])
+                m.next = "WRITE_SEQ"
+            with m.State("WRITE_SEQ"):
+                op("s_seq", 0, writes=[("wl1", intent["wl"])])
+                m.next = "WRITE_RCV_NXT"
+            with m.State("WRITE_RCV_NXT"):
+                with m.If(intent["rcv_syn"]):
+                    op("s_seq", 1, writes=[("rcv_nxt", intent["rcv"])])
+                with m.Else():
+                    op(rcv_add, "rcv_nxt", writes=[("rcv_nxt", intent["rcv"])])
+                m.next = "WRITE_RETRANSMIT"
+            with m.State("WRITE_RETRANSMIT"):
+                op(0, "snd_una", writes=[("snd_nxt", intent["retransmit"])])
+                m.next = "IDLE"
+        m.d.comb += busy.eq(~engine.ongoing("IDLE"))
+        for name, reg in seq.items():
+            with m.If(write[name]):
+                m.d.sync += reg.eq(wbus)
+        engine_free = engine.ongoing("IDLE") & ~sent_op
+
+        # the outcome of a segment of the connection
+        acceptable = Mux(seg_seqlen == 0,
+                         Mux(window == 0, flag["seq_is_rcv_nxt"], flag["seq_in_window"]),
+                         (window != 0) & (flag["seq_in_window"] | flag["last_in_window"]))
+        new_ack = flag["ack_after_snd_una"] & ~flag["ack_after_snd_max"]
+        fin_acked_now = fin_sent & flag["ack_is_fin_plus_1"]
+        decide = engine.ongoing("DECIDE")
+        with m.If(decide):
+            m.d.sync += [intent[name].eq(0) for name in intent]
+            m.d.sync += rcv_add.eq(s_committed)
+        with m.If(decide & (state == S.SYN_SENT)):
+            with m.If(a_ack & ~flag["ack_is_snd_una_plus_1"]):
+                with m.If(~a_rst):
+                    m.d.sync += [rst_due.eq(1), rst_at_nxt.eq(0), intent["rst"].eq(1)]
+            with m.Elif(a_rst):
+                with m.If(a_ack):
                     m.d.sync += abort_to(TcpError.REFUSED)
                     m.d.sync += count("rst_rx")
-            with m.Elif(f_syn):
-                m.d.sync += [rcv_nxt.eq(f.seq + 1), mss.eq(self._mss(f)), snd_wnd.eq(f.window),
-                             wl1.eq(f.seq), wl2.eq(f.ack), ack_now.eq(1)]
-                with m.If(f_ack):
-                    m.d.sync += [state.eq(S.ESTABLISHED), snd_una.eq(f.ack), timer_on.eq(0),
+            with m.Elif(a_syn):
+                m.d.sync += [intent["rcv"].eq(1), intent["rcv_syn"].eq(1), mss.eq(s_mss),
+                             snd_wnd.eq(s_window), intent["wl"].eq(1), ack_now.eq(1)]
+                with m.If(a_ack):
+                    m.d.sync += [state.eq(S.ESTABLISHED), intent["una"].eq(1), timer_on.eq(0),
                                  retries.eq(0), backoff.eq(0)]
                 with m.Else():
                     m.d.sync += [state.eq(S.SYN_RECEIVED), syn_due.eq(1)]
-        with m.Elif(seg & conn_hit):
-            with m.If(f_syn & (state == S.SYN_RECEIVED) & (f.seq + 1 == rcv_nxt)):
+        with m.Elif(decide):
+            with m.If(a_syn & (state == S.SYN_RECEIVED) & flag["seq_is_rcv_nxt_minus_1"]):
                 m.d.sync += syn_due.eq(1)               # our SYN-ACK was lost: resend it
             with m.Elif(~acceptable):
-                with m.If(~f_rst):
+                with m.If(~a_rst):
                     m.d.sync += [ack_now.eq(1), count("dropped_segments")]
-            with m.Elif(f_rst):
+            with m.Elif(a_rst):
                 m.d.sync += count("rst_rx")
-                with m.If(f.seq == rcv_nxt):
+                with m.If(flag["seq_is_rcv_nxt"]):
                     m.d.sync += abort_to(TcpError.RESET)
                 with m.Else():
                     m.d.sync += ack_now.eq(1)           # challenge ACK (RFC 5961 §3)
-            with m.Elif(f_syn):
+            with m.Elif(a_syn):
                 m.d.sync += ack_now.eq(1)               # challenge ACK (RFC 5961 §4)
-            with m.Elif(~f_ack):
+            with m.Elif(~a_ack):
                 pass
             with m.Elif(state == S.SYN_RECEIVED):
-                with m.If(f.ack == iss + 1):
-                    m.d.sync += [state.eq(S.ESTABLISHED), snd_una.eq(f.ack), timer_on.eq(0),
-                                 retries.eq(0), backoff.eq(0), snd_wnd.eq(f.window),
-                                 wl1.eq(f.seq), wl2.eq(f.ack)]
+                with m.If(flag["ack_is_snd_una_plus_1"]):
+                    m.d.sync += [state.eq(S.ESTABLISHED), intent["una"].eq(1), timer_on.eq(0),
+                                 retries.eq(0), backoff.eq(0), snd_wnd.eq(s_window),
+                                 intent["wl"].eq(1)]
                     m.d.comb += commit.eq(1)
                 with m.Else():
-                    m.d.sync += [rst_due.eq(1), rst_seq.eq(f.ack)]
-            with m.Elif(too_new):
+                    m.d.sync += [rst_due.eq(1), rst_at_nxt.eq(0), intent["rst"].eq(1)]
+            with m.Elif(flag["ack_after_snd_max"]):
                 m.d.sync += ack_now.eq(1)
             with m.Else():
                 m.d.comb += commit.eq(1)
                 with m.If(new_ack):
-                    acked = (f.ack - snd_una)[:32]
-                    m.d.sync += [snd_una.eq(f.ack), retries.eq(0), backoff.eq(0), timer.eq(0),
-                                 timer_on.eq(f.ack != snd_max), dupacks.eq(0)]
-                    with m.If(_seq_lt(snd_nxt, f.ack)):
-                        m.d.sync += snd_nxt.eq(f.ack)
+                    m.d.sync += [intent["una"].eq(1), retries.eq(0), backoff.eq(0), timer.eq(0),
+                                 timer_on.eq(~flag["ack_is_snd_max"]),
+                                 dupacks.eq(0), intent["nxt"].eq(flag["ack_after_snd_nxt"])]
                     with m.If(cwnd < ssthresh):
-                        m.d.sync += cwnd.eq(cwnd + Mux(acked[16:] != 0, mss,
+                        m.d.sync += cwnd.eq(cwnd + Mux(acked_big, mss,
                                                        Mux(acked[:16] < mss, acked[:16], mss)))
-                    with m.Elif(cwnd_acc + acked[:17] >= cwnd):
+                    with m.Elif(cwnd_acc + acked >= cwnd):
                         m.d.sync += [cwnd_acc.eq(0), cwnd.eq(Mux(cwnd[16], cwnd, cwnd + mss))]
                     with m.Else():
-                        m.d.sync += cwnd_acc.eq(cwnd_acc + acked[:17])
-                    with m.If(fin_sent & (f.ack == fin_seq + 1)):
+                        m.d.sync += cwnd_acc.eq(cwnd_acc + acked)
+                    with m.If(fin_acked_now):
                         m.d.sync += fin_acked.eq(1)
                         with m.Switch(state):
                             with m.Case(S.FIN_WAIT_1):
@@ -583,13 +779,13 @@ class TcpSession(wiring.Component):
                                              timer_on.eq(1)]
                             with m.Case(S.LAST_ACK):
                                 m.d.comb += go_closed.eq(1)
-                with m.Elif((f.ack == snd_una) & (plen == 0) & ~f_fin & ~nothing_out &
-                            (f.window == snd_wnd)):
+                with m.Elif(flag["ack_is_snd_una"] & (s_plen == 0) & ~a_fin & ~nothing_out &
+                            (s_window == snd_wnd)):
                     m.d.sync += [dupacks.eq(Mux(dupacks == 3, 3, dupacks + 1)), count("dup_acks")]
                     with m.If(dupacks == 2):
                         # fast retransmit (RFC 5681 §3.2), go-back-N from SND.UNA
                         half = flight[1:18]
-                        m.d.sync += [d_snd.eq(d_ack_next), snd_nxt.eq(snd_una),
+                        m.d.sync += [d_snd.eq(d_ack_next), intent["retransmit"].eq(1),
                                      ssthresh.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half)),
                                      cwnd.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half) + 3 * mss),
                                      count("fast_retransmit"), timer.eq(0)]
@@ -597,25 +793,26 @@ class TcpSession(wiring.Component):
                             m.d.sync += fin_sent.eq(0)
                     with m.If(dupacks == 3):
                         m.d.sync += cwnd.eq(cwnd + mss)
-                with m.If(_seq_lt(wl1, f.seq) | ((wl1 == f.seq) & _seq_le(wl2, f.ack))):
-                    m.d.sync += [snd_wnd.eq(f.window), wl1.eq(f.seq), wl2.eq(f.ack)]
+                with m.If(flag["seq_after_wl1"] |
+                          (flag["seq_is_wl1"] & flag["ack_not_before_wl2"])):
+                    m.d.sync += [snd_wnd.eq(s_window), intent["wl"].eq(1)]
                 # data and FIN
-                with m.If(plen != 0):
-                    with m.If((committed == plen) & (f.seq == rcv_nxt)):
-                        with m.If(ack_owed | f.flags[3]):
+                with m.If(s_plen != 0):
+                    with m.If((s_committed == s_plen) & flag["seq_is_rcv_nxt"]):
+                        with m.If(ack_owed | s_flags[3]):
                             m.d.sync += ack_now.eq(1)
                         with m.Else():
                             m.d.sync += [ack_owed.eq(1), delack.eq(0)]
                     with m.Else():
                         m.d.sync += ack_now.eq(1)
-                end = f.seq + plen
-                with m.If(f_fin & (end == rcv_nxt + committed)):
-                    m.d.sync += [rcv_nxt.eq(rcv_nxt + committed + 1), ack_now.eq(1)]
+                with m.If(a_fin & flag["fin_at_end"]):
+                    m.d.sync += [intent["rcv"].eq(1), rcv_add.eq(s_committed + 1),
+                                 ack_now.eq(1)]
                     with m.Switch(state):
                         with m.Case(S.ESTABLISHED):
                             m.d.sync += state.eq(S.CLOSE_WAIT)
                         with m.Case(S.FIN_WAIT_1):
-                            with m.If(fin_sent & (f.ack == fin_seq + 1)):
+                            with m.If(fin_acked_now):
                                 m.d.sync += [state.eq(S.TIME_WAIT), timer.eq(0), timer_on.eq(1)]
                             with m.Else():
                                 m.d.sync += state.eq(S.CLOSING)
@@ -623,27 +820,21 @@ class TcpSession(wiring.Component):
                             m.d.sync += [state.eq(S.TIME_WAIT), timer.eq(0), timer_on.eq(1)]
                         with m.Case(S.TIME_WAIT):
                             m.d.sync += timer.eq(0)
-                with m.Elif(committed != 0):
-                    m.d.sync += rcv_nxt.eq(rcv_nxt + committed)
+                with m.Elif(s_committed != 0):
+                    m.d.sync += intent["rcv"].eq(1)
 
-        # commit or roll back the bytes written while the frame arrived
+        # commit or roll back the bytes written while the frame arrived: at the outcome for a
+        # segment of the connection, at the verdict for any other frame (a runt's verdict
+        # may fall between the two: it wrote nothing)
         with m.If(self.seg_done):
             m.d.sync += rx_written.eq(0)
-            with m.If(seg & conn_hit & commit & receiving):
-                m.d.sync += [rx_commit.eq(rx_spec), count("bytes_rx", committed)]
+            with m.If(~(seg & conn_hit) & ~arrival_pending & ~busy):
+                m.d.sync += rx_spec.eq(rx_commit)
+        with m.If(decide):
+            with m.If(commit & receiving):
+                m.d.sync += [rx_commit.eq(rx_spec), count("bytes_rx", s_committed)]
             with m.Else():
                 m.d.sync += rx_spec.eq(rx_commit)
-
-        # ARP resolution for a client
-        with m.If(self.seg_done & self.seg_accept & (self.seg_kind == FrameKind.ARP) &
-                  (state == S.ARP) & (f.sender_ip == remote_ip) &
-                  ((f.arp_oper == ARP_REPLY) | (f.arp_oper == ARP_REQUEST))):
-            m.d.sync += rx_rptr.eq(rx_commit)
-            m.d.sync += [remote_mac.eq(f.sender_mac), state.eq(S.SYN_SENT), syn_due.eq(1),
-                         iss.eq(iss_clock), snd_una.eq(iss_clock), snd_nxt.eq(iss_clock),
-                         snd_max.eq(iss_clock), wr_seq.eq(iss_clock + 1), timer.eq(0),
-                         timer_on.eq(0), retries.eq(0), backoff.eq(0), cwnd.eq(3 * TCP_MSS),
-                         ssthresh.eq(65535), snd_wnd.eq(0), wl1.eq(0), wl2.eq(0)]
 
         # retransmission timeout (RFC 6298 with a fixed initial RTO, doubled per expiry)
         with m.If(state == S.ARP):
@@ -652,20 +843,23 @@ class TcpSession(wiring.Component):
                 with m.If(retries == 3):
                     m.d.sync += [state.eq(S.CLOSED), self.error_code.eq(TcpError.ARP),
                                  self.error.eq(1)]
-        with m.Elif(tw_expired):
+        with m.Elif(tw_expired & engine_free & ~arrival_pending):
             m.d.comb += go_closed.eq(1)
-        with m.Elif(expired & (state != S.TIME_WAIT)):
+        with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
+                    ~init_pending):
             m.d.sync += [timer.eq(0), backoff.eq(Mux(backoff == 5, 5, backoff + 1))]
             with m.If(zero_wnd_wait):
                 m.d.sync += probe_due.eq(1)             # persist timer: keep probing
+                m.d.comb += probe_op.eq(1)
             with m.Elif(retries == 7):
-                m.d.sync += [rst_due.eq(synchronized), rst_seq.eq(snd_nxt)]
+                m.d.sync += [rst_due.eq(synchronized), rst_at_nxt.eq(1)]
                 m.d.sync += abort_to(TcpError.TIMEOUT)
             with m.Else():
                 half = flight[1:18]
                 m.d.sync += [retries.eq(retries + 1), count("rto"), d_snd.eq(d_ack_next),
-                             snd_nxt.eq(snd_una), cwnd.eq(mss), dupacks.eq(0),
+                             cwnd.eq(mss), dupacks.eq(0),
                              ssthresh.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half))]
+                m.d.comb += rto_op.eq(1)
                 with m.If((state == S.SYN_SENT) | (state == S.SYN_RECEIVED)):
                     m.d.sync += syn_due.eq(1)
                 with m.If(fin_sent & ~fin_acked):
@@ -674,7 +868,7 @@ class TcpSession(wiring.Component):
                     m.d.sync += timer_on.eq(0)
 
         with m.If(self.abort & synchronized):
-            m.d.sync += [rst_due.eq(1), rst_seq.eq(snd_nxt), state.eq(S.CLOSED)]
+            m.d.sync += [rst_due.eq(1), rst_at_nxt.eq(1), state.eq(S.CLOSED)]
         with m.If(go_closed):
             m.d.sync += [state.eq(S.CLOSED), timer_on.eq(0)]
         with m.If(state == S.CLOSED):
