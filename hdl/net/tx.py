@@ -8,12 +8,16 @@ from amaranth.lib.wiring import In, Out
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_TTL, TCP_MSS,
-    TCP_OPT_MSS,
+    ARP_REQUEST, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP,
+    IP_TTL, TCP_MSS, TCP_OPT_MSS,
 )
 from .rx import FrameKind
 
 __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
+
+#: Cycles after a grant in which the checksum words that follow their checksum field are
+#: summed; the MAC's preamble (8 cycles) hides them.
+PRESUM_CYCLES = 4
 
 #: What a requester asks the builder to send.
 TX_REQUEST = data.StructLayout({
@@ -59,9 +63,8 @@ class FrameBuilder(wiring.Component):
     """Serve requesters round-robin, one whole frame at a time, and stream each frame into
     the MAC at one byte per cycle.
 
-    The IPv4 and L4 checksums are summed one 16-bit word per cycle from the latched request
-    while the MAC sends the preamble and the first header bytes: they are complete 26 cycles
-    after the grant, before the MAC takes header byte 24 (which is at least 32 cycles).
+    The IPv4 and L4 checksums are summed from the header bytes as they leave, except the
+    words that follow the checksum field, which are summed while the MAC sends the preamble.
 
     Parameters
     ----------
@@ -101,76 +104,121 @@ class FrameBuilder(wiring.Component):
         l4_len = Signal(16)
         header = Signal(11)
         total = Signal(11)
+        ip_total = Signal(16)
         m.d.comb += [
             l4_len.eq(l4_header + r.length),
+            ip_total.eq(20 + l4_len),
             header.eq(Mux(is_arp, 42, 34 + l4_header)),
             total.eq(Mux(is_arp, 42, 34 + l4_len)),
         ]
-        proto = Signal(8)
-        m.d.comb += proto.eq(Mux(is_tcp, IP_PROTO_TCP, Mux(is_udp, IP_PROTO_UDP, IP_PROTO_ICMP)))
-        ip_total = 20 + l4_len
-        src, dst = self.local_ip, r.ip_dst
-        data_offset = Signal(4)
-        m.d.comb += data_offset.eq(Mux(r.mss, 6, 5))
-        tcp_flags_word = Cat(r.flags, Const(0, 4), data_offset)
 
-        # checksums, one word per cycle
-        ip_words = [0x4500, ip_total, ip_id, 0x4000, Cat(proto, Const(IP_TTL, 8)),
-                    src[16:], src[:16], dst[16:], dst[:16]]
-        l4_words = [src[16:], src[:16], dst[16:], dst[:16], proto, l4_len,
-                    r.src_port, r.dst_port,
-                    Mux(is_tcp, r.seq[16:], l4_len), Mux(is_tcp, r.seq[:16], 0),
-                    Mux(is_tcp, r.ack[16:], 0), Mux(is_tcp, r.ack[:16], 0),
-                    Mux(is_tcp, tcp_flags_word, 0), Mux(is_tcp, r.window, 0),
-                    Mux(is_tcp & r.mss, (TCP_OPT_MSS << 8) | 4, 0),
-                    Mux(is_tcp & r.mss, TCP_MSS, 0),
-                    r.payload_sum]
+        idx = Signal(11)
+        accept = self.m_axis.tvalid & self.m_axis.tready
+        hdr_byte = Signal(8)
+
+        # Checksums. Before the MAC takes the first byte (it sends 8 preamble bytes first),
+        # the words that come after their checksum field are pre-summed, one per cycle: the
+        # IP addresses for the IPv4 header, and for TCP or UDP the pseudo-header's length,
+        # the payload's sum and the MSS option. Every other covered byte is added as it
+        # leaves: IPv4 header bytes 14..23, and for TCP/UDP the protocol byte 23 (the
+        # pseudo-header's low byte) and bytes 26 up to the checksum field.
         ip_acc = Signal(16)
         l4_acc = Signal(16)
-        k = Signal(range(32))
-        with m.If(busy & (k < len(l4_words))):
-            m.d.sync += k.eq(k + 1)
-            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, Array(l4_words)[k]))
-            with m.If(k < len(ip_words)):
-                m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, Array(ip_words)[k]))
+        k = Signal(range(PRESUM_CYCLES + 1))
+        src, dst = self.local_ip, r.ip_dst
+        ip_pre = Array([src[16:], src[:16], dst[16:], dst[:16]])
+        l4_pre = Array([l4_len, r.payload_sum,
+                        Mux(is_tcp & r.mss, ((TCP_OPT_MSS << 8) | 4) + TCP_MSS, 0), 0])
+        byte_word = Mux(idx[0], Cat(hdr_byte, Const(0, 8)), Cat(Const(0, 8), hdr_byte))
+        l4_csum_at = Mux(is_tcp, 50, 40)
+        with m.If(busy & (k < PRESUM_CYCLES)):
+            m.d.sync += [k.eq(k + 1), ip_acc.eq(ones_complement_add(ip_acc, ip_pre[k])),
+                         l4_acc.eq(ones_complement_add(l4_acc, l4_pre[k]))]
+        with m.If(accept & (idx >= 14) & (idx < 24)):
+            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, byte_word))
+        with m.If(accept & ((idx == 23) | ((idx >= 26) & (idx < l4_csum_at)))):
+            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, byte_word))
         ip_csum = ~ip_acc
         l4_csum = Signal(16)
         m.d.comb += l4_csum.eq(Mux(is_udp & (l4_acc == 0xFFFF), 0xFFFF, ~l4_acc))
 
-        # header bytes
+        # Header bytes: a table maps (frame kind, variant, index) to one of a few byte
+        # sources, so the wide selection is made once for all kinds. The variant is the
+        # MSS option of a TCP frame or an ARP request (whose target hardware address is 0).
         def be(value, nbytes):
-            return [value.word_select(nbytes - 1 - q, 8) if not isinstance(value, int)
-                    else (value >> (8 * (nbytes - 1 - q))) & 0xFF for q in range(nbytes)]
+            return [value.word_select(nbytes - 1 - q, 8) for q in range(nbytes)]
 
-        eth = be(r.eth_dst, 6) + be(self.local_mac, 6)
-        ethertype = Mux(is_arp, ETHERTYPE_ARP, ETHERTYPE_IPV4)
-        eth += be(ethertype, 2)
-        tha = Mux(r.arp_oper == 1, 0, r.eth_dst)
-        arp = be(0x0001080006040000, 8)[:7] + [Cat(r.arp_oper, Const(0, 6))]
-        arp += be(self.local_mac, 6) + be(self.local_ip, 4) + be(tha, 6) + be(r.ip_dst, 4)
-        ip = [0x45, 0x00] + be(ip_total, 2) + be(ip_id, 2) + [0x40, 0x00, IP_TTL, proto]
-        ip += be(ip_csum, 2) + be(src, 4) + be(dst, 4)
-        udp = be(r.src_port, 2) + be(r.dst_port, 2) + be(l4_len, 2) + be(l4_csum, 2)
-        tcp = be(r.src_port, 2) + be(r.dst_port, 2) + be(r.seq, 4) + be(r.ack, 4)
-        tcp += be(tcp_flags_word, 2) + be(r.window, 2) + be(l4_csum, 2) + [0, 0]
-        tcp += [TCP_OPT_MSS, 4] + be(Const(TCP_MSS, 16), 2)
+        data_offset = Mux(r.mss, 6, 5)
+        sources = []                        # distinct byte sources, in order of first use
 
-        idx = Signal(11)
-        hdr_byte = Signal(8)
-        with m.Switch(idx):
-            for q in range(58):
+        def source(value):
+            for q, s in enumerate(sources):
+                if s is value or (isinstance(s, int) and isinstance(value, int) and s == value):
+                    return q
+            sources.append(value)
+            return len(sources) - 1
+
+        eth_dst, local_mac = be(r.eth_dst, 6), be(self.local_mac, 6)
+        local_ip, ip_dst = be(self.local_ip, 4), be(r.ip_dst, 4)
+        ports = be(r.src_port, 2) + be(r.dst_port, 2)
+        ip_fields = be(ip_total, 2) + be(ip_id, 2)
+        ip_csum_bytes, l4_csum_bytes = be(ip_csum, 2), be(l4_csum, 2)
+        l4_len_bytes = be(l4_len, 2)
+        tcp_fields = (be(r.seq, 4) + be(r.ack, 4) + [Cat(Const(0, 4), data_offset), r.flags] +
+                      be(r.window, 2))
+        arp_oper = Cat(r.arp_oper, Const(0, 6))
+
+        def ipv4(proto):
+            return ([0x45, 0x00] + ip_fields + [0x40, 0x00, IP_TTL, proto] + ip_csum_bytes +
+                    local_ip + ip_dst)
+
+        def frame(variant, kind):
+            if kind == FrameKind.ARP:
+                tha = [0] * 6 if variant else eth_dst
+                return (eth_dst + local_mac + [ETHERTYPE_ARP >> 8, ETHERTYPE_ARP & 0xFF] +
+                        [0x00, 0x01, 0x08, 0x00, 0x06, 0x04, 0x00, arp_oper] +
+                        local_mac + local_ip + tha + ip_dst)
+            eth = eth_dst + local_mac + [ETHERTYPE_IPV4 >> 8, ETHERTYPE_IPV4 & 0xFF]
+            if kind == FrameKind.ICMP:
+                return eth + ipv4(IP_PROTO_ICMP)
+            if kind == FrameKind.UDP:
+                return eth + ipv4(IP_PROTO_UDP) + ports + l4_len_bytes + l4_csum_bytes
+            tcp = ports + tcp_fields + l4_csum_bytes + [0, 0]
+            if variant:
+                tcp += [TCP_OPT_MSS, 4, TCP_MSS >> 8, TCP_MSS & 0xFF]
+            return eth + ipv4(IP_PROTO_TCP) + tcp
+
+        # IPv4 frames share their layout up to byte 37 (the protocol byte differs); beyond
+        # byte 37 only UDP and TCP differ, and beyond the header the byte is payload
+        code = Signal(range(64))
+        ip_code = Signal(range(64))
+        arp_code = Signal(range(64))
+        udp, tcp = frame(0, FrameKind.UDP), frame(1, FrameKind.TCP)
+        with m.Switch(Cat(idx[:6], is_udp, is_tcp)):
+            for q in range(64):
+                for kind, layout in ((FrameKind.ICMP, frame(0, FrameKind.ICMP)),
+                                     (FrameKind.UDP, udp), (FrameKind.TCP, tcp)):
+                    if q < len(layout):
+                        value = layout[q]
+                        if q == 23:
+                            value = {FrameKind.ICMP: IP_PROTO_ICMP, FrameKind.UDP: IP_PROTO_UDP,
+                                     FrameKind.TCP: IP_PROTO_TCP}[kind]
+                        pattern = q | ((kind == FrameKind.UDP) << 6) | ((kind == FrameKind.TCP) << 7)
+                        with m.Case(pattern):
+                            m.d.comb += ip_code.eq(source(value))
+        with m.Switch(Cat(idx[:6], r.arp_oper == ARP_REQUEST)):
+            for v in (0, 1):
+                for q, value in enumerate(frame(v, FrameKind.ARP)):
+                    with m.Case(q | (v << 6)):
+                        m.d.comb += arp_code.eq(source(value))
+        m.d.comb += code.eq(Mux(is_arp, arp_code, ip_code))
+        assert len(sources) <= 64, len(sources)
+        with m.Switch(code):
+            for q, value in enumerate(sources):
                 with m.Case(q):
-                    if q < 14:
-                        m.d.comb += hdr_byte.eq(eth[q])
-                    else:
-                        a = q - 14
-                        ip_b = ip[a] if a < 20 else Mux(is_tcp, tcp[a - 20] if a - 20 < 24 else 0,
-                                                        udp[a - 20] if a - 20 < 8 else 0)
-                        arp_b = arp[a] if a < 28 else 0
-                        m.d.comb += hdr_byte.eq(Mux(is_arp, arp_b, ip_b))
+                    m.d.comb += hdr_byte.eq(value)
 
         # payload reads: the address of the byte that will be current next cycle
-        accept = self.m_axis.tvalid & self.m_axis.tready
         next_idx = Mux(accept, idx + 1, idx)
         rd_addr = Signal(16)
         m.d.comb += rd_addr.eq(r.payload_addr + (next_idx - header))
