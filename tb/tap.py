@@ -18,6 +18,7 @@ import zlib
 import cocotb
 from cocotb.triggers import ClockCycles
 
+from hdl.net.frames import ETHERTYPE_IPV4, IP_PROTO_TCP
 from tb.net_tb import ENGINE_IP, PEER_IP, NetTB
 
 __all__ = ["namespace_unavailable", "network_namespace", "TapPump", "LinuxTB", "KERNEL_IP",
@@ -79,13 +80,21 @@ def network_namespace():
         subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
 
 
+def _is_tcp(frame):
+    """``frame`` (Ethernet, no FCS) is an IPv4 TCP segment."""
+    return (len(frame) > 23 and frame[12:14] == ETHERTYPE_IPV4.to_bytes(2, "big") and
+            frame[23] == IP_PROTO_TCP)
+
+
 class TapPump:
     """Moves frames between ``tap0`` and the engine's GMII models, inside a cocotb test.
 
     Kernel frames are polled every ``poll_cycles`` cycles (at most 8 per poll) and sent with
     preamble, padding and FCS; engine frames have their FCS checked and removed. With
-    ``loss``, ``duplicate`` and ``reorder`` probabilities, each direction drops a frame, sends
-    it twice, or holds it back behind the next one, from a seeded generator.
+    ``loss``, ``duplicate`` and ``reorder`` probabilities, each direction drops a TCP segment,
+    sends it twice, or holds it back behind the next one, from a seeded generator. Other
+    frames (ARP, ICMP, RBCP) pass untouched: their clients (ping, sitcpy's RBCP) have no
+    retransmission, and what the impairment tests is TCP.
     """
 
     def __init__(self, tb, rng, *, loss=0.0, duplicate=0.0, reorder=0.0, poll_cycles=128):
@@ -116,6 +125,8 @@ class TapPump:
     def _impair(self, direction, frame):
         """Frames to pass on now for ``frame`` under the configured impairments."""
         rng = self.rng
+        if not _is_tcp(frame):
+            return [frame]
         if rng.random() < self.loss:
             self.stats["dropped"] += 1
             return []
@@ -176,12 +187,25 @@ class LinuxTB(NetTB):
     async def poll(self, what, predicate, limit_cycles, step=256):
         """Wait until ``predicate()``, in steps of ``step`` cycles, bounded in cycles and wall
         time."""
-        for _ in range(limit_cycles // step):
+        for k in range(limit_cycles // step):
             if predicate():
                 return
-            assert time.monotonic() - self.started < WALL_LIMIT_S, f"wall-clock limit: {what}"
+            if time.monotonic() - self.started >= WALL_LIMIT_S:
+                raise AssertionError(f"wall-clock limit: {what}; {self.diagnostics()}")
+            if k and k % ((1 << 22) // step) == 0:
+                self.dut._log.info("%s: %s", what, self.diagnostics())
             await ClockCycles(self.dut.aclk, step)
-        raise AssertionError(f"{what}: not within {limit_cycles} cycles")
+        raise AssertionError(f"{what}: not within {limit_cycles} cycles; {self.diagnostics()}")
+
+    def diagnostics(self):
+        """The pump's and every session's state and counters, for a log line."""
+        sessions = []
+        for k in range(8):
+            state = getattr(self.dut, f"tcp{k}_state", None)
+            if state is None:
+                break
+            sessions.append(f"tcp{k} state {int(state.value)} {self.session_counters(k)}")
+        return f"pump {self.pump.stats}; " + "; ".join(sessions)
 
     async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):
         with concurrent.futures.ThreadPoolExecutor(1) as pool:

@@ -246,10 +246,10 @@ class TcpSession(wiring.Component):
         wr_skip = Signal(16)
         po = self.seg_payload_offset
         pv = self.seg_payload_valid
-        ahead = Signal(32)
-        m.d.comb += ahead.eq(rcv_nxt - f.seq)
-        start_ok = (is_tcp & receiving & tuple_match & ~ahead[31] &
-                    (ahead[16:] == 0) & ~f.flags[2] & f.flags[4])
+        ahead = Signal(18)
+        m.d.comb += ahead.eq(rcv_nxt[:18] - f.seq[:18])
+        start_ok = (is_tcp & receiving & tuple_match & (ahead[16:] == 0) & ~f.flags[2] &
+                    f.flags[4])
         first = pv & (po == 0)
         on = Mux(first, start_ok, wr_on)
         skip = Mux(first, ahead[:16], wr_skip)
@@ -353,9 +353,13 @@ class TcpSession(wiring.Component):
         data_fits = distance(snd_seq + snd_len, snd_una) <= wnd_limit
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
         all_sent = (d_snd == d_wr) & (seg_len == 0)
-        m.d.comb += self.tx.valid.eq(pending & ~busy)
         kind_ = Signal(3)           # what the pending request is
         K_RST, K_ARP, K_SYN, K_DATA, K_FIN, K_PROBE, K_ACK = range(7)
+        # A data request whose segment was acknowledged (and freed) while it waited for the
+        # builder is withdrawn: sending it would step the send pointer past the write
+        # pointer, and the segment written next would never leave.
+        withdrawn = pending & (kind_ == K_DATA) & (d_snd == d_wr)
+        m.d.comb += self.tx.valid.eq(pending & ~busy & ~withdrawn)
 
         m.d.comb += [req.kind.eq(FrameKind.TCP), req.eth_dst.eq(remote_mac),
                      req.ip_dst.eq(remote_ip), req.src_port.eq(local_port),
@@ -401,6 +405,8 @@ class TcpSession(wiring.Component):
                 m.d.sync += [pending.eq(1), kind_.eq(K_ACK)]
 
         sent = self.tx.valid & self.tx.ready
+        with m.If(withdrawn):
+            m.d.sync += pending.eq(0)
         with m.If(sent):
             m.d.sync += [pending.eq(0), count("segments_tx")]
             with m.If(kind_ != K_ARP):
@@ -438,8 +444,12 @@ class TcpSession(wiring.Component):
         # ---- timers
         with m.If(timer_on):
             m.d.sync += timer.eq(timer + 1)
-        expired = timer_on & (timer >= rto)
-        tw_expired = (state == S.TIME_WAIT) & (timer >= (self.msl_cycles << 1))
+        limit = Signal(33)
+        m.d.sync += limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
+                                 Mux(state == S.TIME_WAIT, self.msl_cycles << 1, rto)))
+        timer_done = timer >= limit
+        expired = timer_on & timer_done
+        tw_expired = (state == S.TIME_WAIT) & timer_done
         nothing_out = snd_una == snd_max
         zero_wnd_wait = synchronized & nothing_out & (d_snd != d_wr) & ~data_fits
         with m.If(zero_wnd_wait & ~timer_on):
@@ -838,7 +848,7 @@ class TcpSession(wiring.Component):
 
         # retransmission timeout (RFC 6298 with a fixed initial RTO, doubled per expiry)
         with m.If(state == S.ARP):
-            with m.If(timer_on & (timer >= self.arp_retry_cycles)):
+            with m.If(timer_on & timer_done):
                 m.d.sync += [retries.eq(retries + 1), timer.eq(0), arp_due.eq(1)]
                 with m.If(retries == 3):
                     m.d.sync += [state.eq(S.CLOSED), self.error_code.eq(TcpError.ARP),
