@@ -7,7 +7,8 @@ from amaranth.lib.wiring import In, Out
 
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_REPLY, ARP_REQUEST, DROP_REASONS, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4,
+    ARP_REPLY, ARP_REQUEST, ARP_SHA_OFFSET, ARP_SPA_OFFSET, DROP_REASONS, ETH_SRC_OFFSET,
+    IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4,
     ICMP_ECHO_REQUEST, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, TCP_OPT_MSS,
 )
 from .mac import RxByteSignature
@@ -132,9 +133,13 @@ class FrameParser(wiring.Component):
 
         capture(ethertype, 12, 2)
         arp_frame = ethertype == ETHERTYPE_ARP
-        with m.If(v & (((i >= 6) & (i < 12)) | (arp_frame & (i >= 22) & (i < 28)))):
+        def within(offset, nbytes):
+            return (i >= offset) & (i < offset + nbytes)
+
+        with m.If(v & (within(ETH_SRC_OFFSET, 6) |
+                       (arp_frame & (i >= ARP_SHA_OFFSET) & (i < ARP_SHA_OFFSET + 6)))):
             m.d.sync += _shift_in(f.sender_mac, byte)
-        with m.If(v & Mux(arp_frame, (i >= 28) & (i < 32), (i >= 26) & (i < 30))):
+        with m.If(v & Mux(arp_frame, within(ARP_SPA_OFFSET, 4), within(IP_SRC_OFFSET, 4))):
             m.d.sync += _shift_in(f.sender_ip, byte)
         # ARP (RFC 826)
         capture(arp_fixed, 14, 6)

@@ -8,8 +8,9 @@ from amaranth.lib.wiring import In, Out
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_REQUEST, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP,
-    IP_TTL, TCP_MSS, TCP_OPT_MSS,
+    ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET, IP_PROTO_ICMP,
+    IP_PROTO_OFFSET, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, TCP_CSUM_OFFSET,
+    TCP_MSS, TCP_OPT_MSS, UDP_CSUM_OFFSET,
 )
 from .rx import FrameKind
 
@@ -18,6 +19,9 @@ __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
 #: Cycles after a grant in which the checksum words that follow their checksum field are
 #: summed; the MAC's preamble (8 cycles) hides them.
 PRESUM_CYCLES = 4
+
+#: The MSS option of a SYN or SYN-ACK, as sent (after the 20-byte TCP header)
+MSS_OPTION = (TCP_OPT_MSS, 4, TCP_MSS >> 8, TCP_MSS & 0xFF)
 
 #: What a requester asks the builder to send.
 TX_REQUEST = data.StructLayout({
@@ -128,15 +132,17 @@ class FrameBuilder(wiring.Component):
         src, dst = self.local_ip, r.ip_dst
         ip_pre = Array([src[16:], src[:16], dst[16:], dst[:16]])
         l4_pre = Array([l4_len, r.payload_sum,
-                        Mux(is_tcp & r.mss, ((TCP_OPT_MSS << 8) | 4) + TCP_MSS, 0), 0])
+                        Mux(is_tcp & r.mss, sum(MSS_OPTION[q] << 8 * (1 - q % 2)
+                                                for q in range(len(MSS_OPTION))), 0), 0])
         byte_word = Mux(idx[0], Cat(hdr_byte, Const(0, 8)), Cat(Const(0, 8), hdr_byte))
-        l4_csum_at = Mux(is_tcp, 50, 40)
+        l4_csum_at = Mux(is_tcp, TCP_CSUM_OFFSET, UDP_CSUM_OFFSET)
         with m.If(busy & (k < PRESUM_CYCLES)):
             m.d.sync += [k.eq(k + 1), ip_acc.eq(ones_complement_add(ip_acc, ip_pre[k])),
                          l4_acc.eq(ones_complement_add(l4_acc, l4_pre[k]))]
-        with m.If(accept & (idx >= 14) & (idx < 24)):
+        with m.If(accept & (idx >= ETH_HEADER) & (idx < IP_CSUM_OFFSET)):
             m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, byte_word))
-        with m.If(accept & ((idx == 23) | ((idx >= 26) & (idx < l4_csum_at)))):
+        with m.If(accept & ((idx == IP_PROTO_OFFSET) |
+                            ((idx >= IP_SRC_OFFSET) & (idx < l4_csum_at)))):
             m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, byte_word))
         ip_csum = ~ip_acc
         l4_csum = Signal(16)
@@ -185,27 +191,25 @@ class FrameBuilder(wiring.Component):
                 return eth + ipv4(IP_PROTO_UDP) + ports + l4_len_bytes + l4_csum_bytes
             tcp = ports + tcp_fields + l4_csum_bytes + [0, 0]
             if variant:
-                tcp += [TCP_OPT_MSS, 4, TCP_MSS >> 8, TCP_MSS & 0xFF]
+                tcp += list(MSS_OPTION)
             return eth + ipv4(IP_PROTO_TCP) + tcp
 
-        # IPv4 frames share their layout up to byte 37 (the protocol byte differs); beyond
-        # byte 37 only UDP and TCP differ, and beyond the header the byte is payload
+        # one table for the IPv4 kinds (selected by is_udp/is_tcp), one for ARP (by
+        # request/reply); beyond the header the byte is payload
         code = Signal(range(64))
         ip_code = Signal(range(64))
         arp_code = Signal(range(64))
-        udp, tcp = frame(0, FrameKind.UDP), frame(1, FrameKind.TCP)
+        layouts = ((FrameKind.ICMP, frame(0, FrameKind.ICMP)),
+                   (FrameKind.UDP, frame(0, FrameKind.UDP)),
+                   (FrameKind.TCP, frame(1, FrameKind.TCP)))
         with m.Switch(Cat(idx[:6], is_udp, is_tcp)):
             for q in range(64):
-                for kind, layout in ((FrameKind.ICMP, frame(0, FrameKind.ICMP)),
-                                     (FrameKind.UDP, udp), (FrameKind.TCP, tcp)):
+                for kind, layout in layouts:
                     if q < len(layout):
-                        value = layout[q]
-                        if q == 23:
-                            value = {FrameKind.ICMP: IP_PROTO_ICMP, FrameKind.UDP: IP_PROTO_UDP,
-                                     FrameKind.TCP: IP_PROTO_TCP}[kind]
-                        pattern = q | ((kind == FrameKind.UDP) << 6) | ((kind == FrameKind.TCP) << 7)
+                        pattern = (q | ((kind == FrameKind.UDP) << 6) |
+                                   ((kind == FrameKind.TCP) << 7))
                         with m.Case(pattern):
-                            m.d.comb += ip_code.eq(source(value))
+                            m.d.comb += ip_code.eq(source(layout[q]))
         with m.Switch(Cat(idx[:6], r.arp_oper == ARP_REQUEST)):
             for v in (0, 1):
                 for q, value in enumerate(frame(v, FrameKind.ARP)):
