@@ -32,6 +32,12 @@ def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
     resources_only = "--resources-only" in args
     only = [a for a in args if not a.startswith("--")]
+    names = [module.__name__.rsplit(".", 1)[-1] for _, module in BENCHES]
+    unknown = [a for a in only + [a for a in args if a.startswith("--")]
+               if a not in names and a != "--resources-only"]
+    if unknown:
+        raise SystemExit(f"bench/run.py: unknown argument {unknown[0]!r}; benches: "
+                         f"{', '.join(names)}; option: --resources-only")
     for title, module in BENCHES:
         start = time.monotonic()
         name = module.__name__.rsplit(".", 1)[-1]
