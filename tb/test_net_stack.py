@@ -8,6 +8,7 @@ RBCP header encoder, RFC 9293 rules written into the scripted peer's expectation
 import random
 
 import cocotb
+from cocotb.utils import get_sim_time
 from scapy.layers.inet import ICMP, IP, TCP, UDP
 from scapy.layers.l2 import ARP, Ether
 from scapy.packet import Raw
@@ -313,9 +314,10 @@ async def run_tcp_rst_rules(dut):
 
 @cocotb.test()
 async def run_tcp_retransmit_and_zero_window(dut):
-    """An unacknowledged segment is sent again after the RTO with the same sequence number;
-    a zero window stops new data and brings window probes (SEG.SEQ = SND.UNA - 1) on the
-    persist timer; reopening the window lets the rest through, never beyond the window."""
+    """An unacknowledged segment is sent again with the same sequence number after the RTO,
+    then after twice and four times the RTO (back-off); a zero window stops new data and
+    brings window probes (SEG.SEQ = SND.UNA - 1) on the persist timer; reopening the window
+    lets the rest through, never beyond the window."""
     from hdl.net.tcp import TcpState
     tb = NetTB(dut)
     await tb.reset()
@@ -323,9 +325,19 @@ async def run_tcp_retransmit_and_zero_window(dut):
     s, iss = await establish(tb, 0, 27, peer, window=3000)
     data = bytes(range(256)) * 20                     # 5120 bytes
     await s.write(data[:1000])
-    first = await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000])
-    again = await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000], timeout=40_000)
-    assert tb.session_counters(0)["rto"] >= 1 and first.seq == again.seq
+    await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000])
+    # unacknowledged, it comes again after the RTO, 2 RTO, 4 RTO (RFC 6298 §5.5)
+    rto_ns = NET_CONFIGS["stack"]["rto_us"] * 1000
+    sent_at = [get_sim_time("ns")]
+    rtos_before = tb.session_counters(0)["rto"]
+    for k in range(3):
+        await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000],
+                          timeout=(rto_ns << k) // 8 + 5000)
+        sent_at.append(get_sim_time("ns"))
+    intervals = [b - a for a, b in zip(sent_at, sent_at[1:])]
+    for k, interval in enumerate(intervals):
+        assert abs(interval - (rto_ns << k)) <= 1000, f"retransmission intervals {intervals} ns"
+    assert tb.session_counters(0)["rto"] - rtos_before == 3
     # acknowledge it with a zero window; queue the rest
     peer.ack = iss + 1001
     await peer.send("A", window=0)
@@ -343,12 +355,12 @@ async def run_tcp_retransmit_and_zero_window(dut):
     await tb.expect_silence(3000)
     peer.ack = iss + 2461
     await peer.send("A", window=65535)
-    while len(got) < len(data) - 1000:
+    while len(got) < len(data) - 1000:       # the peer acknowledges each segment
         seg = await peer.expect("PA", ack=peer.seq, data=None, timeout=20_000)
         got += bytes(seg.payload)
-    assert bytes(got) == data[1000:]
-    peer.ack = iss + 1 + len(data)
-    await peer.send("A")
+        peer.ack = seg.seq + len(seg.payload)
+        await peer.send("A")
+    assert bytes(got) == data[1000:] and peer.ack == iss + 1 + len(data)
     assert s.get("state") == TcpState.ESTABLISHED.value
     s.set(open_req=0)
     await peer.expect("FA", seq=iss + 1 + len(data))

@@ -45,6 +45,11 @@ class TcpError(enum.Enum, shape=4):
     RESET = 6
 
 
+#: Initial congestion window in segments (net.md §1.4: 3 x 1460 bytes)
+INITIAL_WINDOW = 3
+#: Back-offs of the retransmission timeout: it doubles per expiry up to 2**5 times the RTO
+MAX_BACKOFF = 5
+
 #: Session counters, in the order of the ``counters`` output (net.md §7.2 "counters").
 TCP_COUNTERS = ("bytes_tx", "bytes_rx", "segments_tx", "segments_rx", "rto", "fast_retransmit",
                 "dup_acks", "rst_rx", "dropped_segments")
@@ -65,8 +70,15 @@ class TcpSession(wiring.Component):
     written only by a sequence engine with one adder: a received segment's fields are latched
     at the verdict, compared with them one per cycle, and the outcome is applied 10 cycles
     later, the new sequence numbers over the next 4 (the next segment's payload cannot start
-    within 54 cycles). While the engine runs, no request leaves for the builder and no
-    retransmission timer fires, so what it compared stays true.
+    within 54 cycles). A request's sequence number is the sending segment's descriptor, or
+    for a segment without data one register the engine writes when the request is chosen;
+    an engine program withdraws a pending request (it is chosen again afterwards) and no
+    retransmission timer fires while it runs, so what it compared stays true.
+
+    Congestion control (RFC 5681) counts segments, as Linux does: the initial window is
+    3 segments, slow start adds one per new ACK, congestion avoidance one per window; a
+    timeout or a third duplicate ACK halves the segments in flight. The retransmission
+    timeout doubles per expiry (up to 32 times ``rto_cycles``).
 
     Parameters
     ----------
@@ -169,20 +181,23 @@ class TcpSession(wiring.Component):
         m.d.sync += iss_clock.eq(iss_clock + 1)
         snd_wnd = Signal(16)
         mss = Signal(11, init=TCP_MSS_DEFAULT)
-        cwnd = Signal(17)
-        ssthresh = Signal(17, init=65535)
-        cwnd_acc = Signal(17)
+        # congestion control counts segments, as Linux does: the descriptor ring already
+        # knows how many are in flight, so the window needs no byte arithmetic
+        cwnd = Signal(range(nd), init=INITIAL_WINDOW)
+        ssthresh = Signal(range(nd), init=nd - 1)
+        cwnd_acc = Signal(range(nd))
         dupacks = Signal(2)
         m.d.comb += [self.peer_ip.eq(remote_ip), self.peer_port.eq(remote_port)]
 
         # Sequence-space registers are written only from the sequence engine's write bus
         # (below). SND.UNA holds the ISS until the SYN is acknowledged; the FIN's sequence
-        # number is the write pointer, which stops when the FIN is queued; ``spec_seq`` is
-        # the sequence number of a RST answering a segment, or of a zero-window probe.
-        seq_names = ("snd_una", "snd_nxt", "snd_max", "rcv_nxt", "wl1", "wl2", "spec_seq")
+        # number is the write pointer, which stops when the FIN is queued; ``ctl_seq`` is
+        # the sequence number of the pending request when it carries no data (written when
+        # the request is chosen, or for a RST answering a segment, by that segment's outcome).
+        seq_names = ("snd_una", "snd_nxt", "snd_max", "rcv_nxt", "wl1", "wl2", "ctl_seq")
         seq = {name: Signal(32, name=name) for name in seq_names}
         snd_una, snd_nxt, snd_max, rcv_nxt = (seq[n] for n in seq_names[:4])
-        wl1, wl2, spec_seq = seq["wl1"], seq["wl2"], seq["spec_seq"]
+        wl1, wl2, ctl_seq = seq["wl1"], seq["wl2"], seq["ctl_seq"]
         wbus = Signal(32)
         write = {name: Signal(name=f"write_{name}") for name in seq_names + ("wr_seq",)}
 
@@ -192,19 +207,24 @@ class TcpSession(wiring.Component):
         ack_owed = Signal()         # one in-order segment not yet acknowledged
         delack = Signal(12)
         rst_due = Signal()
-        rst_at_nxt = Signal()       # the pending RST carries SND.NXT (else ``spec_seq``)
+        rst_at_nxt = Signal()       # the pending RST carries SND.NXT (else ``ctl_seq``)
         fin_queued = Signal()
         fin_sent = Signal()
         fin_acked = Signal()
         probe_due = Signal()
         armed = Signal(init=1)
 
+        # The timer counts ticks of 2**scale cycles: the retransmission timeout doubles per
+        # back-off without a shifter, TIME-WAIT lasts 2 MSL.
         timer = Signal(32)
         timer_on = Signal()
-        backoff = Signal(3)
+        backoff = Signal(range(MAX_BACKOFF + 1))
         retries = Signal(4)
-        rto = Signal(32)
-        m.d.comb += rto.eq(self.rto_cycles << backoff)
+        prescaler = Signal(MAX_BACKOFF)
+        m.d.sync += prescaler.eq(prescaler + 1)
+        scale = Signal(range(MAX_BACKOFF + 1))
+        tick = Signal()
+        m.d.comb += tick.eq(Cat(*(prescaler[b] | (scale <= b) for b in range(MAX_BACKOFF))).all())
 
         synchronized = ((state == S.ESTABLISHED) | (state == S.FIN_WAIT_1) |
                         (state == S.FIN_WAIT_2) | (state == S.CLOSE_WAIT) |
@@ -348,9 +368,12 @@ class TcpSession(wiring.Component):
         req = self.tx.request
         pending = Signal()          # a request is offered to the builder
         busy = Signal()             # the sequence engine runs a program (requests wait)
-        flight = distance(snd_max, snd_una)
-        wnd_limit = Mux(cwnd < snd_wnd, cwnd, snd_wnd)
-        data_fits = distance(snd_seq + snd_len, snd_una) <= wnd_limit
+        in_flight = Signal(range(nd))          # segments sent and not yet freed
+        m.d.comb += in_flight.eq(d_snd - d_ack)
+        half_flight = in_flight[1:]
+        reduced = Mux(half_flight < 2, 2, half_flight)      # ssthresh after a loss
+        data_fits = ((distance(snd_seq + snd_len, snd_una) <= snd_wnd) &
+                     (in_flight < cwnd))
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
         all_sent = (d_snd == d_wr) & (seg_len == 0)
         kind_ = Signal(3)           # what the pending request is
@@ -363,49 +386,54 @@ class TcpSession(wiring.Component):
 
         m.d.comb += [req.kind.eq(FrameKind.TCP), req.eth_dst.eq(remote_mac),
                      req.ip_dst.eq(remote_ip), req.src_port.eq(local_port),
-                     req.dst_port.eq(remote_port), req.ack.eq(rcv_nxt), req.window.eq(window)]
+                     req.dst_port.eq(remote_port), req.ack.eq(rcv_nxt), req.window.eq(window),
+                     req.seq.eq(Mux(kind_ == K_DATA, snd_seq, ctl_seq))]
         with m.Switch(kind_):
             with m.Case(K_RST):
-                m.d.comb += [req.seq.eq(Mux(rst_at_nxt, snd_nxt, spec_seq)),
-                             req.flags.eq(TCP_RST), req.window.eq(0)]
+                m.d.comb += [req.flags.eq(TCP_RST), req.window.eq(0)]
             with m.Case(K_ARP):
                 m.d.comb += [req.kind.eq(FrameKind.ARP), req.arp_oper.eq(ARP_REQUEST),
                              req.eth_dst.eq(0xFFFFFFFFFFFF)]
             with m.Case(K_SYN):
-                m.d.comb += [req.seq.eq(snd_una), req.mss.eq(1),
+                m.d.comb += [req.mss.eq(1),
                              req.flags.eq(Mux(state == S.SYN_SENT, TCP_SYN, TCP_SYN | TCP_ACK))]
             with m.Case(K_DATA):
-                m.d.comb += [req.seq.eq(snd_seq), req.flags.eq(TCP_ACK | TCP_PSH),
+                m.d.comb += [req.flags.eq(TCP_ACK | TCP_PSH),
                              req.length.eq(snd_len), req.payload_sum.eq(snd_sum),
                              req.payload_addr.eq(snd_seq[:16])]
             with m.Case(K_FIN):
-                m.d.comb += [req.seq.eq(wr_seq), req.flags.eq(TCP_FIN | TCP_ACK)]
-            with m.Case(K_PROBE):
-                m.d.comb += [req.seq.eq(spec_seq), req.flags.eq(TCP_ACK)]
-            with m.Case(K_ACK):
-                m.d.comb += [req.seq.eq(snd_nxt), req.flags.eq(TCP_ACK)]
+                m.d.comb += req.flags.eq(TCP_FIN | TCP_ACK)
+            with m.Case(K_PROBE, K_ACK):
+                m.d.comb += req.flags.eq(TCP_ACK)
 
-        # choose the next request when none is pending
+        # the next request, chosen when none is pending and the sequence engine is free to
+        # write its sequence number (a program withdraws a pending request: what it changes
+        # may change the request)
         fin_may = fin_queued & all_sent & (~fin_sent | (snd_nxt == wr_seq))
-        with m.If(~pending):
-            with m.If(rst_due):
-                m.d.sync += [pending.eq(1), kind_.eq(K_RST)]
-            with m.Elif(arp_due & (state == S.ARP)):
-                m.d.sync += [pending.eq(1), kind_.eq(K_ARP)]
-            with m.Elif(syn_due & ((state == S.SYN_SENT) | (state == S.SYN_RECEIVED))):
-                m.d.sync += [pending.eq(1), kind_.eq(K_SYN)]
-            with m.Elif(have_data & (state != S.SYN_RECEIVED) & data_fits):
-                m.d.sync += [pending.eq(1), kind_.eq(K_DATA)]
-            with m.Elif(fin_may & ((state == S.FIN_WAIT_1) | (state == S.LAST_ACK) |
-                                   (state == S.CLOSING))):
-                m.d.sync += [pending.eq(1), kind_.eq(K_FIN)]
-            with m.Elif(probe_due):
-                m.d.sync += [pending.eq(1), kind_.eq(K_PROBE)]
-            with m.Elif(ack_now & synchronized):
-                m.d.sync += [pending.eq(1), kind_.eq(K_ACK)]
+        next_kind = Signal(3)
+        next_due = Signal()
+        with m.If(rst_due):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_RST)]
+        with m.Elif(arp_due & (state == S.ARP)):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_ARP)]
+        with m.Elif(syn_due & ((state == S.SYN_SENT) | (state == S.SYN_RECEIVED))):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_SYN)]
+        with m.Elif(have_data & (state != S.SYN_RECEIVED) & data_fits):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_DATA)]
+        with m.Elif(fin_may & ((state == S.FIN_WAIT_1) | (state == S.LAST_ACK) |
+                               (state == S.CLOSING))):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_FIN)]
+        with m.Elif(probe_due):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_PROBE)]
+        with m.Elif(ack_now & synchronized):
+            m.d.comb += [next_due.eq(1), next_kind.eq(K_ACK)]
+        choose = Signal()
+        with m.If(choose):
+            m.d.sync += [pending.eq(1), kind_.eq(next_kind)]
 
         sent = self.tx.valid & self.tx.ready
-        with m.If(withdrawn):
+        withdraw = Signal()
+        with m.If(withdrawn | withdraw):
             m.d.sync += pending.eq(0)
         with m.If(sent):
             m.d.sync += [pending.eq(0), count("segments_tx")]
@@ -442,11 +470,12 @@ class TcpSession(wiring.Component):
             m.d.sync += ack_now.eq(1)
 
         # ---- timers
-        with m.If(timer_on):
+        with m.If(timer_on & tick):
             m.d.sync += timer.eq(timer + 1)
-        limit = Signal(33)
-        m.d.sync += limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
-                                 Mux(state == S.TIME_WAIT, self.msl_cycles << 1, rto)))
+        limit = Signal(32)
+        m.d.sync += [limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
+                                  Mux(state == S.TIME_WAIT, self.msl_cycles, self.rto_cycles))),
+                     scale.eq(Mux(state == S.TIME_WAIT, 1, Mux(state == S.ARP, 0, backoff)))]
         timer_done = timer >= limit
         expired = timer_on & timer_done
         tw_expired = (state == S.TIME_WAIT) & timer_done
@@ -525,7 +554,8 @@ class TcpSession(wiring.Component):
 
         def initialise():
             return [init_pending.eq(1), timer.eq(0), retries.eq(0), backoff.eq(0),
-                    cwnd.eq(3 * TCP_MSS), ssthresh.eq(65535), dupacks.eq(0)]
+                    cwnd.eq(INITIAL_WINDOW), ssthresh.eq(nd - 1), cwnd_acc.eq(0),
+                    dupacks.eq(0)]
 
         with m.If(seg & listen_hit):
             m.d.sync += rx_rptr.eq(rx_commit)      # a new connection starts with no old bytes
@@ -557,8 +587,6 @@ class TcpSession(wiring.Component):
             "ack_after_snd_nxt", "last_in_window", "fin_at_end", "snd_max_behind",
             "ack_is_snd_max")}
         d = Signal(32)              # SEG.SEQ - RCV.NXT
-        acked = Signal(17)
-        acked_big = Signal()
         seg_seqlen = Signal(12)
         m.d.comb += seg_seqlen.eq(s_plen + s_flags[0])
         a_fin, a_syn, a_rst, a_ack = s_flags[0], s_flags[1], s_flags[2], s_flags[4]
@@ -604,7 +632,6 @@ class TcpSession(wiring.Component):
         sent_op = Signal()
         m.d.comb += sent_op.eq(sent & ((kind_ == K_SYN) | (kind_ == K_DATA) | (kind_ == K_FIN)))
         rto_op = Signal()
-        probe_op = Signal()
 
         with m.FSM(name="sequence_engine") as engine:
             with m.State("IDLE"):
@@ -618,8 +645,20 @@ class TcpSession(wiring.Component):
                             op(1, "wr_seq", writes=("snd_nxt",))
                 with m.Elif(rto_op):
                     op(0, "snd_una", writes=("snd_nxt",))
-                with m.Elif(probe_op):
-                    op(-1, "snd_una", writes=("spec_seq",))
+                with m.Elif(~pending & next_due & ~arrival_pending & ~init_pending):
+                    m.d.comb += choose.eq(1)
+                    with m.Switch(next_kind):
+                        with m.Case(K_RST):
+                            with m.If(rst_at_nxt):
+                                op(0, "snd_nxt", writes=("ctl_seq",))
+                        with m.Case(K_SYN):
+                            op(0, "snd_una", writes=("ctl_seq",))
+                        with m.Case(K_FIN):
+                            op(0, "wr_seq", writes=("ctl_seq",))
+                        with m.Case(K_PROBE):
+                            op(-1, "snd_una", writes=("ctl_seq",))
+                        with m.Case(K_ACK):
+                            op(0, "snd_nxt", writes=("ctl_seq",))
                 with m.If(sent_op):
                     m.next = "MAX_COMPARE"
                 with m.Elif(arrival_pending):
@@ -661,7 +700,6 @@ class TcpSession(wiring.Component):
                     flag["seq_is_rcv_nxt_minus_1"].eq(alu == 0xFFFFFFFF),
                     flag["seq_in_window"].eq(alu_in_window)]),
                 ("COMPARE_SND_UNA", "s_ack", "snd_una", False, [
-                    acked.eq(alu[:17]), acked_big.eq(alu[16:] != 0),
                     flag["ack_is_snd_una"].eq(alu_zero),
                     flag["ack_after_snd_una"].eq(alu_positive),
                     flag["ack_is_snd_una_plus_1"].eq(alu == 1)]),
@@ -694,7 +732,7 @@ class TcpSession(wiring.Component):
             # ... and the new sequence numbers
             with m.State("WRITE_ACK"):
                 op("s_ack", 0, writes=[("snd_una", intent["una"]), ("snd_nxt", intent["nxt"]),
-                                     ("wl2", intent["wl"]), ("spec_seq", intent["rst"])])
+                                     ("wl2", intent["wl"]), ("ctl_seq", intent["rst"])])
                 m.next = "WRITE_SEQ"
             with m.State("WRITE_SEQ"):
                 op("s_seq", 0, writes=[("wl1", intent["wl"])])
@@ -708,7 +746,7 @@ class TcpSession(wiring.Component):
             with m.State("WRITE_RETRANSMIT"):
                 op(0, "snd_una", writes=[("snd_nxt", intent["retransmit"])])
                 m.next = "IDLE"
-        m.d.comb += busy.eq(~engine.ongoing("IDLE"))
+        m.d.comb += [busy.eq(~engine.ongoing("IDLE")), withdraw.eq(busy | rto_op)]
         for name, reg in seq.items():
             with m.If(write[name]):
                 m.d.sync += reg.eq(wbus)
@@ -772,13 +810,13 @@ class TcpSession(wiring.Component):
                     m.d.sync += [intent["una"].eq(1), retries.eq(0), backoff.eq(0), timer.eq(0),
                                  timer_on.eq(~flag["ack_is_snd_max"]),
                                  dupacks.eq(0), intent["nxt"].eq(flag["ack_after_snd_nxt"])]
+                    # slow start: one segment per ACK; congestion avoidance: one per window
                     with m.If(cwnd < ssthresh):
-                        m.d.sync += cwnd.eq(cwnd + Mux(acked_big, mss,
-                                                       Mux(acked[:16] < mss, acked[:16], mss)))
-                    with m.Elif(cwnd_acc + acked >= cwnd):
-                        m.d.sync += [cwnd_acc.eq(0), cwnd.eq(Mux(cwnd[16], cwnd, cwnd + mss))]
+                        m.d.sync += cwnd.eq(cwnd + 1)
+                    with m.Elif(cwnd_acc + 1 >= cwnd):
+                        m.d.sync += [cwnd_acc.eq(0), cwnd.eq(Mux(cwnd == nd - 1, cwnd, cwnd + 1))]
                     with m.Else():
-                        m.d.sync += cwnd_acc.eq(cwnd_acc + acked)
+                        m.d.sync += cwnd_acc.eq(cwnd_acc + 1)
                     with m.If(fin_acked_now):
                         m.d.sync += fin_acked.eq(1)
                         with m.Switch(state):
@@ -794,15 +832,13 @@ class TcpSession(wiring.Component):
                     m.d.sync += [dupacks.eq(Mux(dupacks == 3, 3, dupacks + 1)), count("dup_acks")]
                     with m.If(dupacks == 2):
                         # fast retransmit (RFC 5681 §3.2), go-back-N from SND.UNA
-                        half = flight[1:18]
                         m.d.sync += [d_snd.eq(d_ack_next), intent["retransmit"].eq(1),
-                                     ssthresh.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half)),
-                                     cwnd.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half) + 3 * mss),
+                                     ssthresh.eq(reduced), cwnd.eq(reduced + 3),
                                      count("fast_retransmit"), timer.eq(0)]
                         with m.If(fin_sent & ~fin_acked):
                             m.d.sync += fin_sent.eq(0)
-                    with m.If(dupacks == 3):
-                        m.d.sync += cwnd.eq(cwnd + mss)
+                    with m.If((dupacks == 3) & (cwnd != nd - 1)):
+                        m.d.sync += cwnd.eq(cwnd + 1)
                 with m.If(flag["seq_after_wl1"] |
                           (flag["seq_is_wl1"] & flag["ack_not_before_wl2"])):
                     m.d.sync += [snd_wnd.eq(s_window), intent["wl"].eq(1)]
@@ -857,18 +893,16 @@ class TcpSession(wiring.Component):
             m.d.comb += go_closed.eq(1)
         with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
                     ~init_pending):
-            m.d.sync += [timer.eq(0), backoff.eq(Mux(backoff == 5, 5, backoff + 1))]
+            m.d.sync += [timer.eq(0),
+                         backoff.eq(Mux(backoff == MAX_BACKOFF, MAX_BACKOFF, backoff + 1))]
             with m.If(zero_wnd_wait):
                 m.d.sync += probe_due.eq(1)             # persist timer: keep probing
-                m.d.comb += probe_op.eq(1)
             with m.Elif(retries == 7):
                 m.d.sync += [rst_due.eq(synchronized), rst_at_nxt.eq(1)]
                 m.d.sync += abort_to(TcpError.TIMEOUT)
             with m.Else():
-                half = flight[1:18]
                 m.d.sync += [retries.eq(retries + 1), count("rto"), d_snd.eq(d_ack_next),
-                             cwnd.eq(mss), dupacks.eq(0),
-                             ssthresh.eq(Mux(half < 2 * TCP_MSS, 2 * TCP_MSS, half))]
+                             cwnd.eq(1), cwnd_acc.eq(0), dupacks.eq(0), ssthresh.eq(reduced)]
                 m.d.comb += rto_op.eq(1)
                 with m.If((state == S.SYN_SENT) | (state == S.SYN_RECEIVED)):
                     m.d.sync += syn_due.eq(1)
