@@ -82,11 +82,13 @@ def failed_tests(results_xml):
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
-              extra_env=None, quiet=False):
+              extra_env=None, quiet=False, run_name=None):
     """Export, build and run the cocotb tests of ``module`` against ``top``; raise on failure.
 
     ``build`` and ``extra_env`` serve benchmark tops that are not in :data:`gen.tops.TOPS`;
-    ``quiet`` sends the simulator's log to ``sim.log`` in the build folder.
+    ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the build folder;
+    ``run_name`` keeps the results and log of one case of a parametrised test apart from
+    the module's other cases in the same build.
     """
     from cocotb_tools.runner import get_runner
 
@@ -123,7 +125,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     finally:
         fcntl.flock(lock, fcntl.LOCK_UN)
         lock.close()
-    short = module.rsplit(".", 1)[-1]
+    short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     results = build_dir / f"results-{short}.xml"
     env = {
         "ROSGATE_PARAMS": json.dumps(params),

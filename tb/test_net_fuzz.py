@@ -37,7 +37,7 @@ FRAMES = int(os.environ.get("ROSGATE_FUZZ_FRAMES", 500))
                                     pytest.param(10_000, id="10k", marks=pytest.mark.full)])
 def test_net_fuzz(frames):
     run_bench(__name__, "net", "stack", NET_CONFIGS["stack"], "verilator",
-              extra_env={"ROSGATE_FUZZ_FRAMES": str(frames)})
+              extra_env={"ROSGATE_FUZZ_FRAMES": str(frames)}, run_name=str(frames))
 
 
 class FuzzTB(NetTB):

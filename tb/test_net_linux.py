@@ -30,17 +30,17 @@ CASES = [("clean", 0.0, 64 * 1024), ("megabytes", 0.0, 2 * 1024 * 1024),
          ("impaired", 0.02, 1024 * 1024)]
 
 
-@pytest.mark.parametrize("impairment,transfer", [
-    pytest.param(p, n, id=name, marks=() if name == "clean" else (pytest.mark.full,))
+@pytest.mark.parametrize("case,impairment,transfer", [
+    pytest.param(name, p, n, id=name, marks=() if name == "clean" else (pytest.mark.full,))
     for name, p, n in CASES])
-def test_net_linux(impairment, transfer):
+def test_net_linux(case, impairment, transfer):
     why = namespace_unavailable()
     if why:
         pytest.skip(f"Linux peer bench skipped: {why}")
     params = NET_CONFIGS["stack"]
     env = {"ROSGATE_NET_IMPAIRMENT": str(impairment), "ROSGATE_NET_TRANSFER": str(transfer)}
     with network_namespace():
-        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env)
+        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env, run_name=case)
 
 
 async def connect(tb, sock, addr):
