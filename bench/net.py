@@ -63,7 +63,8 @@ def measure(log=print):
 
 def measure_resources(log=print):
     from hdl.net import FrameBuilder, FrameParser, GmiiRx, GmiiTx, NetStack, RbcpServer, TcpSession
-    from hdl.net.stack import GLOBAL_BASE
+    from hdl.net.counters import EventCounters
+    from hdl.net.stack import GLOBAL_BASE, STACK_COUNTERS
     from hdl.ros1 import TcprosEndpoint
     blocks = [
         ("engine", "engine: MAC + ARP + ICMP + IPv4 + UDP/RBCP + 1 TCP session, 4 KiB buffers "
@@ -74,6 +75,8 @@ def measure_resources(log=print):
         ("parser", "  FrameParser", FrameParser),
         ("builder", "  FrameBuilder (2 requesters)", lambda: FrameBuilder(2)),
         ("rbcp", "  RbcpServer", lambda: RbcpServer([(0, 0x10000), (GLOBAL_BASE, 0x10000)])),
+        ("counters", "  EventCounters (the stack's counters, 2 read ports)",
+         lambda: EventCounters(STACK_COUNTERS, readers=2, spacing=2)),
         ("tcp", "  TcpSession, 4 KiB buffers", lambda: TcpSession(tx_depth=4096, rx_depth=4096)),
         ("publisher", "TCPROS publisher endpoint (header memories, registers)",
          lambda: TcprosEndpoint("publisher")),
@@ -120,7 +123,11 @@ def markdown(results, resources):
               "a Spartan-6: 7110 LUT, 9035 registers, 129 RAMB16; LiteEth UDP core (MAC + ARP + "
               "ICMP + IP + UDP, GMII): 1938 LUT / 2119 FF; verilog-ethernet udp_complete + "
               "eth_mac_1g: about 2538 LUT / 3086 FF before FIFOs; COM-5502 TCP_SERVER (1 "
-              "stream): 1536 LUT / 1134 FF.", ""]
+              "stream): 1536 LUT / 1134 FF.", "",
+              "The blocks are synthesised alone, the engine flattened, so the rows do not add "
+              "up to the engine. Yosys/abc LUT counts of the flattened engine move by several "
+              "hundred with functionally neutral edits: the stack's counter accumulators at "
+              "1, 3 and 5 bits gave 3929, 4600 and 4488 LUT.", ""]
     return "\n".join(lines)
 
 

@@ -179,7 +179,7 @@ class NetBenchTop(wiring.Component):
             "sink_received": Out(32), "sink_mismatches": Out(32),
             "open_req": In(1), "active": In(1), "local_port": In(16), "remote_ip": In(32),
             "remote_port": In(16), "state": Out(4), "tcp_counters": Out(32 * len(TCP_COUNTERS)),
-            "counters": Out(32 * len(STACK_COUNTERS)),
+            "counter_index": In(range(len(STACK_COUNTERS))), "counter_value": Out(32),
         })
 
     def elaborate(self, platform):
@@ -202,7 +202,8 @@ class NetBenchTop(wiring.Component):
                      s.local_port.eq(self.local_port), s.remote_ip.eq(self.remote_ip),
                      s.remote_port.eq(self.remote_port), s.close_ack.eq(s.close_req),
                      self.state.eq(s.state), self.tcp_counters.eq(s.counters),
-                     self.counters.eq(stack.counters)]
+                     stack.counter_index.eq(self.counter_index),
+                     self.counter_value.eq(stack.counter_value)]
         return m
 
 

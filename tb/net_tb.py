@@ -95,6 +95,8 @@ class NetTB:
                          "rx_tready"):
                 getattr(dut, f"tcp{k}_{name}").value = 0
         self.bus = RegisterBusModel(dut) if hasattr(dut, "rbcp_ack") else None
+        if hasattr(dut, "counter_index"):
+            dut.counter_index.value = 0
 
     async def reset(self):
         await reset_aresetn(self.dut)
@@ -107,8 +109,16 @@ class NetTB:
     def ip(self):
         return int_to_ip(int(self.dut.local_ip.value))
 
-    def counters(self):
-        return _fields(self.dut.counters.value, STACK_COUNTERS)
+    async def counters(self):
+        """The stack's counters, read through its counter port once every event so far has
+        reached them (they show an event within ``len(STACK_COUNTERS)`` cycles)."""
+        await ClockCycles(self.dut.aclk, len(STACK_COUNTERS) + 2)
+        values = {}
+        for k, name in enumerate(STACK_COUNTERS):
+            self.dut.counter_index.value = k
+            await Timer(1, "ns")
+            values[name] = int(self.dut.counter_value.value)
+        return values
 
     def session_counters(self, k=0):
         return _fields(getattr(self.dut, f"tcp{k}_counters").value, TCP_COUNTERS)

@@ -216,7 +216,7 @@ async def run_fuzz_live_session(dut):
         await ClockCycles(dut.aclk, 500)
     dut._log.info("end: state %d, engine %s, stack %s, peer snd_una %d snd_nxt %d window %d "
                   "retransmissions %d rst %d", s.get("state"), tb.session_counters(0),
-                  tb.counters(), peer.snd_una, peer.snd_nxt, peer.peer_window,
+                  await tb.counters(), peer.snd_una, peer.snd_nxt, peer.peer_window,
                   peer.retransmissions, peer.rst_received)
     assert bytes(s.received) == up, "engine received: " + difference(bytes(s.received), up)
     assert bytes(peer.received) == down, "peer received: " + difference(bytes(peer.received),
@@ -235,7 +235,7 @@ async def run_fuzz_live_session(dut):
     tb.frames_sent += 1
     assert answer is not None and answer[1] == 0xC8
     await ClockCycles(dut.aclk, 200)
-    counts = tb.counters()
+    counts = await tb.counters()
     accounted = counts["delivered"] + sum(counts[r] for r in DROP_REASONS)
     dut._log.info("counters %s, session %s", counts, tb.session_counters(0))
     assert counts["frames_in"] == tb.frames_sent, (counts["frames_in"], tb.frames_sent)

@@ -3,17 +3,19 @@
 and 8 bytes per beat with partial last beats, the good-frame residue), InternetChecksum
 against scapy's ``checksum`` (RFC 1071; odd lengths, a preset pseudo-header sum), and the
 FrameParser (with GmiiRx) against scapy's dissection: every captured field, the payload
-bytes, TCP options, IP options, UDP without checksum, and the checksum verdict."""
+bytes, TCP options, IP options, UDP without checksum, and the checksum verdict; the
+EventCounters bank against a count kept in Python (spec net.md §7.2 counters)."""
 
 import random
 import zlib
 
 import pytest
-from amaranth.hdl import Elaboratable, Module
+from amaranth.hdl import ClockDomain, Elaboratable, Module, Signal
 from amaranth.lib import wiring
 from scapy.utils import checksum as scapy_checksum
 
 from hdl.net import Crc32, FrameParser, GmiiRx, InternetChecksum
+from hdl.net.counters import EventCounters
 from hdl.params import ParameterError
 
 from .streamsim import simulate
@@ -97,6 +99,79 @@ def test_internet_checksum_matches_scapy():
 def test_bad_parameter_names_the_value():
     with pytest.raises(ParameterError, match="data_bytes must be an integer in 1..16, not 0"):
         Crc32(0)
+
+
+class _ResetHarness(Elaboratable):
+    """Gives a testbench the ``sync`` domain's reset."""
+
+    def __init__(self, dut):
+        self.dut = dut
+        self.rst = Signal()
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.sync = cd = ClockDomain()
+        m.d.comb += cd.rst.eq(self.rst)
+        m.submodules.dut = self.dut
+        return m
+
+
+@pytest.mark.parametrize("pattern,spacing", [("sparse", 1), ("every_cycle", 1),
+                                             ("every_other_cycle", 2)])
+def test_event_counters_match_a_python_count(pattern, spacing):
+    """Random events (on all counters as often as ``spacing`` allows in two patterns, a byte
+    amount included) reach their counters within ``len(names)`` cycles, wrap at the width,
+    and both read ports return them; a reset in the middle starts every count from zero."""
+    names = ("frames", "bytes", "drops", "rare", "other")
+    dut = EventCounters(names, width=12, amounts={"bytes": 11}, readers=2, spacing=spacing)
+    top = _ResetHarness(dut)
+    rng = random.Random(pattern)
+    expected = dict.fromkeys(names, 0)
+    seen = []
+
+    def amount(name, cycle):
+        if cycle % spacing:
+            return 0
+        busy = pattern != "sparse"
+        if name == "bytes":
+            return rng.randrange(2048) if busy or rng.random() < 0.1 else 0
+        return int(busy or rng.random() < 0.05)
+
+    async def bench(ctx):
+        for cycle in range(3000):
+            if cycle == 1700:
+                ctx.set(top.rst, 1)
+                for name in names:
+                    ctx.set(dut.events[name], 0)
+                    expected[name] = 0
+                await ctx.tick()
+                ctx.set(top.rst, 0)
+            for name in names:
+                value = amount(name, cycle)
+                ctx.set(dut.events[name], value)
+                expected[name] = (expected[name] + value) % 4096
+            await ctx.tick()
+            if cycle % 500 == 499 or cycle == 1702:
+                for name in names:
+                    ctx.set(dut.events[name], 0)
+                await ctx.tick().repeat(len(names))
+                for k, name in enumerate(names):
+                    ctx.set(dut.rd_addr[0], k)
+                    ctx.set(dut.rd_addr[1], len(names) - 1 - k)
+                    seen.append((name, ctx.get(dut.rd_data[0]), expected[name],
+                                 ctx.get(dut.rd_data[1]), expected[names[len(names) - 1 - k]]))
+
+    simulate(top, bench)
+    assert len(seen) == 7 * len(names)
+    for name, got, want, other, other_want in seen:
+        assert (got, other) == (want, other_want), (name, got, want, other, other_want)
+
+
+def test_event_counters_reject_bad_parameters():
+    with pytest.raises(ParameterError, match="amounts"):
+        EventCounters(("a", "b"), amounts={"c": 4})
+    with pytest.raises(ParameterError, match="names"):
+        EventCounters(("a", "a"))
 
 
 class _ParserHarness(Elaboratable):

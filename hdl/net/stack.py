@@ -1,7 +1,7 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
 one MAC and IP address (spec net.md §1-§2, §7.2)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -9,6 +9,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int, check_power_of_two
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
+from .counters import EventCounters
 from .frames import (
     ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DROP_REASONS,
     TCP_ACK, TCP_RST, ip_to_int, mac_to_int,
@@ -98,8 +99,11 @@ class NetStack(wiring.Component):
         Register bus for user logic: addresses below ``user_window``.
     local_mac, local_ip : Out
         The addresses in use.
-    counters : Out(32 * len(STACK_COUNTERS))
-        :data:`STACK_COUNTERS`.
+    counter_index : In(range(len(STACK_COUNTERS)))
+        A counter of :data:`STACK_COUNTERS` for user logic (a status display) ...
+    counter_value : Out(32)
+        ... and its value in the same cycle. Counters are 32 bits, wrapping, cleared by
+        reset; an event shows within 16 cycles.
     """
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
@@ -129,7 +133,9 @@ class NetStack(wiring.Component):
         for k in range(sessions):
             members[f"tcp{k}"] = Out(TcpUserSignature())
         members.update({"rbcp": Out(RbcpBusSignature()), "local_mac": Out(48),
-                        "local_ip": Out(32), "counters": Out(32 * len(STACK_COUNTERS))})
+                        "local_ip": Out(32),
+                        "counter_index": In(range(len(STACK_COUNTERS))),
+                        "counter_value": Out(32)})
         super().__init__(members)
 
     def elaborate(self, platform):
@@ -224,18 +230,29 @@ class NetStack(wiring.Component):
         m.d.comb += [bus.ack.eq(Mux(in_global, global_ack, self.rbcp.ack)),
                      bus.rd.eq(Mux(in_global, global_rd, self.rbcp.rd))]
 
-        counters = {name: Signal(32, name=f"cnt_{name}") for name in STACK_COUNTERS}
-        m.d.comb += self.counters.eq(Cat(*(counters[n] for n in STACK_COUNTERS)))
-        with m.If(mac_tx.s_axis.tvalid & mac_tx.s_axis.tready & mac_tx.s_axis.tlast):
-            m.d.sync += counters["frames_out"].eq(counters["frames_out"] + 1)
+        # counters: read port 0 for RBCP, port 1 for user logic; each counts at most one
+        # event per frame, and frames end at most every other cycle
+        m.submodules.counters = counters = EventCounters(STACK_COUNTERS, readers=2, spacing=2)
+        m.d.comb += [counters.rd_addr[1].eq(self.counter_index),
+                     self.counter_value.eq(counters.rd_data[1])]
+        m.d.comb += counters.events.frames_out.eq(
+            mac_tx.s_axis.tvalid & mac_tx.s_axis.tready & mac_tx.s_axis.tlast)
 
         global_values = {"mac": local_mac, "ip": local_ip, "rto_cycles": rto,
                          "msl_cycles": msl, "rbcp_port": rbcp_port,
-                         "arp_retry_cycles": arp_retry,
-                         "counters": Cat(*(counters[n] for n in reversed(STACK_COUNTERS)))}
+                         "arp_retry_cycles": arp_retry}
         offset = bus.addr[:16]
+        counters_base = [base for base, (name, _, _) in GLOBAL_REGS.items()
+                         if name == "counters"][0]
+        assert counters_base % 64 == 0 and len(STACK_COUNTERS) <= 16
+        m.d.comb += counters.rd_addr[0].eq(offset[2:6])
         with m.Switch(offset):
             for base, (name, size, writable) in GLOBAL_REGS.items():
+                if name == "counters":
+                    # big-endian 32-bit words, the first counter first
+                    with m.Case(*range(base, base + size)):
+                        m.d.sync += global_rd.eq(counters.rd_data[0].word_select(~offset[:2], 8))
+                    continue
                 value = global_values[name]
                 for b in range(size):
                     with m.Case(base + b):
@@ -248,7 +265,7 @@ class NetStack(wiring.Component):
                 m.d.sync += global_rd.eq(0)
 
         def bump(name):
-            return counters[name].eq(counters[name] + 1)
+            return counters.events[name].eq(1)
 
         verdict = parser.done
         with m.FSM() as reply_fsm:
@@ -326,34 +343,34 @@ class NetStack(wiring.Component):
         busy_slot = Signal()
         m.d.comb += busy_slot.eq(~reply_fsm.ongoing("IDLE"))
         with m.If(verdict):
-            m.d.sync += bump("frames_in")
+            m.d.comb += bump("frames_in")
             with m.If(~parser.accept):
                 with m.Switch(parser.reason):
                     for i, name in enumerate(DROP_REASONS):
                         with m.Case(i):
-                            m.d.sync += bump(name)
+                            m.d.comb += bump(name)
             with m.Else():
                 with m.Switch(parser.kind):
                     with m.Case(FrameKind.ARP):
                         with m.If((f.arp_oper == ARP_REQUEST) & busy_slot):
-                            m.d.sync += bump("busy")
+                            m.d.comb += bump("busy")
                         with m.Else():
-                            m.d.sync += bump("delivered")
+                            m.d.comb += bump("delivered")
                     with m.Case(FrameKind.ICMP):
                         with m.If(busy_slot | ~claim):
-                            m.d.sync += bump("busy")
+                            m.d.comb += bump("busy")
                         with m.Else():
-                            m.d.sync += bump("delivered")
+                            m.d.comb += bump("delivered")
                     with m.Case(FrameKind.UDP):
                         with m.If(f.dst_port != rbcp_port):
-                            m.d.sync += bump("no_port")
+                            m.d.comb += bump("no_port")
                         with m.Elif(busy_slot | ~claim):
-                            m.d.sync += bump("busy")
+                            m.d.comb += bump("busy")
                         with m.Else():
-                            m.d.sync += bump("delivered")
+                            m.d.comb += bump("delivered")
                     with m.Case(FrameKind.TCP):
                         with m.If(claimed):
-                            m.d.sync += bump("delivered")
+                            m.d.comb += bump("delivered")
                         with m.Else():
-                            m.d.sync += bump("no_port")
+                            m.d.comb += bump("no_port")
         return m

@@ -39,8 +39,9 @@ class TcprosNode(wiring.Component):
         Messages from subscriber endpoint ``k``.
     phase<k> : Out
         Endpoint ``k``'s phase (:data:`~hdl.ros1.registers.PHASES`).
-    counters : Out
-        The engine's :data:`~hdl.net.stack.STACK_COUNTERS`.
+    counter_index, counter_value : In, Out
+        One of the engine's :data:`~hdl.net.stack.STACK_COUNTERS` (see
+        :class:`~hdl.net.stack.NetStack`).
     """
 
     def __init__(self, endpoints, *, loopback=(), **stack):
@@ -75,7 +76,8 @@ class TcprosNode(wiring.Component):
             members[f"phase{k}"] = Out(range(len(PHASES)))
         members["local_mac"] = Out(48)
         members["local_ip"] = Out(32)
-        members["counters"] = Out(32 * len(STACK_COUNTERS))
+        members["counter_index"] = In(range(len(STACK_COUNTERS)))
+        members["counter_value"] = Out(32)
         super().__init__(members)
 
     def elaborate(self, platform):
@@ -84,8 +86,9 @@ class TcprosNode(wiring.Component):
         for name in ("gmii_rxd", "gmii_rx_dv", "gmii_rx_er"):
             m.d.comb += getattr(stack, name).eq(getattr(self, name))
         for name in ("gmii_txd", "gmii_tx_en", "gmii_tx_er", "local_mac", "local_ip",
-                     "counters"):
+                     "counter_value"):
             m.d.comb += getattr(self, name).eq(getattr(stack, name))
+        m.d.comb += stack.counter_index.eq(self.counter_index)
 
         endpoints = []
         for k, role in enumerate(self._roles):
