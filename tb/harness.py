@@ -64,8 +64,12 @@ def _verilator_make_fix(sim):
         return
     saved = os.environ.get("MAKEFLAGS")
     words = (saved or "").split()
-    # ccache shares the Verilator runtime's objects, identical in every build, between tops
-    cache = ["OBJCACHE=ccache"] if shutil.which("ccache") else []
+    # ccache shares the Verilator runtime's objects, identical in every build, between tops;
+    # its cache lives with the simulator output, writable wherever the benches run
+    cache = []
+    if shutil.which("ccache"):
+        cache = ["OBJCACHE=ccache"]
+        os.environ.setdefault("CCACHE_DIR", str(SIM_BUILD / "ccache"))
     os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
                                        ["CFG_CXXFLAGS_PCH_I=-include"] + cache)
     try:
