@@ -16,7 +16,7 @@ from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
 from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT
-from hdl.net.stack import GLOBAL_BASE, GLOBAL_REGS, STACK_COUNTERS
+from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
 from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
 
@@ -143,8 +143,8 @@ async def rbcp(tb, payload, sport=50000):
 
 async def write_global(tb, name, value):
     """Write one of the stack's registers (:data:`GLOBAL_REGS`) through RBCP."""
-    offset, (size, _) = [(off, (size, w)) for off, (reg, size, w) in GLOBAL_REGS.items()
-                         if reg == name][0]
+    offset = GLOBAL_OFFSETS[name]
+    size = GLOBAL_REGS[offset][1]
     data = value.to_bytes(size, "big")
     reply = await rbcp(tb, rbcp_request(0x80, 0x5A, GLOBAL_BASE + offset, size, data))
     assert reply == sitcpy_rbcp_header("w", 0x5A, GLOBAL_BASE + offset, size) + data, reply
@@ -177,10 +177,10 @@ async def run_rbcp(dut):
                     b"\xff\x80\x01"):
         assert await rbcp(tb, payload) is None
     # the stack's own registers: read the IP, write it, read the counters
-    ip_off = [off for off, (name, _, _) in GLOBAL_REGS.items() if name == "ip"][0]
+    ip_off = GLOBAL_OFFSETS["ip"]
     reply = await rbcp(tb, rbcp_request(0xC0, 9, GLOBAL_BASE + ip_off, 4))
     assert reply[8:] == bytes(int(b) for b in tb.ip.split("."))
-    cnt_off = [off for off, (name, _, _) in GLOBAL_REGS.items() if name == "counters"][0]
+    cnt_off = GLOBAL_OFFSETS["counters"]
     reply = await rbcp(tb, rbcp_request(0xC0, 10, GLOBAL_BASE + cnt_off, 8))
     frames_in = int.from_bytes(reply[8:12], "big")
     # the request itself may not have reached the counter when it was read

@@ -64,10 +64,6 @@ class EventCounters(wiring.Component):
             "rd_data": Out(data.ArrayLayout(self._width, self._readers)),
         })
 
-    @property
-    def names(self):
-        return self._names
-
     def elaborate(self, platform):
         m = Module()
         n = len(self._names)

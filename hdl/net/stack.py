@@ -20,7 +20,8 @@ from .rx import FrameKind, FrameParser
 from .tcp import TCP_COUNTERS, TcpError, TcpSession, TcpState
 from .tx import FrameBuilder
 
-__all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLOBAL_REGS"]
+__all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLOBAL_REGS",
+           "GLOBAL_OFFSETS"]
 
 #: Stack counters, in the order of the ``counters`` output: every received frame ends in
 #: exactly one of them (``delivered`` or a drop reason).
@@ -38,6 +39,8 @@ GLOBAL_REGS = {
     0x18: ("arp_retry_cycles", 4, True),
     0x40: ("counters", 4 * len(STACK_COUNTERS), False),
 }
+#: name -> offset of the global block's registers
+GLOBAL_OFFSETS = {name: offset for offset, (name, _, _) in GLOBAL_REGS.items()}
 
 _CLOCK_HZ = 125_000_000
 
@@ -103,7 +106,7 @@ class NetStack(wiring.Component):
         A counter of :data:`STACK_COUNTERS` for user logic (a status display) ...
     counter_value : Out(32)
         ... and its value in the same cycle. Counters are 32 bits, wrapping, cleared by
-        reset; an event shows within 16 cycles.
+        reset; an event shows within ``len(STACK_COUNTERS)`` cycles.
     """
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
@@ -242,9 +245,8 @@ class NetStack(wiring.Component):
                          "msl_cycles": msl, "rbcp_port": rbcp_port,
                          "arp_retry_cycles": arp_retry}
         offset = bus.addr[:16]
-        counters_base = [base for base, (name, _, _) in GLOBAL_REGS.items()
-                         if name == "counters"][0]
-        assert counters_base % 64 == 0 and len(STACK_COUNTERS) <= 16
+        # the counter index is offset bits 2..5: the block is 64-byte aligned
+        assert GLOBAL_OFFSETS["counters"] % 64 == 0 and len(STACK_COUNTERS) <= 16
         m.d.comb += counters.rd_addr[0].eq(offset[2:6])
         with m.Switch(offset):
             for base, (name, size, writable) in GLOBAL_REGS.items():

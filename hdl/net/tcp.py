@@ -367,11 +367,16 @@ class TcpSession(wiring.Component):
         # ---- transmit requests
         req = self.tx.request
         pending = Signal()          # a request is offered to the builder
-        busy = Signal()             # the sequence engine runs a program (requests wait)
+        busy = Signal()             # the sequence engine runs a program (requests withdrawn)
         in_flight = Signal(range(nd))          # segments sent and not yet freed
         m.d.comb += in_flight.eq(d_snd - d_ack)
         half_flight = in_flight[1:]
         reduced = Mux(half_flight < 2, 2, half_flight)      # ssthresh after a loss
+        # the window never exceeds the ring: it holds nd - 1 segments
+        cwnd_grown = Mux(cwnd == nd - 1, cwnd, cwnd + 1)
+        inflated = Signal(range(nd + 3))
+        m.d.comb += inflated.eq(reduced + 3)
+        cwnd_inflated = Mux(inflated > nd - 1, nd - 1, inflated)
         data_fits = ((distance(snd_seq + snd_len, snd_una) <= snd_wnd) &
                      (in_flight < cwnd))
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
@@ -381,8 +386,8 @@ class TcpSession(wiring.Component):
         # A data request whose segment was acknowledged (and freed) while it waited for the
         # builder is withdrawn: sending it would step the send pointer past the write
         # pointer, and the segment written next would never leave.
-        withdrawn = pending & (kind_ == K_DATA) & (d_snd == d_wr)
-        m.d.comb += self.tx.valid.eq(pending & ~busy & ~withdrawn)
+        stale_data = pending & (kind_ == K_DATA) & (d_snd == d_wr)
+        m.d.comb += self.tx.valid.eq(pending & ~busy & ~stale_data)
 
         m.d.comb += [req.kind.eq(FrameKind.TCP), req.eth_dst.eq(remote_mac),
                      req.ip_dst.eq(remote_ip), req.src_port.eq(local_port),
@@ -433,7 +438,7 @@ class TcpSession(wiring.Component):
 
         sent = self.tx.valid & self.tx.ready
         withdraw = Signal()
-        with m.If(withdrawn | withdraw):
+        with m.If(stale_data | withdraw):
             m.d.sync += pending.eq(0)
         with m.If(sent):
             m.d.sync += [pending.eq(0), count("segments_tx")]
@@ -812,9 +817,9 @@ class TcpSession(wiring.Component):
                                  dupacks.eq(0), intent["nxt"].eq(flag["ack_after_snd_nxt"])]
                     # slow start: one segment per ACK; congestion avoidance: one per window
                     with m.If(cwnd < ssthresh):
-                        m.d.sync += cwnd.eq(cwnd + 1)
+                        m.d.sync += cwnd.eq(cwnd_grown)
                     with m.Elif(cwnd_acc + 1 >= cwnd):
-                        m.d.sync += [cwnd_acc.eq(0), cwnd.eq(Mux(cwnd == nd - 1, cwnd, cwnd + 1))]
+                        m.d.sync += [cwnd_acc.eq(0), cwnd.eq(cwnd_grown)]
                     with m.Else():
                         m.d.sync += cwnd_acc.eq(cwnd_acc + 1)
                     with m.If(fin_acked_now):
@@ -833,12 +838,12 @@ class TcpSession(wiring.Component):
                     with m.If(dupacks == 2):
                         # fast retransmit (RFC 5681 §3.2), go-back-N from SND.UNA
                         m.d.sync += [d_snd.eq(d_ack_next), intent["retransmit"].eq(1),
-                                     ssthresh.eq(reduced), cwnd.eq(reduced + 3),
+                                     ssthresh.eq(reduced), cwnd.eq(cwnd_inflated),
                                      count("fast_retransmit"), timer.eq(0)]
                         with m.If(fin_sent & ~fin_acked):
                             m.d.sync += fin_sent.eq(0)
-                    with m.If((dupacks == 3) & (cwnd != nd - 1)):
-                        m.d.sync += cwnd.eq(cwnd + 1)
+                    with m.If(dupacks == 3):
+                        m.d.sync += cwnd.eq(cwnd_grown)
                 with m.If(flag["seq_after_wl1"] |
                           (flag["seq_is_wl1"] & flag["ack_not_before_wl2"])):
                     m.d.sync += [snd_wnd.eq(s_window), intent["wl"].eq(1)]
