@@ -213,6 +213,6 @@ async def armv7_section_mapping(dut):
 
 CONFIGS = system_configs()
 
-#: r32 on Verilator in test-full (make test: r32 on Icarus, r64 on both)
+#: make test: r32 on Icarus, r64 on Verilator; the other two in test-full
 test_reconos_memory = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator"),
                                                              ("system_r64", "icarus")])

@@ -137,5 +137,6 @@ from .reconos_tb import system_configs  # noqa: E402 (uses this module's program
 
 CONFIGS = system_configs()
 
-#: r32 on Verilator in test-full (make test: r32 on Icarus, r64 on both)
-test_reconos_pingpong = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator")])
+#: make test: r32 on Icarus, r64 on Verilator; the other two in test-full
+test_reconos_pingpong = cocotb_bench("reconos", CONFIGS, long=[("system_r32", "verilator"),
+                                                             ("system_r64", "icarus")])

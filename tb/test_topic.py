@@ -49,7 +49,11 @@ CONFIGS = {
         marks=pytest.mark.full),
 }
 
-test_topic = cocotb_bench("topic", CONFIGS)
+#: Verilator runs these in test-full only; make test keeps them on Icarus, and Verilator on
+#: the configurations that differ in kind (one publisher, widest, FIFO depth, QoS)
+LONG = [(config_id, "verilator") for config_id in
+        ("1x3_w8", "3x1_w8", "4x4_w8", "1x1_w64", "1x3_w64", "3x1_w64", "3x3_w64", "4x4_w64")]
+test_topic = cocotb_bench("topic", CONFIGS, long=LONG)
 
 # Inside the simulator: the configuration under test (empty when pytest imports this module).
 PARAMS = bench_params() if "ROSGATE_PARAMS" in os.environ else {}
