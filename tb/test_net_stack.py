@@ -323,6 +323,40 @@ async def run_tcp_rst_rules(dut):
 
 
 @cocotb.test()
+async def run_tcp_request_withdrawn_by_arrival(dut):
+    """A segment waiting for the frame builder is withdrawn when a segment arrives, and the
+    next one is chosen with the arrival's values: queued data waits behind a 1,472-byte echo
+    reply while the peer's data arrives with a zero window; when the builder is free only the
+    ACK of that data leaves (data sent now would exceed the peer's window); a window update
+    then brings the data with the current ACK number."""
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 41002, 28, isn=123_456)
+    s, iss = await establish(tb, 0, 28, peer)
+    echo = bytes(range(256)) * 5 + bytes(192)           # 1472 bytes: ~1,520 cycles of reply
+    await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) / ICMP(type=8, id=7, seq=1) /
+                  Raw(echo))
+    await tb.source.wait()
+    await tb.idle(40)                                   # the reply has taken the builder
+    queued = b"queued while the builder is busy"
+    await s.write(queued)
+    await tb.idle(40)                                   # its data request waits
+    await peer.send("PA", b"arrives while the request waits", window=0)
+    reply = await tb.recv()
+    assert reply is not None and ICMP in reply and bytes(reply[ICMP].payload) == echo, \
+        "the echo reply must come first (it held the builder)"
+    await peer.expect("A", seq=iss + 1, ack=peer.seq)
+    await tb.expect_silence(3000)
+    assert await s.wait_received(31, 2000) == b"arrives while the request waits"
+    await peer.send("A", window=65535)
+    await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=queued)
+    peer.ack = iss + 1 + len(queued)
+    await peer.send("A")
+    s.set(open_req=0)
+    await peer.expect("FA", seq=peer.ack, ack=peer.seq)
+
+
+@cocotb.test()
 async def run_tcp_retransmit_and_zero_window(dut):
     """An unacknowledged segment is sent again with the same sequence number after the RTO,
     then after twice and four times the RTO (back-off); a zero window stops new data and
