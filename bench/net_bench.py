@@ -25,7 +25,7 @@ from hdl.net.frames import (
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1.registers import PHASES
 from tb.models.tcp_peer import TcpPeerModel, udp_frame
-from tb.net_tb import CLOCK_NS, PEER_MAC
+from tb.net_tb import CLOCK_NS, PEER_MAC, read_counter_bank
 from tb.streams import reset_aresetn
 
 PEER_IP = "192.168.10.1"            # the bench tops keep the engine's default addresses
@@ -254,9 +254,8 @@ async def measure_tcp(dut):
     cycles = peer.link.cycle - start
     assert int(dut.sink_mismatches.value) == 0, "engine delivered other bytes than sent"
     records["peer_to_engine"] = goodput_record(nbytes, cycles, start, marks)
-    tcp = int(dut.tcp_counters.value)
-    records["engine_counters"] = {name: (tcp >> (32 * k)) & 0xFFFFFFFF
-                                  for k, name in enumerate(TCP_COUNTERS)}
+    records["engine_counters"] = await read_counter_bank(
+        dut.aclk, dut.tcp_counter_index, dut.tcp_counter_value, TCP_COUNTERS)
     records["peer_acks"] = mdl.acks_sent
     Path(os.environ["ROSGATE_BENCH_OUT"]).write_text(json.dumps(records))
 

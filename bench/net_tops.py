@@ -178,7 +178,8 @@ class NetBenchTop(wiring.Component):
             "gen_start": In(1), "gen_count": In(32), "gen_sent": Out(32),
             "sink_received": Out(32), "sink_mismatches": Out(32),
             "open_req": In(1), "active": In(1), "local_port": In(16), "remote_ip": In(32),
-            "remote_port": In(16), "state": Out(4), "tcp_counters": Out(32 * len(TCP_COUNTERS)),
+            "remote_port": In(16), "state": Out(4),
+            "tcp_counter_index": In(range(len(TCP_COUNTERS))), "tcp_counter_value": Out(32),
             "counter_index": In(range(len(STACK_COUNTERS))), "counter_value": Out(32),
         })
 
@@ -201,7 +202,8 @@ class NetBenchTop(wiring.Component):
                      s.open_req.eq(self.open_req), s.active.eq(self.active),
                      s.local_port.eq(self.local_port), s.remote_ip.eq(self.remote_ip),
                      s.remote_port.eq(self.remote_port), s.close_ack.eq(s.close_req),
-                     self.state.eq(s.state), self.tcp_counters.eq(s.counters),
+                     self.state.eq(s.state), s.counter_index.eq(self.tcp_counter_index),
+                     self.tcp_counter_value.eq(s.counter_value),
                      stack.counter_index.eq(self.counter_index),
                      self.counter_value.eq(stack.counter_value)]
         return m

@@ -16,8 +16,8 @@ from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
-__all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS",
-           "RegisterBusModel", "SessionPort"]
+__all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank", "PEER_MAC", "PEER_IP",
+           "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
 #: The network benches' configuration: one build per simulator, shared by the scripted and
@@ -34,9 +34,17 @@ NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=
 PEER_MAC = "02:00:00:00:00:01"
 
 
-def _fields(value, names):
-    value = int(value)
-    return {name: (value >> (32 * k)) & 0xFFFFFFFF for k, name in enumerate(names)}
+async def read_counter_bank(clock, index, value, names):
+    """Counters read through an :class:`~hdl.net.counters.EventCounters` index/value port,
+    once every event so far has reached them (a bank shows an event within ``len(names) + 1``
+    cycles)."""
+    await ClockCycles(clock, len(names) + 2)
+    values = {}
+    for k, name in enumerate(names):
+        index.value = k
+        await Timer(1, "ns")
+        values[name] = int(value.value)
+    return values
 
 
 class RegisterBusModel:
@@ -92,7 +100,7 @@ class NetTB:
         for k in range(self.sessions):
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
                          "close_ack", "abort", "tx_tvalid", "tx_tdata", "tx_tlast",
-                         "rx_tready"):
+                         "rx_tready", "counter_index", "counters_clear"):
                 getattr(dut, f"tcp{k}_{name}").value = 0
         self.bus = RegisterBusModel(dut) if hasattr(dut, "rbcp_ack") else None
         if hasattr(dut, "counter_index"):
@@ -110,18 +118,14 @@ class NetTB:
         return int_to_ip(int(self.dut.local_ip.value))
 
     async def counters(self):
-        """The stack's counters, read through its counter port once every event so far has
-        reached them (they show an event within ``len(STACK_COUNTERS)`` cycles)."""
-        await ClockCycles(self.dut.aclk, len(STACK_COUNTERS) + 2)
-        values = {}
-        for k, name in enumerate(STACK_COUNTERS):
-            self.dut.counter_index.value = k
-            await Timer(1, "ns")
-            values[name] = int(self.dut.counter_value.value)
-        return values
+        """The stack's counters (:data:`~hdl.net.stack.STACK_COUNTERS`)."""
+        return await read_counter_bank(self.dut.aclk, self.dut.counter_index,
+                                       self.dut.counter_value, STACK_COUNTERS)
 
-    def session_counters(self, k=0):
-        return _fields(getattr(self.dut, f"tcp{k}_counters").value, TCP_COUNTERS)
+    async def session_counters(self, k=0):
+        """Session ``k``'s counters (:data:`~hdl.net.tcp.TCP_COUNTERS`)."""
+        return await read_counter_bank(self.dut.aclk, getattr(self.dut, f"tcp{k}_counter_index"),
+                                       getattr(self.dut, f"tcp{k}_counter_value"), TCP_COUNTERS)
 
     async def send(self, frame, *, fcs=True, error=False):
         """Send ``frame`` (scapy packet or bytes, without FCS) into the engine."""

@@ -191,20 +191,22 @@ class LinuxTB(NetTB):
             if predicate():
                 return
             if time.monotonic() - self.started >= WALL_LIMIT_S:
-                raise AssertionError(f"wall-clock limit: {what}; {self.diagnostics()}")
+                raise AssertionError(f"wall-clock limit: {what}; {await self.diagnostics()}")
             if k and k % ((1 << 22) // step) == 0:
-                self.dut._log.info("%s: %s", what, self.diagnostics())
+                self.dut._log.info("%s: %s", what, await self.diagnostics())
             await ClockCycles(self.dut.aclk, step)
-        raise AssertionError(f"{what}: not within {limit_cycles} cycles; {self.diagnostics()}")
+        raise AssertionError(f"{what}: not within {limit_cycles} cycles; "
+                             f"{await self.diagnostics()}")
 
-    def diagnostics(self):
+    async def diagnostics(self):
         """The pump's and every session's state and counters, for a log line."""
         sessions = []
         for k in range(8):
             state = getattr(self.dut, f"tcp{k}_state", None)
             if state is None:
                 break
-            sessions.append(f"tcp{k} state {int(state.value)} {self.session_counters(k)}")
+            counts = await self.session_counters(k)
+            sessions.append(f"tcp{k} state {int(state.value)} {counts}")
         return f"pump {self.pump.stats}; " + "; ".join(sessions)
 
     async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):

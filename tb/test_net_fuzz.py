@@ -215,7 +215,7 @@ async def run_fuzz_live_session(dut):
             break
         await ClockCycles(dut.aclk, 500)
     dut._log.info("end: state %d, engine %s, stack %s, peer snd_una %d snd_nxt %d window %d "
-                  "retransmissions %d rst %d", s.get("state"), tb.session_counters(0),
+                  "retransmissions %d rst %d", s.get("state"), await tb.session_counters(0),
                   await tb.counters(), peer.snd_una, peer.snd_nxt, peer.peer_window,
                   peer.retransmissions, peer.rst_received)
     assert bytes(s.received) == up, "engine received: " + difference(bytes(s.received), up)
@@ -237,6 +237,6 @@ async def run_fuzz_live_session(dut):
     await ClockCycles(dut.aclk, 200)
     counts = await tb.counters()
     accounted = counts["delivered"] + sum(counts[r] for r in DROP_REASONS)
-    dut._log.info("counters %s, session %s", counts, tb.session_counters(0))
+    dut._log.info("counters %s, session %s", counts, await tb.session_counters(0))
     assert counts["frames_in"] == tb.frames_sent, (counts["frames_in"], tb.frames_sent)
     assert accounted == counts["frames_in"], f"{accounted} accounted of {counts['frames_in']}"

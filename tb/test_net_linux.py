@@ -121,7 +121,7 @@ async def run_linux_client_engine_server(dut):
         await s.wait_state(TcpState.LISTEN, 2_000_000)
     finally:
         sock.close()
-    dut._log.info("pump %s, session %s", tb.pump.stats, tb.session_counters(0))
+    dut._log.info("pump %s, session %s", tb.pump.stats, await tb.session_counters(0))
 
 
 @cocotb.test()
@@ -172,4 +172,4 @@ async def run_linux_server_engine_client(dut):
         listener.close()
         if conn is not None:
             conn.close()
-    dut._log.info("pump %s, session %s", tb.pump.stats, tb.session_counters(1))
+    dut._log.info("pump %s, session %s", tb.pump.stats, await tb.session_counters(1))

@@ -277,7 +277,7 @@ async def run_tcp_server_scripted(dut):
     await other.expect("R", seq=1234)
     await other.send("S")
     await other.expect("RA", seq=0, ack=78)
-    assert tb.session_counters(0)["bytes_rx"] == 18
+    assert (await tb.session_counters(0))["bytes_rx"] == 18
 
 
 async def establish(tb, k, port, peer, *, window=65535):
@@ -318,7 +318,7 @@ async def run_tcp_rst_rules(dut):
     await peer.send("R", advance=False)
     await s.wait_state(TcpState.LISTEN, 2000)
     assert errors["n"] == 1 and s.get("error_code") == TcpError.RESET.value
-    assert tb.session_counters(0)["rst_rx"] >= 2
+    assert (await tb.session_counters(0))["rst_rx"] >= 2
     s.set(open_req=0)
 
 
@@ -376,7 +376,7 @@ async def run_tcp_retransmit_and_zero_window(dut):
     # unacknowledged, it comes again after the RTO, 2 RTO, 4 RTO (RFC 6298 §5.5)
     rto_ns = rto_cycles * 8
     sent_at = [get_sim_time("ns")]
-    rtos_before = tb.session_counters(0)["rto"]
+    rtos_before = (await tb.session_counters(0))["rto"]
     for k in range(3):
         await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000],
                           timeout=(rto_ns << k) // 8 + 5000)
@@ -384,7 +384,7 @@ async def run_tcp_retransmit_and_zero_window(dut):
     intervals = [b - a for a, b in zip(sent_at, sent_at[1:])]
     for k, interval in enumerate(intervals):
         assert abs(interval - (rto_ns << k)) <= 1000, f"retransmission intervals {intervals} ns"
-    assert tb.session_counters(0)["rto"] - rtos_before == 3
+    assert (await tb.session_counters(0))["rto"] - rtos_before == 3
     # acknowledge it with a zero window; queue the rest
     peer.ack = iss + 1001
     await peer.send("A", window=0)

@@ -121,13 +121,15 @@ class _ResetHarness(Elaboratable):
 def test_event_counters_match_a_python_count(pattern, spacing):
     """Random events (on all counters as often as ``spacing`` allows in two patterns, a byte
     amount included) reach their counters within ``len(names)`` cycles, wrap at the width,
-    and both read ports return them; a reset in the middle starts every count from zero."""
+    and both read ports return them; a reset in the middle, and ``clear`` (also twice within
+    one round, and while events arrive), start every count from zero."""
     names = ("frames", "bytes", "drops", "rare", "other")
     dut = EventCounters(names, width=12, amounts={"bytes": 11}, readers=2, spacing=spacing)
     top = _ResetHarness(dut)
     rng = random.Random(pattern)
     expected = dict.fromkeys(names, 0)
     seen = []
+    clears = {902, 1296, 1298, 2403}
 
     def amount(name, cycle):
         if cycle % spacing:
@@ -146,11 +148,13 @@ def test_event_counters_match_a_python_count(pattern, spacing):
                     expected[name] = 0
                 await ctx.tick()
                 ctx.set(top.rst, 0)
+            ctx.set(dut.clear, cycle in clears)
             for name in names:
                 value = amount(name, cycle)
                 ctx.set(dut.events[name], value)
-                expected[name] = (expected[name] + value) % 4096
+                expected[name] = (value if cycle in clears else expected[name] + value) % 4096
             await ctx.tick()
+            ctx.set(dut.clear, 0)
             if cycle % 500 == 499 or cycle == 1702:
                 for name in names:
                     ctx.set(dut.events[name], 0)

@@ -117,8 +117,24 @@ async def run_snd_process_rcv(dut):
         # what the hardware subscriber received from snd_data, as software reads it back
         pub_header = await tb.run_in_thread("read HDR_RX", world.node.clients[0].received_header)
         assert pub_header["callerid"] == "/snd_data" and pub_header["md5sum"] == world.md5
-        counts = await tb.run_in_thread("counters", world.node.clients[1].counters)
+        # the endpoints' counters (the session's through its counter port): the publisher
+        # sent its header (with its length prefix) and the framed messages, the subscriber
+        # received snd_data's header (HDR_RX holds its body) and the same messages
+        sub, pub = world.node.clients
+        framed = sum(4 + len(body) for body in sent)
+        counts = await tb.run_in_thread("counters", pub.counters)
+        hdr_tx = await tb.run_in_thread("HDR_TX_LEN", pub.read, "HDR_TX_LEN")
         assert counts["messages_tx"] == len(sent) and counts["header_rejects"] == 0, counts
+        assert counts["bytes_tx"] == hdr_tx + framed, (counts, hdr_tx, framed)
+        sub_counts = await tb.run_in_thread("counters", sub.counters)
+        hdr_rx = await tb.run_in_thread("HDR_RX_LEN", sub.read, "HDR_RX_LEN")
+        assert sub_counts["messages_rx"] == len(sent), sub_counts
+        assert sub_counts["bytes_rx"] == 4 + hdr_rx + framed, (sub_counts, hdr_rx, framed)
+        # CTRL.CLR_CNT zeroes them and leaves the connection streaming
+        await tb.run_in_thread("clear counters", pub.clear_counters)
+        counts = await tb.run_in_thread("counters", pub.counters)
+        assert set(counts.values()) == {0}, counts
+        assert int(dut.phase1.value) == STREAMING
         assert not world.rcv.errors and not world.snd.errors and not world.node.errors
     finally:
         world.close()

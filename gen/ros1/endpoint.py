@@ -115,6 +115,11 @@ class EndpointClient:
         return {name: int.from_bytes(raw[4 * k:4 * k + 4], "big")
                 for k, name in enumerate(COUNTERS)}
 
+    def clear_counters(self):
+        """Zero the endpoint's counters (``CTRL.CLR_CNT``), keeping START and BLOCK."""
+        kept = self.read("CTRL") & (CTRL["START"] | CTRL["BLOCK"])
+        self.write("CTRL", kept | CTRL["CLR_CNT"])
+
     def received_header(self):
         """The peer's connection header as the endpoint stored it, decoded."""
         length = self.read("HDR_RX_LEN")

@@ -17,8 +17,8 @@ class EventCounters(wiring.Component):
     visits one counter per cycle, round robin, and adds that counter's accumulator to its
     RAM word. A counter therefore shows an event at most ``len(names)`` cycles late; an
     accumulator is sized for the events one round can bring, so it never overflows. After
-    reset the first round writes the accumulators instead of adding them, which clears the
-    RAM.
+    reset, and after ``clear``, one round writes the accumulators instead of adding them,
+    which clears the RAM.
 
     Parameters
     ----------
@@ -42,6 +42,9 @@ class EventCounters(wiring.Component):
         Counter to read on each port ...
     rd_data : Out(ArrayLayout(width, readers))
         ... and its value, in the same cycle.
+    clear : In(1)
+        Set every counter to zero: the events of this cycle and later are counted, earlier
+        ones are not. A counter shows the clear within ``len(names)`` cycles.
     """
 
     def __init__(self, names, *, width=32, amounts=None, readers=1, spacing=1):
@@ -62,6 +65,7 @@ class EventCounters(wiring.Component):
             "events": In(data.StructLayout(self._amounts)),
             "rd_addr": In(data.ArrayLayout(range(n), self._readers)),
             "rd_data": Out(data.ArrayLayout(self._width, self._readers)),
+            "clear": In(1),
         })
 
     def elaborate(self, platform):
@@ -74,21 +78,27 @@ class EventCounters(wiring.Component):
             port = mem.read_port(domain="comb")
             m.d.comb += [port.addr.eq(self.rd_addr[k]), self.rd_data[k].eq(port.data)]
 
+        # a clearing round starts at the service position of the reset or the clear and
+        # ends when the pointer comes back to it
         service = Signal(range(n))
+        next_service = Mux(service == n - 1, 0, service + 1)
         clearing = Signal(init=1)
-        m.d.sync += service.eq(Mux(service == n - 1, 0, service + 1))
-        with m.If(service == n - 1):
+        clear_at = Signal(range(n))
+        m.d.sync += service.eq(next_service)
+        with m.If(self.clear):
+            m.d.sync += [clearing.eq(1), clear_at.eq(service)]
+        with m.Elif(next_service == clear_at):
             m.d.sync += clearing.eq(0)
         per_round = -(-n // self._spacing)
         accumulators = [Signal((per_round * (2**self._amounts[name] - 1)).bit_length(),
                                name=f"acc_{name}") for name in self._names]
         for k, (name, acc) in enumerate(zip(self._names, accumulators)):
             event = self.events[name]
-            with m.If(service == k):
+            with m.If((service == k) | self.clear):
                 m.d.sync += acc.eq(event)
             with m.Else():
                 m.d.sync += acc.eq(acc + event)
         m.d.comb += [current.addr.eq(service), write.addr.eq(service), write.en.eq(1),
-                     write.data.eq(Mux(clearing, 0, current.data) +
-                                   Array(accumulators)[service])]
+                     write.data.eq(Mux(clearing | self.clear, 0, current.data) +
+                                   Mux(self.clear, 0, Array(accumulators)[service]))]
         return m

@@ -23,8 +23,8 @@ from .tx import FrameBuilder
 __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLOBAL_REGS",
            "GLOBAL_OFFSETS"]
 
-#: Stack counters, in the order of the ``counters`` output: every received frame ends in
-#: exactly one of them (``delivered`` or a drop reason).
+#: Stack counters, in the order of their read addresses (``counter_index``, RBCP): every
+#: received frame ends in exactly one of them (``delivered`` or a drop reason).
 STACK_COUNTERS = ("frames_in", "delivered") + DROP_REASONS + ("frames_out",)
 
 #: RBCP base of the stack's own registers (net.md §7.2 "global block")
@@ -57,7 +57,9 @@ class TcpUserSignature(wiring.Signature):
             "remote_port": In(16), "open_ack": Out(1), "close_req": Out(1),
             "close_ack": In(1), "abort": In(1), "error": Out(1), "error_code": Out(TcpError),
             "state": Out(TcpState), "peer_ip": Out(32), "peer_port": Out(16),
-            "tx_fill": Out(17), "counters": Out(32 * len(TCP_COUNTERS)),
+            "tx_fill": Out(17),
+            "counter_index": In(range(len(TCP_COUNTERS))), "counter_value": Out(32),
+            "counters_clear": In(1),
         })
 
 
@@ -187,10 +189,10 @@ class NetStack(wiring.Component):
             wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
             wiring.connect(m, s.m_axis, wiring.flipped(user.rx))
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
-                         "close_ack", "abort"):
+                         "close_ack", "abort", "counter_index", "counters_clear"):
                 m.d.comb += getattr(s, name).eq(getattr(user, name))
             for name in ("open_ack", "close_req", "error", "error_code", "state", "peer_ip",
-                         "peer_port", "tx_fill", "counters"):
+                         "peer_port", "tx_fill", "counter_value"):
                 m.d.comb += getattr(user, name).eq(getattr(s, name))
         claimed = Const(0)
         for s in sessions:

@@ -9,6 +9,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int, check_power_of_two
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
+from .counters import EventCounters
 from .frames import (
     ARP_REPLY, ARP_REQUEST, TCP_ACK, TCP_FIN, TCP_MSS, TCP_MSS_DEFAULT, TCP_PSH, TCP_RST,
     TCP_SYN,
@@ -127,8 +128,13 @@ class TcpSession(wiring.Component):
     state : Out(TcpState)
     peer_ip, peer_port : Out
         The connected peer (a server learns it from the SYN).
-    counters : Out(32 * len(TCP_COUNTERS))
-        :data:`TCP_COUNTERS`, 32 bits each, wrapping.
+    counter_index : In(range(len(TCP_COUNTERS)))
+        One of :data:`TCP_COUNTERS` ...
+    counter_value : Out(32)
+        ... and its value in the same cycle (32 bits, wrapping; it shows an event within
+        ``len(TCP_COUNTERS) + 1`` cycles).
+    counters_clear : In(1)
+        Set the counters to zero (they show it within ``len(TCP_COUNTERS)`` cycles).
     rto_cycles, msl_cycles, arp_retry_cycles : In(32)
         Initial retransmission timeout, maximum segment lifetime (TIME-WAIT is 2 MSL) and
         ARP retry interval, in clock cycles (registers of the stack).
@@ -152,7 +158,8 @@ class TcpSession(wiring.Component):
             "open_ack": Out(1), "close_req": Out(1), "close_ack": In(1), "abort": In(1),
             "error": Out(1), "error_code": Out(TcpError), "state": Out(TcpState),
             "peer_ip": Out(32), "peer_port": Out(16), "tx_fill": Out(17),
-            "counters": Out(32 * len(TCP_COUNTERS)),
+            "counter_index": In(range(len(TCP_COUNTERS))), "counter_value": Out(32),
+            "counters_clear": In(1),
             "rto_cycles": In(32), "msl_cycles": In(32), "arp_retry_cycles": In(32),
         })
 
@@ -165,11 +172,17 @@ class TcpSession(wiring.Component):
         txd, rxd, nd = self._tx_depth, self._rx_depth, self._descriptors
         tx_bits, rx_bits = txd.bit_length() - 1, rxd.bit_length() - 1
 
-        counters = {name: Signal(32, name=f"cnt_{name}") for name in TCP_COUNTERS}
-        m.d.comb += self.counters.eq(Cat(*(counters[name] for name in TCP_COUNTERS)))
+        # counters: the events are registered (``count`` is used among sync statements)
+        m.submodules.counters = counters = EventCounters(TCP_COUNTERS,
+                                                         amounts={"bytes_rx": 11})
+        events = Signal(counters.events.shape())
+        m.d.sync += events.eq(0)
+        m.d.comb += [counters.events.eq(events), counters.clear.eq(self.counters_clear),
+                     counters.rd_addr[0].eq(self.counter_index),
+                     self.counter_value.eq(counters.rd_data[0])]
 
         def count(name, amount=1):
-            return counters[name].eq(counters[name] + amount)
+            return events[name].eq(amount)
 
         # ---- connection registers
         remote_mac = Signal(48)

@@ -109,12 +109,9 @@ class TcprosEndpoint(wiring.Component):
         exp_len = [Signal(8, name=f"exp_len_{k}") for k in range(3)]
         phase = Signal(range(len(PHASES)))
         m.d.comb += self.phase.eq(phase)
-        counters = {name: Signal(32, name=f"cnt_{name}") for name in COUNTERS}
-        session = {name: tcp.counters.word_select(k, 32) for k, name in enumerate(TCP_COUNTERS)}
-        base_counts = {name: Signal(32, name=f"base_{name}") for name in
-                       ("bytes_tx", "bytes_rx", "rto", "fast_retransmit", "dup_acks", "rst_rx")}
-        for name, base in base_counts.items():
-            m.d.comb += counters[name].eq(session[name] - base)
+        # the session's counters are read through its counter port; the endpoint keeps the rest
+        counters = {name: Signal(32, name=f"cnt_{name}") for name in COUNTERS
+                    if name not in TCP_COUNTERS}
 
         m.submodules.hdr_tx = hdr_tx_mem = Memory(shape=8, depth=HDR_TX[1], init=[])
         m.submodules.hdr_err = hdr_err_mem = Memory(shape=8, depth=HDR_ERR[1], init=[])
@@ -169,9 +166,10 @@ class TcprosEndpoint(wiring.Component):
                         with m.Case(offset + b):
                             m.d.sync += rd.eq(value.word_select(size - 1 - b, 8))
                 for k, name in enumerate(COUNTERS):
+                    value = tcp.counter_value if name in TCP_COUNTERS else counters[name]
                     for b in range(4):
                         with m.Case(COUNTERS_OFFSET + 4 * k + b):
-                            m.d.sync += rd.eq(counters[name].word_select(3 - b, 8))
+                            m.d.sync += rd.eq(value.word_select(3 - b, 8))
                 with m.Case(_area(EXPECTED_AREA)):
                     m.d.sync += rd.eq(exp_rr.data)
                 with m.Case(_area(HDR_TX)):
@@ -181,6 +179,11 @@ class TcprosEndpoint(wiring.Component):
                 with m.Default():
                     m.d.sync += rd.eq(0)
         m.d.comb += regs.rd.eq(rd)
+        with m.Switch(addr):
+            for k, name in enumerate(COUNTERS):
+                if name in TCP_COUNTERS:
+                    with m.Case(*(COUNTERS_OFFSET + 4 * k + b for b in range(4))):
+                        m.d.comb += tcp.counter_index.eq(TCP_COUNTERS.index(name))
 
         with m.If(regs.we):
             a = regs.addr[:16]
@@ -207,10 +210,9 @@ class TcprosEndpoint(wiring.Component):
         with m.If(regs.we & (regs.addr[:16] == REG["CTRL"][0])):
             m.d.sync += ctrl.eq(regs.wd & (CTRL["START"] | CTRL["BLOCK"]))
         with m.If(regs.we & (regs.addr[:16] == REG["CTRL"][0]) & (regs.wd & CTRL["CLR_CNT"]).any()):
-            for name, base in base_counts.items():
-                m.d.sync += base.eq(session[name])
-            for name in ("messages_tx", "messages_rx", "header_rejects", "messages_dropped"):
-                m.d.sync += counters[name].eq(0)
+            m.d.comb += tcp.counters_clear.eq(1)
+            for counter in counters.values():
+                m.d.sync += counter.eq(0)
 
         def bump(name):
             return counters[name].eq(counters[name] + 1)
