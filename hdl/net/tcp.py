@@ -389,7 +389,11 @@ class TcpSession(wiring.Component):
         cwnd_grown = Mux(cwnd == nd - 1, cwnd, cwnd + 1)
         inflated = Signal(range(nd + 3))
         m.d.comb += inflated.eq(reduced + 3)
-        cwnd_inflated = Mux(inflated > nd - 1, nd - 1, inflated)
+        # (with 8 or more descriptors ssthresh + 3 always fits, and the comparison would be
+        # constant)
+        most_inflated = max(2, (nd - 1) // 2) + 3
+        cwnd_inflated = (Mux(inflated > nd - 1, nd - 1, inflated) if most_inflated > nd - 1
+                         else inflated)
         data_fits = ((distance(snd_seq + snd_len, snd_una) <= snd_wnd) &
                      (in_flight < cwnd))
         have_data = (d_snd != d_wr) & (synchronized | (state == S.SYN_RECEIVED))
