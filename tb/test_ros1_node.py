@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from gen.msg import MessageLibrary
-from gen.msg.ros1 import md5sum, message_definition
+from gen.msg.ros1 import frame_message, md5sum, message_definition
 from gen.ros1 import HardwareNode, RbcpClient, RosMaster
 from hdl.ros1.registers import PHASES
 from tb.harness import run_bench
@@ -119,9 +119,10 @@ async def run_snd_process_rcv(dut):
         assert pub_header["callerid"] == "/snd_data" and pub_header["md5sum"] == world.md5
         # the endpoints' counters (the session's through its counter port): the publisher
         # sent its header (with its length prefix) and the framed messages, the subscriber
-        # received snd_data's header (HDR_RX holds its body) and the same messages
+        # received snd_data's header (HDR_RX holds its body, framed like a message) and the
+        # same messages
         sub, pub = world.node.clients
-        framed = sum(4 + len(body) for body in sent)
+        framed = sum(len(frame_message(body)) for body in sent)
         counts = await tb.run_in_thread("counters", pub.counters)
         hdr_tx = await tb.run_in_thread("HDR_TX_LEN", pub.read, "HDR_TX_LEN")
         assert counts["messages_tx"] == len(sent) and counts["header_rejects"] == 0, counts
@@ -129,7 +130,8 @@ async def run_snd_process_rcv(dut):
         sub_counts = await tb.run_in_thread("counters", sub.counters)
         hdr_rx = await tb.run_in_thread("HDR_RX_LEN", sub.read, "HDR_RX_LEN")
         assert sub_counts["messages_rx"] == len(sent), sub_counts
-        assert sub_counts["bytes_rx"] == 4 + hdr_rx + framed, (sub_counts, hdr_rx, framed)
+        assert sub_counts["bytes_rx"] == len(frame_message(bytes(hdr_rx))) + framed, (
+            sub_counts, hdr_rx, framed)
         # CTRL.CLR_CNT zeroes them and leaves the connection streaming
         await tb.run_in_thread("clear counters", pub.clear_counters)
         counts = await tb.run_in_thread("counters", pub.counters)
