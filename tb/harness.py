@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from gen.export.verilog import export_verilog, write_if_changed, write_manifest
+from gen.export.lint import LINT_ARGS
 from gen.tops import build_top
 
 from .toolchain import SIM_BUILD, put_verilator_on_path
@@ -30,8 +31,11 @@ __all__ = ["SIMULATORS", "cocotb_bench", "run_bench", "bench_params", "bench_man
 
 SIMULATORS = ("icarus", "verilator")
 
-VERILATOR_SIM_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", "--x-assign", "unique",
-                      "--x-initial", "unique"]
+VERILATOR_X_ARGS = ["--x-assign", "unique", "--x-initial", "unique"]
+#: Verilator options of an exported top: its build is also its lint, so a top that
+#: ``make lint`` would reject fails its benches (bench-only tops are built without lint)
+VERILATOR_TOP_ARGS = [*LINT_ARGS, *VERILATOR_X_ARGS]
+VERILATOR_BENCH_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", *VERILATOR_X_ARGS]
 
 #: Tops whose Verilator model is compiled without optimisation (``OPT_FAST=-O0``): their C++
 #: is large and their benches simulate little, so the build dominates (ros1_node: 41 s for
@@ -125,7 +129,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     # WAVES never reuses a build of the other kind.
     build_dir_v = build_dir / ("obj_fst" if waves else "obj")
     if sim == "verilator":
-        build_args = list(VERILATOR_SIM_ARGS)
+        build_args = list(VERILATOR_TOP_ARGS if build is None else VERILATOR_BENCH_ARGS)
         if waves:
             build_args.append("--trace-fst")
             test_args = ["--trace-file", str(fst)]
@@ -136,6 +140,14 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
             runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
                          build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
                          log_file=build_dir / "build.log")
+    except RuntimeError as e:
+        log = (build_dir / "build.log").read_text(errors="replace").splitlines()
+        warnings = [line for line in log if line.startswith("%Warning")]
+        if warnings:
+            raise RuntimeError(f"{top} [{config_id}] is not lint-clean ({len(warnings)} "
+                               f"warning(s), see {build_dir / 'build.log'}):\n" +
+                               "\n".join(warnings[:20])) from e
+        raise
     finally:
         fcntl.flock(lock, fcntl.LOCK_UN)
         lock.close()

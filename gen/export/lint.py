@@ -12,10 +12,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["WAIVERS", "lint_verilog", "main"]
+__all__ = ["WAIVERS", "LINT_ARGS", "lint_verilog", "main"]
 
 WAIVERS = ("DECLFILENAME", "UNUSEDSIGNAL", "PROCASSINIT", "WIDTHEXPAND", "WIDTHTRUNC",
            "CASEINCOMPLETE", "UNSIGNED")
+
+#: Verilator's lint options: every warning but the waived ones (a build with them fails on
+#: a warning, as ``--lint-only`` reports it)
+LINT_ARGS = ("-Wall", *(f"-Wno-{w}" for w in WAIVERS))
 
 
 def _verilator():
@@ -28,8 +32,7 @@ def _verilator():
 
 def lint_verilog(path, top):
     """Return verilator's warnings for module ``top`` in ``path`` ('' when clean)."""
-    cmd = [_verilator(), "--lint-only", "-Wall", "--top-module", top]
-    cmd += [f"-Wno-{w}" for w in WAIVERS]
+    cmd = [_verilator(), "--lint-only", *LINT_ARGS, "--top-module", top]
     cmd.append(str(path))
     result = subprocess.run(cmd, capture_output=True, text=True)
     return (result.stdout + result.stderr).strip() if result.returncode else ""
