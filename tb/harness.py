@@ -195,7 +195,7 @@ def config_params(value):
     return value.values[0], value.marks
 
 
-def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=()):
+def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), testcases=None):
     """Return a pytest test running this module's cocotb tests on every config and simulator.
 
     Parameters
@@ -211,6 +211,9 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=()):
         Cases that run only in the long matrix (``make test-full``), to keep ``make test``
         under 10 minutes on a fresh 2-core machine; each such configuration still runs on
         the other simulator in ``make test``.
+    testcases : list of str or None
+        Run only these cocotb tests of the module (for configurations that exist for one
+        behaviour); default: all.
     """
     long = set(long)
     import inspect
@@ -227,7 +230,7 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=()):
 
     @pytest.mark.parametrize("config_id,params,sim", cases)
     def bench(config_id, params, sim):
-        run_bench(module, top, config_id, params, sim)
+        run_bench(module, top, config_id, params, sim, testcase=testcases)
 
     bench.__name__ = f"test_{top}"
     return bench

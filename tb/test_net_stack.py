@@ -22,6 +22,11 @@ from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
 
 CONFIGS = NET_CONFIGS
 test_net = cocotb_bench("net", CONFIGS)
+#: A transmit ring of 4 descriptors (3 segments), where the window after a fast retransmit
+#: (ssthresh + 3) must be capped at the ring; only the fast-retransmit test runs on it.
+SMALL_RING = {"stack_ring4": dict(NET_CONFIGS["stack"], descriptors=4)}
+test_net_small_ring = cocotb_bench("net", SMALL_RING, testcases=["run_tcp_fast_retransmit"],
+                                   long=[("stack_ring4", "verilator")])
 
 
 def checksums_ok(pkt):
@@ -412,6 +417,52 @@ async def run_tcp_retransmit_and_zero_window(dut):
     await write_global(tb, "rto_cycles", NET_CONFIGS["stack"]["rto_us"] * 125)
     s.set(open_req=0)
     await peer.expect("FA", seq=iss + 1 + len(data))
+
+
+@cocotb.test()
+async def run_tcp_fast_retransmit(dut):
+    """RFC 5681 §3.2: the third duplicate ACK (same ACK number and window, no data, data
+    outstanding) resends the first unacknowledged segment at once, long before the RTO; the
+    first two resend nothing. The window after it is ssthresh + 3 segments with ssthresh half
+    the segments in flight, at least 2: with three in flight, all three may go again and do
+    (the engine goes back to SND.UNA), on a ring of 4 descriptors as on one of 64. The
+    session counts three duplicate ACKs, one fast retransmit and no timeout."""
+    from hdl.net.tcp import TcpState
+    tb = NetTB(dut)
+    await tb.reset()
+    await write_global(tb, "rto_cycles", 1_000_000)      # 8 ms: no timeout in the test
+    peer = ScriptedPeer(tb, 41002, 29, isn=0x7FFFFF00)
+    s, iss = await establish(tb, 0, 29, peer)
+    rng = random.Random(11)
+    chunks = [rng.randbytes(900) for _ in range(4)]       # one segment each (tlast)
+    starts = [iss + 1 + 900 * k for k in range(4)]
+    for chunk in chunks:
+        await s.write(chunk)
+    # the initial window is 3 segments (RFC 5681 §3.1 as Linux counts it)
+    for k in range(3):
+        await peer.expect("PA", seq=starts[k], ack=peer.seq, data=chunks[k], timeout=20_000)
+    await tb.expect_silence(3000)
+    peer.ack = starts[1]
+    await peer.send("A")
+    await peer.expect("PA", seq=starts[3], ack=peer.seq, data=chunks[3])
+    before = await tb.session_counters(0)
+    for _ in range(2):
+        await peer.send("A")
+    await tb.expect_silence(3000)
+    await peer.send("A")
+    # segments 1..3 again, the first at once (the RTO is 1,000,000 cycles away)
+    for k in (1, 2, 3):
+        await peer.expect("PA", seq=starts[k], ack=peer.seq, data=chunks[k], timeout=3000)
+    after = await tb.session_counters(0)
+    moved = {name: after[name] - before[name] for name in ("dup_acks", "fast_retransmit", "rto")}
+    assert moved == {"dup_acks": 3, "fast_retransmit": 1, "rto": 0}, moved
+    peer.ack = starts[3] + 900
+    await peer.send("A")
+    await tb.expect_silence(3000)
+    assert s.get("state") == TcpState.ESTABLISHED.value
+    await write_global(tb, "rto_cycles", NET_CONFIGS["stack"]["rto_us"] * 125)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=peer.ack, ack=peer.seq)
 
 
 @cocotb.test()

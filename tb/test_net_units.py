@@ -14,7 +14,7 @@ from amaranth.hdl import ClockDomain, Elaboratable, Module, Signal
 from amaranth.lib import wiring
 from scapy.utils import checksum as scapy_checksum
 
-from hdl.net import Crc32, FrameParser, GmiiRx, InternetChecksum
+from hdl.net import Crc32, FrameParser, GmiiRx, InternetChecksum, NetStack
 from hdl.net.counters import EventCounters
 from hdl.params import ParameterError
 
@@ -99,6 +99,9 @@ def test_internet_checksum_matches_scapy():
 def test_bad_parameter_names_the_value():
     with pytest.raises(ParameterError, match="data_bytes must be an integer in 1..16, not 0"):
         Crc32(0)
+    with pytest.raises(ParameterError,
+                       match="descriptors must be a power of two in 4..256, not 6"):
+        NetStack(descriptors=6)
 
 
 class _ResetHarness(Elaboratable):

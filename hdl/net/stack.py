@@ -83,6 +83,9 @@ class NetStack(wiring.Component):
         TCP sessions, 1..8.
     tx_depth, rx_depth : int
         Per-session buffer bytes (see :class:`TcpSession`).
+    descriptors : int
+        Segments a session's transmit buffer may hold (see :class:`TcpSession`); the
+        congestion window never exceeds one less.
     rto_us, msl_us, arp_retry_us : int
         Initial retransmission timeout, maximum segment lifetime and a client's ARP retry
         interval in microseconds at 125 MHz (defaults 200 ms, 1 s and 2 s; net.md §1.2,
@@ -112,8 +115,9 @@ class NetStack(wiring.Component):
     """
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
-                 sessions=1, tx_depth=65536, rx_depth=65536, rto_us=200_000, msl_us=1_000_000,
-                 arp_retry_us=2_000_000, user_window=0x10000, iss_seed=0x1000):
+                 sessions=1, tx_depth=65536, rx_depth=65536, descriptors=64, rto_us=200_000,
+                 msl_us=1_000_000, arp_retry_us=2_000_000, user_window=0x10000,
+                 iss_seed=0x1000):
         try:
             self._mac = mac_to_int(mac)
         except ValueError as e:
@@ -129,9 +133,11 @@ class NetStack(wiring.Component):
         self._arp_retry = (check_int("arp_retry_us", arp_retry_us, 1, 30_000_000) *
                            (_CLOCK_HZ // 1_000_000))
         self._user_window = check_int("user_window", user_window, 1, GLOBAL_BASE)
-        self._session_args = dict(tx_depth=tx_depth, rx_depth=rx_depth, iss_seed=iss_seed)
+        self._session_args = dict(tx_depth=tx_depth, rx_depth=rx_depth,
+                                  descriptors=descriptors, iss_seed=iss_seed)
         check_power_of_two("tx_depth", tx_depth, 2048, 65536)
         check_power_of_two("rx_depth", rx_depth, 2048, 65536)
+        check_power_of_two("descriptors", descriptors, 4, 256)
         check_int("iss_seed", iss_seed, 0, 2**32 - 1)
         members = {"gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
                    "gmii_rxd": In(8), "gmii_rx_dv": In(1), "gmii_rx_er": In(1)}
