@@ -15,6 +15,8 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
            "tb.test_kernels_image": "kernels", "tb.test_kernels_control": "kernels",
            "tb.test_kernels_mnist": "kernels", "tb.test_net_stack": "net",
            "tb.test_ros1_registers": "ros1_node"}
+#: bench module -> its configuration tables besides ``CONFIGS``
+MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING",)}
 
 
 def main():
@@ -23,7 +25,10 @@ def main():
     seen = set()
     for module_name, top in BENCHES.items():
         module = importlib.import_module(module_name)
-        for config_id, params in module.CONFIGS.items():
+        configs = dict(module.CONFIGS)
+        for name in MORE_CONFIGS.get(module_name, ()):
+            configs.update(getattr(module, name))
+        for config_id, params in configs.items():
             if (top, config_id) in seen:   # benches may share a configuration
                 continue
             seen.add((top, config_id))
