@@ -466,6 +466,51 @@ async def run_tcp_fast_retransmit(dut):
 
 
 @cocotb.test()
+async def run_tcp_peer_mac_refreshed_by_arp(dut):
+    """net.md §1.2 (RFC 826): an ARP frame from the connected peer's IP refreshes its MAC,
+    whoever the ARP is for (a gratuitous ARP gets no answer but moves the connection); ARP
+    from other addresses changes nothing; an ARP request for the engine moves it back and is
+    answered at the requester's address."""
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 41003, 30, isn=123)
+    s, iss = await establish(tb, 0, 30, peer)
+    moved_mac = "02:00:00:00:00:77"
+    sent = 0
+
+    async def exchange(expected_mac):
+        nonlocal sent
+        data = f"segment {sent}".encode()
+        await s.write(data)
+        seg = await peer.expect("PA", seq=iss + 1 + sent, ack=peer.seq, data=data)
+        assert seg.underlayer.underlayer.dst == expected_mac
+        sent += len(data)
+        peer.ack = iss + 1 + sent
+        await peer.send("A")
+
+    def arp(op, hwsrc, psrc, pdst):
+        return Ether(src=hwsrc, dst="ff:ff:ff:ff:ff:ff") / ARP(op=op, hwsrc=hwsrc, psrc=psrc,
+                                                                pdst=pdst)
+
+    await exchange(PEER_MAC)
+    before = await tb.counters()
+    await tb.send(arp(2, moved_mac, "198.18.0.99", "198.18.0.99"))      # someone else
+    await tb.expect_silence(2000)
+    await exchange(PEER_MAC)
+    await tb.send(arp(2, moved_mac, PEER_IP, PEER_IP))                  # gratuitous: moved
+    await tb.expect_silence(2000)
+    await exchange(moved_mac)
+    assert_counts(before, await tb.counters(), not_mine=2, delivered=2, frames_out=2)
+    await tb.send(arp(1, PEER_MAC, PEER_IP, tb.ip))                     # back, asking us
+    reply = await tb.recv()
+    assert reply is not None and ARP in reply and reply[ARP].op == 2
+    assert (reply.dst, reply[ARP].hwdst) == (PEER_MAC, PEER_MAC)
+    await exchange(PEER_MAC)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=peer.ack, ack=peer.seq)
+
+
+@cocotb.test()
 async def run_tcp_client_refused_and_arp_timeout(dut):
     """Client mode: ARP for the server, SYN, a RST acking the SYN -> CLOSED with error
     REFUSED; a server that never answers ARP -> four requests, then error ARP."""

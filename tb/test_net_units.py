@@ -200,7 +200,7 @@ class _ParserHarness(Elaboratable):
 
 def parse_frames(frames, mac, ip):
     """Run frames (bytes with FCS) through the parser; return per frame the verdict, kind,
-    fields and payload bytes seen."""
+    fields, payload bytes seen and ``arp_seen``."""
     from hdl.net.rx import RX_FIELDS
     dut = _ParserHarness(mac, ip)
     p = dut.parser
@@ -224,7 +224,7 @@ def parse_frames(frames, mac, ip):
                     fields = {name: ctx.get(getattr(p.fields, name))
                               for name in RX_FIELDS.members}
                     out.append((ctx.get(p.accept), ctx.get(p.reason), ctx.get(p.kind),
-                                fields, bytes(payload)))
+                                fields, bytes(payload), ctx.get(p.arp_seen)))
             for _ in range(6):
                 await ctx.tick()
 
@@ -258,6 +258,16 @@ def test_frame_parser_matches_scapy():
         # a sender hardware address other than the Ethernet source: the answer goes to it
         Ether(src="02:00:00:00:00:01", dst="ff:ff:ff:ff:ff:ff") /
         ARP(op=1, hwsrc="02:00:00:00:00:2a", psrc="192.168.10.42", pdst=ip),
+        # gratuitous ARP and a reply to someone else: not for this node, but their sender
+        # is reported (RFC 826 refreshes a known sender first)
+        Ether(src="02:00:00:00:00:07", dst="ff:ff:ff:ff:ff:ff") /
+        ARP(op=2, hwsrc="02:00:00:00:00:07", psrc="192.168.10.1", pdst="192.168.10.1"),
+        Ether(src="02:00:00:00:00:08", dst="ff:ff:ff:ff:ff:ff") /
+        ARP(op=2, hwsrc="02:00:00:00:00:08", psrc="192.168.10.8", pdst="192.168.10.9",
+            hwdst="02:00:00:00:00:09"),
+        # not IPv4 over Ethernet: not an ARP frame this node understands
+        Ether(src="02:00:00:00:00:01", dst="ff:ff:ff:ff:ff:ff") /
+        ARP(op=1, hwsrc="02:00:00:00:00:01", psrc="192.168.10.1", pdst=ip, hwlen=6, plen=5),
         Ether(src="02:00:00:00:00:01", dst=mac) / IP(src="192.168.10.1", dst=ip, ihl=7,
                                                    options=b"\x01" * 8) /
         TCP(sport=9, dport=10, flags="A") / Raw(b"ip options"),
@@ -269,14 +279,21 @@ def test_frame_parser_matches_scapy():
     with_fcs = [f + zlib.crc32(f).to_bytes(4, "little") for f in frames]
     got = parse_frames(with_fcs, mac_to_int(mac), ip_to_int(ip))
     assert len(got) == len(frames)
-    for pkt, frame, (accept, reason, kind, f, payload) in zip(pkts + [None], frames, got):
+    for pkt, frame, (accept, reason, kind, f, payload, arp_seen) in zip(pkts + [None], frames,
+                                                                         got):
         pkt = Ether(frame)
         if ARP in pkt:
-            assert accept and kind == FrameKind.ARP
             a = pkt[ARP]
-            assert (f["arp_oper"], f["sender_ip"], f["arp_tpa"], f["sender_mac"]) == (
-                a.op, ip_to_int(a.psrc), ip_to_int(a.pdst), mac_to_int(a.hwsrc))
+            understood = (a.hwtype, a.ptype, a.hwlen, a.plen) == (1, 0x0800, 6, 4)
+            assert kind == FrameKind.ARP and arp_seen == understood, a.summary()
+            assert bool(accept) == (understood and a.pdst == ip), a.summary()
+            if not accept:
+                assert DROP_REASONS[reason] == "not_mine"
+            if understood:
+                assert (f["arp_oper"], f["sender_ip"], f["arp_tpa"], f["sender_mac"]) == (
+                    a.op, ip_to_int(a.psrc), ip_to_int(a.pdst), mac_to_int(a.hwsrc))
             continue
+        assert not arp_seen
         i = pkt[IP]
         assert (int_to_ip(f["sender_ip"]), int_to_ip(f["ip_dst"]), f["ip_proto"], f["ip_len"]) \
             == (i.src, i.dst, i.proto, i.len)

@@ -71,6 +71,10 @@ class FrameParser(wiring.Component):
         request, a UDP datagram or a TCP segment to ``local_ip`` with correct checksums.
     reason : Out(range(len(DROP_REASONS)))
         Why it was dropped, when ``accept`` is low (net.md §7.2 counters).
+    arp_seen : Out(1)
+        With ``done``: the frame was a well-formed ARP request or reply for this MAC or
+        broadcast, whatever its target address (RFC 826 refreshes a known sender's entry
+        before it looks at the target; ``fields.sender_*`` are its sender's addresses).
     """
 
     def __init__(self):
@@ -81,6 +85,7 @@ class FrameParser(wiring.Component):
             "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
             "kind": Out(FrameKind),
             "done": Out(1), "accept": Out(1), "reason": Out(range(len(DROP_REASONS))),
+            "arp_seen": Out(1),
         })
 
     def elaborate(self, platform):
@@ -251,8 +256,9 @@ class FrameParser(wiring.Component):
         # verdict, one cycle after the end pulse
         frame_bytes = rx.index - 4
         l4_sum = ones_complement_add(l4_acc, pseudo_acc)
-        arp_ok = ((arp_fixed == 0x000108000604) & (f.arp_tpa == self.local_ip) &
-                  ((f.arp_oper == ARP_REQUEST) | (f.arp_oper == ARP_REPLY)))
+        arp_well_formed = ((arp_fixed == 0x000108000604) &
+                           ((f.arp_oper == ARP_REQUEST) | (f.arp_oper == ARP_REPLY)))
+        arp_ok = arp_well_formed & (f.arp_tpa == self.local_ip)
         ip_ok = ((ver_ihl[4:8] == 4) & (ver_ihl[0:4] >= 5) & (f.ip_len >= ihl4) &
                  (ip_end <= frame_bytes) & (ip_acc == 0xFFFF))
         proto_ok = Signal()
@@ -306,5 +312,7 @@ class FrameParser(wiring.Component):
             m.d.comb += reason.eq(DROP_CODE["l4_checksum"])
         with m.Else():
             m.d.comb += accept.eq(1)
-        m.d.sync += [self.done.eq(rx.end), self.accept.eq(accept), self.reason.eq(reason)]
+        m.d.sync += [self.done.eq(rx.end), self.accept.eq(accept), self.reason.eq(reason),
+                     self.arp_seen.eq(~rx.err_size & ~rx.err_rx_er & rx.ok &
+                                      (dst_mine | dst_bcast) & arp_frame & arp_well_formed)]
         return m

@@ -188,6 +188,7 @@ class NetStack(wiring.Component):
                 s.seg_payload_valid.eq(parser.payload_valid),
                 s.seg_payload_offset.eq(parser.payload_offset),
                 s.seg_done.eq(parser.done), s.seg_accept.eq(parser.accept),
+                s.seg_arp.eq(parser.arp_seen),
                 s.rto_cycles.eq(rto), s.msl_cycles.eq(msl),
                 s.arp_retry_cycles.eq(arp_retry),
             ]

@@ -11,7 +11,7 @@ from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .counters import EventCounters
 from .frames import (
-    ARP_REPLY, ARP_REQUEST, TCP_ACK, TCP_FIN, TCP_MSS, TCP_MSS_DEFAULT, TCP_PSH, TCP_RST,
+    ARP_REQUEST, TCP_ACK, TCP_FIN, TCP_MSS, TCP_MSS_DEFAULT, TCP_PSH, TCP_RST,
     TCP_SYN,
 )
 from .rx import RX_FIELDS, FrameKind
@@ -94,8 +94,10 @@ class TcpSession(wiring.Component):
     -------
     seg_* : In
         From the :class:`FrameParser`: ``seg_fields`` (live header fields), ``seg_kind``,
-        ``seg_payload_*`` (payload bytes as they arrive), ``seg_done`` and ``seg_accept``
-        (the parser's verdict).
+        ``seg_payload_*`` (payload bytes as they arrive), ``seg_done``, ``seg_accept`` (the
+        parser's verdict) and ``seg_arp`` (an ARP frame from anyone to anyone: one from the
+        peer's IP resolves it for a client and refreshes its MAC on a live connection,
+        net.md §1.2).
     claim : Out(1)
         The segment of the current verdict belongs to this session (else the stack answers
         with RST).
@@ -148,7 +150,7 @@ class TcpSession(wiring.Component):
         super().__init__({
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
             "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
-            "seg_done": In(1), "seg_accept": In(1),
+            "seg_done": In(1), "seg_accept": In(1), "seg_arp": In(1),
             "claim": Out(1),
             "tx": Out(TxRequestSignature()),
             "s_axis": In(AXIStreamSignature(8, keep=False)),
@@ -544,11 +546,15 @@ class TcpSession(wiring.Component):
         seg = self.seg_done & self.seg_accept & is_tcp
         listen_hit = ((state == S.LISTEN) & (f.dst_port == local_port) & f.flags[1] &
                       ~f.flags[2] & ~f.flags[4])
-        conn_hit = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP) & tuple_match
+        connected = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP)
+        conn_hit = connected & tuple_match
         m.d.comb += self.claim.eq(listen_hit | conn_hit)
-        arp_hit = (self.seg_done & self.seg_accept & (self.seg_kind == FrameKind.ARP) &
-                   (state == S.ARP) & (f.sender_ip == remote_ip) &
-                   ((f.arp_oper == ARP_REPLY) | (f.arp_oper == ARP_REQUEST)))
+        arp_from_peer = self.seg_done & self.seg_arp & (f.sender_ip == remote_ip)
+        arp_hit = arp_from_peer & (state == S.ARP)
+        # RFC 826: a known sender's hardware address is refreshed (gratuitous ARP after a
+        # NIC change, a failover)
+        with m.If(arp_from_peer & connected):
+            m.d.sync += remote_mac.eq(f.sender_mac)
 
         s_seq = Signal(32)
         s_ack = Signal(32)
