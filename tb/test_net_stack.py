@@ -511,6 +511,70 @@ async def run_tcp_peer_mac_refreshed_by_arp(dut):
 
 
 @cocotb.test()
+async def run_arp_pending_blocks_nothing(dut):
+    """net.md §6 (verilog-ethernet #11, #42, #155): while a client session waits for an ARP
+    reply that never comes, 100 ICMP echo and RBCP read requests sent back to back at the
+    minimum inter-frame gap are each answered once, at their source MAC, or counted as
+    ``busy`` (the one reply slot): none lost, none doubled, no other frame. The session's
+    four ARP requests go out meanwhile, then it fails with error ARP."""
+    from hdl.net.frames import RBCP_READ, ip_to_int
+    from hdl.net.tcp import TcpError, TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 1, random.Random(1))
+    s.set(active=1, remote_ip=ip_to_int("198.18.0.99"), remote_port=5000, local_port=0,
+          open_req=1)
+    arp_requests = 0
+    first = await tb.recv()
+    assert ARP in first and first[ARP].pdst == "198.18.0.99" and first[ARP].op == 1
+    arp_requests += 1
+    before = await tb.counters()
+    rng = random.Random(5)
+    expected = {}
+    ip_bytes = ip_to_int(tb.ip).to_bytes(4, "big")
+    for k in range(100):
+        if k % 2:
+            payload = rng.randbytes(rng.randrange(0, 64))
+            await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) / ICMP(type=8, id=7, seq=k) /
+                          Raw(payload))
+            expected[("icmp", k)] = payload
+        else:
+            request = rbcp_request(RBCP_READ, k, GLOBAL_BASE + GLOBAL_OFFSETS["ip"], 4)
+            await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) /
+                          UDP(sport=50000, dport=DEFAULT_RBCP_PORT) / Raw(request))
+            expected[("rbcp", k)] = sitcpy_rbcp_header("r", k, GLOBAL_BASE +
+                                                       GLOBAL_OFFSETS["ip"], 4) + ip_bytes
+    answered = set()
+    while (frame := await tb.recv(8000)) is not None:
+        assert checksums_ok(frame), frame.show(dump=True)
+        if ARP in frame:
+            assert frame[ARP].op == 1 and frame[ARP].pdst == "198.18.0.99"
+            arp_requests += 1
+            continue
+        assert frame.dst == PEER_MAC, frame.summary()
+        if ICMP in frame:
+            key, body = ("icmp", frame[ICMP].seq), bytes(frame[ICMP].payload)
+            assert frame[ICMP].type == 0 and frame[ICMP].id == 7
+        else:
+            body = bytes(frame[UDP].payload)
+            key = ("rbcp", body[2])
+        assert key in expected and key not in answered, (key, frame.summary())
+        assert body == expected[key], (key, body.hex())
+        answered.add(key)
+    after = await tb.counters()
+    busy = after["busy"] - before["busy"]
+    dut._log.info("back to back during ARP: %d answered, %d busy", len(answered), busy)
+    assert len(answered) + busy == 100 and len(answered) > 0, (len(answered), busy)
+    assert_counts(before, after, delivered=len(answered), busy=busy,
+                  frames_out=len(answered) + arp_requests - 1)
+    assert arp_requests == 4, arp_requests
+    assert s.get("state") == TcpState.CLOSED.value
+    assert s.get("error_code") == TcpError.ARP.value
+    s.set(open_req=0)
+
+
+@cocotb.test()
 async def run_tcp_client_refused_and_arp_timeout(dut):
     """Client mode: ARP for the server, SYN, a RST acking the SYN -> CLOSED with error
     REFUSED; a server that never answers ARP -> four requests, then error ARP."""
