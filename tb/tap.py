@@ -18,7 +18,7 @@ import zlib
 import cocotb
 from cocotb.triggers import ClockCycles
 
-from hdl.net.frames import ETHERTYPE_IPV4, IP_PROTO_TCP
+from hdl.net.frames import ETHERTYPE_IPV4, ETHERTYPE_IPV6, IP_PROTO_TCP
 from tb.net_tb import ENGINE_IP, PEER_IP, NetTB
 
 __all__ = ["namespace_unavailable", "network_namespace", "TapPump", "LinuxTB", "KERNEL_IP",
@@ -104,8 +104,9 @@ class TapPump:
         self.poll_cycles = poll_cycles
         self.fd = self._open()
         self.stats = {"to_engine": 0, "from_engine": 0, "dropped": 0, "duplicated": 0,
-                      "reordered": 0}
+                      "reordered": 0, "ipv6": 0}
         self._held = {"in": None, "out": None}
+        self.ipv6_frames = []               # the last 64 IPv6 frames from the kernel
         cocotb.start_soon(self._kernel_to_engine())
         cocotb.start_soon(self._engine_to_kernel())
 
@@ -152,6 +153,9 @@ class TapPump:
                     frame = os.read(self.fd, 2048)
                 except BlockingIOError:
                     break
+                if frame[12:14] == ETHERTYPE_IPV6.to_bytes(2, "big"):
+                    self.stats["ipv6"] += 1
+                    self.ipv6_frames = (self.ipv6_frames + [frame])[-64:]
                 for f in self._impair("in", frame):
                     self.stats["to_engine"] += 1
                     self.tb.source.send_nowait(GmiiFrame.from_payload(f))
@@ -208,6 +212,18 @@ class LinuxTB(NetTB):
             counts = await self.session_counters(k)
             sessions.append(f"tcp{k} state {int(state.value)} {counts}")
         return f"pump {self.pump.stats}; " + "; ".join(sessions)
+
+    async def quiet_counters(self):
+        """The stack's counters and the pump's count of frames sent to the engine, taken
+        when every frame sent has reached its verdict (retried while the kernel sends)."""
+        for _ in range(20):
+            pumped = self.pump.stats["to_engine"]
+            await self.source.wait()
+            await self.idle(200)
+            counters = await self.counters()
+            if self.pump.stats["to_engine"] == pumped:
+                return counters, pumped
+        raise AssertionError(f"the kernel never paused; {await self.diagnostics()}")
 
     async def run_in_thread(self, what, fn, *args, limit_cycles=3_000_000):
         with concurrent.futures.ThreadPoolExecutor(1) as pool:

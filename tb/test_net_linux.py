@@ -13,6 +13,7 @@ import os
 import random
 import socket
 import subprocess
+from pathlib import Path
 
 import cocotb
 import pytest
@@ -20,14 +21,18 @@ import pytest
 from hdl.net.tcp import TcpState
 from tb.harness import run_bench
 from tb.net_tb import NET_CONFIGS, SessionPort
-from tb.tap import KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
+from tb.tap import KERNEL_IP, TAP_NAME, LinuxTB, namespace_unavailable, network_namespace
 
 #: bytes per direction, set by the pytest case
 TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 65536))
 
 #: (id, impairment probability, bytes per direction); make test runs the first
 CASES = [("clean", 0.0, 64 * 1024), ("megabytes", 0.0, 2 * 1024 * 1024),
-         ("impaired", 0.02, 1024 * 1024)]
+         ("impaired", 0.02, 1024 * 1024), ("options_off", 0.0, 256 * 1024)]
+#: case -> the namespace's sysctls (net.md §5.2: the kernel without timestamps, SACK and
+#: window scaling; the other cases offer all three, which the engine ignores)
+SYSCTLS = {"options_off": {"net.ipv4.tcp_timestamps": 0, "net.ipv4.tcp_sack": 0,
+                           "net.ipv4.tcp_window_scaling": 0}}
 
 
 @pytest.mark.parametrize("case,impairment,transfer", [
@@ -40,6 +45,10 @@ def test_net_linux(case, impairment, transfer):
     params = NET_CONFIGS["stack"]
     env = {"ROSGATE_NET_IMPAIRMENT": str(impairment), "ROSGATE_NET_TRANSFER": str(transfer)}
     with network_namespace():
+        for key, value in SYSCTLS.get(case, {}).items():
+            path = Path("/proc/sys") / key.replace(".", "/")
+            path.write_text(f"{value}\n")
+            assert path.read_text().strip() == str(value), (key, path.read_text())
         run_bench(__name__, "net", "stack", params, "verilator", extra_env=env, run_name=case)
 
 
@@ -173,3 +182,40 @@ async def run_linux_server_engine_client(dut):
         if conn is not None:
             conn.close()
     dut._log.info("pump %s, session %s", tb.pump.stats, await tb.session_counters(1))
+
+
+@cocotb.test()
+async def run_linux_ipv6_dropped_and_counted(dut):
+    """net.md §5.2: IPv6 stays on in the namespace. A datagram to an unknown link-local
+    neighbour makes the kernel send a neighbour solicitation (to a multicast MAC); the
+    engine drops it and whatever else the kernel sends meanwhile, and counts every frame:
+    ``frames_in`` grows by exactly the frames the pump delivered, ``not_mine`` by at least
+    the IPv6 ones."""
+    from scapy.layers.inet6 import ICMPv6ND_NS
+    from scapy.layers.l2 import Ether
+    tb = LinuxTB(dut)
+    await tb.reset()
+    before, pumped = await tb.quiet_counters()
+    ipv6_before = tb.pump.stats["ipv6"]
+    tb.pump.ipv6_frames = []
+
+    def solicitation():
+        return any(ICMPv6ND_NS in Ether(f) and Ether(f)[ICMPv6ND_NS].tgt == "fe80::1"
+                   for f in tb.pump.ipv6_frames)
+    sock = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+    try:
+        for _ in range(20):      # the link-local address may still be tentative (DAD)
+            try:
+                sock.sendto(b"neighbour?", (f"fe80::1%{TAP_NAME}", 9))
+                break
+            except OSError:
+                await tb.idle(100_000)
+        await tb.poll("the kernel's neighbour solicitation for fe80::1", solicitation,
+                      3_000_000, step=1024)
+    finally:
+        sock.close()
+    after, delivered = await tb.quiet_counters()
+    ipv6 = tb.pump.stats["ipv6"] - ipv6_before
+    assert after["frames_in"] - before["frames_in"] == delivered - pumped, (before, after)
+    assert after["not_mine"] - before["not_mine"] >= ipv6 >= 1, (ipv6, before, after)
+    dut._log.info("IPv6 frames dropped and counted: %d; pump %s", ipv6, tb.pump.stats)

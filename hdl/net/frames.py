@@ -7,7 +7,7 @@ the SFD). The hardware parser and builder and the Python models import them from
 __all__ = [
     "ETH_HEADER", "ETH_SRC_OFFSET", "ARP_SHA_OFFSET", "ARP_SPA_OFFSET", "IP_PROTO_OFFSET",
     "IP_CSUM_OFFSET", "IP_SRC_OFFSET", "L4_OFFSET", "UDP_CSUM_OFFSET", "TCP_CSUM_OFFSET",
-    "ETHERTYPE_IPV4", "ETHERTYPE_ARP", "MIN_FRAME", "MAX_FRAME", "PREAMBLE",
+    "ETHERTYPE_IPV4", "ETHERTYPE_ARP", "ETHERTYPE_IPV6", "MIN_FRAME", "MAX_FRAME", "PREAMBLE",
     "SFD", "IFG", "ARP_OFFSET", "ARP_REQUEST", "ARP_REPLY", "IP_OFFSET", "IP_PROTO_ICMP",
     "IP_PROTO_TCP", "IP_PROTO_UDP", "IP_TTL", "ICMP_ECHO_REQUEST", "ICMP_ECHO_REPLY",
     "TCP_FIN", "TCP_SYN", "TCP_RST", "TCP_PSH", "TCP_ACK", "TCP_OPT_MSS", "TCP_MSS",
@@ -25,6 +25,8 @@ MIN_FRAME = 64                # dst MAC .. FCS
 MAX_FRAME = 1518
 ETHERTYPE_IPV4 = 0x0800
 ETHERTYPE_ARP = 0x0806
+#: not handled: counted as ``not_mine`` (net.md §5.2, the kernel's neighbour discovery)
+ETHERTYPE_IPV6 = 0x86DD
 
 ETH_SRC_OFFSET = 6
 ARP_OFFSET = ETH_HEADER       # htype 0, ptype 2, hlen 4, plen 5, oper 6, sha 8, spa 14, tha 18, tpa 24
