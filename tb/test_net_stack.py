@@ -18,7 +18,7 @@ from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
-from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
+from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
 
 CONFIGS = NET_CONFIGS
 test_net = cocotb_bench("net", CONFIGS)
@@ -153,6 +153,10 @@ async def write_global(tb, name, value):
     data = value.to_bytes(size, "big")
     reply = await rbcp(tb, rbcp_request(0x80, 0x5A, GLOBAL_BASE + offset, size, data))
     assert reply == sitcpy_rbcp_header("w", 0x5A, GLOBAL_BASE + offset, size) + data, reply
+
+
+#: the configuration's retransmission timeout, which tests that shorten or lengthen it restore
+CONFIG_RTO_CYCLES = NET_CONFIGS["stack"]["rto_us"] * 1000 // CLOCK_NS
 
 
 @cocotb.test()
@@ -414,7 +418,7 @@ async def run_tcp_retransmit_and_zero_window(dut):
         await peer.send("A")
     assert bytes(got) == data[1000:] and peer.ack == iss + 1 + len(data)
     assert s.get("state") == TcpState.ESTABLISHED.value
-    await write_global(tb, "rto_cycles", NET_CONFIGS["stack"]["rto_us"] * 125)
+    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
     s.set(open_req=0)
     await peer.expect("FA", seq=iss + 1 + len(data))
 
@@ -460,7 +464,7 @@ async def run_tcp_fast_retransmit(dut):
     await peer.send("A")
     await tb.expect_silence(3000)
     assert s.get("state") == TcpState.ESTABLISHED.value
-    await write_global(tb, "rto_cycles", NET_CONFIGS["stack"]["rto_us"] * 125)
+    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
     s.set(open_req=0)
     await peer.expect("FA", seq=peer.ack, ack=peer.seq)
 

@@ -6,7 +6,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..params import ParameterError, check_int, check_power_of_two
+from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .counters import EventCounters
@@ -133,12 +133,8 @@ class NetStack(wiring.Component):
         self._arp_retry = (check_int("arp_retry_us", arp_retry_us, 1, 30_000_000) *
                            (_CLOCK_HZ // 1_000_000))
         self._user_window = check_int("user_window", user_window, 1, GLOBAL_BASE)
-        self._session_args = dict(tx_depth=tx_depth, rx_depth=rx_depth,
-                                  descriptors=descriptors, iss_seed=iss_seed)
-        check_power_of_two("tx_depth", tx_depth, 2048, 65536)
-        check_power_of_two("rx_depth", rx_depth, 2048, 65536)
-        check_power_of_two("descriptors", descriptors, 4, 256)
-        check_int("iss_seed", iss_seed, 0, 2**32 - 1)
+        self._session_args = TcpSession.check_parameters(
+            tx_depth=tx_depth, rx_depth=rx_depth, descriptors=descriptors, iss_seed=iss_seed)
         members = {"gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
                    "gmii_rxd": In(8), "gmii_rx_dv": In(1), "gmii_rx_er": In(1)}
         for k in range(sessions):

@@ -142,11 +142,20 @@ class TcpSession(wiring.Component):
         ARP retry interval, in clock cycles (registers of the stack).
     """
 
+    @staticmethod
+    def check_parameters(*, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000):
+        """The parameters, validated (:class:`~hdl.params.ParameterError` names a bad one);
+        for containers that build their sessions later, in ``elaborate``."""
+        return dict(tx_depth=check_power_of_two("tx_depth", tx_depth, 2048, 65536),
+                    rx_depth=check_power_of_two("rx_depth", rx_depth, 2048, 65536),
+                    descriptors=check_power_of_two("descriptors", descriptors, 4, 256),
+                    iss_seed=check_int("iss_seed", iss_seed, 0, 2**32 - 1))
+
     def __init__(self, *, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000):
-        self._tx_depth = check_power_of_two("tx_depth", tx_depth, 2048, 65536)
-        self._rx_depth = check_power_of_two("rx_depth", rx_depth, 2048, 65536)
-        self._descriptors = check_power_of_two("descriptors", descriptors, 4, 256)
-        self._iss_seed = check_int("iss_seed", iss_seed, 0, 2**32 - 1)
+        params = self.check_parameters(tx_depth=tx_depth, rx_depth=rx_depth,
+                                       descriptors=descriptors, iss_seed=iss_seed)
+        self._tx_depth, self._rx_depth = params["tx_depth"], params["rx_depth"]
+        self._descriptors, self._iss_seed = params["descriptors"], params["iss_seed"]
         super().__init__({
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
             "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
