@@ -15,7 +15,7 @@ from scapy.packet import Raw
 from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
 from gen.ros1.rbcp import rbcp_request
-from hdl.net.frames import DEFAULT_RBCP_PORT
+from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
 from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
@@ -50,7 +50,7 @@ def assert_counts(before, after, **expected):
     """Only the named counters moved, by the given amounts (frames_in by their sum)."""
     moved = {k: after[k] - before[k] for k in STACK_COUNTERS if after[k] != before[k]}
     want = dict(expected)
-    want["frames_in"] = sum(v for k, v in expected.items() if k != "frames_out")
+    want["frames_in"] = sum(v for k, v in expected.items() if k in ("delivered",) + DROP_REASONS)
     want = {k: v for k, v in want.items() if v}
     assert moved == want, f"counters moved {moved}, expected {want}"
 
@@ -205,12 +205,17 @@ class ScriptedPeer:
         self.seq = isn
         self.ack = 0
 
-    def segment(self, flags, data=b"", *, seq=None, ack=None, options=(), window=65535):
+    def segment(self, flags, data=b"", *, seq=None, ack=None, options=(), raw_options=b"",
+                window=65535):
+        """``options`` as scapy's list, or ``raw_options`` as bytes (a multiple of 4) that go
+        out as written, malformed or not."""
         return (eth(self.tb) / IP(src=PEER_IP, dst=self.tb.ip) /
                 TCP(sport=self.sport, dport=self.dport, flags=flags,
                     seq=(self.seq if seq is None else seq) % 2**32,
                     ack=(self.ack if ack is None else ack) % 2**32,
-                    window=window, options=list(options)) / Raw(data))
+                    window=window, options=list(options),
+                    dataofs=5 + len(raw_options) // 4 if raw_options else None) /
+                Raw(raw_options + data))
 
     async def send(self, flags, data=b"", advance=True, **kw):
         await self.tb.send(self.segment(flags, data, **kw))
@@ -287,6 +292,46 @@ async def run_tcp_server_scripted(dut):
     await other.send("S")
     await other.expect("RA", seq=0, ack=78)
     assert (await tb.session_counters(0))["bytes_rx"] == 18
+
+
+@cocotb.test()
+async def run_tcp_malformed_options(dut):
+    """net.md §1.3: a malformed option (length below 2, or running past the data offset)
+    stops the option walk, the segment is processed all the same and ``tcp_bad_options``
+    counts it; an MSS option before the fault is used, one after it is not."""
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 0, random.Random(5))
+    s.set(active=0, local_port=24, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    before = await tb.counters()
+    peer = ScriptedPeer(tb, 40002, 24, isn=1000)
+    # MSS 300, SACK-permitted with length 0, two NOPs, MSS 100
+    await peer.send("S", raw_options=b"\x02\x04\x01\x2c\x04\x00\x01\x01\x02\x04\x00\x64")
+    synack = await peer.expect("SA", ack=peer.seq)
+    peer.ack = synack.seq + 1
+    await peer.send("A")
+    await s.wait_state(TcpState.ESTABLISHED)
+    # data behind a timestamp option that the data offset cuts
+    await peer.send("PA", b"still delivered", raw_options=b"\x01\x01\x08\x0a\x00\x00\x00\x01")
+    await peer.expect("A", ack=peer.seq)
+    assert await s.wait_received(15, 2000) == b"still delivered"
+    # well-formed options: processed, not counted
+    await peer.send("PA", b"!", raw_options=b"\x01\x01\x08\x0a" + bytes(8))
+    await peer.expect("A", ack=peer.seq)
+    assert await s.wait_received(16, 2000) == b"still delivered!"
+    # the peer's MSS of 300 cuts what the user writes
+    data = bytes(range(256)) * 3
+    await s.write(data)
+    sent = b""
+    for want in (300, 300, 168):
+        seg = await peer.expect("PA", seq=synack.seq + 1 + len(sent), ack=peer.seq, data=None)
+        assert len(seg.payload) == want, (len(seg.payload), want)
+        sent += bytes(seg.payload)
+    assert sent == data
+    assert_counts(before, await tb.counters(), delivered=4, tcp_bad_options=2, frames_out=6)
 
 
 async def establish(tb, k, port, peer, *, window=65535):

@@ -200,7 +200,7 @@ class _ParserHarness(Elaboratable):
 
 def parse_frames(frames, mac, ip):
     """Run frames (bytes with FCS) through the parser; return per frame the verdict, kind,
-    fields, payload bytes seen and ``arp_seen``."""
+    fields, payload bytes seen, ``arp_seen`` and ``options_malformed``."""
     from hdl.net.rx import RX_FIELDS
     dut = _ParserHarness(mac, ip)
     p = dut.parser
@@ -224,7 +224,8 @@ def parse_frames(frames, mac, ip):
                     fields = {name: ctx.get(getattr(p.fields, name))
                               for name in RX_FIELDS.members}
                     out.append((ctx.get(p.accept), ctx.get(p.reason), ctx.get(p.kind),
-                                fields, bytes(payload), ctx.get(p.arp_seen)))
+                                fields, bytes(payload), ctx.get(p.arp_seen),
+                                ctx.get(p.options_malformed)))
             for _ in range(6):
                 await ctx.tick()
 
@@ -236,12 +237,14 @@ def test_frame_parser_matches_scapy():
     """Every header field the parser captures equals scapy's dissection of the same frame;
     checksums, lengths and options decide the verdict as scapy's checksums say (spec net.md
     §1.2, §1.3, §5.2 "Unit")."""
-    from scapy.layers.inet import ICMP, IP, TCP, UDP
+    from scapy.layers.inet import ICMP, IP, TCP, UDP, in4_chksum
     from scapy.layers.l2 import ARP, Ether
     from scapy.packet import Raw
+    from scapy.utils import checksum
 
     from hdl.net.frames import DROP_REASONS, int_to_ip, ip_to_int, mac_to_int
     from hdl.net.rx import FrameKind
+    from tb.models.tcp_peer import tcp_options_mss
     mac, ip = "02:00:c0:a8:0a:10", "192.168.10.16"
     peer = Ether(src="02:00:00:00:00:01", dst=mac) / IP(src="192.168.10.1", dst=ip)
     rng = random.Random(11)
@@ -272,6 +275,15 @@ def test_frame_parser_matches_scapy():
                                                    options=b"\x01" * 8) /
         TCP(sport=9, dport=10, flags="A") / Raw(b"ip options"),
     ]
+    # option bytes as written (scapy would re-encode them): malformed ones (net.md §1.3:
+    # length below 2, or past the data offset; an MSS before the fault counts), an MSS of
+    # the wrong length, junk after EOL
+    scapy_options = len(pkts)
+    for options in (b"\x02\x04\x03\xe8\x04\x00\x00\x00", b"\x01\x01\x08\x0a\x00\x00\x00\x01",
+                    b"\x01\x01\x01\x03", b"\x02\x05\x04\xb0", b"\x02\x03\x05\x01\x01\x01\x01\x01",
+                    b"\x00\x02\x01\x00", b"\x03\x03\x07\x02\x04\x02\x18\x00"):
+        pkts.append(peer / TCP(sport=7, dport=8, flags="PA", dataofs=5 + len(options) // 4) /
+                    Raw(options + rng.randbytes(rng.randrange(1, 20))))
     frames = [bytes(pkt).ljust(60, b"\0") for pkt in pkts]
     bad = bytearray(frames[1])
     bad[-1] ^= 0x40                                        # TCP payload: bad checksum
@@ -279,8 +291,9 @@ def test_frame_parser_matches_scapy():
     with_fcs = [f + zlib.crc32(f).to_bytes(4, "little") for f in frames]
     got = parse_frames(with_fcs, mac_to_int(mac), ip_to_int(ip))
     assert len(got) == len(frames)
-    for pkt, frame, (accept, reason, kind, f, payload, arp_seen) in zip(pkts + [None], frames,
-                                                                         got):
+    malformed_seen = 0
+    for n, (frame, (accept, reason, kind, f, payload, arp_seen, malformed)) in enumerate(
+            zip(frames, got)):
         pkt = Ether(frame)
         if ARP in pkt:
             a = pkt[ARP]
@@ -304,8 +317,12 @@ def test_frame_parser_matches_scapy():
             assert (f["src_port"], f["dst_port"], f["seq"], f["ack"], f["flags"], f["window"],
                     f["doff"]) == (t.sport, t.dport, t.seq, t.ack, int(t.flags), t.window,
                                    t.dataofs)
-            mss = dict((k, v) for k, v in t.options if k == "MSS").get("MSS")
+            mss, bad_options = tcp_options_mss(l4[20:t.dataofs * 4])
+            if n < scapy_options:       # the option walk agrees with scapy's dissection
+                assert mss == dict((k, v) for k, v in t.options if k == "MSS").get("MSS")
             assert (f["has_mss"], f["mss"] if f["has_mss"] else None) == (mss is not None, mss)
+            assert malformed == bad_options, l4[20:t.dataofs * 4].hex()
+            malformed_seen += bad_options
             body = l4[t.dataofs * 4:]
             assert kind == FrameKind.TCP
         elif UDP in pkt:
@@ -318,13 +335,15 @@ def test_frame_parser_matches_scapy():
             assert (f["icmp_type"], f["icmp_code"]) == (c.type, c.code)
             body = l4
             assert kind == FrameKind.ICMP
+        if TCP not in pkt:
+            assert not malformed
         assert payload == body and f["payload_len"] == len(body)
-        # scapy's verdict on the checksums decides accept
-        check = Ether(frame)
-        for layer in (TCP, UDP, ICMP):
-            if layer in check and not (layer is UDP and check[UDP].chksum == 0):
-                del check[layer].chksum
-        ok = bytes(Ether(bytes(check))) == frame
+        # scapy's checksum of the bytes as received decides accept
+        if ICMP in pkt:
+            ok = checksum(l4) == 0
+        else:
+            ok = (UDP in pkt and pkt[UDP].chksum == 0) or in4_chksum(i.proto, i, l4) == 0
         assert bool(accept) == ok, (pkt.summary(), DROP_REASONS[reason])
         if not ok:
             assert DROP_REASONS[reason] == "l4_checksum"
+    assert malformed_seen == 4

@@ -8,8 +8,8 @@ from amaranth.lib.wiring import In, Out
 from .checksum import ones_complement_add
 from .frames import (
     ARP_REPLY, ARP_REQUEST, ARP_SHA_OFFSET, ARP_SPA_OFFSET, DROP_REASONS, ETH_SRC_OFFSET,
-    IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4,
-    ICMP_ECHO_REQUEST, IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, TCP_OPT_MSS,
+    IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_ECHO_REQUEST,
+    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH,
 )
 from .mac import RxByteSignature
 
@@ -75,6 +75,10 @@ class FrameParser(wiring.Component):
         With ``done``: the frame was a well-formed ARP request or reply for this MAC or
         broadcast, whatever its target address (RFC 826 refreshes a known sender's entry
         before it looks at the target; ``fields.sender_*`` are its sender's addresses).
+    options_malformed : Out(1)
+        With ``done``: the frame was a TCP segment whose options were malformed (a length
+        below 2, or an option running past the data offset, net.md §1.3). Options are parsed
+        up to there (an MSS option before it counts); the verdict does not change.
     """
 
     def __init__(self):
@@ -85,7 +89,7 @@ class FrameParser(wiring.Component):
             "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
             "kind": Out(FrameKind),
             "done": Out(1), "accept": Out(1), "reason": Out(range(len(DROP_REASONS))),
-            "arp_seen": Out(1),
+            "arp_seen": Out(1), "options_malformed": Out(1),
         })
 
     def elaborate(self, platform):
@@ -209,11 +213,17 @@ class FrameParser(wiring.Component):
             with m.If(is_tcp):
                 m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
 
-        # TCP options (RFC 9293 §3.2): only MSS is used; everything else is skipped by length
-        opt_kind = Signal(8)
+        # TCP options (RFC 9293 §3.2): only MSS (length 4) is used; everything else is
+        # skipped by length. A length below 2, or an option that runs past the data offset,
+        # is malformed (net.md §1.3): parsing stops, the segment is processed, the stack
+        # counts it.
+        opt_is_mss = Signal()
         opt_left = Signal(8)
-        opt_mss = Signal(16)
-        with m.FSM(name="options"):
+        opt_mss = Signal(8)
+        opt_bad = Signal()
+        with m.If(v & (i == 0)):
+            m.d.sync += opt_bad.eq(0)
+        with m.FSM(name="options") as options:
             with m.State("WAIT"):
                 with m.If(lv & is_tcp & (j == 19)):
                     m.next = "KIND"
@@ -221,7 +231,7 @@ class FrameParser(wiring.Component):
                 with m.If(v & (i == 0)):
                     m.next = "WAIT"
                 with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += opt_kind.eq(byte)
+                    m.d.sync += opt_is_mss.eq(byte == TCP_OPT_MSS)
                     with m.If(byte == 0):
                         m.next = "WAIT"
                     with m.Elif(byte != 1):
@@ -230,9 +240,11 @@ class FrameParser(wiring.Component):
                 with m.If(v & (i == 0)):
                     m.next = "WAIT"
                 with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += opt_left.eq(byte - 2)
+                    m.d.sync += [opt_left.eq(byte - 2),
+                                 opt_is_mss.eq(opt_is_mss & (byte == TCP_OPT_MSS_LENGTH))]
                     with m.If(byte < 2):
-                        m.next = "WAIT"         # malformed: stop parsing, keep the segment
+                        m.d.sync += opt_bad.eq(1)
+                        m.next = "WAIT"
                     with m.Elif(byte == 2):
                         m.next = "KIND"
                     with m.Else():
@@ -241,11 +253,14 @@ class FrameParser(wiring.Component):
                 with m.If(v & (i == 0)):
                     m.next = "WAIT"
                 with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += [opt_left.eq(opt_left - 1), opt_mss.eq(Cat(byte, opt_mss[:8]))]
+                    m.d.sync += [opt_left.eq(opt_left - 1), opt_mss.eq(byte)]
                     with m.If(opt_left == 1):
                         m.next = "KIND"
-                        with m.If(opt_kind == TCP_OPT_MSS):
-                            m.d.sync += [f.mss.eq(Cat(byte, opt_mss[:8])), f.has_mss.eq(1)]
+                        with m.If(opt_is_mss):
+                            m.d.sync += [f.mss.eq(Cat(byte, opt_mss)), f.has_mss.eq(1)]
+        # at the verdict an option still waiting for its length or body was cut by the end
+        # of the header
+        options_cut = options.ongoing("LENGTH") | options.ongoing("BODY")
 
         m.d.comb += [
             self.payload_data.eq(byte),
@@ -314,5 +329,6 @@ class FrameParser(wiring.Component):
             m.d.comb += accept.eq(1)
         m.d.sync += [self.done.eq(rx.end), self.accept.eq(accept), self.reason.eq(reason),
                      self.arp_seen.eq(~rx.err_size & ~rx.err_rx_er & rx.ok &
-                                      (dst_mine | dst_bcast) & arp_frame & arp_well_formed)]
+                                      (dst_mine | dst_bcast) & arp_frame & arp_well_formed),
+                     self.options_malformed.eq(~arp_frame & is_tcp & (opt_bad | options_cut))]
         return m

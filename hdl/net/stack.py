@@ -24,8 +24,10 @@ __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLO
            "GLOBAL_OFFSETS"]
 
 #: Stack counters, in the order of their read addresses (``counter_index``, RBCP): every
-#: received frame ends in exactly one of them (``delivered`` or a drop reason).
-STACK_COUNTERS = ("frames_in", "delivered") + DROP_REASONS + ("frames_out",)
+#: received frame ends in exactly one of ``delivered`` and the drop reasons;
+#: ``tcp_bad_options`` counts TCP segments that passed every check and had malformed
+#: options (processed all the same, net.md §1.3).
+STACK_COUNTERS = ("frames_in", "delivered") + DROP_REASONS + ("frames_out", "tcp_bad_options")
 
 #: RBCP base of the stack's own registers (net.md §7.2 "global block")
 GLOBAL_BASE = 0xFFFF0000
@@ -380,4 +382,6 @@ class NetStack(wiring.Component):
                             m.d.comb += bump("delivered")
                         with m.Else():
                             m.d.comb += bump("no_port")
+                        with m.If(parser.options_malformed):
+                            m.d.comb += bump("tcp_bad_options")
         return m

@@ -10,7 +10,7 @@ from .checksum import ones_complement_add
 from .frames import (
     ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET, IP_PROTO_ICMP,
     IP_PROTO_OFFSET, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, TCP_CSUM_OFFSET,
-    TCP_MSS, TCP_OPT_MSS, UDP_CSUM_OFFSET,
+    TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, UDP_CSUM_OFFSET,
 )
 from .rx import FrameKind
 
@@ -21,7 +21,7 @@ __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
 PRESUM_CYCLES = 4
 
 #: The MSS option of a SYN or SYN-ACK, as sent (after the 20-byte TCP header)
-MSS_OPTION = (TCP_OPT_MSS, 4, TCP_MSS >> 8, TCP_MSS & 0xFF)
+MSS_OPTION = (TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_MSS >> 8, TCP_MSS & 0xFF)
 
 #: What a requester asks the builder to send.
 TX_REQUEST = data.StructLayout({

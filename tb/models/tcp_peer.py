@@ -15,7 +15,7 @@ from hdl.net.frames import (
     ip_to_int, mac_to_int,
 )
 
-__all__ = ["TcpPeerModel", "parse_tcp_frame", "tcp_frame", "udp_frame",
+__all__ = ["TcpPeerModel", "parse_tcp_frame", "tcp_options_mss", "tcp_frame", "udp_frame",
            "fix_ip_checksum", "fix_tcp_checksum"]
 
 
@@ -90,6 +90,29 @@ def parse_tcp_frame(frame):
                 src_mac=int.from_bytes(frame[6:12], "big"), src_ip=src_ip, dst_ip=dst_ip,
                 sport=sport, dport=dport, seq=seq, ack=ack, flags=flags, window=window,
                 options=seg[20:doff], payload=seg[doff:])
+
+
+def tcp_options_mss(options):
+    """Walk a TCP header's option bytes as a minimal receiver does (RFC 9293 §3.2, spec
+    net.md §1.3): EOL ends the list, NOP is one byte, every other option is skipped by its
+    length; MSS is taken from a kind-2 option of length 4. Return ``(mss or None,
+    malformed)``, where ``malformed`` says that a length below 2 or an option running past
+    the end stopped the walk (an MSS before that point is kept)."""
+    mss, at = None, 0
+    while at < len(options):
+        kind = options[at]
+        if kind == 0:
+            break
+        if kind == 1:
+            at += 1
+            continue
+        if at + 1 >= len(options) or options[at + 1] < 2 or at + options[at + 1] > len(options):
+            return mss, True
+        length = options[at + 1]
+        if kind == 2 and length == 4:
+            mss = struct.unpack("!H", options[at + 2:at + 4])[0]
+        at += length
+    return mss, False
 
 
 def _lt(a, b):
