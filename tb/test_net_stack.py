@@ -157,6 +157,7 @@ async def write_global(tb, name, value):
 
 #: the configuration's retransmission timeout, which tests that shorten or lengthen it restore
 CONFIG_RTO_CYCLES = NET_CONFIGS["stack"]["rto_us"] * 1000 // CLOCK_NS
+CONFIG_MSL_CYCLES = NET_CONFIGS["stack"]["msl_us"] * 1000 // CLOCK_NS
 
 
 @cocotb.test()
@@ -347,6 +348,46 @@ async def establish(tb, k, port, peer, *, window=65535):
     await peer.send("A", window=window)
     await s.wait_state(TcpState.ESTABLISHED)
     return s, synack.seq
+
+
+@cocotb.test()
+async def run_tcp_fin_wait_2_timeout(dut):
+    """net.md §1.4: FIN-WAIT-2 does not last forever (the spec proposes a 60 s timer; here
+    2**FIN_WAIT_2_SCALE MSL of silence from the peer). Data still arrives after our FIN and
+    restarts the timer; when the peer stays silent the engine sends RST, closes and
+    reports TIMEOUT."""
+    from hdl.net.tcp import FIN_WAIT_2_SCALE, TcpError, TcpState
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 40003, 24, isn=5000)
+    msl = 300                   # cycles: a short bench (CONFIG_MSL_CYCLES is longer)
+    await write_global(tb, "msl_cycles", msl)
+    s, iss = await establish(tb, 0, 24, peer)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=iss + 1, ack=peer.seq)
+    peer.ack = iss + 2
+    await peer.send("A")
+    await s.wait_state(TcpState.FIN_WAIT_2)
+    limit = 2**FIN_WAIT_2_SCALE * msl
+    await tb.expect_silence(limit * 3 // 4)
+    assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
+    sent_at = int(get_sim_time("ns")) // CLOCK_NS
+    await peer.send("PA", b"late data")
+    await peer.expect("A", seq=iss + 2, ack=peer.seq)
+    assert await s.wait_received(9, 2000) == b"late data"
+    assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
+    # the timer restarts when the segment arrives (after sent_at) and counts ticks of
+    # 2**FIN_WAIT_2_SCALE cycles: it cannot expire a tick before the limit
+    elapsed = int(get_sim_time("ns")) // CLOCK_NS - sent_at
+    await tb.expect_silence(limit - 2**FIN_WAIT_2_SCALE - elapsed)
+    assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
+    await peer.expect("R", seq=iss + 2, ack=None, timeout=elapsed + 1000)
+    assert TcpState(s.get("state")) == TcpState.CLOSED
+    assert TcpError(s.get("error_code")) == TcpError.TIMEOUT
+    # the peer's late FIN now finds no connection
+    await peer.send("FA")
+    await peer.expect("R", seq=iss + 2)
+    await write_global(tb, "msl_cycles", CONFIG_MSL_CYCLES)
 
 
 @cocotb.test()

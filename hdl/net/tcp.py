@@ -50,6 +50,9 @@ class TcpError(enum.Enum, shape=4):
 INITIAL_WINDOW = 3
 #: Back-offs of the retransmission timeout: it doubles per expiry up to 2**5 times the RTO
 MAX_BACKOFF = 5
+#: FIN-WAIT-2 ends after 2**6 MSL without a segment from the peer (64 s at the default MSL of
+#: 1 s; net.md §1.4 proposes 60 s)
+FIN_WAIT_2_SCALE = 6
 
 #: Session counters, in the order of the ``counters`` output (net.md §7.2 "counters").
 TCP_COUNTERS = ("bytes_tx", "bytes_rx", "segments_tx", "segments_rx", "rto", "fast_retransmit",
@@ -138,8 +141,9 @@ class TcpSession(wiring.Component):
     counters_clear : In(1)
         Set the counters to zero (they show it within ``len(TCP_COUNTERS)`` cycles).
     rto_cycles, msl_cycles, arp_retry_cycles : In(32)
-        Initial retransmission timeout, maximum segment lifetime (TIME-WAIT is 2 MSL) and
-        ARP retry interval, in clock cycles (registers of the stack).
+        Initial retransmission timeout, maximum segment lifetime and ARP retry interval, in
+        clock cycles (registers of the stack). TIME-WAIT lasts 2 MSL; FIN-WAIT-2 ends after
+        64 MSL without a segment from the peer, with RST and ``error_code`` TIMEOUT.
     """
 
     @staticmethod
@@ -244,11 +248,12 @@ class TcpSession(wiring.Component):
         timer_on = Signal()
         backoff = Signal(range(MAX_BACKOFF + 1))
         retries = Signal(4)
-        prescaler = Signal(MAX_BACKOFF)
+        prescaler = Signal(FIN_WAIT_2_SCALE)
         m.d.sync += prescaler.eq(prescaler + 1)
-        scale = Signal(range(MAX_BACKOFF + 1))
+        scale = Signal(range(FIN_WAIT_2_SCALE + 1))
         tick = Signal()
-        m.d.comb += tick.eq(Cat(*(prescaler[b] | (scale <= b) for b in range(MAX_BACKOFF))).all())
+        m.d.comb += tick.eq(Cat(*(prescaler[b] | (scale <= b)
+                                  for b in range(FIN_WAIT_2_SCALE))).all())
 
         synchronized = ((state == S.ESTABLISHED) | (state == S.FIN_WAIT_1) |
                         (state == S.FIN_WAIT_2) | (state == S.CLOSE_WAIT) |
@@ -506,12 +511,16 @@ class TcpSession(wiring.Component):
         with m.If(timer_on & tick):
             m.d.sync += timer.eq(timer + 1)
         limit = Signal(32)
+        msl_timed = (state == S.TIME_WAIT) | (state == S.FIN_WAIT_2)
         m.d.sync += [limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
-                                  Mux(state == S.TIME_WAIT, self.msl_cycles, self.rto_cycles))),
-                     scale.eq(Mux(state == S.TIME_WAIT, 1, Mux(state == S.ARP, 0, backoff)))]
+                                  Mux(msl_timed, self.msl_cycles, self.rto_cycles))),
+                     scale.eq(Mux(state == S.TIME_WAIT, 1,
+                                  Mux(state == S.FIN_WAIT_2, FIN_WAIT_2_SCALE,
+                                      Mux(state == S.ARP, 0, backoff))))]
         timer_done = timer >= limit
         expired = timer_on & timer_done
         tw_expired = (state == S.TIME_WAIT) & timer_done
+        fw2_expired = (state == S.FIN_WAIT_2) & expired
         nothing_out = snd_una == snd_max
         zero_wnd_wait = synchronized & nothing_out & (d_snd != d_wr) & ~data_fits
         with m.If(zero_wnd_wait & ~timer_on):
@@ -581,6 +590,8 @@ class TcpSession(wiring.Component):
                          s_committed.eq(rx_written), s_mss.eq(self._mss(f))]
         with m.If(seg & conn_hit):
             m.d.sync += [arrival_pending.eq(1), count("segments_rx")]
+            with m.If(state == S.FIN_WAIT_2):
+                m.d.sync += timer.eq(0)         # an idle timeout: the peer is still there
 
         m.d.sync += self.error.eq(0)
 
@@ -858,7 +869,8 @@ class TcpSession(wiring.Component):
                         m.d.sync += fin_acked.eq(1)
                         with m.Switch(state):
                             with m.Case(S.FIN_WAIT_1):
-                                m.d.sync += state.eq(S.FIN_WAIT_2)
+                                m.d.sync += [state.eq(S.FIN_WAIT_2), timer.eq(0),
+                                             timer_on.eq(1)]
                             with m.Case(S.CLOSING):
                                 m.d.sync += [state.eq(S.TIME_WAIT), timer.eq(0),
                                              timer_on.eq(1)]
@@ -928,6 +940,11 @@ class TcpSession(wiring.Component):
                                  self.error.eq(1)]
         with m.Elif(tw_expired & engine_free & ~arrival_pending):
             m.d.comb += go_closed.eq(1)
+        with m.Elif(fw2_expired & engine_free & ~arrival_pending):
+            # the peer acknowledged our FIN and went silent: reset, as Linux does for an
+            # orphaned FIN-WAIT-2 socket
+            m.d.sync += [rst_due.eq(1), rst_at_nxt.eq(1)]
+            m.d.sync += abort_to(TcpError.TIMEOUT)
         with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
                     ~init_pending):
             m.d.sync += [timer.eq(0),
