@@ -174,6 +174,59 @@ def test_event_counters_match_a_python_count(pattern, spacing):
         assert (got, other) == (want, other_want), (name, got, want, other, other_want)
 
 
+def test_event_counters_read_while_clearing():
+    """Reads in every cycle, also during the round that a ``clear`` starts (and with clears
+    closer together than a round): a counter reads as a count it held, never a mixture. Each
+    read is a count since the last clear, at most ``len(names) + 1`` cycles behind, or (until
+    the clear has had ``len(names) + 1`` cycles) a value that was allowed just before the
+    clear."""
+    names = ("frames", "bytes", "drops", "rare", "other")
+    n = len(names)
+    dut = EventCounters(names, width=12, amounts={"bytes": 11}, readers=2, spacing=1)
+    rng = random.Random(5)
+    cycles = 1500
+    clears = sorted({rng.randrange(20, cycles - 20) for _ in range(40)} | {700, 702, 705})
+    events = {name: [(rng.randrange(2048) if name == "bytes" else 1) if rng.random() < 0.6
+                     else 0 for _ in range(cycles)] for name in names}
+    reads = []
+
+    async def bench(ctx):
+        for cycle in range(cycles):
+            ctx.set(dut.clear, cycle in clears)
+            for name in names:
+                ctx.set(dut.events[name], events[name][cycle])
+            ctx.set(dut.rd_addr[0], cycle % n)
+            ctx.set(dut.rd_addr[1], (cycle + 2) % n)
+            await ctx.tick()
+            reads.append((ctx.get(dut.rd_data[0]), ctx.get(dut.rd_data[1])))
+
+    simulate(dut, bench)
+
+    def count(name, start, stop):
+        return sum(events[name][start:stop]) % 4096
+
+    def allowed(name, t, memo={}):
+        """Values counter ``name`` may read after the tick of cycle ``t``."""
+        if (name, t) in memo:
+            return memo[(name, t)]
+        last = max([c for c in clears if c <= t], default=None)
+        start = 0 if last is None else last
+        values = {count(name, start, u) for u in range(max(start, t - n), t + 2)}
+        if last is not None and t <= last + n + 1:
+            values |= allowed(name, last - 1) if last > 0 else {0}
+        memo[(name, t)] = values
+        return values
+
+    checked = 0
+    for t, (first, second) in enumerate(reads):
+        if t < n + 2:
+            continue                            # the clearing round after reset
+        for k, got in ((t % n, first), ((t + 2) % n, second)):
+            assert got in allowed(names[k], t), (t, names[k], got, sorted(allowed(names[k], t)))
+            checked += 1
+    assert checked > 2 * (cycles - n - 2) - 1
+
+
 def test_event_counters_reject_bad_parameters():
     with pytest.raises(ParameterError, match="amounts"):
         EventCounters(("a", "b"), amounts={"c": 4})
