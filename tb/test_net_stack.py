@@ -391,6 +391,81 @@ async def run_tcp_fin_wait_2_timeout(dut):
 
 
 @cocotb.test()
+async def run_tcp_close_cases(dut):
+    """net.md §5.2 "close" and "loss" with §1.4's states: a FIN that is not acknowledged is
+    resent after the RTO; both sides closing at once go FIN-WAIT-1, CLOSING, TIME-WAIT; a
+    repeated FIN in TIME-WAIT is acknowledged again and restarts the 2 MSL, after which the
+    session is CLOSED; a FIN that acknowledges ours goes from FIN-WAIT-1 straight to
+    TIME-WAIT. A lost SYN-ACK is resent after the RTO, and at once for the peer's repeated
+    SYN, with the same ISS."""
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    rto = 4000
+    await write_global(tb, "rto_cycles", rto)
+    two_msl = 2 * CONFIG_MSL_CYCLES
+
+    def cycle():
+        return int(get_sim_time("ns")) // CLOCK_NS
+
+    async def time_wait_ends(s, since):
+        """TIME-WAIT lasts 2 MSL from ``since`` (its tick is 2 cycles)."""
+        while TcpState(s.get("state")) == TcpState.TIME_WAIT:
+            await tb.idle(16)
+        assert TcpState(s.get("state")) == TcpState.CLOSED
+        assert two_msl - 2 <= cycle() - since <= two_msl + 200, (cycle() - since, two_msl)
+
+    # simultaneous close, with our first FIN lost
+    peer = ScriptedPeer(tb, 40004, 24, isn=9000)
+    s, iss = await establish(tb, 0, 24, peer)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=iss + 1, ack=peer.seq)
+    start = cycle()
+    await peer.expect("FA", seq=iss + 1, ack=peer.seq, timeout=2 * rto)
+    assert cycle() - start >= rto - 64, cycle() - start
+    await peer.send("FA", ack=iss + 1)              # the peer's FIN, not acknowledging ours
+    await peer.expect("A", seq=iss + 2, ack=peer.seq)
+    await s.wait_state(TcpState.CLOSING, 200)
+    await peer.send("A", ack=iss + 2)
+    await s.wait_state(TcpState.TIME_WAIT, 500)
+    await tb.idle(two_msl // 2)
+    await peer.send("FA", seq=peer.seq - 1, ack=iss + 2, advance=False)
+    await peer.expect("A", seq=iss + 2, ack=peer.seq)
+    await time_wait_ends(s, cycle() - 150)
+
+    # FIN-WAIT-1 to TIME-WAIT: the peer's FIN acknowledges ours
+    peer = ScriptedPeer(tb, 40005, 24, isn=0xFFFFFFFF)
+    s, iss = await establish(tb, 0, 24, peer)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=iss + 1, ack=peer.seq)
+    await peer.send("FA", ack=iss + 2)
+    await peer.expect("A", seq=iss + 2, ack=peer.seq)
+    await time_wait_ends(s, cycle() - 150)
+
+    # a lost SYN-ACK
+    peer = ScriptedPeer(tb, 40006, 24, isn=123)
+    s = SessionPort(dut, 0, random.Random(6))
+    s.set(active=0, local_port=24, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    await peer.send("S", options=[("MSS", 1460)])
+    first = await peer.expect("SA", ack=peer.seq)
+    start = cycle()
+    again = await peer.expect("SA", ack=peer.seq, timeout=2 * rto)
+    assert cycle() - start >= rto - 64 and again.seq == first.seq
+    await peer.send("S", seq=peer.seq - 1, advance=False, options=[("MSS", 1460)])
+    repeated = await peer.expect("SA", ack=peer.seq, timeout=1000)
+    assert repeated.seq == first.seq
+    peer.ack = first.seq + 1
+    await peer.send("A")
+    await s.wait_state(TcpState.ESTABLISHED, 500)
+    s.set(abort=1)
+    await peer.expect("R", seq=first.seq + 1)
+    s.set(abort=0, open_req=0)
+    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
+
+
+@cocotb.test()
 async def run_tcp_rst_rules(dut):
     """RFC 9293 §3.10.7.4 with RFC 5961: an in-window inexact RST and a SYN on a live
     connection get challenge ACKs, an RST outside the window nothing, an exact RST aborts

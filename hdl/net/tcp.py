@@ -832,6 +832,10 @@ class TcpSession(wiring.Component):
             with m.Elif(~acceptable):
                 with m.If(~a_rst):
                     m.d.sync += [ack_now.eq(1), count("dropped_segments")]
+                with m.If(a_fin & (state == S.TIME_WAIT)):
+                    # the peer's FIN again (it lies below RCV.NXT): acknowledge it and
+                    # restart the 2 MSL (RFC 9293 §3.10.7.4)
+                    m.d.sync += timer.eq(0)
             with m.Elif(a_rst):
                 m.d.sync += count("rst_rx")
                 with m.If(flag["seq_is_rcv_nxt"]):
@@ -913,8 +917,6 @@ class TcpSession(wiring.Component):
                                 m.d.sync += state.eq(S.CLOSING)
                         with m.Case(S.FIN_WAIT_2):
                             m.d.sync += [state.eq(S.TIME_WAIT), timer.eq(0), timer_on.eq(1)]
-                        with m.Case(S.TIME_WAIT):
-                            m.d.sync += timer.eq(0)
                 with m.Elif(s_committed != 0):
                     m.d.sync += intent["rcv"].eq(1)
 
