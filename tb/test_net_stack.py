@@ -466,6 +466,42 @@ async def run_tcp_close_cases(dut):
 
 
 @cocotb.test()
+async def run_tcp_receive_window_closes_and_reopens(dut):
+    """net.md §5.2 "window" (0 advertised, update on reopen): while the user reads nothing
+    the advertised window shrinks by what arrives, down to 0 when the receive ring is full;
+    data beyond it is dropped and answered with the unchanged ACK; once the user has read
+    enough (SWS avoidance: min(2 MSS, half the ring)) a window update goes out by itself,
+    and the data sent again is delivered once, in order."""
+    tb = NetTB(dut)
+    await tb.reset()
+    ring = NET_CONFIGS["stack"]["rx_depth"] - 1           # bytes the ring can hold
+    peer = ScriptedPeer(tb, 40007, 24, isn=77)
+    s, iss = await establish(tb, 0, 24, peer)
+    s.set_pauses(0, 1.0)                                   # the user reads nothing
+    data = random.Random(7).randbytes(ring + 100)
+    before = await tb.session_counters(0)
+    third = ring // 3
+    for k in range(3):
+        await peer.send("PA", data[k * third:(k + 1) * third])
+        ack = await peer.expect("A", seq=iss + 1, ack=peer.seq)
+        assert ack.window == ring - (k + 1) * third, (k, ack.window)
+    await peer.send("PA", data[ring:], advance=False)
+    ack = await peer.expect("A", seq=iss + 1, ack=peer.seq)
+    assert ack.window == 0
+    await tb.expect_silence(2000)
+    assert s.received == b""
+    s.set_pauses(0, 0)
+    update = await peer.expect("A", seq=iss + 1, ack=peer.seq, timeout=ring + 2000)
+    assert update.window >= min(2 * 1460, (ring + 1) // 2), update.window
+    await peer.send("PA", data[ring:])
+    await peer.expect("A", seq=iss + 1, ack=peer.seq)
+    assert await s.wait_received(len(data), 10_000) == data
+    after = await tb.session_counters(0)
+    assert after["dropped_segments"] - before["dropped_segments"] == 1
+    assert after["bytes_rx"] - before["bytes_rx"] == len(data)
+
+
+@cocotb.test()
 async def run_tcp_rst_rules(dut):
     """RFC 9293 §3.10.7.4 with RFC 5961: an in-window inexact RST and a SYN on a live
     connection get challenge ACKs, an RST outside the window nothing, an exact RST aborts

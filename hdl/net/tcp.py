@@ -502,9 +502,10 @@ class TcpSession(wiring.Component):
             m.d.sync += delack.eq(delack + 1)
             with m.If(delack == 2500):
                 m.d.sync += ack_now.eq(1)
-        # window update once the user has made room (SWS avoidance, RFC 9293 §3.8.6.2.2)
-        with m.If(receiving & (window >= adv_wnd + Mux(mss + mss < rxd // 2, mss + mss,
-                                                          rxd // 2))):
+        # window update once the user has made room (SWS avoidance, RFC 9293 §3.8.6.2.2);
+        # not in the cycle a segment leaves: ``adv_wnd`` takes its window only then
+        with m.If(receiving & ~sent & (window >= adv_wnd + Mux(mss + mss < rxd // 2, mss + mss,
+                                                                 rxd // 2))):
             m.d.sync += ack_now.eq(1)
 
         # ---- timers
