@@ -776,6 +776,56 @@ async def run_arp_pending_blocks_nothing(dut):
 
 
 @cocotb.test()
+async def run_tcp_client_syn_sent_rules(dut):
+    """Client mode, net.md §1.4 SYN-SENT and §5.2 "loss"/"RST": a lost SYN is resent after
+    the RTO with the same ISS; an RST without ACK is ignored; an ACK that does not
+    acknowledge the SYN gets an RST at its ACK number; a bare SYN (simultaneous open) leads
+    to SYN-RECEIVED and a SYN-ACK, its ACK to ESTABLISHED; data then moves both ways."""
+    from hdl.net.frames import ip_to_int
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    rto = 4000
+    await write_global(tb, "rto_cycles", rto)
+    s = SessionPort(dut, 1, random.Random(8))
+    s.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5001, local_port=0, open_req=1)
+    request = await tb.recv()
+    assert ARP in request and request[ARP].pdst == PEER_IP
+    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
+                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
+    syn = (await tb.recv())[TCP]
+    assert str(syn.flags) == "S" and syn.dport == 5001
+    iss = syn.seq
+    peer = ScriptedPeer(tb, 5001, syn.sport, isn=0x7FFFFFF0)
+    peer.sport, peer.dport = 5001, syn.sport
+    again = await peer.expect("S", seq=iss, ack=None, timeout=2 * rto)
+    assert again.options == [("MSS", 1460)]
+    await peer.send("R", ack=0, advance=False)
+    await tb.expect_silence(500)
+    assert TcpState(s.get("state")) == TcpState.SYN_SENT
+    await peer.send("A", ack=iss + 100, advance=False)
+    await peer.expect("R", seq=iss + 100, ack=None)
+    assert TcpState(s.get("state")) == TcpState.SYN_SENT
+    await peer.send("S", ack=0, options=[("MSS", 1400)])
+    await peer.expect("SA", seq=iss, ack=peer.seq)
+    assert TcpState(s.get("state")) == TcpState.SYN_RECEIVED
+    peer.ack = iss + 1
+    await peer.send("A")
+    await s.wait_state(TcpState.ESTABLISHED, 500)
+    await s.write(b"client data")
+    await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=b"client data")
+    peer.ack += 11
+    await peer.send("PA", b"server data")
+    await peer.expect("A", seq=iss + 12, ack=peer.seq)
+    assert await s.wait_received(11, 2000) == b"server data"
+    s.set(abort=1)
+    await peer.expect("R", seq=iss + 12)
+    s.set(abort=0, open_req=0)
+    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
+
+
+@cocotb.test()
 async def run_tcp_client_refused_and_arp_timeout(dut):
     """Client mode: ARP for the server, SYN, a RST acking the SYN -> CLOSED with error
     REFUSED; a server that never answers ARP -> four requests, then error ARP."""

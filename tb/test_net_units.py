@@ -329,12 +329,14 @@ def test_frame_parser_matches_scapy():
         TCP(sport=9, dport=10, flags="A") / Raw(b"ip options"),
     ]
     # option bytes as written (scapy would re-encode them): malformed ones (net.md §1.3:
-    # length below 2, or past the data offset; an MSS before the fault counts), an MSS of
-    # the wrong length, junk after EOL
+    # length 0 or 1, or past the data offset; an MSS before the fault counts), an MSS of
+    # the wrong length, junk after EOL, one option of 40 bytes, an unknown kind before MSS
     scapy_options = len(pkts)
     for options in (b"\x02\x04\x03\xe8\x04\x00\x00\x00", b"\x01\x01\x08\x0a\x00\x00\x00\x01",
                     b"\x01\x01\x01\x03", b"\x02\x05\x04\xb0", b"\x02\x03\x05\x01\x01\x01\x01\x01",
-                    b"\x00\x02\x01\x00", b"\x03\x03\x07\x02\x04\x02\x18\x00"):
+                    b"\x00\x02\x01\x00", b"\x03\x03\x07\x02\x04\x02\x18\x00",
+                    b"\x1e\x01\x01\x01", b"\xfe\x28" + bytes(range(38)),
+                    b"\x01\x1e\x06\x00\x00\x00\x00\x02\x04\x05\xb4\x00"):
         pkts.append(peer / TCP(sport=7, dport=8, flags="PA", dataofs=5 + len(options) // 4) /
                     Raw(options + rng.randbytes(rng.randrange(1, 20))))
     frames = [bytes(pkt).ljust(60, b"\0") for pkt in pkts]
@@ -399,4 +401,4 @@ def test_frame_parser_matches_scapy():
         assert bool(accept) == ok, (pkt.summary(), DROP_REASONS[reason])
         if not ok:
             assert DROP_REASONS[reason] == "l4_checksum"
-    assert malformed_seen == 4
+    assert malformed_seen == 5

@@ -821,11 +821,12 @@ class TcpSession(wiring.Component):
                     m.d.sync += count("rst_rx")
             with m.Elif(a_syn):
                 m.d.sync += [intent["rcv"].eq(1), intent["rcv_syn"].eq(1), mss.eq(s_mss),
-                             snd_wnd.eq(s_window), intent["wl"].eq(1), ack_now.eq(1)]
+                             snd_wnd.eq(s_window), intent["wl"].eq(1)]
                 with m.If(a_ack):
                     m.d.sync += [state.eq(S.ESTABLISHED), intent["una"].eq(1), timer_on.eq(0),
-                                 retries.eq(0), backoff.eq(0)]
+                                 retries.eq(0), backoff.eq(0), ack_now.eq(1)]
                 with m.Else():
+                    # simultaneous open: the SYN-ACK acknowledges the peer's SYN
                     m.d.sync += [state.eq(S.SYN_RECEIVED), syn_due.eq(1)]
         with m.Elif(decide):
             with m.If(a_syn & (state == S.SYN_RECEIVED) & flag["seq_is_rcv_nxt_minus_1"]):
