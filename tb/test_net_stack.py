@@ -502,6 +502,50 @@ async def run_tcp_receive_window_closes_and_reopens(dut):
 
 
 @cocotb.test()
+async def run_tcp_send_sequence_wraps(dut):
+    """net.md §1.5 "Tests MUST wrap 2**32 inside a transfer", on the send side (the peers of
+    the other tests wrap the receive side): 24 KiB leave across SND.NXT = 2**32; the segment
+    that holds the wrap is lost once and comes again after the RTO (a 4 KiB buffer holds too
+    few segments for three duplicate ACKs); the peer gets every byte once, in order, and the
+    engine frees its buffer across the wrap."""
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 40008, 24, isn=1)
+    await write_global(tb, "rto_cycles", 4000)
+    s, iss = await establish(tb, 0, 24, peer)
+    data = random.Random(9).randbytes(24 * 1024)
+    first = iss + 1
+    wrap = 2**32 - first                        # offset of the byte with sequence number 0
+    assert 0 < wrap < len(data) // 2, f"ISS {iss:#x}: the transfer would not cross 2**32"
+    before = await tb.session_counters(0)
+    writer = cocotb.start_soon(s.write(data))
+    got = bytearray()
+    lost = False
+    while len(got) < len(data):
+        seg = await peer.expect("PA", ack=peer.seq, data=None, timeout=40_000)
+        payload = bytes(seg.payload)
+        offset = (seg.seq - first) % 2**32
+        if not lost and offset <= wrap < offset + len(payload):
+            lost = True
+            continue
+        if offset == len(got):
+            got += payload
+            peer.ack = first + len(got)
+        await peer.send("A")                    # a duplicate ACK for out-of-order data
+    await writer
+    assert bytes(got) == data and lost
+    after = await tb.session_counters(0)
+    moved = {k: after[k] - before[k] for k in ("fast_retransmit", "rto", "dup_acks")}
+    dut._log.info("ISS %#x, wrap after %d bytes, %s", iss, wrap, moved)
+    assert moved["fast_retransmit"] + moved["rto"] > 0
+    await tb.idle(200)
+    assert s.get("tx_fill") == 0, "acknowledged bytes not freed across the wrap"
+    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
+    s.set(open_req=0)
+    await peer.expect("FA", seq=first + len(data))
+
+
+@cocotb.test()
 async def run_tcp_rst_rules(dut):
     """RFC 9293 §3.10.7.4 with RFC 5961: an in-window inexact RST and a SYN on a live
     connection get challenge ACKs, an RST outside the window nothing, an exact RST aborts
