@@ -6,6 +6,7 @@ Golden models: scapy (frame dissection and checksums), zlib via cocotbext-eth (F
 RBCP header encoder, RFC 9293 rules written into the scripted peer's expectations."""
 
 import random
+import zlib
 
 import cocotb
 from cocotb.utils import get_sim_time
@@ -119,6 +120,10 @@ async def run_bad_frames(dut):
     await tb.send(raw[:40], fcs=False)                        # runt (44 bytes with no pad)
     await tb.send(bytes(eth(tb) / IP(src=PEER_IP, dst=tb.ip) / ICMP(type=8) /
                         Raw(b"L" * 1480)))                     # 1522 bytes: too long
+    await tb.send(bytes(eth(tb) / IP(src=PEER_IP, dst=tb.ip) / ICMP(type=8) /
+                        Raw(b"L" * 1473)))                     # 1519 bytes: one too many
+    await tb.send(raw[:59] + zlib.crc32(raw[:59]).to_bytes(4, "little"),
+                  fcs=False)                                  # 63 bytes, good FCS: too short
     await tb.send(eth(tb, "02:00:00:00:00:77") / IP(src=PEER_IP, dst=tb.ip) / ICMP(type=8))
     await tb.send(eth(tb) / IP(src=PEER_IP, dst="192.168.10.77") / ICMP(type=8))
     await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip, proto=99) / Raw(b"z" * 20))
@@ -127,7 +132,7 @@ async def run_bad_frames(dut):
     await tb.send(bytes(hdr))
     await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) / UDP(sport=1, dport=9) / Raw(b"u"))
     await tb.expect_silence()
-    assert_counts(before, await tb.counters(), l4_checksum=1, fcs=1, rx_er=1, size=2, not_mine=2,
+    assert_counts(before, await tb.counters(), l4_checksum=1, fcs=1, rx_er=1, size=4, not_mine=2,
                   protocol=1, ip_header=1, no_port=1)
     # still answering afterwards
     await tb.send(ping)
@@ -543,6 +548,30 @@ async def run_tcp_send_sequence_wraps(dut):
     await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
     s.set(open_req=0)
     await peer.expect("FA", seq=first + len(data))
+
+
+@cocotb.test()
+async def run_tcp_ack_every_second_segment(dut):
+    """net.md §5.2 "data": at most 2 full segments per ACK (RFC 5681 §4.2, RFC 9293
+    §3.8.6.3): four in-order segments without PSH get an ACK after the second and the
+    fourth; a single one waits for the delayed ACK, sent within 20 us (2,500 cycles)."""
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 40009, 24, isn=300)
+    s, iss = await establish(tb, 0, 24, peer)
+    data = random.Random(10).randbytes(5 * 1460)
+    for k in range(4):
+        await peer.send("A", data[k * 1460:(k + 1) * 1460])
+    for k in (2, 4):
+        await peer.expect("A", seq=iss + 1, ack=peer.seq - (4 - k) * 1460)
+    await tb.expect_silence(3000)
+    start = int(get_sim_time("ns")) // CLOCK_NS
+    await peer.send("A", data[4 * 1460:])
+    await peer.expect("A", seq=iss + 1, ack=peer.seq, timeout=5000)
+    delay = int(get_sim_time("ns")) // CLOCK_NS - start
+    # the segment takes about 1,530 cycles to arrive; then the ACK waits 2,500 cycles
+    assert 2500 <= delay <= 1600 + 2500 + 300, delay
+    assert await s.wait_received(len(data), 4000) == data
 
 
 @cocotb.test()
