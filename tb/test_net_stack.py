@@ -304,7 +304,8 @@ async def run_tcp_server_scripted(dut):
 async def run_tcp_malformed_options(dut):
     """net.md §1.3: a malformed option (length below 2, or running past the data offset)
     stops the option walk, the segment is processed all the same and ``tcp_bad_options``
-    counts it; an MSS option before the fault is used, one after it is not."""
+    counts it; an MSS option before the fault is used, one after it is not. Without an MSS
+    option the peer's MSS is 536."""
     from hdl.net.tcp import TcpState
     from tb.net_tb import SessionPort
     tb = NetTB(dut)
@@ -338,6 +339,20 @@ async def run_tcp_malformed_options(dut):
         sent += bytes(seg.payload)
     assert sent == data
     assert_counts(before, await tb.counters(), delivered=4, tcp_bad_options=2, frames_out=6)
+    # a SYN without options: the peer's MSS is 536 (RFC 9293 §3.7.1)
+    s.set(abort=1)
+    await peer.expect("R", seq=synack.seq + 1 + len(data))
+    s.set(abort=0)
+    await s.wait_state(TcpState.LISTEN)
+    peer = ScriptedPeer(tb, 40010, 24, isn=2000)
+    await peer.send("S")
+    synack = await peer.expect("SA", ack=peer.seq)
+    peer.ack = synack.seq + 1
+    await peer.send("A")
+    await s.wait_state(TcpState.ESTABLISHED)
+    await s.write(data[:1000])
+    for start, stop in ((0, 536), (536, 1000)):
+        await peer.expect("PA", seq=synack.seq + 1 + start, ack=peer.seq, data=data[start:stop])
 
 
 async def establish(tb, k, port, peer, *, window=65535):
