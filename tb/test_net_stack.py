@@ -355,14 +355,15 @@ async def run_tcp_malformed_options(dut):
         await peer.expect("PA", seq=synack.seq + 1 + start, ack=peer.seq, data=data[start:stop])
 
 
-async def establish(tb, k, port, peer, *, window=65535):
-    """Session ``k`` listening on ``port``; ``peer`` completes the handshake; returns ISS."""
+async def establish(tb, k, port, peer, *, window=65535, mss=1460):
+    """Session ``k`` listening on ``port``; ``peer`` completes the handshake (announcing
+    ``mss``); returns the session port and the ISS."""
     from hdl.net.tcp import TcpState
     from tb.net_tb import SessionPort
     s = SessionPort(tb.dut, k, random.Random(k))
     s.set(active=0, local_port=port, open_req=1)
     await s.wait_state(TcpState.LISTEN)
-    await peer.send("S", options=[("MSS", 1460)], window=window)
+    await peer.send("S", options=[("MSS", mss)], window=window)
     synack = await peer.expect("SA", ack=peer.seq)
     peer.ack = synack.seq + 1
     await peer.send("A", window=window)
@@ -524,15 +525,16 @@ async def run_tcp_receive_window_closes_and_reopens(dut):
 @cocotb.test()
 async def run_tcp_send_sequence_wraps(dut):
     """net.md §1.5 "Tests MUST wrap 2**32 inside a transfer", on the send side (the peers of
-    the other tests wrap the receive side): 24 KiB leave across SND.NXT = 2**32; the segment
-    that holds the wrap is lost once and comes again after the RTO (a 4 KiB buffer holds too
-    few segments for three duplicate ACKs); the peer gets every byte once, in order, and the
-    engine frees its buffer across the wrap."""
+    the other tests wrap the receive side): 24 KiB leave across SND.NXT = 2**32 in segments
+    of the peer's MSS of 400 bytes, so that the 4 KiB buffer holds enough of them in flight
+    for three duplicate ACKs; the segment that holds the wrap is lost once and comes again
+    by fast retransmit; the peer gets every byte once, in order, and the engine frees its
+    buffer across the wrap."""
     tb = NetTB(dut)
     await tb.reset()
     peer = ScriptedPeer(tb, 40008, 24, isn=1)
     await write_global(tb, "rto_cycles", 4000)
-    s, iss = await establish(tb, 0, 24, peer)
+    s, iss = await establish(tb, 0, 24, peer, mss=400)
     data = random.Random(9).randbytes(24 * 1024)
     first = iss + 1
     wrap = 2**32 - first                        # offset of the byte with sequence number 0
@@ -557,7 +559,7 @@ async def run_tcp_send_sequence_wraps(dut):
     after = await tb.session_counters(0)
     moved = {k: after[k] - before[k] for k in ("fast_retransmit", "rto", "dup_acks")}
     dut._log.info("ISS %#x, wrap after %d bytes, %s", iss, wrap, moved)
-    assert moved["fast_retransmit"] + moved["rto"] > 0
+    assert moved["fast_retransmit"] >= 1, moved
     await tb.idle(200)
     assert s.get("tx_fill") == 0, "acknowledged bytes not freed across the wrap"
     await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
