@@ -29,6 +29,8 @@ PAPER_TABLE_I = {
 }
 
 TOPOLOGIES = [(1, 1), (1, 4), (4, 1), (4, 4)]
+#: Data widths of the topic the bench measures
+WIDTHS = (64, 512)
 #: Target of the foundation issue, from verilog-axis axis_arb_mux + axis_broadcast (4:4, 64 b).
 RESOURCE_TARGET = {"LUT": 287, "FF": 608}
 
@@ -60,13 +62,18 @@ def stream_cases(pubs, width):
     return cases
 
 
+def build_topic_bench_top(*, pubs, subs, data_width):
+    """The topic traffic bench top (``topic_bench``), for :func:`tb.harness.run_bench`."""
+    return TopicTrafficBench(pubs, subs, data_width)
+
+
 def run_topology(pubs, subs, width, cases, *, sim="verilator"):
     config_id = f"{pubs}x{subs}_w{width}"
     out = SIM_BUILD / f"bench-{config_id}-{sim}" / "records.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     run_bench("bench.hmt_bench", "topic_bench", config_id,
               {"pubs": pubs, "subs": subs, "data_width": width}, sim,
-              build=lambda **p: TopicTrafficBench(p["pubs"], p["subs"], p["data_width"]),
+              build=build_topic_bench_top,
               extra_env={"ROSGATE_BENCH_CASES": json.dumps(cases),
                          "ROSGATE_BENCH_OUT": str(out)}, quiet=True)
     return json.loads(out.read_text())
@@ -88,7 +95,7 @@ def summarise(record):
     }
 
 
-def measure(widths=(64, 512), sizes=tuple(PAPER_TABLE_I), topologies=TOPOLOGIES, log=print):
+def measure(widths=WIDTHS, sizes=tuple(PAPER_TABLE_I), topologies=TOPOLOGIES, log=print):
     results = {"clock_mhz": CLOCK_MHZ, "runs": []}
     for width in widths:
         for pubs, subs in topologies:

@@ -31,12 +31,18 @@ IMAGES = [("1 MB", 1024, 1024, "mono8", 1), ("2 MB", 1024, 683, "rgb8", 3),
           ("6 MB", 1920, 1080, "rgb8", 3)]
 
 
-def _ros1_top(**params):
+#: Parameters of the TCPROS node bench top (64 KiB buffers each way)
+IMAGE_TOP_PARAMS = dict(tx_depth=65536, rx_depth=65536)
+
+
+def build_ros1_bench_top(**params):
+    """The TCPROS node bench top (``ros1_bench``), for :func:`tb.harness.run_bench`."""
     from bench.net_tops import Ros1BenchTop
     return Ros1BenchTop(**params)
 
 
-def _bench_top(**params):
+def build_net_bench_top(**params):
+    """The engine throughput bench top (``net_bench``), for :func:`tb.harness.run_bench`."""
     from bench.net_tops import NetBenchTop
     return NetBenchTop(**params)
 
@@ -47,14 +53,14 @@ def measure(log=print):
         out = SIM_BUILD / f"bench-net-{case}.json"
         log(f"  simulating {case}: {nbytes} bytes each way (Verilator)...")
         run_bench("bench.net_bench", "net_bench", case, top, "verilator", quiet=True,
-                  build=_bench_top, testcase="measure_tcp",
+                  build=build_net_bench_top, testcase="measure_tcp",
                   extra_env={"ROSGATE_BENCH_OUT": str(out),
                              "ROSGATE_BENCH_CASE": json.dumps(dict(bytes=nbytes, peer=peer))})
         results["tcp"][case] = dict(json.loads(out.read_text()), label=label)
     out = SIM_BUILD / "bench-net-images.json"
     log("  simulating the TCPROS node: 1, 2 and 6 MB images, receive, send, round trip...")
-    run_bench("bench.net_bench", "ros1_bench", "images", dict(tx_depth=65536, rx_depth=65536),
-              "verilator", quiet=True, build=_ros1_top, testcase="measure_image",
+    run_bench("bench.net_bench", "ros1_bench", "images", IMAGE_TOP_PARAMS,
+              "verilator", quiet=True, build=build_ros1_bench_top, testcase="measure_image",
               extra_env={"ROSGATE_BENCH_OUT": str(out),
                          "ROSGATE_BENCH_CASE": json.dumps(dict(images=IMAGES))})
     results["image"] = json.loads(out.read_text())

@@ -1,5 +1,5 @@
-"""``make lint``: export every top of every bench configuration and the system of every
-example project, and lint them."""
+"""``make lint``: export every top of every bench configuration, every top ``make bench``
+simulates and the system of every example project, and lint them."""
 
 import importlib
 import sys
@@ -17,6 +17,20 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
            "tb.test_ros1_registers": "ros1_node"}
 #: bench module -> its configuration tables besides ``CONFIGS``
 MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING",)}
+
+
+def benchmark_tops():
+    """(top, configuration, parameters, build) of every top ``make bench`` simulates that
+    is not in :data:`gen.tops.TOPS` (its own bench tops, built by ``run_bench(build=...)``)."""
+    from bench.hmt import TOPOLOGIES, WIDTHS, build_topic_bench_top
+    from bench.net import IMAGE_TOP_PARAMS, TCP_CASES, build_net_bench_top, build_ros1_bench_top
+    for case, (_, params, _, _) in TCP_CASES.items():
+        yield "net_bench", case, params, build_net_bench_top
+    yield "ros1_bench", "images", IMAGE_TOP_PARAMS, build_ros1_bench_top
+    for width in WIDTHS:
+        for pubs, subs in TOPOLOGIES:
+            yield ("topic_bench", f"{pubs}x{subs}_w{width}",
+                   {"pubs": pubs, "subs": subs, "data_width": width}, build_topic_bench_top)
 
 
 def main():
@@ -40,6 +54,15 @@ def main():
             if report:
                 print(report)
                 failed += 1
+    for top, config_id, params, build in benchmark_tops():
+        vfile = export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}",
+                                 build=build)
+        report = lint_verilog(vfile, top)
+        count += 1
+        print(f"lint {top} [{config_id}] (make bench): {'clean' if not report else 'WARNINGS'}")
+        if report:
+            print(report)
+            failed += 1
     from gen.config import load_project
     from gen.export.verilog import export_verilog, write_if_changed
     from gen.system import build_system
