@@ -34,8 +34,15 @@ def benchmark_tops():
 
 
 def main():
-    failed = 0
-    count = 0
+    reports = []
+
+    def lint(vfile, top, label):
+        report = lint_verilog(vfile, top)
+        reports.append(report)
+        print(f"lint {top} [{label}]: {'clean' if not report else 'WARNINGS'}")
+        if report:
+            print(report)
+
     seen = set()
     for module_name, top in BENCHES.items():
         module = importlib.import_module(module_name)
@@ -47,22 +54,11 @@ def main():
                 continue
             seen.add((top, config_id))
             params, _ = config_params(params)
-            vfile = export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}")
-            report = lint_verilog(vfile, top)
-            count += 1
-            print(f"lint {top} [{config_id}]: {'clean' if not report else 'WARNINGS'}")
-            if report:
-                print(report)
-                failed += 1
+            lint(export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}"),
+                 top, config_id)
     for top, config_id, params, build in benchmark_tops():
-        vfile = export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}",
-                                 build=build)
-        report = lint_verilog(vfile, top)
-        count += 1
-        print(f"lint {top} [{config_id}] (make bench): {'clean' if not report else 'WARNINGS'}")
-        if report:
-            print(report)
-            failed += 1
+        lint(export_bench_top(top, params, SIM_BUILD / "lint" / f"{top}-{config_id}",
+                              build=build), top, f"{config_id}, make bench")
     from gen.config import load_project
     from gen.export.verilog import export_verilog, write_if_changed
     from gen.system import build_system
@@ -72,14 +68,10 @@ def main():
         text, _ = export_verilog(system, "rosgate_system")
         vfile = SIM_BUILD / "lint" / f"rosgate_system-{name}" / "rosgate_system.v"
         write_if_changed(vfile, text)
-        report = lint_verilog(vfile, "rosgate_system")
-        count += 1
-        print(f"lint rosgate_system [examples/{name}]: {'clean' if not report else 'WARNINGS'}")
-        if report:
-            print(report)
-            failed += 1
-    print(f"{count - failed} of {count} tops lint-clean (verilator --lint-only -Wall, waived: "
-          f"{', '.join(WAIVERS)})")
+        lint(vfile, "rosgate_system", f"examples/{name}")
+    failed = sum(1 for report in reports if report)
+    print(f"{len(reports) - failed} of {len(reports)} tops lint-clean (verilator --lint-only "
+          f"-Wall, waived: {', '.join(WAIVERS)})")
     return 1 if failed else 0
 
 
