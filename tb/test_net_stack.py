@@ -43,6 +43,11 @@ def checksums_ok(pkt):
     return True
 
 
+def sim_cycle():
+    """The current simulated time in clock cycles."""
+    return int(get_sim_time("ns")) // CLOCK_NS
+
+
 def eth(tb, dst=None):
     return Ether(src=PEER_MAC, dst=dst or tb.mac)
 
@@ -392,14 +397,14 @@ async def run_tcp_fin_wait_2_timeout(dut):
     limit = 2**FIN_WAIT_2_SCALE * msl
     await tb.expect_silence(limit * 3 // 4)
     assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
-    sent_at = int(get_sim_time("ns")) // CLOCK_NS
+    sent_at = sim_cycle()
     await peer.send("PA", b"late data")
     await peer.expect("A", seq=iss + 2, ack=peer.seq)
     assert await s.wait_received(9, 2000) == b"late data"
     assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
     # the timer restarts when the segment arrives (after sent_at) and counts ticks of
     # 2**FIN_WAIT_2_SCALE cycles: it cannot expire a tick before the limit
-    elapsed = int(get_sim_time("ns")) // CLOCK_NS - sent_at
+    elapsed = sim_cycle() - sent_at
     await tb.expect_silence(limit - 2**FIN_WAIT_2_SCALE - elapsed)
     assert TcpState(s.get("state")) == TcpState.FIN_WAIT_2
     await peer.expect("R", seq=iss + 2, ack=None, timeout=elapsed + 1000)
@@ -427,24 +432,21 @@ async def run_tcp_close_cases(dut):
     await write_global(tb, "rto_cycles", rto)
     two_msl = 2 * CONFIG_MSL_CYCLES
 
-    def cycle():
-        return int(get_sim_time("ns")) // CLOCK_NS
-
     async def time_wait_ends(s, since):
         """TIME-WAIT lasts 2 MSL from ``since`` (its tick is 2 cycles)."""
         while TcpState(s.get("state")) == TcpState.TIME_WAIT:
             await tb.idle(16)
         assert TcpState(s.get("state")) == TcpState.CLOSED
-        assert two_msl - 2 <= cycle() - since <= two_msl + 200, (cycle() - since, two_msl)
+        assert two_msl - 2 <= sim_cycle() - since <= two_msl + 200, (sim_cycle() - since, two_msl)
 
     # simultaneous close, with our first FIN lost
     peer = ScriptedPeer(tb, 40004, 24, isn=9000)
     s, iss = await establish(tb, 0, 24, peer)
     s.set(open_req=0)
     await peer.expect("FA", seq=iss + 1, ack=peer.seq)
-    start = cycle()
+    start = sim_cycle()
     await peer.expect("FA", seq=iss + 1, ack=peer.seq, timeout=2 * rto)
-    assert cycle() - start >= rto - 64, cycle() - start
+    assert sim_cycle() - start >= rto - 64, sim_cycle() - start
     await peer.send("FA", ack=iss + 1)              # the peer's FIN, not acknowledging ours
     await peer.expect("A", seq=iss + 2, ack=peer.seq)
     await s.wait_state(TcpState.CLOSING, 200)
@@ -453,7 +455,7 @@ async def run_tcp_close_cases(dut):
     await tb.idle(two_msl // 2)
     await peer.send("FA", seq=peer.seq - 1, ack=iss + 2, advance=False)
     await peer.expect("A", seq=iss + 2, ack=peer.seq)
-    await time_wait_ends(s, cycle() - 150)
+    await time_wait_ends(s, sim_cycle() - 150)
 
     # FIN-WAIT-1 to TIME-WAIT: the peer's FIN acknowledges ours
     peer = ScriptedPeer(tb, 40005, 24, isn=0xFFFFFFFF)
@@ -462,7 +464,7 @@ async def run_tcp_close_cases(dut):
     await peer.expect("FA", seq=iss + 1, ack=peer.seq)
     await peer.send("FA", ack=iss + 2)
     await peer.expect("A", seq=iss + 2, ack=peer.seq)
-    await time_wait_ends(s, cycle() - 150)
+    await time_wait_ends(s, sim_cycle() - 150)
 
     # a lost SYN-ACK
     peer = ScriptedPeer(tb, 40006, 24, isn=123)
@@ -471,9 +473,9 @@ async def run_tcp_close_cases(dut):
     await s.wait_state(TcpState.LISTEN)
     await peer.send("S", options=[("MSS", 1460)])
     first = await peer.expect("SA", ack=peer.seq)
-    start = cycle()
+    start = sim_cycle()
     again = await peer.expect("SA", ack=peer.seq, timeout=2 * rto)
-    assert cycle() - start >= rto - 64 and again.seq == first.seq
+    assert sim_cycle() - start >= rto - 64 and again.seq == first.seq
     await peer.send("S", seq=peer.seq - 1, advance=False, options=[("MSS", 1460)])
     repeated = await peer.expect("SA", ack=peer.seq, timeout=1000)
     assert repeated.seq == first.seq
@@ -582,10 +584,10 @@ async def run_tcp_ack_every_second_segment(dut):
     for k in (2, 4):
         await peer.expect("A", seq=iss + 1, ack=peer.seq - (4 - k) * 1460)
     await tb.expect_silence(3000)
-    start = int(get_sim_time("ns")) // CLOCK_NS
+    start = sim_cycle()
     await peer.send("A", data[4 * 1460:])
     await peer.expect("A", seq=iss + 1, ack=peer.seq, timeout=5000)
-    delay = int(get_sim_time("ns")) // CLOCK_NS - start
+    delay = sim_cycle() - start
     # the segment takes about 1,530 cycles to arrive; then the ACK waits 2,500 cycles
     assert 2500 <= delay <= 1600 + 2500 + 300, delay
     assert await s.wait_received(len(data), 4000) == data
