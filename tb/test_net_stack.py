@@ -157,7 +157,8 @@ async def rbcp(tb, payload, sport=50000):
 
 
 async def write_global(tb, name, value):
-    """Write one of the stack's registers (:data:`GLOBAL_REGS`) through RBCP."""
+    """Write one of the stack's registers (:data:`GLOBAL_REGS`) through RBCP; the next
+    ``tb.reset()`` gives it back its configured value."""
     offset = GLOBAL_OFFSETS[name]
     size = GLOBAL_REGS[offset][1]
     data = value.to_bytes(size, "big")
@@ -413,7 +414,6 @@ async def run_tcp_fin_wait_2_timeout(dut):
     # the peer's late FIN now finds no connection
     await peer.send("FA")
     await peer.expect("R", seq=iss + 2)
-    await write_global(tb, "msl_cycles", CONFIG_MSL_CYCLES)
 
 
 @cocotb.test()
@@ -485,7 +485,6 @@ async def run_tcp_close_cases(dut):
     s.set(abort=1)
     await peer.expect("R", seq=first.seq + 1)
     s.set(abort=0, open_req=0)
-    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
 
 
 @cocotb.test()
@@ -917,7 +916,6 @@ async def run_tcp_client_syn_sent_rules(dut):
     s.set(abort=1)
     await peer.expect("R", seq=iss + 12)
     s.set(abort=0, open_req=0)
-    await write_global(tb, "rto_cycles", CONFIG_RTO_CYCLES)
 
 
 @cocotb.test()
