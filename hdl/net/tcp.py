@@ -601,6 +601,10 @@ class TcpSession(wiring.Component):
                                  S.LISTEN, S.CLOSED)),
                     self.error_code.eq(code), self.error.eq(1)]
 
+        def time_out():
+            """Give up: RST at SND.NXT if the connection was synchronized, error TIMEOUT."""
+            return [rst_due.eq(synchronized), rst_at_nxt.eq(1)] + abort_to(TcpError.TIMEOUT)
+
         def initialise():
             return [init_pending.eq(1), timer.eq(0), retries.eq(0), backoff.eq(0),
                     cwnd.eq(INITIAL_WINDOW), ssthresh.eq(nd - 1), cwnd_acc.eq(0),
@@ -947,8 +951,7 @@ class TcpSession(wiring.Component):
         with m.Elif(fw2_expired & engine_free & ~arrival_pending):
             # the peer acknowledged our FIN and went silent: reset, as Linux does for an
             # orphaned FIN-WAIT-2 socket
-            m.d.sync += [rst_due.eq(1), rst_at_nxt.eq(1)]
-            m.d.sync += abort_to(TcpError.TIMEOUT)
+            m.d.sync += time_out()
         with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
                     ~init_pending):
             m.d.sync += [timer.eq(0),
@@ -956,8 +959,7 @@ class TcpSession(wiring.Component):
             with m.If(zero_wnd_wait):
                 m.d.sync += probe_due.eq(1)             # persist timer: keep probing
             with m.Elif(retries == 7):
-                m.d.sync += [rst_due.eq(synchronized), rst_at_nxt.eq(1)]
-                m.d.sync += abort_to(TcpError.TIMEOUT)
+                m.d.sync += time_out()
             with m.Else():
                 m.d.sync += [retries.eq(retries + 1), count("rto"), d_snd.eq(d_ack_next),
                              cwnd.eq(1), cwnd_acc.eq(0), dupacks.eq(0), ssthresh.eq(reduced)]
