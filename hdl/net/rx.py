@@ -60,8 +60,10 @@ class FrameParser(wiring.Component):
         Header fields, captured in place.
     payload_data, payload_valid, payload_offset : Out
         The L4 payload's bytes as they pass: the whole ICMP message, the UDP data, the TCP
-        data (after the options); ``payload_offset`` counts from 0. Bytes beyond the IP total
-        length (Ethernet padding, FCS) are not payload.
+        data (after the options); ``payload_offset`` counts from 0 without a gap. Bytes beyond
+        the IP total length (Ethernet padding, FCS) are not payload, nor are any bytes of an
+        ARP frame, of an IPv4 header shorter than 20 bytes or of a TCP segment whose data
+        offset is below 5 (tb/test_net_formal.py proves these rules).
     kind : Out(FrameKind)
         What the frame is, from its EtherType and IP protocol (valid during the payload).
     done : Out(1)
@@ -113,7 +115,7 @@ class FrameParser(wiring.Component):
         pl_start = Signal(11, init=2047)
         tcp_csum = Signal(16)
         ihl4 = Cat(Const(0, 2), ver_ihl[0:4])
-        ip_end = Signal(12)
+        ip_end = Signal(17)             # an IP total length up to 65535 must not wrap
         m.d.comb += ip_end.eq(ETH_HEADER + f.ip_len)
 
         j = Signal(11)
@@ -160,7 +162,11 @@ class FrameParser(wiring.Component):
         capture(frag, 20, 2)
         capture(f.ip_proto, 23, 1)
         capture(f.ip_dst, 30, 4)
-        with m.If(v & (i == 14)):
+        # only an IPv4 header of 20 bytes or more has an L4 part: no other frame's bytes
+        # become payload (the verdict drops those frames; their bytes must not reach a
+        # consumer before it)
+        with m.If(v & (i == 14) & (ethertype == ETHERTYPE_IPV4) & (byte[4:8] == 4) &
+                  (byte[0:4] >= 5)):
             m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))
         with m.If(v & (i >= 14) & (i < l4_off)):
             m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, word))
@@ -210,7 +216,7 @@ class FrameParser(wiring.Component):
         is_tcp = f.ip_proto == IP_PROTO_TCP
         with m.If(lv & (j == 12)):
             m.d.sync += f.doff.eq(byte[4:8])
-            with m.If(is_tcp):
+            with m.If(is_tcp & (byte[4:8] >= 5)):
                 m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
 
         # TCP options (RFC 9293 §3.2): only MSS (length 4) is used; everything else is
