@@ -6,6 +6,10 @@ no read past frame end, no dead FSM state").
   from an ARP frame, and an accepted frame has delivered exactly its ``payload_len`` bytes,
   none of them FCS (bounded, ``abc bmc3``); the TCP option walker is back in its waiting
   state at every frame's first byte, whatever came before (unbounded, ``abc pdr``).
+* :class:`RbcpServer` with the stack's two windows, any request in its buffer and a bus that
+  acknowledges late or never: strobes only for a well-formed request inside a window, one
+  per byte at the request's addresses in order; buffer writes only to the flag byte and the
+  request's data bytes (bounded, ``abc bmc3``).
 * :class:`FrameBuilder`, serving two requesters that change their requests freely between
   frames: every frame is ``header + length`` bytes with ``tlast`` on the last, payload byte
   ``k`` is the requester's buffer byte ``payload_addr + k`` (so nothing before or after the
@@ -20,8 +24,10 @@ import pytest
 from amaranth.asserts import AnyConst, AnySeq, Initial
 from amaranth.hdl import Assert, Assume, Elaboratable, Module, Mux, ResetSignal, Signal
 
-from hdl.net.frames import ETH_HEADER
+from hdl.net.frames import ETH_HEADER, RBCP_HEADER, RBCP_READ, RBCP_VERSION, RBCP_WRITE
+from hdl.net.rbcp import RbcpServer
 from hdl.net.rx import FrameKind, FrameParser
+from hdl.net.stack import GLOBAL_BASE
 from hdl.net.tx import FrameBuilder
 from tb.formal import run_sby
 
@@ -33,6 +39,9 @@ pytestmark = pytest.mark.formal
 #: to reach 66.
 PARSER_DEPTHS = [pytest.param(60, id="bmc60"), pytest.param(66, id="bmc66",
                                                           marks=pytest.mark.full)]
+#: the RBCP server: the header, its checks and six bus accesses
+RBCP_DEPTHS = [pytest.param(30, id="bmc30"), pytest.param(40, id="bmc40",
+                                                        marks=pytest.mark.full)]
 #: the builder: a grant, the checksum pre-sums, an ICMP or UDP header and payload bytes
 BUILDER_DEPTHS = [pytest.param(40, id="bmc40"), pytest.param(44, id="bmc44",
                                                           marks=pytest.mark.full)]
@@ -213,6 +222,82 @@ def test_frame_parser_payload_inside_frame(depth):
 def test_frame_parser_options_resync():
     run_sby("frame_parser_options_resync", FrameParserOptionsResyncProperty(), 20,
             mode="prove", engine="abc pdr")
+
+
+class RbcpServerProperty(Elaboratable):
+    """Strobes only for a well-formed request inside a window, at its addresses in order;
+    buffer writes only to the reply's flag byte and data bytes."""
+
+    #: the stack's windows with the default user window (net.md §7.2)
+    WINDOWS = ((0, 0x10000), (GLOBAL_BASE, 0x10000))
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = dut = RbcpServer(self.WINDOWS)
+        bus = dut.bus
+        m.d.comb += Assume(ResetSignal() == Initial())
+
+        # the request: any header and length, fixed for the run; the data bytes are free
+        header = AnyConst(64)           # byte 0 in the top bits, as on the wire
+        length = AnyConst(11)
+        version, command, ident, count = (header.word_select(7 - q, 8) for q in range(4))
+        base = header[:32]
+        read_addr = Signal(11)
+        m.d.sync += read_addr.eq(dut.buf_addr)
+        header_byte = header.word_select((7 - read_addr[:3]).as_unsigned()[:3], 8)
+        m.d.comb += [dut.length.eq(length),
+                     dut.buf_rdata.eq(Mux(read_addr < RBCP_HEADER, header_byte, AnySeq(8)))]
+
+        # one request at a time; an acknowledge answers one strobe
+        running = Signal()
+        outstanding = Signal()
+        m.d.comb += dut.start.eq(AnySeq(1))
+        with m.If(dut.start):
+            m.d.comb += Assume(~running)
+            m.d.sync += running.eq(1)
+        with m.If(dut.done):
+            m.d.sync += running.eq(0)
+        m.d.comb += [bus.ack.eq(AnySeq(1)), bus.rd.eq(AnySeq(8))]
+        with m.If(bus.ack):
+            m.d.comb += Assume(outstanding)
+        with m.If(bus.we | bus.re):
+            m.d.sync += outstanding.eq(1)
+        with m.Elif(bus.ack):
+            m.d.sync += outstanding.eq(0)
+
+        # the request as net.md §2.2 defines a good one
+        end = base + count
+        inside = 0
+        for wbase, wsize in self.WINDOWS:
+            inside = inside | ((base >= wbase) & (end <= wbase + wsize))
+        well_formed = ((length >= RBCP_HEADER) & (version == RBCP_VERSION) &
+                       ((command == RBCP_WRITE) | (command == RBCP_READ)) & (count != 0) &
+                       inside & ((command == RBCP_READ) | (length >= RBCP_HEADER + count)))
+        strobes = Signal(9)
+        with m.If(dut.start):
+            m.d.sync += strobes.eq(0)
+        with m.Elif(bus.we | bus.re):
+            m.d.sync += strobes.eq(strobes + 1)
+
+        with m.If(~Initial() & ~ResetSignal()):
+            with m.If(bus.we | bus.re):
+                m.d.comb += [Assert(running), Assert(well_formed), Assert(bus.act),
+                             Assert(~(bus.we & bus.re)),
+                             Assert(bus.we == (command == RBCP_WRITE)),
+                             Assert(strobes < count), Assert(bus.addr == base + strobes)]
+            with m.If(dut.buf_we):
+                m.d.comb += [Assert(running),
+                             Assert((dut.buf_addr == 1) |
+                                    ((dut.buf_addr >= RBCP_HEADER) &
+                                     (dut.buf_addr < RBCP_HEADER + count)))]
+            with m.If(dut.done & dut.reply):
+                m.d.comb += Assert(dut.reply_len == RBCP_HEADER + count)
+        return m
+
+
+@pytest.mark.parametrize("depth", RBCP_DEPTHS)
+def test_rbcp_server_accesses(depth):
+    run_sby(f"rbcp_server_{depth}", RbcpServerProperty(), depth, engine="abc bmc3")
 
 
 @pytest.mark.parametrize("depth", BUILDER_DEPTHS)
