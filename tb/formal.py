@@ -26,6 +26,8 @@ def run_sby(name, design, depth, mode="bmc", engine="smtbmc z3"):
     bindir = Path(sys.executable).parent
     if shutil.which("yowasp-sby") is None and not (bindir / "yowasp-sby").exists():
         pytest.fail("yowasp-sby is missing: make setup installs it (pyproject dependency)")
+    if engine.startswith("abc") and shutil.which("yosys-abc") is None:
+        pytest.fail("yosys-abc is missing: make setup installs it (Debian package yosys)")
     folder = SIM_BUILD / "formal" / name
     if folder.exists():
         shutil.rmtree(folder)
