@@ -9,7 +9,8 @@ from .checksum import ones_complement_add
 from .frames import (
     ARP_REPLY, ARP_REQUEST, ARP_SHA_OFFSET, ARP_SPA_OFFSET, DROP_REASONS, ETH_SRC_OFFSET,
     IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_ECHO_REQUEST,
-    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH,
+    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_VERSION, MIN_HEADER_WORDS, TCP_OPT_MSS,
+    TCP_OPT_MSS_LENGTH,
 )
 from .mac import RxByteSignature
 
@@ -44,6 +45,11 @@ DROP_CODE = {name: code for code, name in enumerate(DROP_REASONS)}
 
 def _shift_in(field, byte):
     return field.eq(Cat(byte, field[:-8]))
+
+
+def _ipv4_version_ihl_ok(value):
+    """The first IPv4 header byte names version 4 and a header of 20 bytes or more."""
+    return (value[4:8] == IP_VERSION) & (value[0:4] >= MIN_HEADER_WORDS)
 
 
 class FrameParser(wiring.Component):
@@ -165,8 +171,7 @@ class FrameParser(wiring.Component):
         # only an IPv4 header of 20 bytes or more has an L4 part: no other frame's bytes
         # become payload (the verdict drops those frames; their bytes must not reach a
         # consumer before it)
-        with m.If(v & (i == 14) & (ethertype == ETHERTYPE_IPV4) & (byte[4:8] == 4) &
-                  (byte[0:4] >= 5)):
+        with m.If(v & (i == 14) & (ethertype == ETHERTYPE_IPV4) & _ipv4_version_ihl_ok(byte)):
             m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))
         with m.If(v & (i >= 14) & (i < l4_off)):
             m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, word))
@@ -216,7 +221,7 @@ class FrameParser(wiring.Component):
         is_tcp = f.ip_proto == IP_PROTO_TCP
         with m.If(lv & (j == 12)):
             m.d.sync += f.doff.eq(byte[4:8])
-            with m.If(is_tcp & (byte[4:8] >= 5)):
+            with m.If(is_tcp & (byte[4:8] >= MIN_HEADER_WORDS)):
                 m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
 
         # TCP options (RFC 9293 §3.2): only MSS (length 4) is used; everything else is
@@ -280,7 +285,7 @@ class FrameParser(wiring.Component):
         arp_well_formed = ((arp_fixed == 0x000108000604) &
                            ((f.arp_oper == ARP_REQUEST) | (f.arp_oper == ARP_REPLY)))
         arp_ok = arp_well_formed & (f.arp_tpa == self.local_ip)
-        ip_ok = ((ver_ihl[4:8] == 4) & (ver_ihl[0:4] >= 5) & (f.ip_len >= ihl4) &
+        ip_ok = (_ipv4_version_ihl_ok(ver_ihl) & (f.ip_len >= ihl4) &
                  (ip_end <= frame_bytes) & (ip_acc == 0xFFFF))
         proto_ok = Signal()
         l4_ok = Signal()
@@ -294,7 +299,8 @@ class FrameParser(wiring.Component):
                                       ((f.udp_csum == 0) | (l4_sum == 0xFFFF)))]
             with m.Case(IP_PROTO_TCP):
                 m.d.comb += [proto_ok.eq(1),
-                             l4_ok.eq((f.doff >= 5) & (Cat(Const(0, 2), f.doff) <= f.l4_len) &
+                             l4_ok.eq((f.doff >= MIN_HEADER_WORDS) &
+                                      (Cat(Const(0, 2), f.doff) <= f.l4_len) &
                                       (l4_sum == 0xFFFF))]
         with m.Switch(f.ip_proto):
             with m.Case(IP_PROTO_ICMP):

@@ -8,9 +8,10 @@ from amaranth.lib.wiring import In, Out
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET, IP_PROTO_ICMP,
-    IP_PROTO_OFFSET, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, TCP_CSUM_OFFSET,
-    TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, UDP_CSUM_OFFSET,
+    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET,
+    IP_PROTO_ICMP, IP_PROTO_OFFSET, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_VERSION,
+    L4_OFFSET, MIN_HEADER_WORDS, TCP_CSUM_OFFSET, TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH,
+    UDP_CSUM_OFFSET,
 )
 from .rx import FrameKind
 
@@ -112,8 +113,8 @@ class FrameBuilder(wiring.Component):
         m.d.comb += [
             l4_len.eq(l4_header + r.length),
             ip_total.eq(20 + l4_len),
-            header.eq(Mux(is_arp, 42, 34 + l4_header)),
-            total.eq(Mux(is_arp, 42, 34 + l4_len)),
+            header.eq(Mux(is_arp, ETH_HEADER + ARP_LENGTH, L4_OFFSET + l4_header)),
+            total.eq(Mux(is_arp, ETH_HEADER + ARP_LENGTH, L4_OFFSET + l4_len)),
         ]
 
         idx = Signal(11)
@@ -154,7 +155,7 @@ class FrameBuilder(wiring.Component):
         def be(value, nbytes):
             return [value.word_select(nbytes - 1 - q, 8) for q in range(nbytes)]
 
-        data_offset = Mux(r.mss, 6, 5)
+        data_offset = Mux(r.mss, MIN_HEADER_WORDS + 1, MIN_HEADER_WORDS)
         sources = []                        # distinct byte sources, in order of first use
 
         def source(value):
@@ -175,8 +176,9 @@ class FrameBuilder(wiring.Component):
         arp_oper = Cat(r.arp_oper, Const(0, 6))
 
         def ipv4(proto):
-            return ([0x45, 0x00] + ip_fields + [0x40, 0x00, IP_TTL, proto] + ip_csum_bytes +
-                    local_ip + ip_dst)
+            version_ihl = (IP_VERSION << 4) | MIN_HEADER_WORDS
+            return ([version_ihl, 0x00] + ip_fields + [0x40, 0x00, IP_TTL, proto] +
+                    ip_csum_bytes + local_ip + ip_dst)
 
         def frame(variant, kind):
             if kind == FrameKind.ARP:
