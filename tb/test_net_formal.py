@@ -22,14 +22,16 @@ interfaces' docstrings (RxByteSignature, TxRequestSignature), not from the RTL.
 
 import pytest
 from amaranth.asserts import AnyConst, AnySeq, Initial
-from amaranth.hdl import Assert, Assume, Elaboratable, Module, Mux, ResetSignal, Signal
+from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, Mux, ResetSignal, Signal
 
-from hdl.net.frames import ETH_HEADER, RBCP_HEADER, RBCP_READ, RBCP_VERSION, RBCP_WRITE
+from hdl.net.frames import (
+    ARP_LENGTH, ETH_HEADER, L4_OFFSET, RBCP_HEADER, RBCP_READ, RBCP_VERSION, RBCP_WRITE,
+)
 from hdl.net.rbcp import RbcpServer
 from hdl.net.rx import FrameKind, FrameParser
 from hdl.net.stack import GLOBAL_BASE
 from hdl.net.tx import FrameBuilder
-from tb.formal import run_sby
+from tb.formal import held_until_taken, run_sby
 
 pytestmark = pytest.mark.formal
 
@@ -157,12 +159,8 @@ class FrameBuilderProperty(Elaboratable):
         # Requesters: any request, held unchanged from valid until ready; the buffer returns
         # a byte one cycle after its address, a function of the address alone.
         for q in reqs:
-            held = Signal()
-            held_request = Signal.like(q.request)
             m.d.comb += [q.valid.eq(AnySeq(1)), q.request.eq(AnySeq(len(q.request.as_value())))]
-            m.d.sync += [held.eq(q.valid & ~q.ready), held_request.eq(q.request)]
-            with m.If(held & ~Initial()):
-                m.d.comb += Assume(q.valid & (q.request.as_value() == held_request.as_value()))
+            held_until_taken(m, q.valid, q.ready, q.request.as_value(), Assume)
             m.d.comb += Assume(q.request.length <= 1460)
             m.d.comb += Assume(q.request.kind.as_value() <= FrameKind.TCP.value)
             rd_addr = Signal(16)
@@ -178,7 +176,7 @@ class FrameBuilderProperty(Elaboratable):
         kind = request.kind
         l4 = Mux(kind == FrameKind.TCP, Mux(request.mss, 24, 20),
                  Mux(kind == FrameKind.UDP, 8, 0))
-        m.d.comb += header.eq(Mux(kind == FrameKind.ARP, 42, 34 + l4))
+        m.d.comb += header.eq(Mux(kind == FrameKind.ARP, ETH_HEADER + ARP_LENGTH, L4_OFFSET + l4))
         length = Mux(kind == FrameKind.ARP, 0, request.length)
         beat = o.tvalid & o.tready
 
@@ -202,15 +200,9 @@ class FrameBuilderProperty(Elaboratable):
                 with m.If(o.tlast):
                     m.d.comb += Assert(reqs[0].done | reqs[1].done)
                     m.d.sync += busy.eq(0)
-
-            # AXI4-Stream: an offered byte stays until taken
-            out_held = Signal()
-            out_data = Signal(8)
-            out_last = Signal()
-            m.d.sync += [out_held.eq(o.tvalid & ~o.tready), out_data.eq(o.tdata),
-                         out_last.eq(o.tlast)]
-            with m.If(out_held):
-                m.d.comb += Assert(o.tvalid & (o.tdata == out_data) & (o.tlast == out_last))
+        # AXI4-Stream: an offered byte stays until taken
+        held_until_taken(m, o.tvalid, o.tready, Cat(o.tdata, o.tlast), Assert,
+                         when=~ResetSignal())
         return m
 
 
