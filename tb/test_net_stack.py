@@ -365,6 +365,50 @@ async def run_tcp_malformed_options(dut):
         await peer.expect("PA", seq=synack.seq + 1 + start, ack=peer.seq, data=data[start:stop])
 
 
+@cocotb.test()
+async def run_tcp_peer_mss_floor(dut):
+    """A peer MSS below 48 is raised to 48, Linux's floor (``net.ipv4.tcp_min_snd_mss``,
+    CVE-2019-11479), in both handshakes: MSS 1 in a client's SYN (server mode) and MSS 0 in
+    a server's SYN-ACK (client mode) give 48-byte segments, not 1-byte ones or none."""
+    from hdl.net.frames import ip_to_int
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    linux_min_snd_mss = 48
+    data = bytes(range(100))
+    cuts = [(start, min(start + linux_min_snd_mss, len(data)))
+            for start in range(0, len(data), linux_min_snd_mss)]
+    tb = NetTB(dut)
+    await tb.reset()
+    peer = ScriptedPeer(tb, 40020, 24, isn=3000)
+    s, iss = await establish(tb, 0, 24, peer, mss=1)
+    await s.write(data)
+    for start, stop in cuts:
+        await peer.expect("PA", seq=iss + 1 + start, ack=peer.seq, data=data[start:stop])
+    s.set(abort=1)
+    await peer.expect("R", seq=iss + 1 + len(data))
+    s.set(abort=0, open_req=0)
+    c = SessionPort(dut, 1, random.Random(9))
+    c.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5002, local_port=0, open_req=1)
+    request = await tb.recv()
+    assert ARP in request and request[ARP].pdst == PEER_IP
+    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
+                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
+    syn = (await tb.recv())[TCP]
+    assert str(syn.flags) == "S"
+    server = ScriptedPeer(tb, 5002, syn.sport, isn=9000)
+    server.ack = syn.seq + 1
+    await server.send("SA", options=[("MSS", 0)])
+    await server.expect("A", seq=syn.seq + 1, ack=server.seq)
+    await c.wait_state(TcpState.ESTABLISHED, 500)
+    await c.write(data)
+    for start, stop in cuts:
+        await server.expect("PA", seq=syn.seq + 1 + start, ack=server.seq,
+                            data=data[start:stop])
+    c.set(abort=1)
+    await server.expect("R", seq=syn.seq + 1 + len(data))
+    c.set(abort=0, open_req=0)
+
+
 async def establish(tb, k, port, peer, *, window=65535, mss=1460):
     """Session ``k`` listening on ``port``; ``peer`` completes the handshake (announcing
     ``mss``); returns the session port and the ISS."""

@@ -12,7 +12,8 @@ __all__ = [
     "MIN_HEADER_WORDS", "IP_PROTO_ICMP",
     "IP_PROTO_TCP", "IP_PROTO_UDP", "IP_TTL", "ICMP_ECHO_REQUEST", "ICMP_ECHO_REPLY",
     "TCP_FIN", "TCP_SYN", "TCP_RST", "TCP_PSH", "TCP_ACK", "TCP_OPT_MSS", "TCP_OPT_MSS_LENGTH",
-    "TCP_MSS", "TCP_MSS_DEFAULT", "RBCP_VERSION", "RBCP_WRITE", "RBCP_READ", "RBCP_REPLY",
+    "TCP_MSS", "TCP_MSS_DEFAULT", "TCP_MSS_MIN", "RBCP_VERSION", "RBCP_WRITE", "RBCP_READ",
+    "RBCP_REPLY",
     "RBCP_BUS_ERROR", "RBCP_HEADER", "DEFAULT_IP", "DEFAULT_MAC", "DEFAULT_TCP_PORT",
     "DEFAULT_RBCP_PORT", "ip_to_int", "int_to_ip", "mac_to_int", "int_to_mac",
     "DROP_REASONS",
@@ -65,6 +66,10 @@ TCP_OPT_MSS = 2
 TCP_OPT_MSS_LENGTH = 4
 TCP_MSS = 1460                # sent in SYN and SYN-ACK
 TCP_MSS_DEFAULT = 536         # assumed when the peer's SYN has no MSS option (RFC 9293 §3.7.1)
+#: The smallest peer MSS used: a smaller announced one is raised to it, as Linux does
+#: (``net.ipv4.tcp_min_snd_mss``, CVE-2019-11479): an MSS of 1 would fill the descriptor
+#: ring with one-byte segments.
+TCP_MSS_MIN = 48
 
 RBCP_VERSION = 0xFF
 RBCP_WRITE = 0x80

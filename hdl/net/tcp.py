@@ -11,7 +11,7 @@ from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .counters import EventCounters
 from .frames import (
-    ARP_REQUEST, TCP_ACK, TCP_FIN, TCP_MSS, TCP_MSS_DEFAULT, TCP_PSH, TCP_RST,
+    ARP_REQUEST, TCP_ACK, TCP_FIN, TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN, TCP_PSH, TCP_RST,
     TCP_SYN,
 )
 from .rx import RX_FIELDS, FrameKind
@@ -63,10 +63,10 @@ class TcpSession(wiring.Component):
     """One TCP connection with a SiTCP-like user side.
 
     Transmit data goes into a block-RAM buffer of ``tx_depth`` bytes and is cut into segments
-    as it arrives (at ``min(peer MSS, 1460)`` bytes, at ``tlast``, or after 16 idle cycles);
-    each segment's checksum is summed while it is written, so a segment is sent at one byte
-    per cycle straight from the buffer and resent unchanged until acknowledged. Received
-    in-order data is written into a ``rx_depth``-byte ring while the frame arrives and
+    as it arrives (at ``min(max(peer MSS, 48), 1460)`` bytes, at ``tlast``, or after 16 idle
+    cycles); each segment's checksum is summed while it is written, so a segment is sent at
+    one byte per cycle straight from the buffer and resent unchanged until acknowledged.
+    Received in-order data is written into a ``rx_depth``-byte ring while the frame arrives and
     committed when the frame's FCS and checksum are known good; the ring's free space is the
     advertised window. Out-of-order segments are dropped and answered with a duplicate ACK.
 
@@ -983,4 +983,4 @@ class TcpSession(wiring.Component):
     @staticmethod
     def _mss(f):
         peer = Mux(f.has_mss, f.mss, TCP_MSS_DEFAULT)
-        return Mux(peer < TCP_MSS, peer, TCP_MSS)[:11]
+        return Mux(peer < TCP_MSS_MIN, TCP_MSS_MIN, Mux(peer < TCP_MSS, peer, TCP_MSS))[:11]
