@@ -16,7 +16,7 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
            "tb.test_kernels_mnist": "kernels", "tb.test_net_stack": "net",
            "tb.test_ros1_registers": "ros1_node"}
 #: bench module -> its configuration tables besides ``CONFIGS``
-MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING",)}
+MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING", "WIDE_USER")}
 
 
 def benchmark_tops():

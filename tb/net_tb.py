@@ -102,9 +102,11 @@ class NetTB:
         for k in range(self.sessions):
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
                          "close_ack", "abort", "tx_tvalid", "tx_tdata", "tx_tlast",
-                         "rx_tready", "counter_index", "counters_clear"):
-                getattr(dut, f"tcp{k}_{name}").value = 0
+                         "rx_tready", "counter_index", "counters_clear", "tx_tkeep"):
+                if hasattr(dut, f"tcp{k}_{name}"):
+                    getattr(dut, f"tcp{k}_{name}").value = 0
         self.bus = RegisterBusModel(dut) if hasattr(dut, "rbcp_ack") else None
+        self.cycle = 0          # the peer model's clock (see run_peer)
         if hasattr(dut, "counter_index"):
             dut.counter_index.value = 0
 
@@ -163,11 +165,38 @@ class NetTB:
     async def idle(self, cycles):
         await ClockCycles(self.dut.aclk, cycles)
 
+    async def put(self, frame, *, fcs=True, error=False):
+        """Send a frame of a peer model (:meth:`send`; benches count or learn here)."""
+        await self.send(frame, fcs=fcs, error=error)
+
+    def check_frame(self, payload):
+        """A frame from the engine to a peer model, FCS checked and removed (benches add
+        their oracles here)."""
+
+    async def run_peer(self, peer):
+        """Frames between the engine and a :class:`~tb.models.tcp_peer.TcpPeerModel` until
+        cancelled: the engine's frames to the peer, the peer's answers and timed frames
+        (:meth:`~tb.models.tcp_peer.TcpPeerModel.poll`, every 64 cycles) to the engine."""
+        while True:
+            while not self.sink.empty():
+                gf = self.sink.recv_nowait()
+                assert gf.check_fcs(), "engine frame with a bad FCS"
+                payload = bytes(gf.get_payload())
+                self.check_frame(payload)
+                for f in peer.on_frame(payload, self.cycle):
+                    await self.put(f)
+            for f in peer.poll(self.cycle):
+                await self.put(f)
+            await ClockCycles(self.dut.aclk, 64)
+            self.cycle += 64
+
 
 class SessionPort(StreamPort):
     """Session ``k``'s user streams: a cocotbext-axi source on ``tcp<k>_tx`` (one ``tlast``
     per written chunk) and a :class:`PacketSink` on ``tcp<k>_rx``, with optional random idle
-    and backpressure, and its control signals."""
+    and backpressure, and its control signals. The streams may be wider than a byte
+    (``user_width``): bytes are counted by ``tkeep``, and ``received`` joins the packets that
+    ``tlast`` cut."""
 
     def __init__(self, dut, k, rng):
         super().__init__(dut, f"tcp{k}", rng, out="rx", into="tx")
@@ -186,7 +215,8 @@ class SessionPort(StreamPort):
 
     @property
     def received(self):
-        return bytes(self.sink.current.data)
+        packets = self.sink.packets + [self.sink.current]
+        return b"".join(bytes(p.data) for p in packets)
 
     async def write(self, data):
         from cocotbext.axi import AxiStreamFrame
@@ -194,10 +224,10 @@ class SessionPort(StreamPort):
 
     async def wait_received(self, count, timeout_cycles):
         for _ in range(timeout_cycles // 64):
-            if len(self.sink.current.data) >= count:
+            if len(self.received) >= count:
                 return self.received
             await ClockCycles(self.dut.aclk, 64)
-        raise AssertionError(f"session {self.k}: {len(self.sink.current.data)} of {count} "
+        raise AssertionError(f"session {self.k}: {len(self.received)} of {count} "
                              f"bytes received in {timeout_cycles} cycles")
 
     async def wait_state(self, state, timeout_cycles=100000):

@@ -1,8 +1,8 @@
 """amaranth.sim drivers for AXI4-Stream ports: fast unit tests of internal blocks.
 
 The same roles as the cocotb benches (source with random idle, sink with random
-backpressure), for blocks that are not exported tops. Beats are ``(tdata, tlast)`` tuples;
-messages are lists of ``tdata`` values.
+backpressure), for blocks that are not exported tops. Beats are ``(tdata, tlast)`` tuples,
+or ``(tdata, tlast, tkeep)`` where ``tkeep`` matters; messages are lists of ``tdata`` values.
 """
 
 import random
@@ -30,7 +30,8 @@ def beats_to_messages(beats):
 class StreamSource:
     """Drives ``port`` (an ``In`` stream of the DUT) with beats, pausing at random.
 
-    ``tvalid`` stays high with a stable payload until the beat transfers (AXI rule).
+    ``tvalid`` stays high with a stable payload until the beat transfers (AXI rule). A beat
+    without ``tkeep`` keeps every byte.
     """
 
     def __init__(self, port, beats, *, idle=0.0, seed=0, domain_tick=None):
@@ -44,14 +45,14 @@ class StreamSource:
     async def run(self, ctx):
         port = self.port
         tick = self.tick or (lambda: ctx.tick())
-        for data, last in self.beats:
+        for data, last, *keep in self.beats:
             while self.rng.random() < self.idle:
                 ctx.set(port.tvalid, 0)
                 await tick()
             ctx.set(port.tdata, data)
             ctx.set(port.tlast, last)
             if hasattr(port, "tkeep"):
-                ctx.set(port.tkeep, (1 << len(port.tkeep)) - 1)
+                ctx.set(port.tkeep, keep[0] if keep else (1 << len(port.tkeep)) - 1)
             ctx.set(port.tvalid, 1)
             await tick().until(port.tready)
             self.sent += 1
@@ -59,10 +60,12 @@ class StreamSource:
 
 
 class StreamSink:
-    """Takes beats from ``port`` (an ``Out`` stream of the DUT) with random backpressure."""
+    """Takes beats from ``port`` (an ``Out`` stream of the DUT) with random backpressure;
+    ``keep`` records ``(tdata, tlast, tkeep)``."""
 
-    def __init__(self, port, *, backpressure=0.0, seed=1, domain_tick=None):
+    def __init__(self, port, *, backpressure=0.0, seed=1, domain_tick=None, keep=False):
         self.port = port
+        self.keep = keep
         self.backpressure = backpressure
         self.rng = random.Random(seed)
         self.beats = []
@@ -75,9 +78,10 @@ class StreamSink:
         while True:
             ready = not self.paused and self.rng.random() >= self.backpressure
             ctx.set(port.tready, ready)
-            *_, valid, data, last = await tick().sample(port.tvalid, port.tdata, port.tlast)
+            *_, valid, data, last, tkeep = await tick().sample(
+                port.tvalid, port.tdata, port.tlast, port.tkeep if self.keep else port.tlast)
             if ready and valid:
-                self.beats.append((data, last))
+                self.beats.append((data, last, tkeep) if self.keep else (data, last))
 
 
 def simulate(dut, *testbenches, background=(), clocks=None, vcd=None):

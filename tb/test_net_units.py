@@ -102,6 +102,9 @@ def test_bad_parameter_names_the_value():
     with pytest.raises(ParameterError,
                        match="descriptors must be a power of two in 4..256, not 6"):
         NetStack(descriptors=6)
+    with pytest.raises(ParameterError, match=r"user_width must be an integer in 8\.\.1024 and a "
+                                             r"multiple of 8, not 12"):
+        NetStack(user_width=12)
 
 
 class _ResetHarness(Elaboratable):

@@ -1,4 +1,5 @@
-"""Unit tests of hdl.stream (amaranth.sim): signature, register slice, FIFOs, monitor."""
+"""Unit tests of hdl.stream (amaranth.sim): signature, register slice, FIFOs, monitor, width
+converters."""
 
 import random
 
@@ -7,7 +8,7 @@ from amaranth.hdl import ClockDomain, Module
 
 from hdl.params import ParameterError
 from hdl.stream import (AsyncStreamFIFO, AXIStreamSignature, MessageFIFO, RegisterSlice,
-                        StreamFIFO)
+                        StreamDownsizer, StreamFIFO, StreamUpsizer)
 from tb.streamsim import (StreamSink, StreamSource, beats_to_messages, messages_to_beats,
                           simulate)
 
@@ -267,3 +268,115 @@ def test_async_fifo_crosses_domains(w_period, r_period):
 
     simulate(m, send, background=[receive], clocks={"write": w_period, "read": r_period})
     assert sink.beats == beats
+
+
+# Width converters --------------------------------------------------------------------------
+# The golden model is the byte sequence: bytes of a beat are its tkeep bytes from byte 0.
+
+def run_converter(dut, beats, *, idle, backpressure, seed, expected_beats):
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=seed)
+    sink = StreamSink(dut.m_axis, backpressure=backpressure, seed=seed + 1,
+                      keep=hasattr(dut.m_axis, "tkeep"))
+
+    async def drain(ctx):
+        await source.run(ctx)
+        for _ in range(2000):
+            if expected_beats(sink.beats):
+                break
+            await ctx.tick()
+
+    simulate(dut, drain, background=[sink.run])
+    return sink.beats
+
+
+def beat_bytes(data, keep):
+    return [(data >> 8 * i) & 0xFF for i in range(keep.bit_length()) if keep >> i & 1]
+
+
+@pytest.mark.parametrize("width", [16, 32, 64])
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.4, 0.0), (0.0, 0.5), (0.3, 0.6)])
+def test_downsizer_random(width, idle, backpressure):
+    """Every kept byte once, in order; tlast on the last byte of a beat with tlast; beats
+    with tkeep 0 give nothing."""
+    rng = random.Random(width + int(10 * idle) + int(100 * backpressure))
+    B = width // 8
+    beats, want = [], []
+    for _ in range(120):
+        n = rng.choice([B, B, rng.randint(0, B)])
+        last = int(n < B or rng.random() < 0.2)
+        data = rng.getrandbits(width)
+        beats.append((data, last, (1 << n) - 1))
+        chunk = beat_bytes(data, (1 << n) - 1)
+        want += [(b, int(last and i == n - 1)) for i, b in enumerate(chunk)]
+    got = run_converter(StreamDownsizer(width), beats, idle=idle, backpressure=backpressure,
+                        seed=5, expected_beats=lambda got: len(got) >= len(want))
+    assert got == want
+
+
+@pytest.mark.parametrize("width", [16, 32, 64])
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.4, 0.0), (0.0, 0.5), (0.3, 0.6)])
+def test_upsizer_random(width, idle, backpressure):
+    """The bytes once, in order, tkeep contiguous from byte 0; a byte with tlast ends a beat
+    with tlast; a partial beat carries tlast; with an input that never pauses, every beat
+    but those ending at tlast is full (backpressure does not split beats)."""
+    rng = random.Random(width * 3 + int(10 * idle) + int(100 * backpressure))
+    B = width // 8
+    beats = [(rng.getrandbits(8), int(rng.random() < 0.05)) for _ in range(600)]
+    got = run_converter(StreamUpsizer(width), beats, idle=idle, backpressure=backpressure,
+                        seed=7, expected_beats=lambda got: sum(
+                            bin(k).count("1") for _, _, k in got) >= len(beats))
+    flat = []
+    for data, last, keep in got:
+        n = bin(keep).count("1")
+        assert keep == (1 << n) - 1 and n >= 1, f"tkeep {keep:#x} not contiguous from byte 0"
+        assert last or n == B, f"a partial beat ({n} of {B} bytes) without tlast"
+        chunk = beat_bytes(data, keep)
+        flat += [(b, int(last and i == n - 1)) for i, b in enumerate(chunk)]
+    assert [b for b, _ in flat] == [b for b, _ in beats]
+    ends = {i for i, (_, last) in enumerate(flat) if last}
+    assert {i for i, (_, last) in enumerate(beats) if last} <= ends
+    if idle == 0:
+        tlast_at = {i for i, (_, last) in enumerate(beats) if last}
+        assert ends - tlast_at <= {len(beats) - 1}, "a beat flushed while bytes kept coming"
+
+
+@pytest.mark.parametrize("converter", [StreamDownsizer, StreamUpsizer])
+def test_converters_full_throughput(converter):
+    """One byte per cycle through either converter, whatever the beat width."""
+    B = 4
+    if converter is StreamDownsizer:
+        beats = [(0x04030201 + i, int(i % 7 == 6), 0xF) for i in range(50)]
+        total = 50 * B
+    else:
+        beats = [(i & 0xFF, 0) for i in range(200)]
+        total = 200
+    dut = converter(8 * B)
+    source = StreamSource(dut.s_axis, beats)
+    sink = StreamSink(dut.m_axis, keep=converter is StreamUpsizer)
+    done = []
+
+    async def bench(ctx):
+        await source.run(ctx)
+        for _ in range(10):
+            await ctx.tick()
+
+    async def count(ctx):
+        cycles = 0
+        while True:
+            await ctx.tick()
+            cycles += 1
+            done.append(source.sent)
+
+    simulate(dut, bench, background=[sink.run, count])
+    moved = sum(bin(b[2]).count("1") for b in sink.beats) if converter is StreamUpsizer \
+        else len(sink.beats)
+    assert moved == total
+    input_cycles = done.index(len(beats)) + 1
+    assert input_cycles <= (len(beats) if converter is StreamUpsizer else total) + 2, input_cycles
+
+
+@pytest.mark.parametrize("converter", [StreamDownsizer, StreamUpsizer])
+def test_converters_reject_byte_width(converter):
+    with pytest.raises(ParameterError, match=r"data_width must be an integer in 16\.\.1024 and "
+                                             r"a multiple of 8, not 8"):
+        converter(8)

@@ -6,7 +6,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
-from ..stream import AXIStreamSignature
+from ..stream import AXIStreamSignature, keep_count
 
 __all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask", "keep_count"]
 
@@ -14,14 +14,6 @@ __all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask", "keep_co
 def byte_mask(value, nbytes, count):
     """``value`` (``nbytes`` bytes) with every byte at index ``>= count`` cleared."""
     return Cat(*(Mux(count > i, value.word_select(i, 8), 0) for i in range(nbytes)))
-
-
-def keep_count(tkeep):
-    """Number of set bits of a contiguous-from-bit-0 ``tkeep``."""
-    count = Const(0, range(len(tkeep) + 1))
-    for i in range(len(tkeep)):
-        count = Mux(tkeep[i], i + 1, count)
-    return count
 
 
 class ChunkSignature(wiring.Signature):

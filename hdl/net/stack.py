@@ -7,7 +7,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from ..stream import AXIStreamSignature
+from ..stream import AXIStreamSignature, StreamDownsizer, StreamUpsizer
 from .checksum import ones_complement_add
 from .counters import EventCounters
 from .frames import (
@@ -49,12 +49,22 @@ _CLOCK_HZ = 125_000_000
 
 class TcpUserSignature(wiring.Signature):
     """One TCP session's user side (``Out`` = towards the user), after SiTCP's interface
-    (net.md §2.1); see :class:`TcpSession` for each member's meaning."""
+    (net.md §2.1); see :class:`TcpSession` for each member's meaning.
 
-    def __init__(self):
+    Parameters
+    ----------
+    data_width : int
+        Width of the ``tx`` and ``rx`` streams: 8 (SiTCP's byte streams, no ``tkeep``) or a
+        wider multiple of 8 up to 1024, with ``tkeep`` (see :class:`NetStack`).
+    """
+
+    def __init__(self, data_width=8):
+        check_int("data_width", data_width, 8, 1024, multiple_of=8)
+        self._data_width = data_width
+        keep = data_width > 8
         super().__init__({
-            "tx": In(AXIStreamSignature(8, keep=False)),
-            "rx": Out(AXIStreamSignature(8, keep=False)),
+            "tx": In(AXIStreamSignature(data_width, keep=keep)),
+            "rx": Out(AXIStreamSignature(data_width, keep=keep)),
             "open_req": In(1), "active": In(1), "local_port": In(16), "remote_ip": In(32),
             "remote_port": In(16), "open_ack": Out(1), "close_req": Out(1),
             "close_ack": In(1), "abort": In(1), "error": Out(1), "error_code": Out(TcpError),
@@ -63,6 +73,14 @@ class TcpUserSignature(wiring.Signature):
             "counter_index": In(range(len(TCP_COUNTERS))), "counter_value": Out(32),
             "counters_clear": In(1),
         })
+
+    data_width = property(lambda self: self._data_width)
+
+    def __eq__(self, other):
+        return type(other) is type(self) and other._data_width == self._data_width
+
+    def __hash__(self):
+        return hash((type(self), self._data_width))
 
 
 class NetStack(wiring.Component):
@@ -96,6 +114,13 @@ class NetStack(wiring.Component):
         Bytes of RBCP address space from 0 that the user bus decodes.
     iss_seed : int
         Initial-sequence-number clock at reset (tests use values near 2**32).
+    user_width : int
+        Width of the sessions' user streams: 8 (default, SiTCP's) or a wider multiple of 8
+        (16..1024). A wider ``tx`` beat is sent byte 0 first, its ``tkeep`` contiguous from
+        byte 0, ``tlast`` pushing out the segment as on the byte stream. A wider ``rx`` beat
+        leaves when full or, partial and with ``tlast``, when the session has no further
+        byte to deliver, so bytes never wait for later ones. Both directions keep one byte
+        per cycle (:class:`~hdl.stream.StreamDownsizer`, :class:`~hdl.stream.StreamUpsizer`).
 
     Members
     -------
@@ -103,7 +128,7 @@ class NetStack(wiring.Component):
         To the PHY.
     gmii_rxd, gmii_rx_dv, gmii_rx_er : In
         From the PHY (on the core clock).
-    tcp<k> : Out(TcpUserSignature())
+    tcp<k> : Out(TcpUserSignature(user_width))
         Session ``k``.
     rbcp : Out(RbcpBusSignature())
         Register bus for user logic: addresses below ``user_window``.
@@ -119,7 +144,7 @@ class NetStack(wiring.Component):
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
                  sessions=1, tx_depth=65536, rx_depth=65536, descriptors=64, rto_us=200_000,
                  msl_us=1_000_000, arp_retry_us=2_000_000, user_window=0x10000,
-                 iss_seed=0x1000):
+                 iss_seed=0x1000, user_width=8):
         try:
             self._mac = mac_to_int(mac)
         except ValueError as e:
@@ -137,10 +162,11 @@ class NetStack(wiring.Component):
         self._user_window = check_int("user_window", user_window, 1, GLOBAL_BASE)
         self._session_args = TcpSession.check_parameters(
             tx_depth=tx_depth, rx_depth=rx_depth, descriptors=descriptors, iss_seed=iss_seed)
+        self._user_width = check_int("user_width", user_width, 8, 1024, multiple_of=8)
         members = {"gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
                    "gmii_rxd": In(8), "gmii_rx_dv": In(1), "gmii_rx_er": In(1)}
         for k in range(sessions):
-            members[f"tcp{k}"] = Out(TcpUserSignature())
+            members[f"tcp{k}"] = Out(TcpUserSignature(user_width))
         members.update({"rbcp": Out(RbcpBusSignature()), "local_mac": Out(48),
                         "local_ip": Out(32),
                         "counter_index": In(range(len(STACK_COUNTERS))),
@@ -191,8 +217,16 @@ class NetStack(wiring.Component):
                 s.arp_retry_cycles.eq(arp_retry),
             ]
             wiring.connect(m, s.tx, getattr(builder, f"req_{k + 1}"))
-            wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
-            wiring.connect(m, s.m_axis, wiring.flipped(user.rx))
+            if self._user_width == 8:
+                wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
+                wiring.connect(m, s.m_axis, wiring.flipped(user.rx))
+            else:
+                m.submodules[f"tcp{k}_tx_downsizer"] = down = StreamDownsizer(self._user_width)
+                m.submodules[f"tcp{k}_rx_upsizer"] = up = StreamUpsizer(self._user_width)
+                wiring.connect(m, wiring.flipped(user.tx), down.s_axis)
+                wiring.connect(m, down.m_axis, s.s_axis)
+                wiring.connect(m, s.m_axis, up.s_axis)
+                wiring.connect(m, up.m_axis, wiring.flipped(user.rx))
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
                          "close_ack", "abort", "counter_index", "counters_clear"):
                 m.d.comb += getattr(s, name).eq(getattr(user, name))

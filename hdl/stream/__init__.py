@@ -1,4 +1,4 @@
-"""AXI4-Stream library: signature, register slice, FIFOs."""
+"""AXI4-Stream library: signature, register slice, FIFOs, width converters."""
 
 from .signature import AXIStreamSignature, PAYLOAD_MEMBERS, check_stream_signature
 from .skid import RegisterSlice
@@ -11,3 +11,7 @@ __all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "check_stream_signature", "R
 from .monitor import StreamMonitorSignature, StreamMonitor
 
 __all__ += ["StreamMonitorSignature", "StreamMonitor"]
+
+from .width import StreamDownsizer, StreamUpsizer, keep_count
+
+__all__ += ["StreamDownsizer", "StreamUpsizer", "keep_count"]

@@ -1,0 +1,130 @@
+"""Width converters between byte streams and wider AXI4-Stream beats (byte 0 first)."""
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_int
+from .signature import AXIStreamSignature
+
+__all__ = ["StreamDownsizer", "StreamUpsizer", "keep_count"]
+
+
+def keep_count(tkeep):
+    """Number of set bits of a contiguous-from-bit-0 ``tkeep``."""
+    count = Const(0, range(len(tkeep) + 1))
+    for i in range(len(tkeep)):
+        count = Mux(tkeep[i], i + 1, count)
+    return count
+
+
+def _check_width(data_width):
+    check_int("data_width", data_width, 16, 1024, multiple_of=8)
+
+
+class StreamDownsizer(wiring.Component):
+    """Splits beats of ``data_width`` bits into one-byte beats, byte 0 first.
+
+    Full throughput: one byte per cycle, the next beat taken in the cycle the previous one's
+    last byte leaves.
+
+    Parameters
+    ----------
+    data_width : int
+        Width of the input's ``tdata``, a multiple of 8 in 16..1024.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(data_width))
+        ``tkeep`` contiguous from byte 0. A beat with ``tkeep`` 0 carries no byte and is taken
+        without output (its ``tlast`` is lost: it has no byte to mark).
+    m_axis : Out(AXIStreamSignature(8, keep=False))
+        The kept bytes in order; ``tlast`` on the last kept byte of a beat with ``tlast``.
+    """
+
+    def __init__(self, data_width):
+        _check_width(data_width)
+        self._width = data_width
+        super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
+                          "m_axis": Out(AXIStreamSignature(8, keep=False))})
+
+    def elaborate(self, platform):
+        m = Module()
+        W, B = self._width, self._width // 8
+        buf = Signal(W)
+        left = Signal(range(B + 1))         # bytes of the held beat still to send
+        last = Signal()
+        s, out = self.s_axis, self.m_axis
+        m.d.comb += [out.tvalid.eq(left != 0), out.tdata.eq(buf[:8]),
+                     out.tlast.eq(last & (left == 1))]
+        sent = out.tvalid & out.tready
+        m.d.comb += s.tready.eq((left == 0) | ((left == 1) & out.tready))
+        with m.If(s.tvalid & s.tready):
+            m.d.sync += [buf.eq(s.tdata), left.eq(keep_count(s.tkeep)), last.eq(s.tlast)]
+        with m.Elif(sent):
+            m.d.sync += [buf.eq(buf >> 8), left.eq(left - 1)]
+        return m
+
+
+class StreamUpsizer(wiring.Component):
+    """Gathers one-byte beats into beats of ``data_width`` bits, byte 0 first.
+
+    The input is a byte stream whose beat boundaries mean nothing, so a beat leaves when it is
+    full, after a byte with ``tlast``, or, partial, as soon as the input has no byte to offer:
+    bytes never wait for more bytes that may not come. Full throughput: one byte per cycle
+    in, the next beat gathered while the previous one waits.
+
+    Parameters
+    ----------
+    data_width : int
+        Width of the output's ``tdata``, a multiple of 8 in 16..1024.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(8, keep=False))
+        Bytes.
+    m_axis : Out(AXIStreamSignature(data_width))
+        ``tkeep`` contiguous from byte 0; a beat that is not full carries ``tlast``, as does a
+        beat whose last byte carried it (so ``tkeep`` is partial only with ``tlast``).
+    """
+
+    def __init__(self, data_width):
+        _check_width(data_width)
+        self._width = data_width
+        super().__init__({"s_axis": In(AXIStreamSignature(8, keep=False)),
+                          "m_axis": Out(AXIStreamSignature(data_width))})
+
+    def elaborate(self, platform):
+        m = Module()
+        W, B = self._width, self._width // 8
+        # gathering register, and the output register it moves into when the beat closes
+        acc = Signal(W - 8)
+        count = Signal(range(B))
+        data = Signal(W)
+        keep = Signal(B)
+        last = Signal()
+        valid = Signal()
+        s, out = self.s_axis, self.m_axis
+        m.d.comb += [out.tvalid.eq(valid), out.tdata.eq(data), out.tkeep.eq(keep),
+                     out.tlast.eq(last)]
+        free = ~valid | out.tready          # the output register is empty after this cycle
+        with m.If(out.tready):
+            m.d.sync += valid.eq(0)
+        take = s.tvalid & s.tready
+        gathered = Cat(acc, Const(0, 8))
+        with_byte = gathered | (Cat(s.tdata, Const(0, W - 8)) << (count * 8))
+        closes = (count == B - 1) | s.tlast
+        # bytes 0..count with the incoming one, bytes 0..count - 1 without it
+        keep_with = Cat(Const(1, 1), *(count >= i for i in range(1, B)))
+        keep_without = Cat(*(count > i for i in range(B - 1)), Const(0, 1))
+        # the input may wait only while a closed beat cannot move on
+        m.d.comb += s.tready.eq(free | ~closes)
+        with m.If(take & closes):
+            m.d.sync += [data.eq(with_byte), keep.eq(keep_with), last.eq(s.tlast),
+                         valid.eq(1), acc.eq(0), count.eq(0)]
+        with m.Elif(take):
+            m.d.sync += [acc.eq(with_byte[:W - 8]), count.eq(count + 1)]
+        with m.Elif((count != 0) & free):
+            m.d.sync += [data.eq(gathered), keep.eq(keep_without), last.eq(1), valid.eq(1),
+                         acc.eq(0), count.eq(0)]
+        return m
