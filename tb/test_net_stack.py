@@ -435,9 +435,7 @@ async def run_tcp_peer_mss_floor(dut):
     """A peer MSS below 48 is raised to 48, Linux's floor (``net.ipv4.tcp_min_snd_mss``,
     CVE-2019-11479), in both handshakes: MSS 1 in a client's SYN (server mode) and MSS 0 in
     a server's SYN-ACK (client mode) give 48-byte segments, not 1-byte ones or none."""
-    from hdl.net.frames import ip_to_int
     from hdl.net.tcp import TcpState
-    from tb.net_tb import SessionPort
     linux_min_snd_mss = 48
     data = bytes(range(100))
     cuts = [(start, min(start + linux_min_snd_mss, len(data)))
@@ -452,14 +450,7 @@ async def run_tcp_peer_mss_floor(dut):
     s.set(abort=1)
     await peer.expect("R", seq=iss + 1 + len(data))
     s.set(abort=0, open_req=0)
-    c = SessionPort(dut, 1, random.Random(9))
-    c.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5002, local_port=0, open_req=1)
-    request = await tb.recv()
-    assert ARP in request and request[ARP].pdst == PEER_IP
-    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
-                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
-    syn = (await tb.recv())[TCP]
-    assert str(syn.flags) == "S"
+    c, syn = await client_open(tb, 1, 5002, 9)
     server = ScriptedPeer(tb, 5002, syn.sport, isn=9000)
     server.ack = syn.seq + 1
     await server.send("SA", options=[("MSS", 0)])
@@ -488,6 +479,26 @@ async def establish(tb, k, port, peer, *, window=65535, mss=1460):
     await peer.send("A", window=window)
     await s.wait_state(TcpState.ESTABLISHED)
     return s, synack.seq
+
+
+async def client_open(tb, k, port, seed):
+    """Session ``k`` opens a client connection to the peer's ``port``: the engine broadcasts
+    an ARP request for the peer, which is answered; returns the session port and the
+    engine's SYN (its TCP layer)."""
+    from hdl.net.frames import ip_to_int
+    from tb.net_tb import SessionPort
+    c = SessionPort(tb.dut, k, random.Random(seed))
+    c.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=port, local_port=0, open_req=1)
+    request = await tb.recv()
+    assert request is not None and ARP in request, f"no ARP request: {request!r}"
+    assert request[ARP].op == 1 and request[ARP].pdst == PEER_IP
+    assert request.dst == "ff:ff:ff:ff:ff:ff"
+    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
+                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
+    syn = await tb.recv()
+    assert syn is not None and TCP in syn, f"no SYN: {syn!r}"
+    assert str(syn[TCP].flags) == "S" and syn[TCP].dport == port
+    return c, syn[TCP]
 
 
 @cocotb.test()
@@ -988,21 +999,12 @@ async def run_tcp_client_syn_sent_rules(dut):
     the RTO with the same ISS; an RST without ACK is ignored; an ACK that does not
     acknowledge the SYN gets an RST at its ACK number; a bare SYN (simultaneous open) leads
     to SYN-RECEIVED and a SYN-ACK, its ACK to ESTABLISHED; data then moves both ways."""
-    from hdl.net.frames import ip_to_int
     from hdl.net.tcp import TcpState
-    from tb.net_tb import SessionPort
     tb = NetTB(dut)
     await tb.reset()
     rto = 4000
     await write_global(tb, "rto_cycles", rto)
-    s = SessionPort(dut, 1, random.Random(8))
-    s.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5001, local_port=0, open_req=1)
-    request = await tb.recv()
-    assert ARP in request and request[ARP].pdst == PEER_IP
-    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
-                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
-    syn = (await tb.recv())[TCP]
-    assert str(syn.flags) == "S" and syn.dport == 5001
+    s, syn = await client_open(tb, 1, 5001, 8)
     iss = syn.seq
     peer = ScriptedPeer(tb, 5001, syn.sport, isn=0x7FFFFFF0)
     peer.sport, peer.dport = 5001, syn.sport
@@ -1037,22 +1039,12 @@ async def run_tcp_client_refused_and_arp_timeout(dut):
     REFUSED; a server that never answers ARP -> four requests, then error ARP."""
     from hdl.net.frames import ip_to_int
     from hdl.net.tcp import TcpError, TcpState
-    from tb.net_tb import SessionPort
     tb = NetTB(dut)
     await tb.reset()
-    s = SessionPort(dut, 1, random.Random(1))
-    s.set(active=1, remote_ip=ip_to_int(PEER_IP), remote_port=5000, local_port=0, open_req=1)
-    request = await tb.recv()
-    assert ARP in request and request[ARP].op == 1 and request[ARP].pdst == PEER_IP
-    assert request.dst == "ff:ff:ff:ff:ff:ff"
-    await tb.send(Ether(src=PEER_MAC, dst=tb.mac) /
-                  ARP(op=2, hwsrc=PEER_MAC, psrc=PEER_IP, hwdst=tb.mac, pdst=tb.ip))
-    syn = await tb.recv()
-    assert TCP in syn and str(syn[TCP].flags) == "S" and syn[TCP].dport == 5000
-    assert syn[TCP].sport >= 49152 and syn[TCP].options == [("MSS", 1460)]
+    s, syn = await client_open(tb, 1, 5000, 1)
+    assert syn.sport >= 49152 and syn.options == [("MSS", 1460)]
     await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) /
-                  TCP(sport=5000, dport=syn[TCP].sport, flags="RA", seq=0,
-                      ack=syn[TCP].seq + 1))
+                  TCP(sport=5000, dport=syn.sport, flags="RA", seq=0, ack=syn.seq + 1))
     await s.wait_state(TcpState.CLOSED, 2000)
     assert s.get("error_code") == TcpError.REFUSED.value
     # nobody answers ARP for this address

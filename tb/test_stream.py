@@ -69,29 +69,34 @@ def test_register_slice_random(idle, backpressure):
                  idle=idle, backpressure=backpressure, seed=11)
 
 
-def test_register_slice_full_throughput():
-    dut = RegisterSlice(AXIStreamSignature(8))
-    beats = [(i & 0xFF, int(i % 5 == 4)) for i in range(100)]
-    source = StreamSource(dut.s_axis, beats)
-    sink = StreamSink(dut.m_axis)
-    cycles = []
+def run_sampled(dut, source, sink, probe, *, tail=10):
+    """Run ``source`` into ``dut`` and ``sink`` from it until ``tail`` cycles after the
+    source's last beat; return ``probe()`` sampled after every cycle."""
+    samples = []
 
     async def bench(ctx):
         await source.run(ctx)
-        for _ in range(5):
+        for _ in range(tail):
             await ctx.tick()
 
-    async def count(ctx):
-        n = 0
+    async def sample(ctx):
         while True:
             await ctx.tick()
-            n += 1
-            cycles.append((n, len(sink.beats)))
+            samples.append(probe())
 
-    simulate(dut, bench, background=[sink.run, count])
+    simulate(dut, bench, background=[sink.run, sample])
+    return samples
+
+
+def test_register_slice_full_throughput():
+    dut = RegisterSlice(AXIStreamSignature(8))
+    beats = [(i & 0xFF, int(i % 5 == 4)) for i in range(100)]
+    sink = StreamSink(dut.m_axis)
+    taken = run_sampled(dut, StreamSource(dut.s_axis, beats), sink, lambda: len(sink.beats),
+                        tail=5)
     assert sink.beats == beats
-    first = next(n for n, got in cycles if got)
-    last = next(n for n, got in cycles if got == len(beats))
+    first = next(n for n, got in enumerate(taken) if got)
+    last = next(n for n, got in enumerate(taken) if got == len(beats))
     assert last - first + 1 == len(beats)
 
 
@@ -353,25 +358,11 @@ def test_converters_full_throughput(converter):
     dut = converter(8 * B)
     source = StreamSource(dut.s_axis, beats)
     sink = StreamSink(dut.m_axis, keep=converter is StreamUpsizer)
-    done = []
-
-    async def bench(ctx):
-        await source.run(ctx)
-        for _ in range(10):
-            await ctx.tick()
-
-    async def count(ctx):
-        cycles = 0
-        while True:
-            await ctx.tick()
-            cycles += 1
-            done.append(source.sent)
-
-    simulate(dut, bench, background=[sink.run, count])
+    sent = run_sampled(dut, source, sink, lambda: source.sent)
     moved = sum(bin(b[2]).count("1") for b in sink.beats) if converter is StreamUpsizer \
         else len(sink.beats)
     assert moved == total
-    input_cycles = done.index(len(beats)) + 1
+    input_cycles = sent.index(len(beats)) + 1
     assert input_cycles <= (len(beats) if converter is StreamUpsizer else total) + 2, input_cycles
 
 
