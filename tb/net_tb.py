@@ -16,7 +16,7 @@ from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
-__all__ = ["NET_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank", "PEER_MAC", "PEER_IP",
+__all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank", "PEER_MAC", "PEER_IP",
            "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
@@ -29,6 +29,8 @@ PEER_IP = "198.18.0.1"
 #: reset sends across 2**32 within its first 12 KB (net.md §1.5: tests wrap 2**32).
 NET_CONFIGS = {"stack": dict(ip=ENGINE_IP, sessions=2, tx_depth=4096, rx_depth=4096,
                              rto_us=200, msl_us=20, arp_retry_us=40, iss_seed=2**32 - 12_000)}
+#: The same engine with 32-bit user streams (``user_width``), for the benches of the user side.
+WIDE_USER_CONFIGS = {"stack_w32": dict(NET_CONFIGS["stack"], user_width=32)}
 #: The ROS 1 node benches' configuration (the seed paper's component: a subscriber looped
 #: back to a publisher), shared by tb/test_ros1_node.py and tb/test_ros1_registers.py.
 NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=ENGINE_IP,

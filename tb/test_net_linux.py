@@ -20,36 +20,40 @@ import pytest
 
 from hdl.net.tcp import TcpState
 from tb.harness import run_bench
-from tb.net_tb import NET_CONFIGS, SessionPort
+from tb.net_tb import NET_CONFIGS, WIDE_USER_CONFIGS, SessionPort
 from tb.tap import KERNEL_IP, TAP_NAME, LinuxTB, namespace_unavailable, network_namespace
 
 #: bytes per direction, set by the pytest case
 TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 65536))
 
-#: (id, impairment probability, bytes per direction); make test runs the first
-CASES = [("clean", 0.0, 64 * 1024), ("megabytes", 0.0, 2 * 1024 * 1024),
-         ("impaired", 0.02, 1024 * 1024), ("options_off", 0.0, 256 * 1024)]
+#: (id, impairment probability, bytes per direction, engine configuration); make test runs
+#: the first
+CASES = [("clean", 0.0, 64 * 1024, "stack"), ("megabytes", 0.0, 2 * 1024 * 1024, "stack"),
+         ("impaired", 0.02, 1024 * 1024, "stack"), ("options_off", 0.0, 256 * 1024, "stack"),
+         ("wide_user", 0.02, 256 * 1024, "stack_w32")]
+CONFIGS = dict(NET_CONFIGS, **WIDE_USER_CONFIGS)
 #: case -> the namespace's sysctls (net.md §5.2: the kernel without timestamps, SACK and
 #: window scaling; the other cases offer all three, which the engine ignores)
 SYSCTLS = {"options_off": {"net.ipv4.tcp_timestamps": 0, "net.ipv4.tcp_sack": 0,
                            "net.ipv4.tcp_window_scaling": 0}}
 
 
-@pytest.mark.parametrize("case,impairment,transfer", [
-    pytest.param(name, p, n, id=name, marks=() if name == "clean" else (pytest.mark.full,))
-    for name, p, n in CASES])
-def test_net_linux(case, impairment, transfer):
+@pytest.mark.parametrize("case,impairment,transfer,config", [
+    pytest.param(name, p, n, config, id=name,
+                 marks=() if name == "clean" else (pytest.mark.full,))
+    for name, p, n, config in CASES])
+def test_net_linux(case, impairment, transfer, config):
     why = namespace_unavailable()
     if why:
         pytest.skip(f"Linux peer bench skipped: {why}")
-    params = NET_CONFIGS["stack"]
+    params = CONFIGS[config]
     env = {"ROSGATE_NET_IMPAIRMENT": str(impairment), "ROSGATE_NET_TRANSFER": str(transfer)}
     with network_namespace():
         for key, value in SYSCTLS.get(case, {}).items():
             path = Path("/proc/sys") / key.replace(".", "/")
             path.write_text(f"{value}\n")
             assert path.read_text().strip() == str(value), (key, path.read_text())
-        run_bench(__name__, "net", "stack", params, "verilator", extra_env=env, run_name=case)
+        run_bench(__name__, "net", config, params, "verilator", extra_env=env, run_name=case)
 
 
 async def connect(tb, sock, addr):

@@ -19,13 +19,13 @@ from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
-from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, NetTB
+from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, WIDE_USER_CONFIGS, NetTB
 
 CONFIGS = NET_CONFIGS
 test_net = cocotb_bench("net", CONFIGS)
 #: Sessions with 32-bit user streams (``user_width``): the tests that move data through the
 #: user ports run on it, on Verilator in the long matrix only.
-WIDE_USER = {"stack_w32": dict(NET_CONFIGS["stack"], user_width=32)}
+WIDE_USER = WIDE_USER_CONFIGS
 test_net_wide_user = cocotb_bench("net", WIDE_USER, testcases=[
     "run_tcp_server_scripted", "run_tcp_user_streams_random"],
     long=[("stack_w32", "verilator")])

@@ -84,8 +84,9 @@ class StreamUpsizer(wiring.Component):
     s_axis : In(AXIStreamSignature(8, keep=False))
         Bytes.
     m_axis : Out(AXIStreamSignature(data_width))
-        ``tkeep`` contiguous from byte 0; a beat that is not full carries ``tlast``, as does a
-        beat whose last byte carried it (so ``tkeep`` is partial only with ``tlast``).
+        ``tkeep`` contiguous from byte 0 (bytes outside it are not cleared); a beat that is
+        not full carries ``tlast``, as does a beat whose last byte carried it (so ``tkeep`` is
+        partial only with ``tlast``).
     """
 
     def __init__(self, data_width):
@@ -97,8 +98,9 @@ class StreamUpsizer(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         W, B = self._width, self._width // 8
-        # gathering register, and the output register it moves into when the beat closes
-        acc = Signal(W - 8)
+        # bytes 0..B-2 gathered in place (byte ``count`` is written next), and the output
+        # register they move into, with the incoming byte at ``count``, when the beat closes
+        acc = [Signal(8, name=f"acc{i}") for i in range(B - 1)]
         count = Signal(range(B))
         data = Signal(W)
         keep = Signal(B)
@@ -111,20 +113,23 @@ class StreamUpsizer(wiring.Component):
         with m.If(out.tready):
             m.d.sync += valid.eq(0)
         take = s.tvalid & s.tready
-        gathered = Cat(acc, Const(0, 8))
-        with_byte = gathered | (Cat(s.tdata, Const(0, W - 8)) << (count * 8))
         closes = (count == B - 1) | s.tlast
-        # bytes 0..count with the incoming one, bytes 0..count - 1 without it
-        keep_with = Cat(Const(1, 1), *(count >= i for i in range(1, B)))
-        keep_without = Cat(*(count > i for i in range(B - 1)), Const(0, 1))
         # the input may wait only while a closed beat cannot move on
         m.d.comb += s.tready.eq(free | ~closes)
-        with m.If(take & closes):
-            m.d.sync += [data.eq(with_byte), keep.eq(keep_with), last.eq(s.tlast),
-                         valid.eq(1), acc.eq(0), count.eq(0)]
-        with m.Elif(take):
-            m.d.sync += [acc.eq(with_byte[:W - 8]), count.eq(count + 1)]
-        with m.Elif((count != 0) & free):
-            m.d.sync += [data.eq(gathered), keep.eq(keep_without), last.eq(1), valid.eq(1),
-                         acc.eq(0), count.eq(0)]
+        with m.If(take & ~closes):
+            m.d.sync += count.eq(count + 1)
+            for i in range(B - 1):
+                with m.If(count == i):
+                    m.d.sync += acc[i].eq(s.tdata)
+        flush = ~take & (count != 0) & free     # the input has no byte: the beat leaves
+        with m.If((take & closes) | flush):
+            # bytes 0..count with the incoming byte, bytes 0..count - 1 without it (bytes
+            # beyond tkeep are not cleared)
+            m.d.sync += [valid.eq(1), count.eq(0), last.eq(flush | s.tlast),
+                         keep.eq(Cat(Const(1, 1), *(count >= i for i in range(1, B - 1)),
+                                     count == B - 1)),
+                         data.eq(Cat(*(Mux(count == i, s.tdata, acc[i])
+                                       for i in range(B - 1)), s.tdata))]
+            with m.If(flush):
+                m.d.sync += keep.eq(Cat(*(count > i for i in range(B - 1)), Const(0, 1)))
         return m
