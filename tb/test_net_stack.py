@@ -431,6 +431,64 @@ async def run_tcp_user_streams_random(dut):
 
 
 @cocotb.test()
+async def run_tcp_default_port_and_shared_listen(dut):
+    """Sessions listening with ``local_port`` 0 use the stack's TCP port, SiTCP's 24 by
+    default (a register, read back over RBCP); two sessions on one port serve two
+    connections: a SYN goes to the lowest-numbered listener, a retransmitted SYN to the
+    session whose connection it belongs to (one SYN-ACK, the other session keeps
+    listening); a third SYN finds no listener and gets RST. A new value of the register
+    applies at the next listen."""
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    reply = await rbcp(tb, rbcp_request(0xC0, 11, GLOBAL_BASE + GLOBAL_OFFSETS["tcp_port"], 2))
+    assert reply is not None and reply[8:] == (24).to_bytes(2, "big"), reply
+    sessions = [SessionPort(dut, k, random.Random(31 + k)) for k in range(2)]
+    for s in sessions:
+        s.set(active=0, local_port=0, open_req=1)
+        await s.wait_state(TcpState.LISTEN)
+    peers = []
+    for k, s in enumerate(sessions):
+        peer = ScriptedPeer(tb, 41000 + k, 24, isn=1000 * (k + 1))
+        await peer.send("S", options=[("MSS", 1460)])
+        synack = await peer.expect("SA", ack=peer.seq)
+        await tb.expect_silence(500)
+        assert TcpState(s.get("state")) == TcpState.SYN_RECEIVED
+        if k == 0:
+            assert TcpState(sessions[1].get("state")) == TcpState.LISTEN
+            await peer.send("S", seq=peer.seq - 1, advance=False, options=[("MSS", 1460)])
+            await peer.expect("SA", seq=synack.seq, ack=peer.seq)
+            await tb.expect_silence(500)
+            assert TcpState(sessions[1].get("state")) == TcpState.LISTEN
+        peer.ack = synack.seq + 1
+        await peer.send("A")
+        await s.wait_state(TcpState.ESTABLISHED)
+        peers.append(peer)
+    third = ScriptedPeer(tb, 41002, 24, isn=9000)
+    await third.send("S")
+    await third.expect("RA", seq=0, ack=9001)
+    for k, (s, peer) in enumerate(zip(sessions, peers)):
+        message = f"to session {k}".encode()
+        await peer.send("PA", message)
+        await peer.expect("A", ack=peer.seq)
+        assert await s.wait_received(len(message), 2000) == message
+    await write_global(tb, "tcp_port", 8024)
+    for s, peer in zip(sessions, peers):
+        s.set(abort=1)
+        await peer.expect("R", seq=peer.ack)
+        s.set(abort=0)
+        await s.wait_state(TcpState.LISTEN)
+    moved = ScriptedPeer(tb, 41003, 8024, isn=1)
+    await moved.send("S")
+    await moved.expect("SA", ack=moved.seq)
+    assert TcpState(sessions[0].get("state")) == TcpState.SYN_RECEIVED
+    old = ScriptedPeer(tb, 41004, 24, isn=1)
+    await old.send("S")
+    await old.expect("RA", seq=0, ack=2)
+
+
+@cocotb.test()
 async def run_tcp_peer_mss_floor(dut):
     """A peer MSS below 48 is raised to 48, Linux's floor (``net.ipv4.tcp_min_snd_mss``,
     CVE-2019-11479), in both handshakes: MSS 1 in a client's SYN (server mode) and MSS 0 in

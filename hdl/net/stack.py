@@ -1,7 +1,7 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
 one MAC and IP address (spec net.md §1-§2, §7.2)."""
 
-from amaranth.hdl import Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -11,8 +11,8 @@ from ..stream import AXIStreamSignature, StreamDownsizer, StreamUpsizer
 from .checksum import ones_complement_add
 from .counters import EventCounters
 from .frames import (
-    ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DROP_REASONS,
-    TCP_ACK, TCP_RST, ip_to_int, mac_to_int,
+    ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT,
+    DROP_REASONS, TCP_ACK, TCP_RST, ip_to_int, mac_to_int,
 )
 from .mac import GmiiRx, GmiiTx
 from .rbcp import RbcpBusSignature, RbcpServer
@@ -39,6 +39,7 @@ GLOBAL_REGS = {
     0x10: ("msl_cycles", 4, True),
     0x14: ("rbcp_port", 2, True),
     0x18: ("arp_retry_cycles", 4, True),
+    0x1C: ("tcp_port", 2, True),
     0x40: ("counters", 4 * len(STACK_COUNTERS), False),
 }
 #: name -> offset of the global block's registers
@@ -89,7 +90,8 @@ class NetStack(wiring.Component):
     Received frames are parsed on the fly (:class:`FrameParser`); ARP requests for the local
     IP, ICMP echo requests and RBCP requests are answered through one reply slot (a frame that
     needs the slot while it is busy is dropped and counted as ``busy``); TCP segments go to
-    the session whose connection or listening port they match, others are answered with RST
+    the session whose connection or listening port they match (a SYN for a port several
+    sessions listen on to the lowest-numbered one), others are answered with RST
     (RFC 9293 §3.10.7.1). Frames leave through a round-robin :class:`FrameBuilder`.
 
     Parameters
@@ -99,6 +101,11 @@ class NetStack(wiring.Component):
         :data:`GLOBAL_BASE` change them at run time.
     rbcp_port : int
         UDP port of RBCP (4660).
+    tcp_port : int
+        The port a server session with ``local_port`` 0 listens on (SiTCP's 24); a register
+        at :data:`GLOBAL_BASE` changes it for the next listen. Several sessions may listen on
+        one port: a SYN goes to the session whose connection it matches (a retransmitted
+        SYN), else to the lowest-numbered listener, so N sessions serve N connections.
     sessions : int
         TCP sessions, 1..8.
     tx_depth, rx_depth : int
@@ -142,6 +149,7 @@ class NetStack(wiring.Component):
     """
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
+                 tcp_port=DEFAULT_TCP_PORT,
                  sessions=1, tx_depth=65536, rx_depth=65536, descriptors=64, rto_us=200_000,
                  msl_us=1_000_000, arp_retry_us=2_000_000, user_window=0x10000,
                  iss_seed=0x1000, user_width=8):
@@ -154,6 +162,7 @@ class NetStack(wiring.Component):
         except ValueError as e:
             raise ParameterError("ip", ip, "an IPv4 address like 192.168.10.16") from e
         self._rbcp_port = check_int("rbcp_port", rbcp_port, 1, 65535)
+        self._tcp_port = check_int("tcp_port", tcp_port, 1, 65535)
         self._sessions = check_int("sessions", sessions, 1, 8)
         self._rto = check_int("rto_us", rto_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
         self._msl = check_int("msl_us", msl_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
@@ -193,6 +202,7 @@ class NetStack(wiring.Component):
         rto = Signal(32, init=self._rto)
         msl = Signal(32, init=self._msl)
         rbcp_port = Signal(16, init=self._rbcp_port)
+        tcp_port = Signal(16, init=self._tcp_port)
         arp_retry = Signal(32, init=self._arp_retry)
         m.d.comb += [self.local_mac.eq(local_mac), self.local_ip.eq(local_ip),
                      parser.local_mac.eq(local_mac), parser.local_ip.eq(local_ip),
@@ -214,7 +224,7 @@ class NetStack(wiring.Component):
                 s.seg_done.eq(parser.done), s.seg_accept.eq(parser.accept),
                 s.seg_arp.eq(parser.arp_seen),
                 s.rto_cycles.eq(rto), s.msl_cycles.eq(msl),
-                s.arp_retry_cycles.eq(arp_retry),
+                s.arp_retry_cycles.eq(arp_retry), s.default_port.eq(tcp_port),
             ]
             wiring.connect(m, s.tx, getattr(builder, f"req_{k + 1}"))
             if self._user_width == 8:
@@ -233,6 +243,12 @@ class NetStack(wiring.Component):
             for name in ("open_ack", "close_req", "error", "error_code", "state", "peer_ip",
                          "peer_port", "tx_fill", "counter_value"):
                 m.d.comb += getattr(user, name).eq(getattr(s, name))
+        # a SYN goes to the session whose connection it matches, else to the lowest-numbered
+        # session listening on its port
+        for k, s in enumerate(sessions):
+            others = [o.conn_match for o in sessions if o is not s]
+            lower = [o.listen_match for o in sessions[:k]]
+            m.d.comb += s.listen_block.eq(Cat(Const(0, 1), *others, *lower).any())
         claimed = Const(0)
         for s in sessions:
             claimed = claimed | s.claim
@@ -284,7 +300,7 @@ class NetStack(wiring.Component):
 
         global_values = {"mac": local_mac, "ip": local_ip, "rto_cycles": rto,
                          "msl_cycles": msl, "rbcp_port": rbcp_port,
-                         "arp_retry_cycles": arp_retry}
+                         "arp_retry_cycles": arp_retry, "tcp_port": tcp_port}
         offset = bus.addr[:16]
         # the counter index is offset bits 2..5: the block is 64-byte aligned
         assert GLOBAL_OFFSETS["counters"] % 64 == 0 and len(STACK_COUNTERS) <= 16

@@ -103,7 +103,14 @@ class TcpSession(wiring.Component):
         net.md §1.2).
     claim : Out(1)
         The segment of the current verdict belongs to this session (else the stack answers
-        with RST).
+        with RST): it matches the connection, or it is a SYN to the listening port that
+        ``listen_block`` does not give to another session.
+    conn_match, listen_match : Out(1)
+        The segment matches the connection; it is a SYN to the listening port (whatever
+        ``listen_block``).
+    listen_block : In(1)
+        Another session takes this SYN (its connection, or a lower-numbered listener on the
+        same port): do not accept it.
     tx : Out(TxRequestSignature())
         Frame requests to the :class:`FrameBuilder`.
     s_axis : In(AXIStreamSignature(8, keep=False))
@@ -118,7 +125,10 @@ class TcpSession(wiring.Component):
     active : In(1)
         Client mode.
     local_port, remote_ip, remote_port : In
-        Addresses; a client with ``local_port`` 0 takes ephemeral ports from 49152 up.
+        Addresses; a client with ``local_port`` 0 takes ephemeral ports from 49152 up, a
+        server with ``local_port`` 0 listens on ``default_port`` (both taken at the open).
+    default_port : In(16)
+        The server port of ``local_port`` 0 (SiTCP's TCP port, 24 by default).
     open_ack : Out(1)
         The connection is up (ESTABLISHED .. LAST-ACK, SiTCP TCP_OPEN_ACK).
     close_req : Out(1)
@@ -164,12 +174,14 @@ class TcpSession(wiring.Component):
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
             "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
             "seg_done": In(1), "seg_accept": In(1), "seg_arp": In(1),
-            "claim": Out(1),
+            "claim": Out(1), "conn_match": Out(1), "listen_match": Out(1),
+            "listen_block": In(1),
             "tx": Out(TxRequestSignature()),
             "s_axis": In(AXIStreamSignature(8, keep=False)),
             "m_axis": Out(AXIStreamSignature(8, keep=False)),
             "open_req": In(1), "active": In(1),
             "local_port": In(16), "remote_ip": In(32), "remote_port": In(16),
+            "default_port": In(16),
             "open_ack": Out(1), "close_req": Out(1), "close_ack": In(1), "abort": In(1),
             "error": Out(1), "error_code": Out(TcpError), "state": Out(TcpState),
             "peer_ip": Out(32), "peer_port": Out(16), "tx_fill": Out(17),
@@ -536,9 +548,12 @@ class TcpSession(wiring.Component):
                 m.d.sync += [timer_on.eq(0), fin_queued.eq(0), fin_sent.eq(0), fin_acked.eq(0),
                              syn_due.eq(0), probe_due.eq(0), ack_now.eq(0), ack_owed.eq(0),
                              backoff.eq(0), retries.eq(0), dupacks.eq(0)]
-                with m.If(self.open_req & ~self.active):
-                    m.d.sync += [state.eq(S.LISTEN), local_port.eq(self.local_port)]
-                with m.Elif(self.open_req & self.active & armed):
+                # a pending RST leaves first: it carries the old connection's ports
+                with m.If(self.open_req & ~self.active & ~rst_due):
+                    m.d.sync += [state.eq(S.LISTEN),
+                                 local_port.eq(Mux(self.local_port != 0, self.local_port,
+                                                   self.default_port))]
+                with m.Elif(self.open_req & self.active & armed & ~rst_due):
                     m.d.sync += [state.eq(S.ARP), arp_due.eq(1), armed.eq(0),
                                  remote_ip.eq(self.remote_ip), remote_port.eq(self.remote_port),
                                  local_port.eq(Mux(self.local_port != 0, self.local_port,
@@ -563,11 +578,13 @@ class TcpSession(wiring.Component):
         # ---- segment arrival: the verdict's fields are latched; the sequence engine
         # compares them and applies the outcome (DECIDE) and the new sequence numbers
         seg = self.seg_done & self.seg_accept & is_tcp
-        listen_hit = ((state == S.LISTEN) & (f.dst_port == local_port) & f.flags[1] &
-                      ~f.flags[2] & ~f.flags[4])
+        listen_match = ((state == S.LISTEN) & (f.dst_port == local_port) & f.flags[1] &
+                        ~f.flags[2] & ~f.flags[4])
+        listen_hit = listen_match & ~self.listen_block
         connected = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP)
         conn_hit = connected & tuple_match
-        m.d.comb += self.claim.eq(listen_hit | conn_hit)
+        m.d.comb += [self.claim.eq(listen_hit | conn_hit), self.conn_match.eq(conn_hit),
+                     self.listen_match.eq(listen_match)]
         arp_from_peer = self.seg_done & self.seg_arp & (f.sender_ip == remote_ip)
         arp_hit = arp_from_peer & (state == S.ARP)
         # RFC 826: a known sender's hardware address is refreshed (gratuitous ARP after a
