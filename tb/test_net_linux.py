@@ -56,14 +56,21 @@ def test_net_linux(case, impairment, transfer, config):
         run_bench(__name__, "net", config, params, "verilator", extra_env=env, run_name=case)
 
 
-async def connect(tb, sock, addr):
+def start_connect(sock, addr):
     sock.setblocking(False)
     err = sock.connect_ex(addr)
     assert err in (0, errno.EINPROGRESS), os.strerror(err)
 
+
+async def wait_connected(tb, sock, addr):
     def connected():
         return sock.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR) == 0 and _peer(sock)
     await tb.poll(f"connect to {addr}", connected, 2_000_000)
+
+
+async def connect(tb, sock, addr):
+    start_connect(sock, addr)
+    await wait_connected(tb, sock, addr)
 
 
 def _peer(sock):
@@ -135,6 +142,40 @@ async def run_linux_client_engine_server(dut):
     finally:
         sock.close()
     dut._log.info("pump %s, session %s", tb.pump.stats, await tb.session_counters(0))
+
+
+@cocotb.test()
+async def run_linux_two_clients_one_port(dut):
+    """Two kernel clients connect at once to the engine's default TCP port (24), on which
+    sessions 0 and 1 both listen with ``local_port`` 0: each connection lands on one
+    session only (with both sessions taking the first SYN, the kernel never connects), also
+    when the kernel resends a SYN while the simulation is slow. Then 8 KiB each way on both
+    connections, byte-exact."""
+    tb = LinuxTB(dut)
+    await tb.reset()
+    sessions = [SessionPort(dut, k, random.Random(tb.rng.random())) for k in range(2)]
+    for s in sessions:
+        s.set(active=0, local_port=0, open_req=1)
+        await s.wait_state(TcpState.LISTEN)
+    socks = [socket.socket() for _ in sessions]
+    try:
+        for sock in socks:
+            start_connect(sock, (tb.ip, 24))
+        for sock in socks:
+            await wait_connected(tb, sock, (tb.ip, 24))
+        for s in sessions:
+            await s.wait_state(TcpState.ESTABLISHED, 2_000_000)
+        by_port = {s.get("peer_port"): s for s in sessions}
+        assert sorted(by_port) == sorted(sock.getsockname()[1] for sock in socks), by_port
+        for sock in socks:
+            s = by_port[sock.getsockname()[1]]
+            up, down = tb.rng.randbytes(8192), tb.rng.randbytes(8192)
+            got_engine, got_kernel = await tb.transfer(sock, s, up, down, 2_000_000)
+            assert got_engine == up and got_kernel == down
+    finally:
+        for sock in socks:
+            sock.close()
+    dut._log.info("pump %s", tb.pump.stats)
 
 
 @cocotb.test()
