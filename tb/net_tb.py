@@ -16,8 +16,8 @@ from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
-__all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank", "PEER_MAC", "PEER_IP",
-           "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
+__all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank",
+           "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
 
 CLOCK_NS = 8
 #: The network benches' configuration: one build per simulator, shared by the scripted and

@@ -376,8 +376,8 @@ async def run_tcp_user_streams_random(dut):
     """8 KiB each way between a Linux-like peer model and the user streams, with random idle
     on ``tx`` and random backpressure on ``rx``, and a stretch in which the user reads
     nothing (the 4 KiB receive ring fills, the window shrinks below a segment and reopens):
-    byte-exact both ways. On wider user streams every ``rx`` beat has ``tkeep`` contiguous from byte 0,
-    partial only with ``tlast``."""
+    byte-exact both ways. On wider user streams every ``rx`` beat has ``tkeep`` contiguous
+    from byte 0, partial only with ``tlast``."""
     from hdl.net.tcp import TcpState
     from tb.models.tcp_peer import TcpPeerModel
     from tb.net_tb import SessionPort

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from ..stream import AXIStreamSignature, keep_count
 
-__all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask", "keep_count"]
+__all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask"]
 
 
 def byte_mask(value, nbytes, count):

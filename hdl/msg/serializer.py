@@ -7,8 +7,8 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from ..stream import AXIStreamSignature
-from .bytes import BytePacker, byte_mask, keep_count
+from ..stream import AXIStreamSignature, keep_count
+from .bytes import BytePacker, byte_mask
 from .steps import RuntimeStep, pad_bytes, payload_bytes
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]

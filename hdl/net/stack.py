@@ -249,9 +249,9 @@ class NetStack(wiring.Component):
             others = [o.conn_match for o in sessions if o is not s]
             lower = [o.listen_match for o in sessions[:k]]
             m.d.comb += s.listen_block.eq(Cat(Const(0, 1), *others, *lower).any())
-        claimed = Const(0)
-        for s in sessions:
-            claimed = claimed | s.claim
+        # a segment is claimed when any session matches it: a blocked listener's SYN is
+        # taken by the session that blocks it
+        claimed = Cat(*(Cat(s.conn_match, s.listen_match) for s in sessions)).any()
 
         # ---- reply slot: ARP replies, ICMP echo replies, RBCP replies, RST
         m.submodules.reply_mem = mem = Memory(shape=8, depth=2048, init=[])

@@ -101,13 +101,10 @@ class TcpSession(wiring.Component):
         parser's verdict) and ``seg_arp`` (an ARP frame from anyone to anyone: one from the
         peer's IP resolves it for a client and refreshes its MAC on a live connection,
         net.md §1.2).
-    claim : Out(1)
-        The segment of the current verdict belongs to this session (else the stack answers
-        with RST): it matches the connection, or it is a SYN to the listening port that
-        ``listen_block`` does not give to another session.
     conn_match, listen_match : Out(1)
-        The segment matches the connection; it is a SYN to the listening port (whatever
-        ``listen_block``).
+        The segment of the current verdict matches the connection; it is a SYN to the
+        listening port (whatever ``listen_block``). A segment that no session matches is
+        answered by the stack with RST.
     listen_block : In(1)
         Another session takes this SYN (its connection, or a lower-numbered listener on the
         same port): do not accept it.
@@ -174,7 +171,7 @@ class TcpSession(wiring.Component):
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
             "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
             "seg_done": In(1), "seg_accept": In(1), "seg_arp": In(1),
-            "claim": Out(1), "conn_match": Out(1), "listen_match": Out(1),
+            "conn_match": Out(1), "listen_match": Out(1),
             "listen_block": In(1),
             "tx": Out(TxRequestSignature()),
             "s_axis": In(AXIStreamSignature(8, keep=False)),
@@ -583,8 +580,7 @@ class TcpSession(wiring.Component):
         listen_hit = listen_match & ~self.listen_block
         connected = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP)
         conn_hit = connected & tuple_match
-        m.d.comb += [self.claim.eq(listen_hit | conn_hit), self.conn_match.eq(conn_hit),
-                     self.listen_match.eq(listen_match)]
+        m.d.comb += [self.conn_match.eq(conn_hit), self.listen_match.eq(listen_match)]
         arp_from_peer = self.seg_done & self.seg_arp & (f.sender_ip == remote_ip)
         arp_hit = arp_from_peer & (state == S.ARP)
         # RFC 826: a known sender's hardware address is refreshed (gratuitous ARP after a
