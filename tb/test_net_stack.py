@@ -49,6 +49,11 @@ def checksums_ok(pkt):
     return True
 
 
+#: Cycles from the end of one peer frame to the end of a following pure ACK sent at once:
+#: inter-frame gap, preamble, the ACK padded to 60 bytes, FCS
+WIRE_ACK = 12 + 8 + 60 + 4
+
+
 def sim_cycle():
     """The current simulated time in clock cycles."""
     return int(get_sim_time("ns")) // CLOCK_NS
@@ -596,6 +601,87 @@ async def run_tcp_fin_wait_2_timeout(dut):
     # the peer's late FIN now finds no connection
     await peer.send("FA")
     await peer.expect("R", seq=iss + 2)
+
+
+@cocotb.test()
+async def run_tcp_fin_wait_2_last_cycle(dut):
+    """net.md §1.4: FIN-WAIT-2 ends after 2**FIN_WAIT_2_SCALE MSL *without a segment from the
+    peer*, also when the peer's segment arrives in the very cycle the timer runs out.
+
+    The timer counts ticks, so the last cycle cannot be aimed at from outside; it is swept
+    instead. Each round closes a fresh connection to FIN-WAIT-2 with the peer's ACK sent at
+    the same phase of a 64-cycle grid, so the timeout falls at the same distance from that
+    ACK every round. A first round without a second segment measures that distance; the
+    rounds after it send one more segment whose end walks cycle by cycle across where the
+    timeout fell. The engine's RST may come sooner after the peer's last segment than the
+    rule allows only if the timer ran out before that segment arrived, and then the segment
+    finds no connection and is answered with a RST of its own. Before the fix, a segment in
+    the last cycle restarted nothing: one RST, 80 cycles after it."""
+    from hdl.net.tcp import FIN_WAIT_2_SCALE, TcpError, TcpState
+    tb = NetTB(dut)
+    await tb.reset()
+    msl = 3                         # cycles: FIN-WAIT-2 lasts 3 ticks of 64 cycles
+    tick = 2**FIN_WAIT_2_SCALE
+    await write_global(tb, "msl_cycles", msl)
+    rst_frame = 8 + 60 + 4          # preamble, padded RST, FCS: the RST is seen when complete
+    # the timer restarts at the segment and needs msl ticks, the first of them may come at
+    # once; a RST sooner than that after the peer's segment must mean the timer ran out
+    # before the segment arrived, which the segment's own RST then shows
+    least = (msl - 1) * tick + rst_frame
+
+    async def round_(k, second_after=None):
+        """Close a connection to FIN-WAIT-2; a second segment (a pure ACK) is sent to end
+        about ``second_after`` cycles after the end of the peer's ACK of our FIN. Return the
+        cycles from the ACK's end to the second segment's end (or None), and from the end of
+        the peer's last segment to the end of the engine's RST."""
+        peer = ScriptedPeer(tb, 41000 + k, 24, isn=1000 * k)
+        s, iss = await establish(tb, 0, 24, peer)
+        s.set(open_req=0)
+        await peer.expect("FA", seq=iss + 1, ack=peer.seq)
+        peer.ack = iss + 2
+        await tb.source.wait()
+        await tb.idle(tick - sim_cycle() % tick)
+        await peer.send("A")
+        await tb.source.wait()
+        ack_end = last_end = sim_cycle()
+        after = None
+        if second_after is not None:
+            await tb.idle(second_after - WIRE_ACK)
+            await peer.send("A")
+            await tb.source.wait()
+            last_end = sim_cycle()
+            after = last_end - ack_end
+        await peer.expect("R", seq=iss + 2, ack=None, timeout=2000)
+        gap = sim_cycle() - last_end
+        assert TcpState(s.get("state")) == TcpState.CLOSED
+        assert TcpError(s.get("error_code")) == TcpError.TIMEOUT
+        if gap < least:
+            # the timeout came first: the segment found no connection and is refused
+            refusal = await tb.recv(2000)
+            assert refusal is not None, (
+                f"RST {gap} cycles after the peer's segment (ending {after} cycles after its "
+                f"ACK of our FIN), sooner than {least}, and the segment was not refused: the "
+                "connection took it and timed out all the same")
+            assert str(refusal[TCP].flags) == "R" and refusal[TCP].seq == (iss + 2) % 2**32
+        await tb.expect_silence(200)
+        return after, gap
+
+    _, first = await round_(0)
+    assert first >= least, f"RST {first} cycles after the peer's ACK, before {least}"
+    # the timeout fell about ``first - rst_frame`` cycles after the ACK's end, less the
+    # engine's latency to the RST's first preamble byte and the 16-cycle grain of ``recv``
+    target = first - rst_frame
+    covered = set()
+    early = 0
+    span = range(max(WIRE_ACK, target - 32), target + 1)
+    for k, second_after in enumerate(span, start=1):
+        after, gap = await round_(k, second_after)
+        covered.add(after)
+        early += gap < least
+    # one round per cycle (the GMII source starts a cycle after it is asked)
+    assert sorted(covered) == list(range(min(covered), min(covered) + len(span))), covered
+    # the sweep crossed the timeout: rounds on both sides
+    assert 0 < early < len(span), (early, len(span))
 
 
 @cocotb.test()

@@ -522,11 +522,13 @@ class TcpSession(wiring.Component):
             m.d.sync += timer.eq(timer + 1)
         limit = Signal(32)
         msl_timed = (state == S.TIME_WAIT) | (state == S.FIN_WAIT_2)
-        m.d.sync += [limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
-                                  Mux(msl_timed, self.msl_cycles, self.rto_cycles))),
-                     scale.eq(Mux(state == S.TIME_WAIT, 1,
-                                  Mux(state == S.FIN_WAIT_2, FIN_WAIT_2_SCALE,
-                                      Mux(state == S.ARP, 0, backoff))))]
+        m.d.sync += limit.eq(Mux(state == S.ARP, self.arp_retry_cycles,
+                                 Mux(msl_timed, self.msl_cycles, self.rto_cycles)))
+        # the tick follows the state at once: a registered scale let the first cycle of
+        # FIN-WAIT-2 or TIME-WAIT count at the previous state's rate (a tick early)
+        m.d.comb += scale.eq(Mux(state == S.TIME_WAIT, 1,
+                                 Mux(state == S.FIN_WAIT_2, FIN_WAIT_2_SCALE,
+                                     Mux(state == S.ARP, 0, backoff))))
         timer_done = timer >= limit
         expired = timer_on & timer_done
         tw_expired = (state == S.TIME_WAIT) & timer_done
@@ -602,7 +604,10 @@ class TcpSession(wiring.Component):
             m.d.sync += [s_seq.eq(f.seq), s_ack.eq(f.ack), s_flags.eq(f.flags),
                          s_window.eq(f.window), s_plen.eq(f.payload_len),
                          s_committed.eq(rx_written), s_mss.eq(self._mss(f))]
-        with m.If(seg & conn_hit):
+        # a segment of the connection in the cycle a timer runs out is seen first (it may
+        # restart the timer: FIN-WAIT-2 ends only after a silence)
+        arriving = seg & conn_hit
+        with m.If(arriving):
             m.d.sync += [arrival_pending.eq(1), count("segments_rx")]
             with m.If(state == S.FIN_WAIT_2):
                 m.d.sync += timer.eq(0)         # an idle timeout: the peer is still there
@@ -959,14 +964,14 @@ class TcpSession(wiring.Component):
                 with m.If(retries == 3):
                     m.d.sync += [state.eq(S.CLOSED), self.error_code.eq(TcpError.ARP),
                                  self.error.eq(1)]
-        with m.Elif(tw_expired & engine_free & ~arrival_pending):
+        with m.Elif(tw_expired & engine_free & ~arrival_pending & ~arriving):
             m.d.comb += go_closed.eq(1)
-        with m.Elif(fw2_expired & engine_free & ~arrival_pending):
+        with m.Elif(fw2_expired & engine_free & ~arrival_pending & ~arriving):
             # the peer acknowledged our FIN and went silent: reset, as Linux does for an
             # orphaned FIN-WAIT-2 socket
             m.d.sync += time_out()
         with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
-                    ~init_pending):
+                    ~arriving & ~init_pending):
             m.d.sync += [timer.eq(0),
                          backoff.eq(Mux(backoff == MAX_BACKOFF, MAX_BACKOFF, backoff + 1))]
             with m.If(zero_wnd_wait):
