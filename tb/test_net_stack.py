@@ -616,7 +616,7 @@ async def run_tcp_fin_wait_2_last_cycle(dut):
     timeout fell. The engine's RST may come sooner after the peer's last segment than the
     rule allows only if the timer ran out before that segment arrived, and then the segment
     finds no connection and is answered with a RST of its own. Before the fix, a segment in
-    the last cycle restarted nothing: one RST, 80 cycles after it."""
+    the last cycle restarted nothing: one RST, 96 cycles after it."""
     from hdl.net.tcp import FIN_WAIT_2_SCALE, TcpError, TcpState
     tb = NetTB(dut)
     await tb.reset()
