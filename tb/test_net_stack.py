@@ -16,7 +16,7 @@ from scapy.packet import Raw
 from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
 from gen.ros1.rbcp import rbcp_request
-from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS
+from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, IFG, MIN_FRAME, PREAMBLE
 from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
 from tb.harness import cocotb_bench
 from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, WIDE_USER_CONFIGS, NetTB
@@ -49,9 +49,11 @@ def checksums_ok(pkt):
     return True
 
 
-#: Cycles from the end of one peer frame to the end of a following pure ACK sent at once:
-#: inter-frame gap, preamble, the ACK padded to 60 bytes, FCS
-WIRE_ACK = 12 + 8 + 60 + 4
+#: Cycles a minimum-size frame (a pure ACK, a RST) occupies the wire: preamble, SFD, the
+#: frame padded to its minimum with FCS
+WIRE_MIN_FRAME = PREAMBLE + 1 + MIN_FRAME
+#: Cycles from the end of one peer frame to the end of a pure ACK sent right after it
+WIRE_ACK = IFG + WIRE_MIN_FRAME
 
 
 def sim_cycle():
@@ -623,7 +625,7 @@ async def run_tcp_fin_wait_2_last_cycle(dut):
     msl = 3                         # cycles: FIN-WAIT-2 lasts 3 ticks of 64 cycles
     tick = 2**FIN_WAIT_2_SCALE
     await write_global(tb, "msl_cycles", msl)
-    rst_frame = 8 + 60 + 4          # preamble, padded RST, FCS: the RST is seen when complete
+    rst_frame = WIRE_MIN_FRAME      # the RST is seen when complete
     # the timer restarts at the segment and needs msl ticks, the first of them may come at
     # once; a RST sooner than that after the peer's segment must mean the timer ran out
     # before the segment arrived, which the segment's own RST then shows

@@ -604,8 +604,6 @@ class TcpSession(wiring.Component):
             m.d.sync += [s_seq.eq(f.seq), s_ack.eq(f.ack), s_flags.eq(f.flags),
                          s_window.eq(f.window), s_plen.eq(f.payload_len),
                          s_committed.eq(rx_written), s_mss.eq(self._mss(f))]
-        # a segment of the connection in the cycle a timer runs out is seen first (it may
-        # restart the timer: FIN-WAIT-2 ends only after a silence)
         arriving = seg & conn_hit
         with m.If(arriving):
             m.d.sync += [arrival_pending.eq(1), count("segments_rx")]
@@ -821,7 +819,10 @@ class TcpSession(wiring.Component):
         for name, reg in seq.items():
             with m.If(write[name]):
                 m.d.sync += reg.eq(wbus)
-        engine_free = engine.ongoing("IDLE") & ~sent_op
+        # a timer may act only between segments: a segment being applied, or arriving in
+        # this very cycle, is seen first (it may restart the timer: FIN-WAIT-2 ends only
+        # after a silence)
+        timers_free = engine.ongoing("IDLE") & ~sent_op & ~arrival_pending & ~arriving
 
         # the outcome of a segment of the connection
         acceptable = Mux(seg_seqlen == 0,
@@ -964,14 +965,13 @@ class TcpSession(wiring.Component):
                 with m.If(retries == 3):
                     m.d.sync += [state.eq(S.CLOSED), self.error_code.eq(TcpError.ARP),
                                  self.error.eq(1)]
-        with m.Elif(tw_expired & engine_free & ~arrival_pending & ~arriving):
+        with m.Elif(tw_expired & timers_free):
             m.d.comb += go_closed.eq(1)
-        with m.Elif(fw2_expired & engine_free & ~arrival_pending & ~arriving):
+        with m.Elif(fw2_expired & timers_free):
             # the peer acknowledged our FIN and went silent: reset, as Linux does for an
             # orphaned FIN-WAIT-2 socket
             m.d.sync += time_out()
-        with m.Elif(expired & (state != S.TIME_WAIT) & engine_free & ~arrival_pending &
-                    ~arriving & ~init_pending):
+        with m.Elif(expired & (state != S.TIME_WAIT) & timers_free & ~init_pending):
             m.d.sync += [timer.eq(0),
                          backoff.eq(Mux(backoff == MAX_BACKOFF, MAX_BACKOFF, backoff + 1))]
             with m.If(zero_wnd_wait):
