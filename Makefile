@@ -16,6 +16,7 @@ TOP ?= topic
 SIM ?= icarus
 CONFIG ?=
 WAVES ?= 0
+SEED ?=
 
 .PHONY: help setup debs demo test test-full sim lint bench bench-resources train-mnist clean
 
@@ -24,7 +25,7 @@ help:
 	@echo "  make demo        the main job: the Sobel/DIP application (export for Vivado, co-simulate, print the table)"
 	@echo "  make test        the default test suite (Icarus + Verilator, < 10 min on 2 cores)"
 	@echo "  make test-full   the long matrix as well"
-	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1]   one bench"
+	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1] [SEED=n]   one bench"
 	@echo "      (TOP names tb/test_<TOP>.py: topic, msg_codec, net_stack, reconos_memif, ...)"
 	@echo "  make lint        verilator --lint-only -Wall on every exported top"
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
@@ -66,7 +67,7 @@ test-full: setup
 sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \
 	  $$(ls tb/test_*.py | sed 's,tb/test_,,; s,\.py,,'); exit 2; }
-	WAVES=$(WAVES) $(PY) -m pytest tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
+	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
 
 lint: setup
 	$(PY) -m tb.lint_tops

@@ -9,6 +9,10 @@ item exports the top (through :mod:`gen.tops`, exactly what ``rosgate export`` w
 ``sim_build/<top>-<config>-<sim>/``, builds it (a Verilator build is reused while the Verilog is
 unchanged), and runs every cocotb test of the module in one simulation. The cocotb side reads
 its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
+
+Every run draws a new random seed (cocotb's); a failure names the seed of each failed test and
+the command that repeats the run with it: ``SEED=<n>`` in the environment (or ``make sim ...
+SEED=<n>``) fixes the seed of every bench that does not pass its own.
 """
 
 import contextlib
@@ -92,11 +96,40 @@ def _verilator_make_fix(sim, quick=False):
             os.environ["MAKEFLAGS"] = saved
 
 
-def failed_tests(results_xml):
-    """Names of the failed test cases in a cocotb results file."""
+def failed_seeds(results_xml):
+    """Failed test case name -> the random seed its run was started with (``None`` when the
+    results file records none)."""
     tree = ET.parse(results_xml)
-    return [case.get("name") for case in tree.iter("testcase")
-            if case.find("failure") is not None or case.find("error") is not None]
+    failed = {}
+    for case in tree.iter("testcase"):
+        if case.find("failure") is None and case.find("error") is None:
+            continue
+        seeds = [prop.get("value") for prop in case.iter("property")
+                 if prop.get("name") == "random_seed"]
+        failed[case.get("name")] = int(seeds[0]) if seeds else None
+    return failed
+
+
+def environment_seed():
+    """The seed ``SEED`` in the environment asks for, or ``None``; anything but a
+    non-negative integer is refused by name."""
+    value = os.environ.get("SEED", "")
+    if value == "":
+        return None
+    try:
+        seed = int(value, 0)
+    except ValueError:
+        seed = -1
+    if seed < 0:
+        raise ValueError(f"SEED={value!r} in the environment: expected a non-negative "
+                         f"integer (the seed a failed bench printed)")
+    return seed
+
+
+def rerun_hint(module, config_id, sim, seed):
+    """The command that repeats one bench item with ``seed``."""
+    bench = module.rsplit(".", 1)[-1].removeprefix("test_")
+    return f"make sim TOP={bench} SIM={sim} CONFIG={config_id} SEED={seed}"
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
@@ -106,9 +139,13 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     ``build`` and ``extra_env`` serve benchmark tops that are not in :data:`gen.tops.TOPS`;
     ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the build folder;
     ``run_name`` keeps the results and log of one case of a parametrised test apart from
-    the module's other cases in the same build.
+    the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
+    environment, else a new one) seeds cocotb.
     """
     from cocotb_tools.runner import get_runner
+
+    if seed is None:
+        seed = environment_seed()
 
     if sim == "verilator":
         put_verilator_on_path()
@@ -177,14 +214,18 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
                                  f"{exc.code} and wrote no results") from None
     if not results.exists():
         raise AssertionError(f"{top} [{config_id}, {sim}]: no results file")
-    failed = failed_tests(results)
+    failed = failed_seeds(results)
     total = sum(1 for _ in ET.parse(results).iter("testcase"))
     if total == 0:
         raise AssertionError(f"{top} [{config_id}, {sim}]: no cocotb test ran")
     if failed:
+        seeds = sorted({s for s in failed.values() if s is not None})
+        again = "".join(f"; again with: {rerun_hint(module, config_id, sim, s)}"
+                        for s in seeds)
         raise AssertionError(f"{top} [{config_id}, {sim}]: {len(failed)} of {total} cocotb "
-                             f"tests failed: {', '.join(failed)} (log above, results in "
-                             f"{results})")
+                             f"tests failed: {', '.join(failed)} (seed "
+                             f"{', '.join(map(str, seeds)) or 'not recorded'}{again}; log "
+                             f"above, results in {results})")
     return results
 
 
