@@ -1,8 +1,9 @@
 """Bench of the image kernels (hdl/kernels: Sobel, GaussianBlur, BgrToGray, BgrToHsv, InRange,
 TrafficLightDetector; spec kernels.md §1-§5, reconos.md §9.1) in one ``kernels`` top.
 
-Every kernel gets real photographs (examples/images) and random frames of random sizes under
-random idle at its input and random backpressure at its output, and each output frame is
+Every kernel gets real photographs (examples/images), random frames of random sizes and of the
+corner sizes it accepts (narrowest, widest, fewest and most rows) under random idle at its
+input and random backpressure at its output, and each output frame is
 compared byte for byte with OpenCV (tb/models/image.py); ``tuser`` must mark exactly the first
 beat and ``tlast`` exactly the last. Bad frames (early and late ``tlast``, a size the kernel
 cannot take) must raise their error pulse once, give a well-formed (padded, cut or no) output
@@ -216,9 +217,9 @@ class KernelsTB:
     async def reset(self):
         await reset_aresetn(self.dut)
 
-    def random_image(self, kernel, *, width=None, height=None, min_height=1):
-        """Random bgr8 pixels of a random size the kernel accepts (as a bgr8 image), at least
-        ``min_height`` rows."""
+    @staticmethod
+    def image_widths(kernel):
+        """``(smallest, largest, step)``: the widths of bgr8 images the kernel accepts."""
         step = kernel.p * (4 if kernel.channels == 4 else 1)
         lo = -(-kernel.min_width // step) * step
         if kernel.channels == 4:
@@ -227,6 +228,12 @@ class KernelsTB:
             hi = min(hi, kernel.max_width)
         else:
             hi = kernel.max_width // step * step
+        return lo, hi, step
+
+    def random_image(self, kernel, *, width=None, height=None, min_height=1):
+        """Random bgr8 pixels of a random size the kernel accepts (as a bgr8 image), at least
+        ``min_height`` rows."""
+        lo, hi, step = self.image_widths(kernel)
         width = width or self.rng.randrange(lo, hi + 1, step)
         height = height or self.rng.randrange(max(2 * kernel.radius + 1, min_height), 24)
         rng = np.random.default_rng(self.rng.randrange(1 << 30))
@@ -314,6 +321,26 @@ async def bad_frames_are_flagged_and_resynchronised(dut):
     await tb.run_frames(frames, timeout_cycles=100_000)
     for k in tb.kernels.values():
         assert k.errors == {"short": 1, "long": 1, "size": 1}, (k.name, k.errors)
+
+
+@cocotb.test()
+async def smallest_and_largest_sizes(dut):
+    """Per kernel, random pixels at the corners of the sizes it accepts: the narrowest width
+    with the fewest rows (one beat for a per-pixel kernel) and with the most rows, the widest
+    with the fewest, under 20 % idle and 20 % backpressure: every frame equals OpenCV and no
+    error pulses."""
+    tb = KernelsTB(dut)
+    await tb.reset()
+    tb.set_pauses(0.2, 0.2)
+    frames = {}
+    for name, k in tb.kernels.items():
+        lo, hi, _ = tb.image_widths(k)
+        fewest = 2 * k.radius + 1
+        sizes = [(lo, fewest), (lo, k.max_height), (hi, fewest), (lo, fewest)]
+        frames[name] = [(tb.random_image(k, width=w, height=h), {}) for w, h in sizes]
+    await tb.run_frames(frames, timeout_cycles=100_000)
+    for k in tb.kernels.values():
+        assert k.errors == {"short": 0, "long": 0, "size": 0}, (k.name, k.errors)
 
 
 @cocotb.test()
