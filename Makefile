@@ -17,8 +17,9 @@ SIM ?= icarus
 CONFIG ?=
 WAVES ?= 0
 SEED ?=
+RUNS ?= 10
 
-.PHONY: help setup debs demo test test-full sim lint bench bench-resources train-mnist clean
+.PHONY: help setup debs demo test test-full sim soak lint bench bench-resources train-mnist clean
 
 help:
 	@echo "rosgate make targets:"
@@ -27,6 +28,7 @@ help:
 	@echo "  make test-full   the long matrix as well"
 	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1] [SEED=n]   one bench"
 	@echo "      (TOP names tb/test_<TOP>.py: topic, msg_codec, net_stack, reconos_memif, ...)"
+	@echo "  make soak TOP=... SIM=... [CONFIG=...] [RUNS=10]   the same bench RUNS times, a new seed each"
 	@echo "  make lint        verilator --lint-only -Wall on every exported top"
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
 	@echo "  make bench-resources   re-measure only the yosys estimates in bench/results/"
@@ -68,6 +70,10 @@ sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \
 	  $$(ls tb/test_*.py | sed 's,tb/test_,,; s,\.py,,'); exit 2; }
 	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
+
+soak: setup
+	@test -f tb/test_$(TOP).py || { echo "make soak: no bench tb/test_$(TOP).py for TOP=$(TOP)"; exit 2; }
+	$(PY) -m tb.soak tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" --runs $(RUNS) --jobs $(JOBS)
 
 lint: setup
 	$(PY) -m tb.lint_tops

@@ -12,7 +12,8 @@ its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
 
 Every run draws a new random seed (cocotb's); a failure names the seed of each failed test and
 the command that repeats the run with it: ``SEED=<n>`` in the environment (or ``make sim ...
-SEED=<n>``) fixes the seed of every bench that does not pass its own.
+SEED=<n>``) fixes the seed of every bench that does not pass its own; ``make soak`` runs one
+bench with many seeds (tb/soak.py).
 """
 
 import contextlib
