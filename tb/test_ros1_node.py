@@ -17,6 +17,7 @@ import pytest
 from gen.msg import MessageLibrary
 from gen.msg.ros1 import frame_message, md5sum, message_definition
 from gen.ros1 import HardwareNode, RbcpClient, RosMaster
+from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS
 from hdl.ros1.registers import PHASES
 from tb.harness import run_bench
 from tb.net_tb import NODE_CONFIG
@@ -25,6 +26,10 @@ from tb.tap import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network
 
 IMAGE = "sensor_msgs/msg/Image"
 STREAMING = PHASES.index("streaming")
+#: the engine's TCP port in these tests, written before the node starts: the hardware
+#: publisher has no port of its own (LOCAL_PORT 0), so it listens here, and requestTopic must
+#: read it back for rcv_data to reach it (not SiTCP's default 24)
+TCP_PORT = 11411
 
 
 def test_ros1_node():
@@ -50,7 +55,7 @@ class RosWorld:
         spec = dict(type="sensor_msgs/Image", md5sum=self.md5, definition=self.definition)
         self.node = HardwareNode("/fpga", self.master.uri, KERNEL_IP, ENGINE_IP, self.rbcp,
                                  [dict(spec, topic="/image_raw"),
-                                  dict(spec, topic="/image_processed", port=24)])
+                                  dict(spec, topic="/image_processed")])
         self.snd = SoftwarePublisher("/snd_data", self.master.uri, KERNEL_IP, "/image_raw",
                                      "sensor_msgs/Image", pub_md5 or self.md5, self.definition)
         self.rcv = SoftwareSubscriber("/rcv_data", self.master.uri, KERNEL_IP,
@@ -78,7 +83,10 @@ class RosWorld:
 
 async def start_world(tb, **kw):
     world = RosWorld(tb, **kw)
+    await tb.run_in_thread("engine TCP port", world.rbcp.write_int,
+                           GLOBAL_BASE + GLOBAL_OFFSETS["tcp_port"], 2, TCP_PORT)
     await tb.run_in_thread("hardware node start", world.node.start)
+    assert world.node.listen_ports == {1: TCP_PORT}
     await tb.run_in_thread("snd_data registers", world.snd.register)
     return world
 

@@ -6,6 +6,8 @@ import os
 import threading
 import xmlrpc.client
 
+from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS
+
 from .endpoint import EndpointClient
 from .master import XmlRpcServer
 
@@ -29,7 +31,10 @@ class HardwareNode:
     rbcp : RbcpClient
     endpoints : list of dict
         Per endpoint, in the hardware's order: ``topic``, ``type`` (ROS 1 name), ``md5sum``,
-        ``definition`` and, for a publisher, ``port``.
+        ``definition`` and, for a publisher, ``port``: the TCP port it listens on, 1..65535,
+        or 0 (the default) for the engine's TCP port (its ``tcp_port`` register, SiTCP's 24
+        unless changed), which :meth:`start` reads back so that ``requestTopic`` names the
+        port the hardware really listens on.
 
     A hardware publisher has one TCP session, so ``requestTopic`` answers a second subscriber
     with code 0 while the first is connected (net.md §7.1). A hardware subscriber connects to
@@ -43,7 +48,13 @@ class HardwareNode:
         self.engine_ip = engine_ip
         self.rbcp = rbcp
         self.specs = list(endpoints)
+        for k, spec in enumerate(self.specs):
+            port = spec.get("port", 0)
+            if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+                raise ValueError(f"endpoint {k} ({spec.get('topic')!r}): port {port!r} is not "
+                                 f"an integer in 0..65535 (0: the engine's TCP port)")
         self.clients = [EndpointClient(rbcp, k) for k in range(len(self.specs))]
+        self.listen_ports = {}            # publisher endpoint -> the port it listens on
         self.server = XmlRpcServer(host)
         for fn in ("requestTopic", "publisherUpdate", "getBusInfo", "getBusStats",
                    "getMasterUri", "getPid", "getSubscriptions", "getPublications",
@@ -68,7 +79,9 @@ class HardwareNode:
                              md5sum=spec["md5sum"], definition=spec["definition"])
             spec["role"] = client.role
             if spec["role"] == "publisher":
-                client.listen(spec.get("port", 24))
+                port = spec.get("port", 0)
+                client.listen(port)
+                self.listen_ports[k] = port or self.engine_tcp_port()
         for k, spec in enumerate(self.specs):
             if spec["role"] == "publisher":
                 self.master.registerPublisher(self.name, spec["topic"], spec["type"], self.uri)
@@ -78,6 +91,12 @@ class HardwareNode:
                 if code == SUCCESS and pubs:
                     self._connect(k, pubs)
         return self
+
+    def engine_tcp_port(self):
+        """The engine's TCP port (its global ``tcp_port`` register): where an endpoint with
+        ``LOCAL_PORT`` 0 listens."""
+        offset = GLOBAL_OFFSETS["tcp_port"]
+        return self.rbcp.read_int(GLOBAL_BASE + offset, GLOBAL_REGS[offset][1])
 
     def stop(self):
         for spec in self.specs:
@@ -111,15 +130,18 @@ class HardwareNode:
 
     # ---- Slave API
     def requestTopic(self, caller_id, topic, protocols):
-        for spec, client in zip(self.specs, self.clients):
+        for k, (spec, client) in enumerate(zip(self.specs, self.clients)):
             if spec.get("role") == "publisher" and spec["topic"] == topic:
                 if not any(p and p[0] == "TCPROS" for p in protocols):
                     return [FAILURE, "no supported protocol implementations", []]
                 if client.phase not in ("idle", "connecting"):
                     return [FAILURE, f"hardware publisher of [{topic}] already has a "
                                      f"subscriber (one TCP session)", []]
-                return [SUCCESS, f"ready on {self.engine_ip}:{spec.get('port', 24)}",
-                        ["TCPROS", self.engine_ip, spec.get("port", 24)]]
+                port = self.listen_ports.get(k)
+                if port is None:
+                    return [FAILURE, f"hardware publisher of [{topic}] is not listening yet", []]
+                return [SUCCESS, f"ready on {self.engine_ip}:{port}",
+                        ["TCPROS", self.engine_ip, port]]
         return [ERROR, f"Not a publisher of [{topic}]", []]
 
     def publisherUpdate(self, caller_id, topic, publishers):
