@@ -11,9 +11,9 @@ unchanged), and runs every cocotb test of the module in one simulation. The coco
 its configuration with :func:`bench_params`. ``WAVES=1`` records FST waveforms.
 
 Every run draws a new random seed (cocotb's); a failure names the seed of each failed test and
-the command that repeats the run with it: ``SEED=<n>`` in the environment (or ``make sim ...
-SEED=<n>``) fixes the seed of every bench that does not pass its own; ``make soak`` runs one
-bench with many seeds (tb/soak.py).
+the command that repeats its pytest item with it: ``SEED=<n>`` in the environment (or ``make
+sim ... SEED=<n>``) fixes the seed of every bench that does not pass its own; ``make soak``
+runs one bench with many seeds (tb/soak.py).
 """
 
 import contextlib
@@ -21,6 +21,7 @@ import fcntl
 import json
 import os
 import shutil
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -127,10 +128,17 @@ def environment_seed():
     return seed
 
 
-def rerun_hint(module, config_id, sim, seed):
-    """The command that repeats one bench item with ``seed``."""
-    bench = module.rsplit(".", 1)[-1].removeprefix("test_")
-    return f"make sim TOP={bench} SIM={sim} CONFIG={config_id} SEED={seed}"
+def rerun_hint(seed):
+    """The command that repeats the running pytest item with ``seed`` (outside pytest: what
+    to set)."""
+    current = os.environ.get("PYTEST_CURRENT_TEST", "")
+    if not current:
+        return f"SEED={seed} in the environment"
+    nodeid = current.rsplit(" (", 1)[0]
+    python = Path(sys.executable)
+    with contextlib.suppress(ValueError):
+        python = python.relative_to(Path.cwd())
+    return f"SEED={seed} {python} -m pytest -p no:xdist '{nodeid}'"
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
@@ -221,8 +229,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         raise AssertionError(f"{top} [{config_id}, {sim}]: no cocotb test ran")
     if failed:
         seeds = sorted({s for s in failed.values() if s is not None})
-        again = "".join(f"; again with: {rerun_hint(module, config_id, sim, s)}"
-                        for s in seeds)
+        again = "".join(f"; again with: {rerun_hint(s)}" for s in seeds)
         raise AssertionError(f"{top} [{config_id}, {sim}]: {len(failed)} of {total} cocotb "
                              f"tests failed: {', '.join(failed)} (seed "
                              f"{', '.join(map(str, seeds)) or 'not recorded'}{again}; log "

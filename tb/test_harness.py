@@ -6,6 +6,7 @@ this module start them, each by name.
 
 import os
 import random
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -69,7 +70,12 @@ def test_failure_names_seed_and_command(tmp_path, monkeypatch):
         run(tmp_path, "fails_on_purpose", "seed-fail")
     message = str(info.value)
     assert "1 of 1 cocotb tests failed: fails_on_purpose (seed 777;" in message, message
-    assert f"again with: make sim TOP=harness SIM=icarus CONFIG={CONFIG_ID} SEED=777" in message
+    nodeid = "tb/test_harness.py::test_failure_names_seed_and_command"
+    assert re.search(rf"again with: SEED=777 \S*python\S* -m pytest -p no:xdist '{nodeid}';",
+                     message), message
+    monkeypatch.delenv("PYTEST_CURRENT_TEST")
+    with pytest.raises(AssertionError, match="again with: SEED=777 in the environment;"):
+        run(tmp_path, "fails_on_purpose", "seed-fail")
 
 
 @pytest.mark.parametrize("value", ["abc", "-3", "1.5"])
