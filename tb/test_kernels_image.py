@@ -113,6 +113,22 @@ class KernelPort:
         lead = -(-r // self.p)
         return max(2 * r + 1, (2 * lead + 1) * self.p) if r else self.p
 
+    @property
+    def min_height(self):
+        return 2 * self.radius + 1
+
+    def image_widths(self):
+        """``(smallest, largest, step)``: the widths of bgr8 images the kernel accepts."""
+        step = self.p * (4 if self.channels == 4 else 1)
+        lo = -(-self.min_width // step) * step
+        if self.channels == 4:
+            lo = max(lo, -(-self.min_width * 4 // 3 // step) * step)
+            hi = self.max_width * 4 // 3 // step * step
+            hi = min(hi, self.max_width)
+        else:
+            hi = self.max_width // step * step
+        return lo, hi, step
+
     def frame_image(self, image):
         """The image as this kernel's input pixels (``H x W x C``)."""
         if self.channels == 4:
@@ -158,7 +174,7 @@ class KernelPort:
         self.width.value, self.height.value = width, height
         data = pixels.tobytes() if data is None else data
         size_ok = (width % self.p == 0 and self.min_width <= width <= self.max_width and
-                   (2 * self.radius + 1 if self.radius else 1) <= height <= self.max_height)
+                   self.min_height <= height <= self.max_height)
         if size_ok:
             size = self.frame_bytes(width, height)
             frame = np.frombuffer(golden.guard_frame(data, size), np.uint8)
@@ -217,25 +233,12 @@ class KernelsTB:
     async def reset(self):
         await reset_aresetn(self.dut)
 
-    @staticmethod
-    def image_widths(kernel):
-        """``(smallest, largest, step)``: the widths of bgr8 images the kernel accepts."""
-        step = kernel.p * (4 if kernel.channels == 4 else 1)
-        lo = -(-kernel.min_width // step) * step
-        if kernel.channels == 4:
-            lo = max(lo, -(-kernel.min_width * 4 // 3 // step) * step)
-            hi = kernel.max_width * 4 // 3 // step * step
-            hi = min(hi, kernel.max_width)
-        else:
-            hi = kernel.max_width // step * step
-        return lo, hi, step
-
     def random_image(self, kernel, *, width=None, height=None, min_height=1):
         """Random bgr8 pixels of a random size the kernel accepts (as a bgr8 image), at least
         ``min_height`` rows."""
-        lo, hi, step = self.image_widths(kernel)
+        lo, hi, step = kernel.image_widths()
         width = width or self.rng.randrange(lo, hi + 1, step)
-        height = height or self.rng.randrange(max(2 * kernel.radius + 1, min_height), 24)
+        height = height or self.rng.randrange(max(kernel.min_height, min_height), 24)
         rng = np.random.default_rng(self.rng.randrange(1 << 30))
         return rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
 
@@ -334,8 +337,8 @@ async def smallest_and_largest_sizes(dut):
     tb.set_pauses(0.2, 0.2)
     frames = {}
     for name, k in tb.kernels.items():
-        lo, hi, _ = tb.image_widths(k)
-        fewest = 2 * k.radius + 1
+        lo, hi, _ = k.image_widths()
+        fewest = k.min_height
         sizes = [(lo, fewest), (lo, k.max_height), (hi, fewest), (lo, fewest)]
         frames[name] = [(tb.random_image(k, width=w, height=h), {}) for w, h in sizes]
     await tb.run_frames(frames, timeout_cycles=100_000)

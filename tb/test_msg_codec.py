@@ -19,11 +19,11 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 import pytest
 
 from gen.msg import MessageLibrary
-from gen.msg.wire import STRUCT_FORMAT, WireError, decode_cdr
+from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT, WireError, decode_cdr
 from gen.tops import message_plan
 from hdl.msg import DeserializerError, SerializerError, payload_port
 from tb.harness import bench_params, cocotb_bench
-from tb.models.messages import golden_store, random_primitive, random_value, to_rosbags
+from tb.models.messages import golden_store, random_sequence, random_value, to_rosbags
 from tb.models.msgstream import (expected_fields, fixed_part, leaf_values, reconros_beats,
                                  set_at, value_at, variable_bytes)
 from tb.streams import HandshakeSink, HandshakeSource, PacketSink, bursty_pauses, random_pauses
@@ -145,11 +145,7 @@ class MsgCodecTB:
             if v.string or v.bound or not big:
                 continue
             n = self.rng.randint(big // 2, big)
-            if v.element in ("uint8", "byte", "char"):
-                item = self.rng.randbytes(n)
-            else:
-                item = [random_primitive(v.element, self.rng) for _ in range(n)]
-            set_at(value, v.path, item)
+            set_at(value, v.path, random_sequence(v.element, n, self.rng))
         return value
 
     def empty_fields(self, value):
@@ -292,9 +288,7 @@ async def round_trip_full_rate(dut):
     target = max((v for v in tb.plan.variables if not v.string and not v.bound),
                  key=lambda v: v.element_bytes)
     n = big // target.element_bytes
-    set_at(value, target.path, tb.rng.randbytes(n) if target.element_bytes == 1 and
-           target.element in ("uint8", "byte", "char") else
-           [random_primitive(target.element, tb.rng) for _ in range(n)])
+    set_at(value, target.path, random_sequence(target.element, n, tb.rng))
     await tb.serialize(value)
     frame = await with_timeout(tb.ser_out.recv(compact=False), 2_000_000, "ns")
     tb.check_serialized(frame, value, 0)
@@ -321,9 +315,7 @@ async def sequences_at_max_count(dut):
     for v in tb.plan.variables:
         if v.string or v.bound:
             continue
-        n = tb.max_count
-        set_at(value, v.path, tb.rng.randbytes(n) if v.element in ("uint8", "byte", "char")
-               else [random_primitive(v.element, tb.rng) for _ in range(n)])
+        set_at(value, v.path, random_sequence(v.element, tb.max_count, tb.rng))
     await tb.run_serializer([value])
     assert not tb.errors["ser"], tb.errors
     await tb.run_deserializer([value])
@@ -374,8 +366,7 @@ def bad_messages(tb):
     big = tb.random_message()
     seq = [v for v in plan.variables if not v.string and not v.bound][-1]
     n = 64
-    set_at(big, seq.path, [random_primitive(seq.element, rng) for _ in range(n)]
-           if seq.element not in ("uint8", "byte", "char") else rng.randbytes(n))
+    set_at(big, seq.path, random_sequence(seq.element, n, rng))
     big_bytes = tb.wire_bytes(big)
     cases.append(("ends early inside a payload", big_bytes[:-(n * seq.element_bytes) // 2],
                   DeserializerError.EARLY_END, big))
@@ -389,7 +380,7 @@ def bad_messages(tb):
     # the same on an empty sequence of 8-byte elements: the count is followed by no padding,
     # so the bytes after it are not zero; the count is still what gets reported
     empty = _copy(value)
-    set_at(empty, seq.path, [] if seq.element not in ("uint8", "byte", "char") else b"")
+    set_at(empty, seq.path, b"" if seq.element in BYTE_ELEMENTS else [])
     offset = count_offset(tb, empty, seq)
     data = bytearray(tb.wire_bytes(empty))
     data[offset:offset + 4] = (tb.max_count + 1).to_bytes(4, "little")
@@ -473,8 +464,7 @@ async def serializer_bad_payload_recovers(dut):
                                SerializerError.PAYLOAD_LONG)):
         value = tb.random_message()
         n = 40
-        set_at(value, seq.path, [random_primitive(seq.element, tb.rng) for _ in range(n)]
-               if seq.element not in ("uint8", "byte", "char") else tb.rng.randbytes(n))
+        set_at(value, seq.path, random_sequence(seq.element, n, tb.rng))
         payloads = variable_bytes(tb.plan, value)
         declared = payloads[seq.index]
         if delta < 0:
@@ -488,7 +478,7 @@ async def serializer_bad_payload_recovers(dut):
         await tb.serialize(value, payloads)
         frame = await with_timeout(tb.ser_out.recv(compact=False), 2_000_000, "ns")
         expected_value = _copy(value)
-        if seq.element in ("uint8", "byte", "char"):
+        if seq.element in BYTE_ELEMENTS:
             set_at(expected_value, seq.path, expected_field)
         else:
             set_at(expected_value, seq.path, decode_elements(seq, expected_field))

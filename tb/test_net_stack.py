@@ -17,7 +17,8 @@ from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
 from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, IFG, MIN_FRAME, PREAMBLE
-from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS
+from hdl.net.stack import (GLOBAL_BASE, GLOBAL_OFFSETS, STACK_COUNTERS,
+                            global_register)
 from tb.harness import cocotb_bench
 from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, WIDE_USER_CONFIGS, NetTB
 
@@ -176,11 +177,10 @@ async def rbcp(tb, payload, sport=50000):
 async def write_global(tb, name, value):
     """Write one of the stack's registers (:data:`GLOBAL_REGS`) through RBCP; the next
     ``tb.reset()`` gives it back its configured value."""
-    offset = GLOBAL_OFFSETS[name]
-    size = GLOBAL_REGS[offset][1]
+    address, size = global_register(name)
     data = value.to_bytes(size, "big")
-    reply = await rbcp(tb, rbcp_request(0x80, 0x5A, GLOBAL_BASE + offset, size, data))
-    assert reply == sitcpy_rbcp_header("w", 0x5A, GLOBAL_BASE + offset, size) + data, reply
+    reply = await rbcp(tb, rbcp_request(0x80, 0x5A, address, size, data))
+    assert reply == sitcpy_rbcp_header("w", 0x5A, address, size) + data, reply
 
 
 #: the configuration's retransmission timeout, which tests that shorten or lengthen it restore

@@ -17,7 +17,7 @@ import pytest
 from gen.msg import MessageLibrary
 from gen.msg.ros1 import frame_message, md5sum, message_definition
 from gen.ros1 import HardwareNode, RbcpClient, RosMaster
-from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS
+from hdl.net.stack import global_register
 from hdl.ros1.registers import PHASES
 from tb.harness import run_bench
 from tb.net_tb import NODE_CONFIG
@@ -84,7 +84,7 @@ class RosWorld:
 async def start_world(tb, **kw):
     world = RosWorld(tb, **kw)
     await tb.run_in_thread("engine TCP port", world.rbcp.write_int,
-                           GLOBAL_BASE + GLOBAL_OFFSETS["tcp_port"], 2, TCP_PORT)
+                           *global_register("tcp_port"), TCP_PORT)
     await tb.run_in_thread("hardware node start", world.node.start)
     assert world.node.listen_ports == {1: TCP_PORT}
     await tb.run_in_thread("snd_data registers", world.snd.register)

@@ -14,9 +14,12 @@ import struct
 from .model import Array, Named, Primitive
 
 __all__ = ["STRUCT_FORMAT", "WireError", "encode_cdr", "decode_cdr", "encode_ros1", "decode_ros1",
-           "CDR_LE_HEADER"]
+           "CDR_LE_HEADER", "BYTE_ELEMENTS"]
 
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
+
+#: element types whose arrays and sequences are ``bytes`` in values (decoded and encoded)
+BYTE_ELEMENTS = ("uint8", "byte", "char")
 
 #: ROS primitive -> Python ``struct`` format character (little endian when prefixed ``<``)
 STRUCT_FORMAT = {"bool": "?", "byte": "B", "char": "B", "int8": "b", "uint8": "B", "int16": "h",
@@ -90,7 +93,7 @@ class _Codec:
                 self._pad(out, 4)
                 out.extend(struct.pack("<I", len(items)))
             element = type_.element
-            if isinstance(element, Primitive) and element.name in ("uint8", "byte", "char") \
+            if isinstance(element, Primitive) and element.name in BYTE_ELEMENTS \
                     and len(items):
                 out.extend(bytes(bytearray(int(x) for x in items)))
             else:
@@ -169,7 +172,7 @@ class _Codec:
             if type_.bound and count > type_.bound:
                 raise WireError(f"{path}: count {count} exceeds the bound of {type_}")
         element = type_.element
-        if isinstance(element, Primitive) and element.name in ("uint8", "byte", "char"):
+        if isinstance(element, Primitive) and element.name in BYTE_ELEMENTS:
             return bytes(self._take(count, path))
         return [self._read(element, f"{path}[{i}]") for i in range(count)]
 

@@ -6,7 +6,8 @@ import os
 import threading
 import xmlrpc.client
 
-from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS
+from hdl.net.stack import global_register
+from hdl.params import check_int
 
 from .endpoint import EndpointClient
 from .master import XmlRpcServer
@@ -49,10 +50,7 @@ class HardwareNode:
         self.rbcp = rbcp
         self.specs = list(endpoints)
         for k, spec in enumerate(self.specs):
-            port = spec.get("port", 0)
-            if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
-                raise ValueError(f"endpoint {k} ({spec.get('topic')!r}): port {port!r} is not "
-                                 f"an integer in 0..65535 (0: the engine's TCP port)")
+            check_int(f"endpoint {k} ({spec.get('topic')!r}) port", spec.get("port", 0), 0, 65535)
         self.clients = [EndpointClient(rbcp, k) for k in range(len(self.specs))]
         self.listen_ports = {}            # publisher endpoint -> the port it listens on
         self.server = XmlRpcServer(host)
@@ -95,8 +93,7 @@ class HardwareNode:
     def engine_tcp_port(self):
         """The engine's TCP port (its global ``tcp_port`` register): where an endpoint with
         ``LOCAL_PORT`` 0 listens."""
-        offset = GLOBAL_OFFSETS["tcp_port"]
-        return self.rbcp.read_int(GLOBAL_BASE + offset, GLOBAL_REGS[offset][1])
+        return self.rbcp.read_int(*global_register("tcp_port"))
 
     def stop(self):
         for spec in self.specs:

@@ -21,6 +21,7 @@ from .tcp import TCP_COUNTERS, TcpError, TcpSession, TcpState
 from .tx import FrameBuilder
 
 __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLOBAL_REGS",
+           "global_register",
            "GLOBAL_OFFSETS"]
 
 #: Stack counters, in the order of their read addresses (``counter_index``, RBCP): every
@@ -44,6 +45,12 @@ GLOBAL_REGS = {
 }
 #: name -> offset of the global block's registers
 GLOBAL_OFFSETS = {name: offset for offset, (name, _, _) in GLOBAL_REGS.items()}
+
+
+def global_register(name):
+    """``(RBCP address, bytes)`` of the global block's register ``name``."""
+    offset = GLOBAL_OFFSETS[name]
+    return GLOBAL_BASE + offset, GLOBAL_REGS[offset][1]
 
 _CLOCK_HZ = 125_000_000
 

@@ -11,6 +11,7 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
 
 from gen.msg.model import Array, Named, Primitive, Sequence
+from gen.msg.wire import BYTE_ELEMENTS
 
 __all__ = ["golden_store", "random_value", "random_primitive", "to_rosbags"]
 
@@ -59,6 +60,14 @@ def random_primitive(name, rng, bound=0):
     return rng.randint(0, (1 << bits) - 1)
 
 
+def random_sequence(element, n, rng):
+    """``n`` random elements of the primitive type ``element``: ``bytes`` for
+    :data:`BYTE_ELEMENTS`, else a list."""
+    if element in BYTE_ELEMENTS:
+        return rng.randbytes(n)
+    return [random_primitive(element, rng) for _ in range(n)]
+
+
 def random_value(library, typename, rng, max_len=6):
     """A random value (dicts) of ``typename``; uint8/byte/char arrays as ``bytes``."""
     def value(type_):
@@ -71,7 +80,7 @@ def random_value(library, typename, rng, max_len=6):
         else:
             n = rng.randint(0, type_.bound or max_len)
         element = type_.element
-        if isinstance(element, Primitive) and element.name in ("uint8", "byte", "char"):
+        if isinstance(element, Primitive) and element.name in BYTE_ELEMENTS:
             return rng.randbytes(n)
         return [value(element) for _ in range(n)]
 

@@ -20,7 +20,7 @@ import struct
 import cocotb
 from cocotb.triggers import Event, RisingEdge, Timer, First
 
-from gen.msg.wire import STRUCT_FORMAT as _FMT
+from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT as _FMT
 from hdl.reconos.protocol import (CMD_MASK, call, INTERRUPTED_REPLY, SIGNAL_THREAD_RESUME,
                                   SIGNAL_THREAD_START, Command, OsifRegister,
                                   ProcControlRegister, ResourceType, arch as get_arch,
@@ -300,7 +300,7 @@ class MessageMemory:
                 else:
                     ptr, n = self._ptr(at), self._ptr(at + self.p)
                 raw = self.mem.read(ptr, n * esz) if n else b""
-                if t.element.name in ("uint8", "byte", "char"):
+                if t.element.name in BYTE_ELEMENTS:
                     out[m.name] = raw
                 else:
                     out[m.name] = list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
