@@ -1,11 +1,15 @@
+import os
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+ROOT = Path(__file__).resolve().parent
+sys.path.insert(0, str(ROOT))
 
-from tb.toolchain import put_verilator_on_path  # noqa: E402
+from host.toolchain import put_verilator_on_path  # noqa: E402
 
 put_verilator_on_path()
+# what the tests run through ``rosgate`` builds under sim_build/, not in the user's cache
+os.environ.setdefault("ROSGATE_CACHE", str(ROOT / "sim_build" / "cache"))
 
 
 def pytest_configure(config):

@@ -1,19 +1,18 @@
 """Hardware-mapped topic benchmark (issue: foundation §6; spec hmt.md §7).
 
 All numbers are simulated clock cycles of the real :class:`hdl.dds.Topic` RTL under Verilator
-(generator and checker in :mod:`bench.trafficgen`), converted to time at 100 MHz, the clock of
+(generator and checker in :mod:`tb.topic_traffic`), converted to time at 100 MHz, the clock of
 the fpgaDDS evaluation. Resources come from Debian's Yosys ``synth_xilinx -flatten -family xc7``.
 """
 
 import json
 import math
 
-from bench.trafficgen import TopicTrafficBench
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_top
-from tb.harness import run_bench
-from tb.toolchain import SIM_BUILD
+from tb.harness import SIM_BUILD, run_bench
+from tb.topic_traffic import TOPOLOGIES, WIDTHS, build_topic_bench_top
 
 CLOCK_MHZ = 100
 
@@ -28,9 +27,6 @@ PAPER_TABLE_I = {
     3 * 1024 ** 2: ("3146 kB", 9.24, 3.93),
 }
 
-TOPOLOGIES = [(1, 1), (1, 4), (4, 1), (4, 4)]
-#: Data widths of the topic the bench measures
-WIDTHS = (64, 512)
 #: Target of the foundation issue, from verilog-axis axis_arb_mux + axis_broadcast (4:4, 64 b).
 RESOURCE_TARGET = {"LUT": 287, "FF": 608}
 
@@ -60,11 +56,6 @@ def stream_cases(pubs, width):
         cases.append({"name": f"stream-{size}", "kind": "stream", "size": size,
                       "beats": [beats] * pubs, "count": [count] * pubs})
     return cases
-
-
-def build_topic_bench_top(*, pubs, subs, data_width):
-    """The topic traffic bench top (``topic_bench``), for :func:`tb.harness.run_bench`."""
-    return TopicTrafficBench(pubs, subs, data_width)
 
 
 def run_topology(pubs, subs, width, cases, *, sim="verilator"):

@@ -1,5 +1,5 @@
 """cocotb module of the topic benchmark: runs the cases given in ROSGATE_BENCH_CASES on a
-:class:`bench.trafficgen.TopicTrafficBench` top and writes the records to ROSGATE_BENCH_OUT."""
+:class:`tb.topic_traffic.TopicTrafficBench` top and writes the records to ROSGATE_BENCH_OUT."""
 
 import json
 import os

@@ -9,11 +9,11 @@ import os
 import cocotb
 from cocotbext.axi import AxiStreamFrame
 
+from tb.kernels_control_tb import ControlTB, int16, pid_word
+from tb.kernels_image_tb import KernelsTB
 from tb.models import image as golden
 from tb.models import inverse_kinematics as ik_model
 from tb.models.pid import AvrPid
-from tb.test_kernels_control import ControlTB, int16, pid_word
-from tb.test_kernels_image import KernelsTB
 
 
 @cocotb.test()
@@ -21,7 +21,7 @@ async def measure_kernels(dut):
     params = json.loads(os.environ["ROSGATE_PARAMS"])
     records = {}
     if "cnn" in params["kernels"]:
-        from tb.test_kernels_mnist import MnistTB, check, held_out
+        from tb.kernels_mnist_tb import MnistTB, check, held_out
         tb = MnistTB(dut)
         await tb.reset()
         test_x, test_y = held_out()

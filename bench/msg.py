@@ -13,8 +13,7 @@ from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import message_plan
 from hdl.msg import Deserializer, Serializer
-from tb.harness import run_bench
-from tb.toolchain import SIM_BUILD
+from tb.harness import SIM_BUILD, run_bench
 
 CLOCK_MHZ = 100
 IMAGE = "sensor_msgs/msg/Image"

@@ -9,7 +9,7 @@ from cocotb.triggers import RisingEdge, with_timeout
 
 from tb.models.messages import random_primitive
 from tb.models.msgstream import set_at
-from tb.test_msg_codec import MsgCodecTB
+from tb.msg_codec_tb import MsgCodecTB
 
 
 class EdgeWatch:

@@ -8,8 +8,13 @@ import json
 
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
-from tb.harness import run_bench
-from tb.toolchain import SIM_BUILD
+from tb.harness import SIM_BUILD, run_bench
+from tb.net_bench_tops import (
+    NET_BENCH_CONFIGS,
+    ROS1_BENCH_CONFIG,
+    build_net_bench_top,
+    build_ros1_bench_top,
+)
 
 CLOCK_MHZ = 125
 CEILING_MBPS = 949.3
@@ -18,10 +23,10 @@ MB = 1024 * 1024
 #: case -> (label, top parameters, peer model parameters, bytes)
 TCP_CASES = {
     "linux_64k": ("64 KiB buffers; peer ACKs every 2nd segment, 100 us turnaround",
-                  dict(tx_depth=65536, rx_depth=65536),
+                  NET_BENCH_CONFIGS["linux_64k"],
                   dict(ack_every=2, ack_latency=12_500), 4 * MB),
     "seed_16k": ("16 KiB transmit buffer; peer ACKs once, 158.7 us after each burst (the seed "
-                 "paper's capture)", dict(tx_depth=16384, rx_depth=65536),
+                 "paper's capture)", NET_BENCH_CONFIGS["seed_16k"],
                  dict(ack_every=1000, ack_delay=19_840, delay_from_last=True), 1 * MB),
 }
 
@@ -29,22 +34,6 @@ TCP_CASES = {
 #: the seed paper's message sizes: label, width, height, encoding, bytes per pixel
 IMAGES = [("1 MB", 1024, 1024, "mono8", 1), ("2 MB", 1024, 683, "rgb8", 3),
           ("6 MB", 1920, 1080, "rgb8", 3)]
-
-
-#: Parameters of the TCPROS node bench top (64 KiB buffers each way)
-IMAGE_TOP_PARAMS = dict(tx_depth=65536, rx_depth=65536)
-
-
-def build_ros1_bench_top(**params):
-    """The TCPROS node bench top (``ros1_bench``), for :func:`tb.harness.run_bench`."""
-    from bench.net_tops import Ros1BenchTop
-    return Ros1BenchTop(**params)
-
-
-def build_net_bench_top(**params):
-    """The engine throughput bench top (``net_bench``), for :func:`tb.harness.run_bench`."""
-    from bench.net_tops import NetBenchTop
-    return NetBenchTop(**params)
 
 
 def measure(log=print):
@@ -59,7 +48,7 @@ def measure(log=print):
         results["tcp"][case] = dict(json.loads(out.read_text()), label=label)
     out = SIM_BUILD / "bench-net-images.json"
     log("  simulating the TCPROS node: 1, 2 and 6 MB images, receive, send, round trip...")
-    run_bench("bench.net_bench", "ros1_bench", "images", IMAGE_TOP_PARAMS,
+    run_bench("bench.net_bench", "ros1_bench", "images", ROS1_BENCH_CONFIG,
               "verilator", quiet=True, build=build_ros1_bench_top, testcase="measure_image",
               extra_env={"ROSGATE_BENCH_OUT": str(out),
                          "ROSGATE_BENCH_CASE": json.dumps(dict(images=IMAGES))})
@@ -104,7 +93,7 @@ def measure_resources(log=print):
 def markdown(results, resources):
     lines = ["# Network engine benchmark", "",
              f"Simulated cycles under Verilator at {CLOCK_MHZ} MHz (8 ns per GMII byte). The "
-             "peer is a Python TCP model on a wide-word GMII port (bench/net_tops.py); it "
+             "peer is a Python TCP model on a wide-word GMII port (tb/net_bench_tops.py); it "
              "acknowledges like Linux (every second full segment, at once for out-of-order "
              "data) after a turnaround. Goodput counts payload bytes; the steady state is the "
              "last 75 % of the transfer. Ceiling: 1460/1538 x 1000 = 949.3 Mb/s.", "",

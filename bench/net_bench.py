@@ -1,5 +1,5 @@
 """cocotb side of ``make bench`` for the network engine: a Python peer on the wide-word GMII
-port of bench/net_tops.py (ARP answers, TCP peer models that acknowledge like Linux, RBCP
+port of tb/net_bench_tops.py (ARP answers, TCP peer models that acknowledge like Linux, RBCP
 requests), goodput of long transfers in each direction and the seed paper's image
 measurements through the TCPROS node, in simulated cycles; results to
 ``ROSGATE_BENCH_OUT``."""
@@ -16,15 +16,23 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from bench.net_tops import WORD_BYTES, pattern_bytes
-from gen.ros1.rbcp import RbcpClient, rbcp_reply_ok
 from hdl.net.frames import (
-    ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, ETHERTYPE_ARP,
-    IP_PROTO_TCP, IP_PROTO_UDP, ip_to_int, mac_to_int,
+    ARP_REPLY,
+    ARP_REQUEST,
+    DEFAULT_IP,
+    DEFAULT_MAC,
+    DEFAULT_RBCP_PORT,
+    ETHERTYPE_ARP,
+    IP_PROTO_TCP,
+    IP_PROTO_UDP,
+    ip_to_int,
+    mac_to_int,
 )
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1.registers import PHASES
+from host.ros1.rbcp import RbcpClient, rbcp_reply_ok
 from tb.models.tcp_peer import TcpPeerModel, udp_frame
+from tb.net_bench_tops import WORD_BYTES, pattern_bytes
 from tb.net_tb import CLOCK_NS, PEER_MAC, read_counter_bank
 from tb.streams import reset_aresetn
 
@@ -39,7 +47,7 @@ def pattern(n, start=0):
 
 
 class WordLink:
-    """Python side of :class:`~bench.net_tops.GmiiWordPeer`: frames in and out as words; the
+    """Python side of :class:`~tb.net_bench_tops.GmiiWordPeer`: frames in and out as words; the
     coroutine wakes once per word while frames move and every ``idle`` cycles otherwise."""
 
     def __init__(self, dut, on_frame, idle=16):
@@ -290,7 +298,7 @@ async def measure_image(dut):
 
     from gen.msg import MessageLibrary
     from gen.msg.ros1 import encode_connection_header, md5sum, message_definition
-    from gen.ros1.endpoint import EndpointClient
+    from host.ros1.endpoint import EndpointClient
     case = json.loads(os.environ["ROSGATE_BENCH_CASE"])
     peer = await setup(dut)
     dut.gen_start.value = 0

@@ -20,9 +20,9 @@ from gen.export.resources import YOSYS_COMMAND
 from hdl.reconos import ReconosSystem
 from hdl.reconos.fifo import OSIF_FIFO_DEPTH, ReconosFifo
 from hdl.reconos.hwt import OsifEngine
-from hdl.reconos.protocol import CALLS, arch as get_arch
-from tb.harness import run_bench
-from tb.toolchain import SIM_BUILD
+from hdl.reconos.protocol import CALLS
+from hdl.reconos.protocol import arch as get_arch
+from tb.harness import SIM_BUILD, run_bench
 
 CLOCK_MHZ = 100
 SIZES = [4, 8192, 1 << 20, 6 << 20, 10 << 20]

@@ -8,9 +8,8 @@ import json
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import build_thread
-from tb.harness import run_bench
+from tb.harness import SIM_BUILD, run_bench
 from tb.reconos_tb import apps_configs
-from tb.toolchain import SIM_BUILD
 
 CLOCK_MHZ = 100
 #: P-RR Table 6 (ms): raw HW (the hardware node), pp HW (ping-pong through ROS 2)

@@ -12,10 +12,9 @@ import cocotb
 import cv2
 from cocotb.triggers import ClockCycles
 
-from tb.models.reconos_sw import Resource
+from host.reconos import Resource
 from tb.models.sobel import sobel_byte_lanes
-from tb.test_reconos_apps import (IMAGES, AppsTB, check_sobel, image_msg,
-                                  run_sobel)
+from tb.reconos_apps_tb import IMAGES, AppsTB, check_sobel, image_msg, run_sobel
 
 
 def now_cycles():

@@ -9,8 +9,8 @@ import random
 import cocotb
 from cocotb.triggers import FallingEdge
 
-from tb.models.reconos_sw import PAGE
-from tb.test_reconos_memory import COPY, MemoryTB
+from host.reconos import PAGE
+from tb.reconos_memory_tb import COPY, MemoryTB
 
 
 class BusWatch:

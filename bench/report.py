@@ -6,7 +6,7 @@ from pathlib import Path
 
 from gen.export.resources import estimate_resources
 from gen.export.verilog import export_verilog, write_if_changed
-from tb.toolchain import SIM_BUILD
+from tb.harness import SIM_BUILD
 
 __all__ = ["component_resources", "resource_table", "write_report"]
 

@@ -25,12 +25,18 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gen.msg.parser import (ACTION_FEEDBACK_MESSAGE, ACTION_GET_RESULT_RESPONSE,
-                            ACTION_SEND_GOAL_REQUEST, SERVICE_REQUEST, SERVICE_RESPONSE)
+from gen.msg.parser import (
+    ACTION_FEEDBACK_MESSAGE,
+    ACTION_GET_RESULT_RESPONSE,
+    ACTION_SEND_GOAL_REQUEST,
+    SERVICE_REQUEST,
+    SERVICE_RESPONSE,
+)
 from hdl.reconos.protocol import ResourceType
 
 __all__ = ["ConfigError", "Location", "Project", "Clock", "Slot", "Resource", "Thread",
-           "HwEndpoint", "HwTopic", "load_project", "parse_project", "split_args", "unquote"]
+           "HwEndpoint", "HwTopic", "load_project", "parse_project", "split_args", "unquote",
+           "apply_parameters"]
 
 _SPLIT = re.compile(r"[, ]+")
 _RANGE = re.compile(r"^(?P<name>[^()]*)\((?P<start>[0-9]+):(?P<end>[0-9]+)\)$")
@@ -84,7 +90,7 @@ SECTION_KEYS = {
     "HwSlot": {"required": ("Id", "Clock"), "optional": ("Reconfigurable", "Ports")},
     "ReconosThread": {"required": ("Slot",),
                       "optional": ("HwSource", "SwSource", "ResourceGroup", "UseMem",
-                                   "VideoOut", "Ports")},
+                                   "VideoOut", "Ports", "Parameters")},
     "ROSGateway": {"required": ("Slot", "HWTopic", "SWTopic", "MsgType"), "optional": ()},
 }
 BOARDS = {"zcu104": "r64", "zedboard": "r32", "pynqz1": "r32", "miniitx": "r32"}
@@ -270,6 +276,8 @@ class Thread:
     use_mem: bool
     where: Location
     gateway: dict = None
+    #: ``Parameters`` (a rosgate extension): name -> value, strings, for ``build(ctx)``
+    params: dict = field(default_factory=dict)
 
     @property
     def core_name(self):
@@ -333,6 +341,36 @@ def _kind(section_name):
         if section_name.startswith(prefix):
             return prefix
     return None
+
+
+def _parameters(sec, file):
+    """``Parameters = name=value, name=value`` of a thread section (a rosgate extension)."""
+    out = {}
+    for token in split_args(sec.values.get("Parameters", "")):
+        name, eq, value = token.partition("=")
+        if not eq or not name.isidentifier() or not value:
+            raise ConfigError(sec.where(file, "Parameters"),
+                              f"{token!r} is not name=value (for example mode=reconros)")
+        out[name] = unquote(value)
+    return out
+
+
+def apply_parameters(project, settings, option="--param"):
+    """Set thread parameters from ``THREAD.NAME=VALUE`` strings (the command line's
+    ``--param``), over the build.cfg's ``Parameters``; a bad setting raises
+    :class:`ValueError` naming it."""
+    names = {t.name: t for t in project.threads}
+    for setting in settings:
+        target, eq, value = setting.partition("=")
+        thread, dot, name = target.partition(".")
+        if not eq or not dot or not name.isidentifier() or not value:
+            raise ValueError(f"{option} {setting!r}: expected THREAD.NAME=VALUE, for example "
+                             f"Sobel.mode=reconros")
+        if thread not in names:
+            raise ValueError(f"{option} {setting!r}: no thread {thread!r} in {project.path} "
+                             f"(threads: {', '.join(names) or 'none'})")
+        names[thread].params[name] = value
+    return project
 
 
 def _check_keys(sec, kind, file):
@@ -525,7 +563,8 @@ def parse_project(text, path="build.cfg", *, msg_dirs=None):
         hw = sec.values.get("HwSource", "").split(",")[0].strip() or None
         sw = sec.values.get("SwSource", "").split(",")[0].strip() or None
         thread = Thread(name, len(threads), tslots, hw, sw, gnames, [], [],
-                        _bool(sec, "UseMem", file, True), sec.where(file))
+                        _bool(sec, "UseMem", file, True), sec.where(file),
+                        params=_parameters(sec, file))
         _thread_resources(thread, resources)
         threads.append(thread)
     for sec in kinds.get("ROSGateway", []):

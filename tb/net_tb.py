@@ -7,17 +7,19 @@ import cocotb
 from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, First, RisingEdge, Timer
 from cocotbext.eth import GmiiFrame, GmiiSink, GmiiSource
-from scapy.layers.inet import IP
+from scapy.layers.inet import ICMP, IP, TCP, UDP
 from scapy.layers.l2 import Ether
+from scapy.packet import Raw
 
-from hdl.net.frames import int_to_ip, int_to_mac
+from hdl.net.frames import DEFAULT_RBCP_PORT, int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
 __all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank",
-           "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort"]
+           "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort",
+           "checksums_ok", "eth", "rbcp"]
 
 CLOCK_NS = 8
 #: The network benches' configuration: one build per simulator, shared by the scripted and
@@ -238,3 +240,34 @@ class SessionPort(StreamPort):
                 return
             await ClockCycles(self.dut.aclk, 16)
         raise AssertionError(f"session {self.k}: state {self.get('state')}, not {state!r}")
+
+
+def checksums_ok(pkt):
+    """Whether scapy computes the same IP and L4 checksums as the packet carries."""
+    rebuilt = Ether(bytes(pkt))
+    for layer in (IP, ICMP, UDP, TCP):
+        if layer in rebuilt:
+            del rebuilt[layer].chksum
+    rebuilt = Ether(bytes(rebuilt))
+    for layer in (IP, ICMP, UDP, TCP):
+        if layer in pkt and pkt[layer].chksum != rebuilt[layer].chksum:
+            return False
+    return True
+
+
+def eth(tb, dst=None):
+    return Ether(src=PEER_MAC, dst=dst or tb.mac)
+
+
+async def rbcp(tb, payload, sport=50000):
+    """Send one RBCP request from the peer; return the reply's UDP payload (``None`` when no
+    reply comes), after checking its checksums and addresses."""
+    await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) /
+                  UDP(sport=sport, dport=DEFAULT_RBCP_PORT) / Raw(payload))
+    reply = await tb.recv(20000)
+    if reply is None:
+        return None
+    assert checksums_ok(reply), reply.show(dump=True)
+    assert (reply[IP].dst, reply[UDP].dport, reply[UDP].sport) == (PEER_IP, sport,
+                                                                    DEFAULT_RBCP_PORT)
+    return bytes(reply[UDP].payload)

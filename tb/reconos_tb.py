@@ -1,33 +1,56 @@
-"""The shared test bench of the ``reconos`` top: clock, reset, the three AXI4-Lite masters,
-process memory behind the AXI4 port, and the software model of :mod:`tb.models.reconos_sw`."""
+"""The shared test bench of the ``reconos`` top: the software side of
+:class:`host.reconos.ReconosCosim` configured from the bench parameters, the systems the
+``reconos`` benches build, and the OS-call programs their call sequencers run."""
 
-import logging
 from pathlib import Path
 
-import cocotb
-from cocotb.clock import Clock
-from cocotb.triggers import ClockCycles
-from cocotbext.axi import AxiBus, AxiLiteBus, AxiLiteMaster, AxiRam
-
-from hdl.reconos.protocol import arch as get_arch
+from hdl.reconos.protocol import CALLS
+from host.reconos import RAM_SIZE, ReconosCosim
 
 from .harness import bench_params
-from .models.reconos_sw import Broker, MessageMemory, ProcessMemory, ReconosRuntime
 
-__all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "apps_configs", "struct_offsets", "slot_of"]
+__all__ = ["ReconosTB", "RAM_SIZE", "system_configs", "apps_configs", "struct_offsets", "slot_of",
+           "call_program", "BAD_PROGRAM", "BLOCKED_SEM", "SKIP"]
 
-RAM_SIZE = 1 << 25
 #: message packages of the examples (sorter_msgs, application_msgs, ...)
 EXAMPLE_MESSAGES = [str(Path(__file__).resolve().parent.parent / "examples" / d)
                     for d in ("messages", "sobel_dip/msg")]
+
+#: calls the compatibility program leaves out (the sequencer issues them itself, or they are
+#: sent separately below)
+SKIP = {"thread_init", "thread_exit", "ros_take_interruptable", "ros_take_interruptable_cancel"}
+BLOCKED_SEM = 0x63
+
+
+def argument(i, k, wide):
+    """A distinct argument value; on r64 some are wider than 32 bits."""
+    base = (i + 1) * 16 + k + 1
+    return base | (0x1234_5678 << 32) if wide and k == 0 and i % 3 == 0 else base
+
+
+def call_program(arch):
+    """Every OS call once with distinct arguments, then the interruptible take and a blocking
+    semaphore wait."""
+    wide = arch == "r64"
+    out = []
+    for i, (name, c) in enumerate(CALLS.items()):
+        if name in SKIP:
+            continue
+        out.append((name, [argument(i, k, wide) for k in range(len(c.args))]))
+    out += [("ros_take_interruptable", [5, 6]), ("ros_take_interruptable_cancel", []),
+            ("ros_take_interruptable", [7, 8]), ("ros_take_interruptable_cancel", []),
+            ("sem_wait", [BLOCKED_SEM])]
+    return out
+
+
+#: slot 2: post semaphore 1, post semaphore 2, then an unknown command word
+BAD_PROGRAM = [["sem_post", [1]], ["sem_post", [2]], ["command", [0x123]]]
 
 
 def _system(arch):
     """One system per architecture for every ``reconos`` bench module (one build each):
     0 echo node (in its own clock: the slot's FIFOs cross clock domains), 1 copy node, 2 a thread making bad calls, 3 and 4 memory-test threads,
     5 the OS-call sequencer of the compatibility bench."""
-    from .test_reconos_calls import program
-    from .test_reconos_pingpong import BAD_PROGRAM
     # sensor_msgs/Image.data (spec §6: 72 on arm64, 48 on arm32)
     offset = struct_offsets(arch, "sensor_msgs/msg/Image")["data"]
     return {"arch": arch, "async_slots": [0], "threads": [
@@ -37,7 +60,7 @@ def _system(arch):
         {"kind": "calls", "program": BAD_PROGRAM, "h_report": 0},
         {"kind": "memtest", "h_cmd": 0, "h_result": 1},
         {"kind": "memtest", "h_cmd": 0, "h_result": 1},
-        {"kind": "calls", "program": program(arch)},
+        {"kind": "calls", "program": call_program(arch)},
     ]}
 
 
@@ -69,7 +92,8 @@ def _apps_system(arch):
     """The ReconROS demo nodes of :mod:`tb.test_reconos_apps`: 0 sort service server, 1 sort
     action server, 2 the mailbox sort thread, 3 and 4 shared-counter threads, 5 the Sobel
     service server, 6 the DIP node (Listings 2 and 3 of the paper), 7 an action client (a call
-    sequencer) of the sort action server."""
+    sequencer) of the sort action server. The Sobel server runs the paper's per-byte-lane
+    filter; its OpenCV mode is tested through the sobel_dip project (tb/test_project_sim.py)."""
     img = struct_offsets(arch, "sensor_msgs/msg/Image")
     image_offsets = {k: img[k] for k in ("height", "encoding", "is_bigendian", "step", "data")}
     goal = struct_offsets(arch, "sorter_msgs/action/Sort_SendGoal_Request")["goal"]
@@ -83,7 +107,7 @@ def _apps_system(arch):
         {"kind": "counter", "h_cmd": 0, "h_mutex": 1, "h_done": 2},
         {"kind": "counter", "h_cmd": 0, "h_mutex": 1, "h_done": 2},
         {"kind": "sobel_server", "h_srvs": 2, "h_req": 1, "h_res": 3,
-         "image_offsets": image_offsets},
+         "image_offsets": image_offsets, "mode": "reconros"},
         {"kind": "dip", "h_sub": 1, "h_pub": 2, "h_img": 3, "h_srvc": 5, "h_req": 4,
          "h_res": 6, "image_offsets": image_offsets},
         {"kind": "calls", "program": ACTION_CLIENT_PROGRAM, "h_report": 0},
@@ -102,64 +126,14 @@ def slot_of(params, kind, nth=0, **match):
     return found[nth]
 
 
-class ReconosTB:
+class ReconosTB(ReconosCosim):
+    """:class:`~host.reconos.ReconosCosim` for the system the bench parameters describe."""
+
     def __init__(self, dut, *, ram_size=RAM_SIZE):
-        self.dut = dut
         self.params = bench_params()
-        self.arch = get_arch(self.params.get("arch", "r64"))
-        self.num_hwts = len(self.params["threads"])
-        cocotb.start_soon(Clock(dut.aclk, self.params.get("clock_ns", 10), unit="ns").start())
-        for i in self.params.get("async_slots", ()):
-            # a slot clock unrelated to the system clock (ReconROS: a reconos_clock output)
-            period = self.params.get("slot_clock_ns", {}).get(str(i), 13.7)
-            cocotb.start_soon(Clock(getattr(dut, f"slot{i}_clk"), period, unit="ns").start())
-        self.osif = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_osif"), dut.aclk,
-                                  dut.aresetn, reset_active_level=False)
-        self.intc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_intc"), dut.aclk,
-                                  dut.aresetn, reset_active_level=False)
-        self.proc = AxiLiteMaster(AxiLiteBus.from_prefix(dut, "s_axi_proc"), dut.aclk,
-                                  dut.aresetn, reset_active_level=False)
-        self.ram = AxiRam(AxiBus.from_prefix(dut, "m_axi_mem"), dut.aclk, dut.aresetn,
-                          reset_active_level=False, size=ram_size)
-        for m in (self.osif, self.intc, self.proc, self.ram):
-            for part in ("write_if", "read_if"):
-                if hasattr(m, part):
-                    getattr(m, part).log.setLevel(logging.WARNING)
-            m.log.setLevel(logging.WARNING) if hasattr(m, "log") else None
-        self.ram_size = ram_size
-        self._decode_window(ram_size)
-        self.memory = ProcessMemory(self.arch, self.ram, ram_size)
-        self.broker = Broker()
-        self.messages = None
-        self.runtime = None
-
-    def _decode_window(self, size):
-        """AxiRam wraps addresses modulo its size; a real interconnect answers an access with
-        no memory behind it with an error. Accesses at or above ``size`` raise here, which
-        cocotbext-axi answers with SLVERR."""
-        for port, name in ((self.ram.read_if, "_read"), (self.ram.write_if, "_write")):
-            inner = getattr(port, name)
-
-            async def checked(address, arg, _inner=inner):
-                if address >= size:
-                    raise IndexError(f"no memory at 0x{address:x}")
-                return await _inner(address, arg)
-            setattr(port, name, checked)
-
-    async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 5)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
-
-    async def start_runtime(self, library=None):
-        from gen.msg import MessageLibrary
-        library = library or MessageLibrary([], store="ros2_humble")
-        self.messages = MessageMemory(self.memory, library)
-        self.runtime = ReconosRuntime(
-            self.arch, osif=self.osif, intc=self.intc, proc=self.proc,
-            irq_osif=self.dut.irq_osif, irq_pgf=self.dut.irq_pgf, clock=self.dut.aclk,
-            memory=self.memory, messages=self.messages, broker=self.broker,
-            num_hwts=self.num_hwts)
-        await self.runtime.start()
-        return self.runtime
+        super().__init__(dut, arch=self.params.get("arch", "r64"),
+                         num_hwts=len(self.params["threads"]),
+                         clock_ns=self.params.get("clock_ns", 10),
+                         slot_clocks={i: self.params.get("slot_clock_ns", {}).get(str(i), 13.7)
+                                      for i in self.params.get("async_slots", ())},
+                         ram_size=ram_size)

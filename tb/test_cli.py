@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The rosgate command line: export topic, its manifest, lint, and bad parameters."""
 
 import json
@@ -7,10 +8,10 @@ import sys
 
 import pytest
 
-from gen.cli import main
-from gen.export.lint import lint_verilog
 from hdl.dds import Topic
 from hdl.params import ParameterError
+from host.cli import main
+from host.lint import lint_verilog
 
 
 def verilog_ports(text, module):
@@ -81,7 +82,7 @@ def test_export_is_deterministic(tmp_path):
     (["--pubs", "x", "--subs", "1", "--width", "8"], "argument --pubs: invalid int value: 'x'"),
 ])
 def test_export_topic_rejects_bad_parameters(tmp_path, args, message):
-    result = subprocess.run([sys.executable, "-m", "gen.cli", "export", "topic", *args,
+    result = subprocess.run([sys.executable, "-m", "host.cli", "export", "topic", *args,
                              "-o", str(tmp_path / "out")], capture_output=True, text=True)
     assert result.returncode == 2
     assert message in result.stderr, result.stderr
@@ -97,7 +98,7 @@ def test_topic_parameter_errors_name_the_parameter():
 
 
 def test_help_documents_every_option():
-    result = subprocess.run([sys.executable, "-m", "gen.cli", "export", "topic", "--help"],
+    result = subprocess.run([sys.executable, "-m", "host.cli", "export", "topic", "--help"],
                             capture_output=True, text=True)
     assert result.returncode == 0
     for option in ("--pubs", "--subs", "--width", "--fifo-depth", "--qos", "--history",
@@ -106,7 +107,7 @@ def test_help_documents_every_option():
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "gen.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "host.cli", *args], capture_output=True,
                           text=True)
 
 

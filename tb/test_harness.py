@@ -15,7 +15,7 @@ import pytest
 from cocotb.triggers import Timer
 
 from tb.harness import environment_seed, run_bench
-from tb.test_topic import CONFIGS
+from tb.topic_tb import CONFIGS
 
 CONFIG_ID = "1x1_w8"
 

@@ -7,20 +7,13 @@ Icarus runs the first 4 held-out images, Verilator all 1000 (both under random i
 backpressure for the first 4); a short and a long image raise their error pulses."""
 
 import os
-import random
 
 import cocotb
 import numpy as np
-from cocotb.clock import Clock
-from cocotb.triggers import RisingEdge
-from cocotbext.axi import AxiStreamFrame
 
-from gen import mnist
-from hdl.kernels.mnist import MNIST_RESULT
-from tb.harness import bench_params, cocotb_bench
-from tb.streams import StreamPort, count_pulses, reset_aresetn
+from tb.harness import cocotb_bench
 
-CLOCK_NS = 10
+from .kernels_mnist_tb import LATENCY_BUDGET, TARGET_ACCURACY, MnistTB, check, held_out
 
 CONFIGS = {"mnist": dict(kernels={"cnn": dict(kind="mnist", pixels_per_beat=4)})}
 
@@ -30,60 +23,6 @@ test_kernels = cocotb_bench("kernels", CONFIGS, long=[("mnist", "verilator"),
                                                       ("mnist", "icarus")])
 
 SIM = os.environ.get("ROSGATE_SIM", "")
-TARGET_ACCURACY = 0.975
-LATENCY_BUDGET = 5000
-
-
-class MnistTB:
-    def __init__(self, dut):
-        self.dut = dut
-        self.params = bench_params()
-        self.rng = random.Random(cocotb.RANDOM_SEED)
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
-        self.port = StreamPort(dut, "cnn", self.rng)
-        self.source, self.sink = self.port.source, self.port.sink
-        self.errors = {"short": 0, "long": 0}
-        for e in self.errors:
-            cocotb.start_soon(count_pulses(getattr(dut, f"cnn_err_{e}"), self.errors, e))
-
-    async def reset(self):
-        await reset_aresetn(self.dut)
-
-    def set_pauses(self, idle, backpressure):
-        self.port.set_pauses(idle, backpressure)
-
-    async def classify(self, images, timeout_cycles=8000):
-        """Send the images, wait for their results; return ``[(digit, scores)]`` and the
-        cycles from each image's first beat to its result."""
-        results, latencies = [], []
-        for image in images:
-            before = len(self.sink.packets)
-            await self.source.send(AxiStreamFrame(image.tobytes()))
-            start = self.sink.cycle
-            for _ in range(timeout_cycles):
-                if len(self.sink.packets) > before:
-                    break
-                await RisingEdge(self.dut.aclk)
-            else:
-                raise AssertionError(f"no result within {timeout_cycles} cycles")
-            packet = self.sink.packets[-1]
-            result = MNIST_RESULT.from_bits(int.from_bytes(packet.data, "little"))
-            results.append((result.digit, [result.scores[k] for k in range(10)]))
-            latencies.append(packet.cycles[-1] - start)
-        return results, latencies
-
-
-def held_out():
-    images, labels = mnist.load_mnist()
-    _, _, test_x, test_y = mnist.split(images, labels)
-    return test_x, test_y
-
-
-def check(results, images):
-    digits, scores = mnist.infer_batch(images)
-    for n, ((digit, got), want_d, want) in enumerate(zip(results, digits, scores)):
-        assert got == [int(v) for v in want] and digit == want_d, \
-            f"image {n}: hardware {digit} {got}, model {want_d} {list(want)}"
 
 
 @cocotb.test()

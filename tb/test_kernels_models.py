@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Golden models and parameters of the kernels: the models against the spec's own numbers
 (finemb.md §6.2 PID vectors, reconos.md §9.3 fixed-point constants, kernels.md §3 tables),
 OpenCV's border modes, and parameter errors that name the bad value."""

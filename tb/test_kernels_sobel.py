@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """SobelByteLanes in amaranth.sim against the spec's golden model (reconos.md §9.1) on a
 real photograph and on random images, under random idle and backpressure."""
 

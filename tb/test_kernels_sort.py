@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """MergeSorter in amaranth.sim against Python's ``sorted`` (spec reconos.md §9.2: ascending
 unsigned 32-bit), under random idle and backpressure, with short and long blocks."""
 

@@ -1,5 +1,5 @@
 """``make lint`` in the long matrix: every bench top and every example project's system is
-lint-clean (``verilator --lint-only -Wall`` with the waivers of :mod:`gen.export.lint`)."""
+lint-clean (``verilator --lint-only -Wall`` with the waivers of :mod:`host.lint`)."""
 
 import pytest
 

@@ -2,7 +2,7 @@
 independent generator."""
 
 import pytest
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gen.msg import MessageLibrary, parse_msg, parse_srv
 from gen.msg.ros1 import md5_text, md5sum, message_definition, service_md5sum
@@ -98,6 +98,7 @@ def test_connection_header_wiki_example():
     assert frame_message((5).to_bytes(4, "little") + b"hello") == bytes.fromhex(
         "09000000" "05000000" "68656c6c6f")
     import pytest
+
     from gen.msg.ros1 import ConnectionHeaderError
     with pytest.raises(ConnectionHeaderError, match="offset 0"):
         decode_connection_header(b"\x05\x00\x00\x00abc")

@@ -25,7 +25,13 @@ from amaranth.asserts import AnyConst, AnySeq, Initial
 from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, Mux, ResetSignal, Signal
 
 from hdl.net.frames import (
-    ARP_LENGTH, ETH_HEADER, L4_OFFSET, RBCP_HEADER, RBCP_READ, RBCP_VERSION, RBCP_WRITE,
+    ARP_LENGTH,
+    ETH_HEADER,
+    L4_OFFSET,
+    RBCP_HEADER,
+    RBCP_READ,
+    RBCP_VERSION,
+    RBCP_WRITE,
 )
 from hdl.net.rbcp import RbcpServer
 from hdl.net.rx import FrameKind, FrameParser

@@ -24,11 +24,10 @@ from scapy.packet import Raw, fuzz
 from scapy.utils import checksum
 
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, TCP_ACK, TCP_FIN, TCP_RST, TCP_SYN
+from host.ros1.rbcp import rbcp_request
 from tb.harness import run_bench
 from tb.models.tcp_peer import TcpPeerModel, fix_ip_checksum, fix_tcp_checksum, tcp_frame
-from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB, SessionPort
-from gen.ros1.rbcp import rbcp_request
-from tb.test_net_stack import checksums_ok, rbcp
+from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB, SessionPort, checksums_ok, rbcp
 
 FRAMES = int(os.environ.get("ROSGATE_FUZZ_FRAMES", 500))
 

@@ -20,8 +20,8 @@ import pytest
 
 from hdl.net.tcp import TcpState
 from tb.harness import run_bench
+from tb.linux_tb import KERNEL_IP, TAP_NAME, LinuxTB, namespace_unavailable, network_namespace
 from tb.net_tb import NET_CONFIGS, WIDE_USER_CONFIGS, SessionPort
-from tb.tap import KERNEL_IP, TAP_NAME, LinuxTB, namespace_unavailable, network_namespace
 
 #: bytes per direction, set by the pytest case
 TRANSFER = int(os.environ.get("ROSGATE_NET_TRANSFER", 65536))

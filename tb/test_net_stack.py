@@ -15,12 +15,21 @@ from scapy.layers.l2 import ARP, Ether
 from scapy.packet import Raw
 from sitcpy.rbcp_server import _make_header as sitcpy_rbcp_header
 
-from gen.ros1.rbcp import rbcp_request
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, IFG, MIN_FRAME, PREAMBLE
-from hdl.net.stack import (GLOBAL_BASE, GLOBAL_OFFSETS, STACK_COUNTERS,
-                            global_register)
+from hdl.net.stack import GLOBAL_BASE, GLOBAL_OFFSETS, STACK_COUNTERS, global_register
+from host.ros1.rbcp import rbcp_request
 from tb.harness import cocotb_bench
-from tb.net_tb import CLOCK_NS, NET_CONFIGS, PEER_IP, PEER_MAC, WIDE_USER_CONFIGS, NetTB
+from tb.net_tb import (
+    CLOCK_NS,
+    NET_CONFIGS,
+    PEER_IP,
+    PEER_MAC,
+    WIDE_USER_CONFIGS,
+    NetTB,
+    checksums_ok,
+    eth,
+    rbcp,
+)
 
 CONFIGS = NET_CONFIGS
 test_net = cocotb_bench("net", CONFIGS)
@@ -37,19 +46,6 @@ test_net_small_ring = cocotb_bench("net", SMALL_RING, testcases=["run_tcp_fast_r
                                    long=[("stack_ring4", "verilator")])
 
 
-def checksums_ok(pkt):
-    """Whether scapy computes the same IP and L4 checksums as the packet carries."""
-    rebuilt = Ether(bytes(pkt))
-    for layer in (IP, ICMP, UDP, TCP):
-        if layer in rebuilt:
-            del rebuilt[layer].chksum
-    rebuilt = Ether(bytes(rebuilt))
-    for layer in (IP, ICMP, UDP, TCP):
-        if layer in pkt and pkt[layer].chksum != rebuilt[layer].chksum:
-            return False
-    return True
-
-
 #: Cycles a minimum-size frame (a pure ACK, a RST) occupies the wire: preamble, SFD, the
 #: frame padded to its minimum with FCS
 WIRE_MIN_FRAME = PREAMBLE + 1 + MIN_FRAME
@@ -60,10 +56,6 @@ WIRE_ACK = IFG + WIRE_MIN_FRAME
 def sim_cycle():
     """The current simulated time in clock cycles."""
     return int(get_sim_time("ns")) // CLOCK_NS
-
-
-def eth(tb, dst=None):
-    return Ether(src=PEER_MAC, dst=dst or tb.mac)
 
 
 def assert_counts(before, after, **expected):
@@ -160,18 +152,6 @@ async def run_bad_frames(dut):
     # still answering afterwards
     await tb.send(ping)
     assert (await tb.recv()) is not None
-
-
-async def rbcp(tb, payload, sport=50000):
-    await tb.send(eth(tb) / IP(src=PEER_IP, dst=tb.ip) /
-                  UDP(sport=sport, dport=DEFAULT_RBCP_PORT) / Raw(payload))
-    reply = await tb.recv(20000)
-    if reply is None:
-        return None
-    assert checksums_ok(reply), reply.show(dump=True)
-    assert (reply[IP].dst, reply[UDP].dport, reply[UDP].sport) == (PEER_IP, sport,
-                                                                    DEFAULT_RBCP_PORT)
-    return bytes(reply[UDP].payload)
 
 
 async def write_global(tb, name, value):

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Network unit blocks in amaranth.sim against independent references (spec net.md §1.1,
 §5.2 "Unit"): Crc32 against ``zlib.crc32`` (check value, lengths 0..80 and full frames, 1, 4
 and 8 bytes per beat with partial last beats, the good-frame residue), InternetChecksum

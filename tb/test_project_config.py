@@ -1,16 +1,15 @@
 """ReconROS build.cfg parsing (spec reconos.md §7, hmt.md §3): the spec's handle examples,
 every example project, and one clear error (file, line, section, key) per kind of bad input."""
 
-from pathlib import Path
 
 import pytest
 
-from gen.cli import main as rosgate
 from gen.config import ConfigError, load_project, parse_project
 from hdl.reconos.protocol import ResourceType
+from host.cli import main as rosgate
 
-ROOT = Path(__file__).resolve().parents[1]
-EXAMPLES = sorted(p.parent.name for p in (ROOT / "examples").glob("*/build.cfg"))
+from .harness import ROOT
+from .projects import EXAMPLES
 
 
 def handles(project, thread):

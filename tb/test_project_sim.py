@@ -1,37 +1,170 @@
-"""``rosgate sim`` of the example projects: the paper's Sobel/DIP application bit-exact with
-OpenCV on photographs and a random image, and the sort service demo with two slots on their
-own clock serving one service (both simulators)."""
+"""``rosgate sim`` of the example projects, and what it does with bad input.
+
+The Sobel/DIP application (camera -> DIP (HW) -> Sobel service (HW) -> viewer) on
+photographs and random images of sizes nobody tuned to (odd widths and heights, the smallest
+and a crop of a photograph), each ``<stem>_filtered.png`` compared here with OpenCV's Sobel
+edge image; the paper's per-byte-lane mode against the spec's model; images the hardware
+cannot take refused before anything is built; an exception in a project's ``sim.py`` reported
+with its file and line; a run that stops making progress ended with what waits; and the sort
+service demo with two slots on their own clock (both simulators).
+"""
 
 import json
+import random
+import shutil
+import time
 
-import numpy as np
 import cv2
+import numpy as np
 import pytest
 
-from gen.cli import main as rosgate
+from host.cli import main as rosgate
+from host.project_sim import run_project_sim
 
-from .project_sim import run_project_sim
-from .test_project_config import ROOT
+from .harness import ROOT
+from .models.image import IMAGES
+from .models.sobel import sobel_byte_lanes
 
 SIMS = ("icarus", "verilator")
+SOBEL_DIP = ROOT / "examples" / "sobel_dip" / "build.cfg"
+PHOTO = IMAGES / "coffee_80x60.png"
+
+
+def opencv_edges(pixels):
+    """OpenCV's Sobel edge image: |dx| and |dy| saturated to 8 bits and added, per channel,
+    BORDER_REFLECT_101 (OpenCV's default)."""
+    gx = cv2.Sobel(pixels, cv2.CV_16S, 1, 0, ksize=3)
+    gy = cv2.Sobel(pixels, cv2.CV_16S, 0, 1, ksize=3)
+    return cv2.add(cv2.convertScaleAbs(gx), cv2.convertScaleAbs(gy))
+
+
+def write_images(folder, rng):
+    """Random images of odd sizes, the smallest the hardware takes, and a crop of a
+    photograph with an odd width; returns their paths."""
+    photo = cv2.imread(str(IMAGES / "chelsea_96x72.png"))
+    w, h = rng.randrange(5, 60, 2), rng.randrange(3, 40)
+    y, x = rng.randrange(0, 72 - 31), rng.randrange(0, 96 - 45)
+    images = {"odd33x17": rng_image(rng, 33, 17), "min3x3": rng_image(rng, 3, 3),
+              f"rand{w}x{h}": rng_image(rng, w, h), "crop45x31": photo[y:y + 31, x:x + 45]}
+    paths = []
+    for name, pixels in images.items():
+        paths.append(folder / f"{name}.png")
+        cv2.imwrite(str(paths[-1]), pixels)
+    return paths
+
+
+def rng_image(rng, width, height):
+    return np.frombuffer(rng.randbytes(width * height * 3), np.uint8).reshape(height, width, 3)
 
 
 @pytest.mark.parametrize("sim", SIMS)
-def test_sobel_dip(sim, tmp_path):
-    """Two photographs and a random image through camera -> DIP (HW) -> Sobel service (HW)
-    -> viewer, through ``rosgate sim``; each result equals OpenCV's and is written as PNG."""
-    noise = np.random.default_rng(7).integers(0, 256, (24, 32, 3), dtype=np.uint8)
-    cv2.imwrite(str(tmp_path / "noise.png"), noise)
-    images = f"coffee_80x60.png,{tmp_path / 'noise.png'},chelsea_96x72.png"
+def test_sobel_dip_equals_opencv(sim, tmp_path):
+    """Every image through ``rosgate sim`` comes back equal to OpenCV's Sobel edge image
+    (compared here, from the PNGs the viewer wrote), with a montage next to it; consecutive
+    images leave no state behind (their byte counts differ modulo the word)."""
+    rng = random.Random()
+    paths = write_images(tmp_path, rng)
     out = tmp_path / "out"
-    assert rosgate(["sim", str(ROOT / "examples/sobel_dip/build.cfg"), "--sim", sim,
-                    "--arg", f"images={images}", "--limit-ms", "50", "-o", str(out)]) == 0
-    got = json.loads((out / "sim_results.json").read_text())["images"]
-    assert [r["image"] for r in got] == ["coffee_80x60.png", "noise.png", "chelsea_96x72.png"]
-    for r in got:
+    images = ",".join(["coffee_80x60.png", *map(str, paths)])
+    assert rosgate(["sim", str(SOBEL_DIP), "--sim", sim, "--arg", f"images={images}",
+                    "--limit-ms", "50", "-o", str(out)]) == 0
+    got = json.loads((out / "sim_results.json").read_text())
+    assert got["mode"] == "opencv"
+    assert [r["image"] for r in got["images"]] == \
+        ["coffee_80x60.png", *(p.name for p in paths)]
+    for r, path in zip(got["images"], [IMAGES / "coffee_80x60.png", *paths]):
+        pixels = cv2.imread(str(path))
+        filtered = cv2.imread(r["filtered_png"])
+        assert filtered.shape == pixels.shape, r
+        assert np.array_equal(filtered, opencv_edges(pixels)), f"{path.name} differs"
         assert r["bit_exact"] and r["header_ok"], r
-        assert r["cycles"] > r["width"] * r["height"] * 3 // 8, r   # one word per cycle at most
-        assert cv2.imread(r["filtered_png"]).shape == (r["height"], r["width"], 3)
+        montage = cv2.imread(r["montage_png"])
+        assert montage.shape[1] > 3 * pixels.shape[1], r
+        # at most one pixel per cycle, and the image is copied in and out over MEMIF
+        assert r["cycles"] > r["width"] * r["height"], r
+
+
+def test_sobel_dip_paper_mode(tmp_path):
+    """``--param Sobel.mode=reconros``: the paper's per-byte-lane filter, checked against the
+    spec's model (ReconROS' written region and rosgate's native border)."""
+    out = tmp_path / "out"
+    noise = rng_image(random.Random(), 32, 20)
+    cv2.imwrite(str(tmp_path / "noise.png"), noise)
+    assert rosgate(["sim", str(SOBEL_DIP), "--sim", "verilator", "--param",
+                    "Sobel.mode=reconros", "--arg",
+                    f"images=coffee_80x60.png,{tmp_path / 'noise.png'}", "--limit-ms", "50",
+                    "-o", str(out)]) == 0
+    got = json.loads((out / "sim_results.json").read_text())
+    assert got["mode"] == "reconros"
+    for r, path in zip(got["images"], [IMAGES / "coffee_80x60.png", tmp_path / "noise.png"]):
+        pixels = cv2.imread(str(path))
+        height, width = pixels.shape[:2]
+        want, _ = sobel_byte_lanes(pixels.tobytes(), height, width * 3 // 4)
+        assert cv2.imread(r["filtered_png"]).tobytes() == want, path.name
+        assert (out / f"{path.stem}_reference.png").is_file()
+
+
+@pytest.mark.parametrize("make,words", [
+    (lambda p: cv2.imwrite(str(p), np.zeros((500, 700, 3), np.uint8)),
+     ["700x500", "3..640 x 3..480"]),
+    (lambda p: cv2.imwrite(str(p), np.zeros((2, 9, 3), np.uint8)), ["9x2", "3..640 x 3..480"]),
+    (lambda p: p.write_text("not an image"), ["not an image OpenCV can read"]),
+    (lambda p: None, ["no file"]),
+], ids=["too_large", "too_small", "not_an_image", "missing"])
+def test_sobel_dip_refuses_bad_images_before_building(tmp_path, capsys, make, words):
+    """An image the Sobel thread cannot take, a file that is not an image and a missing file
+    are refused at once (exit 2), naming the file and what is accepted; no simulator is
+    built (the system's Verilog is written first, in seconds)."""
+    bad = tmp_path / "bad.png"
+    make(bad)
+    cache = tmp_path / "cache"
+    start = time.monotonic()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("ROSGATE_CACHE", str(cache))
+        assert rosgate(["sim", str(SOBEL_DIP), "--arg", f"images=coffee_80x60.png,{bad}",
+                        "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "rosgate sim: error:" in err and "sim.py:" in err and str(bad) in err, err
+    for word in words:
+        assert word in err, err
+    assert not list(cache.glob("sim/*/obj")), "a simulator was built for a refused run"
+    assert time.monotonic() - start < 30
+
+
+def broken_project(tmp_path, node_source):
+    """A copy of the Sobel/DIP project whose sim.py runs ``node_source`` as its only node."""
+    project = tmp_path / "project"
+    shutil.copytree(SOBEL_DIP.parent, project)
+    text = (project / "sim.py").read_text()
+    text = text.replace("NODES = [camera, viewer]", node_source + "\n\nNODES = [broken]")
+    (project / "sim.py").write_text(text)
+    line = text.splitlines().index(next(ln for ln in node_source.splitlines()
+                                        if "# <-" in ln)) + 1
+    return project / "build.cfg", line
+
+
+def test_error_in_sim_py_names_file_and_line(tmp_path, capsys):
+    """An exception in a node of sim.py reaches the user as its own message, with the file
+    and line it came from."""
+    cfg, line = broken_project(tmp_path, '''async def broken(ctx):
+    await ctx.cycles(100)
+    raise ZeroDivisionError("the node divided by zero")  # <-''')
+    assert rosgate(["sim", str(cfg), "--sim", "icarus", "--arg", f"images={PHOTO}",
+                    "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"sim.py:{line}: ZeroDivisionError: the node divided by zero" in err, err
+
+
+def test_stalled_run_ends_with_what_waits(tmp_path, capsys):
+    """A node waiting for a message that never comes ends the run after ``--stall-ms`` of
+    simulated inactivity, naming the waiting node and the slot in its OS call."""
+    cfg, _ = broken_project(tmp_path, '''async def broken(ctx):
+    await ctx.filtered.get()  # <- nothing is ever published''')
+    assert rosgate(["sim", str(cfg), "--sim", "icarus", "--stall-ms", "0.5", "--arg",
+                    f"images={PHOTO}", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "no progress for 60000 cycles (0.6 ms simulated at 100 MHz)" in err, err
+    assert "slot 1 in ROS_TAKE" in err and "nodes still running: broken" in err, err
 
 
 #: in test-full (make test: the sort service node runs in tb/test_reconos_apps.py, clock-crossing
@@ -45,6 +178,6 @@ def test_sort_service_two_slots(sim, tmp_path):
     concurrent calls of 300 values each come back sorted."""
     results = run_project_sim(ROOT / "examples/sort_service/build.cfg", sim,
                               out=tmp_path / "out", args={"requests": "3", "size": "300"},
-                              limit_ms=20, quiet=True)
+                              limit_ms=20)
     assert results["slots_running"] == [0, 1]
     assert len(results["calls"]) == 6 and results["all_sorted"], results

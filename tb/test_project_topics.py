@@ -13,9 +13,8 @@ from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, Combine, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
-from .harness import bench_params, run_bench
+from .harness import ROOT, bench_params, run_bench
 from .streams import random_pauses
-from .test_project_config import ROOT
 
 PROJECT = ROOT / "examples" / "hwtopic_gateway" / "build.cfg"
 PUBS = {"Threadb": "slot1_nicehwtopic", "Gateway1": "slot2_nicehwtopic_out"}
@@ -103,9 +102,9 @@ async def topic_under_idle_and_backpressure(dut):
 def test_project_topic(sim):
     from gen.config import load_project
     from gen.system import build_system
-    from .project_sim import top_ports
+    from host.project_sim import top_ports
     system = build_system(load_project(PROJECT))
-    idle = [n for n, (_, _, flow) in top_ports(system).items()
+    idle = [n for n, flow in top_ports(system).items()
             if flow == "in" and n.startswith("slot") and "nicehwtopic" not in n]
     run_bench(__name__, "rosgate_system", "hwtopic_gateway", {"idle_inputs": idle, "seed": 5},
               sim, build=lambda **_: system)

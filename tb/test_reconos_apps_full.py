@@ -5,8 +5,8 @@ import cocotb
 import pytest
 
 from .harness import cocotb_bench
+from .reconos_apps_tb import run_sobel_pair
 from .reconos_tb import apps_configs
-from .test_reconos_apps import run_sobel_pair
 
 
 @cocotb.test()

@@ -6,33 +6,11 @@ blocking call (§3.2). The test plays the delegate through the reconos_osif regi
 
 import cocotb
 
-from hdl.reconos.protocol import (CALLS, INTERRUPTED_REPLY, SIGNAL_THREAD_START, Command)
+from hdl.reconos.protocol import CALLS, INTERRUPTED_REPLY, SIGNAL_THREAD_START, Command
 from hdl.reconos.threads import REPORT_MBOX
 
 from .harness import cocotb_bench
-from .reconos_tb import ReconosTB, slot_of
-
-SKIP = {"thread_init", "thread_exit", "ros_take_interruptable", "ros_take_interruptable_cancel"}
-BLOCKED_SEM = 0x63
-
-
-def argument(i, k, wide):
-    """A distinct argument value; on r64 some are wider than 32 bits."""
-    base = (i + 1) * 16 + k + 1
-    return base | (0x1234_5678 << 32) if wide and k == 0 and i % 3 == 0 else base
-
-
-def program(arch):
-    wide = arch == "r64"
-    out = []
-    for i, (name, c) in enumerate(CALLS.items()):
-        if name in SKIP:
-            continue
-        out.append((name, [argument(i, k, wide) for k in range(len(c.args))]))
-    out += [("ros_take_interruptable", [5, 6]), ("ros_take_interruptable_cancel", []),
-            ("ros_take_interruptable", [7, 8]), ("ros_take_interruptable_cancel", []),
-            ("sem_wait", [BLOCKED_SEM])]
-    return out
+from .reconos_tb import BLOCKED_SEM, ReconosTB, slot_of, system_configs
 
 
 class CallsTB(ReconosTB):
@@ -65,7 +43,9 @@ class CallsTB(ReconosTB):
 async def control_registers(dut):
     """reconos_osif, osif_intc and proc_control registers at the spec's offsets and bits."""
     from cocotb.triggers import ClockCycles
-    from hdl.reconos.protocol import OsifRegister as O, ProcControlRegister as R
+
+    from hdl.reconos.protocol import OsifRegister as O
+    from hdl.reconos.protocol import ProcControlRegister as R
     from hdl.reconos.protocol import osif_register_offset
     tb = CallsTB(dut)
     await tb.reset()
@@ -153,8 +133,6 @@ async def every_call_word_sequence(dut):
     assert covered | {"thread_init", "thread_exit"} == set(CALLS), \
         set(CALLS) - covered
 
-
-from .reconos_tb import system_configs  # noqa: E402 (uses this module's programs)
 
 CONFIGS = system_configs()
 

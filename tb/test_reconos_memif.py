@@ -15,8 +15,7 @@ from hdl.reconos.memctrl import MemoryController
 from hdl.reconos.memif import MemifArbiter
 from hdl.reconos.mmu import MMU
 from hdl.reconos.protocol import arch as get_arch
-
-from .models.reconos_sw import ProcessMemory
+from host.reconos import ProcessMemory
 
 
 class _Ram:

@@ -5,8 +5,8 @@ import cocotb
 import pytest
 
 from .harness import cocotb_bench
+from .reconos_pingpong_tb import PingPongTB, run_round_trips
 from .reconos_tb import system_configs
-from .test_reconos_pingpong import PingPongTB, run_round_trips
 
 MIB = 1 << 20
 

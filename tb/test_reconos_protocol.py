@@ -1,12 +1,26 @@
+# amaranth: UnusedElaboratable=no
 """rosgate's ReconOS tables against the literal values of spec reconos.md §3.1, §3.3, §4,
 §5.1, §5.2 and §7.2 (numbers copied from the spec, not from hdl/reconos/protocol.py)."""
 
 import pytest
 
-from hdl.reconos.protocol import (CALLS, SIGNAL_THREAD_RESUME, SIGNAL_THREAD_START, Command,
-                                  MemifOp, OsifRegister, ProcControlRegister, ResourceType,
-                                  arch, call, memif_command, memif_decode, memif_split,
-                                  osif_register_offset, proc_control_offset)
+from hdl.reconos.protocol import (
+    CALLS,
+    SIGNAL_THREAD_RESUME,
+    SIGNAL_THREAD_START,
+    Command,
+    MemifOp,
+    OsifRegister,
+    ProcControlRegister,
+    ResourceType,
+    arch,
+    call,
+    memif_command,
+    memif_decode,
+    memif_split,
+    osif_register_offset,
+    proc_control_offset,
+)
 
 # spec §3.1, in table order
 SPEC_CODES = {

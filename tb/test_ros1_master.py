@@ -9,8 +9,8 @@ import xmlrpc.client
 
 import pytest
 
-from gen.ros1 import RosMaster
-from gen.ros1.master import XmlRpcServer
+from host.ros1 import RosMaster
+from host.ros1.master import XmlRpcServer
 
 TOPIC = "/image_raw"
 TYPE = "sensor_msgs/Image"

@@ -16,13 +16,13 @@ import pytest
 
 from gen.msg import MessageLibrary
 from gen.msg.ros1 import frame_message, md5sum, message_definition
-from gen.ros1 import HardwareNode, RbcpClient, RosMaster
 from hdl.net.stack import global_register
 from hdl.ros1.registers import PHASES
+from host.ros1 import HardwareNode, RbcpClient, RosMaster
 from tb.harness import run_bench
-from tb.net_tb import NODE_CONFIG
+from tb.linux_tb import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
 from tb.models.ros1_peers import SoftwarePublisher, SoftwareSubscriber
-from tb.tap import ENGINE_IP, KERNEL_IP, LinuxTB, namespace_unavailable, network_namespace
+from tb.net_tb import NODE_CONFIG
 
 IMAGE = "sensor_msgs/msg/Image"
 STREAMING = PHASES.index("streaming")

@@ -8,13 +8,21 @@ import random
 import cocotb
 
 from hdl.ros1.registers import (
-    CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, ENDPOINT_ID, ENDPOINT_STRIDE, EXPECTED, HDR_ERR,
-    HDR_RX, HDR_TX, PHASES, REG,
+    CHECK_DEFAULT,
+    COUNTERS,
+    COUNTERS_OFFSET,
+    ENDPOINT_ID,
+    ENDPOINT_STRIDE,
+    EXPECTED,
+    HDR_ERR,
+    HDR_RX,
+    HDR_TX,
+    PHASES,
+    REG,
 )
+from host.ros1.rbcp import rbcp_request
 from tb.harness import cocotb_bench
-from tb.net_tb import NODE_CONFIG, NetTB
-from gen.ros1.rbcp import rbcp_request
-from tb.test_net_stack import rbcp
+from tb.net_tb import NODE_CONFIG, NetTB, rbcp
 
 CONFIGS = {"loopback": NODE_CONFIG}
 test_ros1_registers = cocotb_bench("ros1_node", CONFIGS, long=[("loopback", "verilator")])

@@ -10,9 +10,9 @@ import xmlrpc.client
 
 import pytest
 
-from gen.ros1 import HardwareNode, RosMaster
 from hdl.net.stack import global_register
 from hdl.ros1.registers import CTRL, ENDPOINT_STRIDE, REG
+from host.ros1 import HardwareNode, RosMaster
 
 ENGINE_IP = "192.168.10.16"
 SPEC = dict(type="std_msgs/String", md5sum="992ce8a1687cec8c8bd883ec73ca41d1",

@@ -13,11 +13,19 @@ import re
 from pathlib import Path
 
 from amaranth.back import verilog
-from amaranth.hdl import (ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal,
-                          ValueCastable)
+from amaranth.hdl import (
+    ClockDomain,
+    ClockSignal,
+    Elaboratable,
+    Module,
+    ResetSignal,
+    Signal,
+    ValueCastable,
+)
 from amaranth.lib import wiring
 
-__all__ = ["VivadoTop", "export_verilog", "port_name", "write_if_changed", "fix_icarus_t0"]
+__all__ = ["VivadoTop", "exported_ports", "export_verilog", "port_name", "write_if_changed",
+           "fix_icarus_t0"]
 
 
 def port_name(path):
@@ -45,6 +53,20 @@ def port_name(path):
     return "_".join(parts)
 
 
+def exported_ports(component, *, clock="aclk", reset="aresetn"):
+    """The top-level ports of ``component`` as :class:`VivadoTop` exports it: name -> (inner
+    value, flow), clock and reset not included."""
+    ports = {}
+    for path, member, value in component.signature.flatten(component):
+        if isinstance(value, ValueCastable):
+            value = value.as_value()
+        name = port_name(path)
+        if name in ports or name in (clock, reset):
+            raise ValueError(f"port name {name!r} of member {path} is not unique")
+        ports[name] = (value, member.flow)
+    return ports
+
+
 class VivadoTop(Elaboratable):
     """Wraps a component whose logic runs in the ``sync`` domain as a flat AXI-style top.
 
@@ -61,15 +83,9 @@ class VivadoTop(Elaboratable):
         self.component = component
         self.clock = Signal(name=clock)
         self.reset_n = Signal(name=reset, init=1)
-        self.ports = {}  # name -> (top signal, inner value, flow)
-        for path, member, value in component.signature.flatten(component):
-            if isinstance(value, ValueCastable):
-                value = value.as_value()
-            name = port_name(path)
-            if name in self.ports or name in (clock, reset):
-                raise ValueError(f"port name {name!r} of member {path} is not unique")
-            top = Signal(len(value), name=name)
-            self.ports[name] = (top, value, member.flow)
+        #: name -> (top signal, inner value, flow)
+        self.ports = {name: (Signal(len(value), name=name), value, flow) for name, (value, flow)
+                      in exported_ports(component, clock=clock, reset=reset).items()}
 
     def elaborate(self, platform):
         m = Module()

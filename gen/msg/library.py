@@ -3,8 +3,16 @@ project's own ``.msg``/``.srv``/``.action`` files."""
 
 from pathlib import Path
 
-from .model import (Array, Constant, Field, MessageDef, MessageDefinitionError, Named, Primitive,
-                    Sequence)
+from .model import (
+    Array,
+    Constant,
+    Field,
+    MessageDef,
+    MessageDefinitionError,
+    Named,
+    Primitive,
+    Sequence,
+)
 from .parser import parse_file
 
 __all__ = ["MessageLibrary", "normalize_name"]

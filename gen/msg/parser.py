@@ -10,8 +10,17 @@ Services expand to ``pkg/srv/Name_Request`` and ``_Response``; actions to ``Name
 import re
 from pathlib import Path
 
-from .model import (PRIMITIVES, Array, Constant, Field, MessageDef, MessageDefinitionError,
-                    Named, Primitive, Sequence)
+from .model import (
+    PRIMITIVES,
+    Array,
+    Constant,
+    Field,
+    MessageDef,
+    MessageDefinitionError,
+    Named,
+    Primitive,
+    Sequence,
+)
 
 __all__ = ["parse_msg", "parse_srv", "parse_action", "parse_file", "parse_type"]
 

@@ -22,7 +22,7 @@ the slot), as ReconOS' HLS library does.
 
 import enum
 
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
@@ -688,6 +688,79 @@ class MemCalls:
         with m.If(e.write_done):
             m.d.sync += [r_sent.eq(0), w_sent.eq(0)]
             m.next = then
+
+    def transform_bytes_states(self, name, src, dst, size, sink, source, *, then):
+        """Emit the states ``name`` and ``name_TAIL_*``: stream ``size`` bytes (any count;
+        ``src`` and ``dst`` W-aligned) from ``src`` through a kernel into ``dst``.
+
+        ``sink`` (``tdata`` of W bytes, ``tkeep``, ``tlast``) gets the ``ceil(size / W)`` words
+        from ``src``, the last one with ``tlast`` and ``tkeep`` marking its ``size mod W``
+        bytes (all when W divides ``size``). From ``source`` (same shape) the first
+        ``floor(size / W)`` beats are written to ``dst`` at full rate; the beat after them,
+        when ``size`` is not a multiple of W, is merged into the destination word by
+        read-modify-write, so no byte past ``dst + size`` changes. Call at FSM level."""
+        m, e = self._m, self.engine
+        w, wb = self._w, self._wb
+        sh = wb.bit_length() - 1
+        tag = name.lower()
+        main = Signal(w, name=f"{tag}_main")
+        tail = Signal(range(wb), name=f"{tag}_tail")
+        words_in = Signal(w, name=f"{tag}_words_in")
+        read_left = Signal(w, name=f"{tag}_read_left")
+        write_left = Signal(w, name=f"{tag}_write_left")
+        r_sent, w_sent = Signal(name=f"{tag}_r_sent"), Signal(name=f"{tag}_w_sent")
+        written, tail_in = Signal(name=f"{tag}_written"), Signal(name=f"{tag}_tail_in")
+        t_word = Signal(w, name=f"{tag}_t_word")
+        d_word = Signal(w, name=f"{tag}_d_word")
+        merged = Signal(w, name=f"{tag}_merged")
+        m.d.comb += [main.eq(size >> sh << sh), tail.eq(size[:sh]),
+                     words_in.eq((size + wb - 1) >> sh)]
+        for b in range(wb):
+            keep = d_word.word_select(b, 8)
+            m.d.comb += merged.word_select(b, 8).eq(
+                Mux(tail > b, t_word.word_select(b, 8), keep) if b < wb - 1 else keep)
+        with m.State(name):
+            self._issue(e.read_cmd, src, words_in << sh, r_sent, read_left.eq(words_in))
+            self._issue(e.write_cmd, dst, main, w_sent, write_left.eq(main >> sh),
+                        written.eq(0), tail_in.eq(tail == 0))
+            final = read_left == 1
+            m.d.comb += [
+                sink.tdata.eq(e.read_data.payload.data),
+                sink.tlast.eq(final),
+                # a partial last word keeps its ``tail`` (< W) low bytes: never the top one
+                sink.tkeep.eq(Mux(final & (tail != 0),
+                                  Cat(*(tail > b for b in range(wb - 1)), Const(0, 1)),
+                                  (1 << wb) - 1)),
+                sink.tvalid.eq(r_sent & e.read_data.valid),
+                e.read_data.ready.eq(r_sent & sink.tready),
+            ]
+            with m.If(sink.tvalid & sink.tready):
+                m.d.sync += read_left.eq(read_left - 1)
+            to_memory = w_sent & (write_left != 0)
+            m.d.comb += [
+                e.write_data.valid.eq(to_memory & source.tvalid),
+                e.write_data.payload.eq(source.tdata),
+                source.tready.eq(Mux(to_memory, e.write_data.ready, w_sent & ~tail_in)),
+            ]
+            with m.If(e.write_data.valid & e.write_data.ready):
+                m.d.sync += write_left.eq(write_left - 1)
+            with m.If(w_sent & (write_left == 0) & ~tail_in & source.tvalid):
+                m.d.sync += [t_word.eq(source.tdata), tail_in.eq(1)]
+            with m.If(e.write_done):
+                m.d.sync += written.eq(1)
+            # both flags are cleared on the way out: the next run starts from its own
+            with m.If(w_sent & written & tail_in):
+                m.d.sync += [r_sent.eq(0), w_sent.eq(0), written.eq(0), tail_in.eq(0)]
+                m.next = f"{name}_TAIL"
+        with m.State(f"{name}_TAIL"):
+            with m.If(tail == 0):
+                m.next = then
+            with m.Else():
+                m.next = f"{name}_TAIL_DST"
+        with m.State(f"{name}_TAIL_DST"):
+            self.read_word(dst + main, d_word, then=f"{name}_TAIL_WRITE")
+        with m.State(f"{name}_TAIL_WRITE"):
+            self.write_word(dst + main, merged, then=then)
 
     def copy_bytes_states(self, name, src, dst, size, *, then):
         """Emit the states ``name`` and ``name_TAIL_*`` of a copy of ``size`` bytes (any

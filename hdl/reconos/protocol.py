@@ -1,7 +1,7 @@
 """ReconOS/ReconROS protocol facts, defined once (spec reconos.md §3-§5).
 
 Everything here is plain Python: the hardware (:mod:`hdl.reconos`), the software model
-(:mod:`tb.models.reconos_sw`) and the compatibility tests import the same tables. Nothing in
+(:mod:`host.reconos`) and the compatibility tests import the same tables. Nothing in
 this module depends on the RTL.
 """
 

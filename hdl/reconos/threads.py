@@ -615,19 +615,30 @@ def _lane32(word, offset, wb):
 
 class SobelServerThread(HardwareThread):
     """The "Sobel" node of the ReconROS paper (Listing 2): a service server that filters
-    the request's image with the per-byte-lane Sobel of spec §9.1 and answers with the
-    filtered image.
+    the request's image and answers with the filtered image.
 
-    Loop: SERVICES_TAKE; read the request image's ``height``, ``step`` and payload; copy
-    ``height``, ``width``, ``is_bigendian`` and ``step`` into the response image (its
-    ``encoding`` and header are left as software set them); ROS_MESSAGE_SET_SIZE the
-    response payload; stream the payload through a :class:`~hdl.kernels.SobelByteLanes`
-    into it (native border: the whole frame is written, border words 0); SERVICES_RESPONSE.
+    Loop: SERVICES_TAKE; read the request image's ``height``, ``width``, ``step`` and
+    payload; copy ``height``, ``width``, ``is_bigendian`` and ``step`` into the response image
+    (its ``encoding`` and header are left as software set them); ROS_MESSAGE_SET_SIZE the
+    response payload; stream the payload through the filter into it; SERVICES_RESPONSE.
+    Unlike Listing 2 the result goes into the response, not back over the request.
 
-    Unlike Listing 2 the result goes into the response, not back over the request. An image
-    whose ``step`` is not a multiple of W, whose rows are shorter than 3 or longer than
-    ``max_words`` words, with fewer than 3 rows, or whose payload size is not
-    ``height * step`` is answered with an empty payload.
+    Modes:
+
+    ``"opencv"`` (default)
+        The edge image OpenCV computes for a ``bgr8`` image: per channel
+        ``cv2.add(cv2.convertScaleAbs(Sobel(dx=1)), cv2.convertScaleAbs(Sobel(dy=1)))``,
+        3 x 3, ``BORDER_REFLECT_101`` (:class:`~hdl.kernels.Sobel`), one pixel per cycle, any
+        width and height from 3 to ``max_width`` x ``max_height``. The image's ``step`` must be
+        ``3 * width`` (no row padding).
+    ``"reconros"``
+        The paper's filter: each byte lane of the 32-bit word grid filtered on its own,
+        ``(|gx| + |gy|) >> 3`` (:class:`~hdl.kernels.SobelByteLanes`), rows of 3 to
+        ``max_words`` words, ``step`` a multiple of W (native border: the border words are
+        0 where ReconROS leaves them unwritten).
+
+    A request the mode cannot take (a size or ``step`` outside these rules, fewer than 3
+    rows, or a payload that is not ``height * step`` bytes) is answered with an empty payload.
 
     Parameters
     ----------
@@ -639,35 +650,88 @@ class SobelServerThread(HardwareThread):
         ``is_bigendian``, ``step`` and ``data`` for the target ABI (spec §6).
     req_image_offset, res_image_offset : int
         Offset of the image in the request and in the response (``img``: 0 and 0).
+    mode : str
+        ``"opencv"`` or ``"reconros"``.
+    max_width, max_height : int
+        ``opencv``: the largest image, in pixels (default 640 x 480).
     max_words : int
-        Longest row in 32-bit words (default 480: 640 ``bgr8`` pixels).
+        ``reconros``: the longest row in 32-bit words (default 480: 640 ``bgr8`` pixels).
     """
 
+    MODES = ("opencv", "reconros")
+
     def __init__(self, arch, *, h_srvs, h_req, h_res, image_offsets, req_image_offset=0,
-                 res_image_offset=0, max_words=480):
+                 res_image_offset=0, mode="opencv", max_width=640, max_height=480,
+                 max_words=480):
+        from ..params import check_choice, check_int
+        self.mode = check_choice("mode", mode, self.MODES)
+        self.max_width = check_int("max_width", max_width, 3, 1 << 14)
+        self.max_height = check_int("max_height", max_height, 3, 1 << 14)
+        self.max_words = check_int("max_words", max_words, 3, 8192)
         self.handles = (h_srvs, h_req, h_res)
         super().__init__(arch)
         self.offsets = _image_offsets(image_offsets, self.arch)
         self.image_at = (req_image_offset, res_image_offset)
-        self.max_words = max_words
+
+    @property
+    def min_width(self):
+        """The narrowest image the mode takes, in pixels."""
+        return 3 if self.mode == "opencv" else 4
+
+    def accepts(self, width, height):
+        """Whether a ``bgr8`` image of ``width`` x ``height`` pixels (``step = 3 * width``)
+        is filtered rather than refused."""
+        if height < 3:
+            return False
+        if self.mode == "opencv":
+            return 3 <= width <= self.max_width and height <= self.max_height
+        step = 3 * width
+        wb = self.arch.word_bytes
+        return step % wb == 0 and 12 <= step <= 4 * self.max_words
 
     def elaborate(self, platform):
-        from ..kernels import SobelByteLanes
+        from ..kernels import Sobel, SobelByteLanes
+        from ..stream import StreamRepacker
         m = Module()
         os, mem = self.os_and_memory(m)
-        m.submodules.sobel = sobel = SobelByteLanes(self.max_words)
         h_srvs, h_req, h_res = self.handles
         off = self.offsets
         ri, so = self.image_at
         a = self.arch
         w, wb = a.word_bits, a.word_bytes
-        req, res, src, size, dst, dims, steps = (
-            Signal(w, name=nm) for nm in ("req", "res", "src", "size", "dst", "dims", "steps"))
-        height, step = Signal(32), Signal(32)
+        req, res, src, size, dst, dims, widths, steps = (
+            Signal(w, name=nm) for nm in ("req", "res", "src", "size", "dst", "dims", "widths",
+                                          "steps"))
+        height, width, step = Signal(32), Signal(32), Signal(32)
         n = Signal(w)
+        # rosidl: ``uint32 width`` follows ``uint32 height`` (in the same word on r64)
+        width_at = off["height"] + 4
         m.d.comb += [height.eq(_lane32(dims, off["height"], wb)),
-                     step.eq(_lane32(steps, off["step"], wb)),
-                     sobel.words.eq(step >> 2), sobel.height.eq(height)]
+                     width.eq(_lane32(widths, width_at, wb)),
+                     step.eq(_lane32(steps, off["step"], wb))]
+        if self.mode == "opencv":
+            m.submodules.sobel = sobel = Sobel("opencv", channels=3, pixels_per_beat=1,
+                                               max_width=self.max_width,
+                                               max_height=self.max_height)
+            m.submodules.to_pixels = to_pixels = StreamRepacker(wb, 3)
+            m.submodules.to_words = to_words = StreamRepacker(3, wb)
+            m.d.comb += [sobel.width.eq(width), sobel.height.eq(height),
+                         sobel.i.tdata.eq(to_pixels.m_axis.tdata),
+                         sobel.i.tlast.eq(to_pixels.m_axis.tlast),
+                         sobel.i.tvalid.eq(to_pixels.m_axis.tvalid),
+                         to_pixels.m_axis.tready.eq(sobel.i.tready),
+                         to_words.s_axis.tdata.eq(sobel.o.tdata),
+                         to_words.s_axis.tlast.eq(sobel.o.tlast),
+                         to_words.s_axis.tkeep.eq(0b111),
+                         to_words.s_axis.tvalid.eq(sobel.o.tvalid),
+                         sobel.o.tready.eq(to_words.s_axis.tready)]
+            ok = ((step == 3 * width) & (width >= 3) & (width <= self.max_width) &
+                  (height >= 3) & (height <= self.max_height) & (size == height * step))
+        else:
+            m.submodules.sobel = sobel = SobelByteLanes(self.max_words)
+            m.d.comb += [sobel.words.eq(step >> 2), sobel.height.eq(height)]
+            ok = ((step[:(wb - 1).bit_length()] == 0) & (step >= 12) &
+                  (step <= 4 * self.max_words) & (height >= 3) & (size == height * step))
 
         def aligned(o):
             return o & ~(wb - 1)
@@ -681,12 +745,12 @@ class SobelServerThread(HardwareThread):
             with m.State("PAYLOAD"):
                 mem.read_words(req + ri + off["data"], [src, size], then="DIMS")
             with m.State("DIMS"):
-                mem.read_word(req + ri + aligned(off["height"]), dims, then="STEP")
+                mem.read_word(req + ri + aligned(off["height"]), dims, then="WIDTH")
+            with m.State("WIDTH"):
+                mem.read_word(req + ri + aligned(width_at), widths, then="STEP")
             with m.State("STEP"):
                 mem.read_word(req + ri + aligned(off["step"]), steps, then="CHECK")
             with m.State("CHECK"):
-                ok = ((step[:(wb - 1).bit_length()] == 0) & (step >= 12) &
-                      (step <= 4 * self.max_words) & (height >= 3) & (size == height * step))
                 m.d.sync += n.eq(Mux(ok, size, 0))
                 m.next = "GEOMETRY"
             _image_geometry_states(m, mem, "GEOMETRY", req + ri, res + so, off, then="SET_SIZE")
@@ -696,8 +760,12 @@ class SobelServerThread(HardwareThread):
                 m.next = "RESPOND"
                 with m.If(n != 0):
                     m.next = "FILTER"
-            with m.State("FILTER"):
-                mem.transform(src, dst, n, sobel.i, sobel.o, then="RESPOND")
+            if self.mode == "opencv":
+                mem.transform_bytes_states("FILTER", src, dst, n, to_pixels.s_axis,
+                                           to_words.m_axis, then="RESPOND")
+            else:
+                with m.State("FILTER"):
+                    mem.transform(src, dst, n, sobel.i, sobel.o, then="RESPOND")
             with m.State("RESPOND"):
                 os.ros_services_response(h_srvs, h_res, then="TAKE")
         return m

@@ -1,4 +1,4 @@
-"""Width converters between byte streams and wider AXI4-Stream beats (byte 0 first)."""
+"""Width converters between AXI4-Stream beats of different byte counts (byte 0 first)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -7,7 +7,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from .signature import AXIStreamSignature
 
-__all__ = ["StreamDownsizer", "StreamUpsizer", "keep_count"]
+__all__ = ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "keep_count"]
 
 
 def keep_count(tkeep):
@@ -132,4 +132,75 @@ class StreamUpsizer(wiring.Component):
                                        for i in range(B - 1)), s.tdata))]
             with m.If(flush):
                 m.d.sync += keep.eq(Cat(*(count > i for i in range(B - 1)), Const(0, 1)))
+        return m
+
+
+class StreamRepacker(wiring.Component):
+    """Regroups a byte stream from beats of ``in_bytes`` into beats of ``out_bytes`` at full
+    rate, for widths that are not multiples of each other (64-bit memory words into 24-bit
+    ``bgr8`` pixels and back).
+
+    A buffer of ``in_bytes + out_bytes - 1`` bytes takes an input beat in every cycle in which
+    its bytes fit after the output beat of that cycle leaves, so the slower side sets the
+    rate: ``min(in_bytes, out_bytes)`` bytes per cycle when neither side pauses. An output
+    beat leaves full, or, after an input beat with ``tlast``, with the bytes that remain
+    (``tkeep`` partial and ``tlast`` set; a last beat that fills the output exactly carries
+    ``tlast`` with every byte). Until that beat has left, no input is taken.
+
+    Parameters
+    ----------
+    in_bytes, out_bytes : int
+        Bytes of an input and of an output beat, 1..128.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(8 * in_bytes))
+        ``tkeep`` contiguous from byte 0 (partial only with ``tlast``). A beat with
+        ``tkeep`` 0 and ``tlast`` ends the message after the bytes before it, or carries
+        nothing when none are held (its ``tlast`` has no byte to mark and is lost).
+    m_axis : Out(AXIStreamSignature(8 * out_bytes))
+        The bytes in order, ``tkeep`` contiguous from byte 0.
+    """
+
+    def __init__(self, in_bytes, out_bytes):
+        check_int("in_bytes", in_bytes, 1, 128)
+        check_int("out_bytes", out_bytes, 1, 128)
+        self._in, self._out = in_bytes, out_bytes
+        super().__init__({"s_axis": In(AXIStreamSignature(8 * in_bytes)),
+                          "m_axis": Out(AXIStreamSignature(8 * out_bytes))})
+
+    in_bytes = property(lambda self: self._in)
+    out_bytes = property(lambda self: self._out)
+
+    def elaborate(self, platform):
+        m = Module()
+        Bi, Bo = self._in, self._out
+        C = Bi + Bo - 1
+        buf = [Signal(8, name=f"buf{j}") for j in range(C)]
+        count = Signal(range(C + 1))
+        last = Signal()                     # a tlast was taken; its bytes are still held
+        s, out = self.s_axis, self.m_axis
+
+        m.d.comb += [out.tvalid.eq((count >= Bo) | (last & (count != 0))),
+                     out.tdata.eq(Cat(*buf[:Bo])),
+                     out.tlast.eq(last & (count <= Bo)),
+                     out.tkeep.eq(Cat(*((count > i) for i in range(Bo))))]
+        take_out = out.tvalid & out.tready
+        after = Signal(range(C + 1))        # bytes held once this cycle's output has left
+        m.d.comb += after.eq(Mux(take_out, Mux(count >= Bo, count - Bo, 0), count))
+        m.d.comb += s.tready.eq((~last | (take_out & out.tlast)) & (after < Bo))
+        take_in = s.tvalid & s.tready
+        n_in = keep_count(s.tkeep)
+        shifted = [Mux(take_out, buf[j + Bo] if j + Bo < C else 0, buf[j]) for j in range(C)]
+        for j in range(C):
+            value = shifted[j]
+            for a in range(Bo):               # the input lands at byte ``after`` (< Bo)
+                if a <= j < a + Bi:
+                    value = Mux(take_in & (after == a), s.tdata.word_select(j - a, 8), value)
+            m.d.sync += buf[j].eq(value)
+        new_count = Signal(range(C + 1))
+        m.d.comb += new_count.eq(after + Mux(take_in, n_in, 0))
+        m.d.sync += [count.eq(new_count),
+                     last.eq(Mux(take_in, s.tlast, last & ~(take_out & out.tlast)) &
+                             (new_count != 0))]
         return m

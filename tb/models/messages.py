@@ -8,7 +8,7 @@ import struct
 from pathlib import Path
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gen.msg.model import Array, Named, Primitive, Sequence
 from gen.msg.wire import BYTE_ELEMENTS

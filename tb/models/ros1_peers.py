@@ -6,7 +6,7 @@ import threading
 import xmlrpc.client
 
 from gen.msg.ros1 import decode_connection_header, encode_connection_header, frame_message
-from gen.ros1.master import XmlRpcServer
+from host.ros1.master import XmlRpcServer
 
 __all__ = ["SoftwarePublisher", "SoftwareSubscriber", "read_exact"]
 

@@ -11,8 +11,18 @@ import struct
 from scapy.utils import checksum
 
 from hdl.net.frames import (
-    ETHERTYPE_IPV4, IP_PROTO_TCP, IP_PROTO_UDP, IP_TTL, TCP_ACK, TCP_FIN, TCP_MSS, TCP_PSH, TCP_RST, TCP_SYN,
-    ip_to_int, mac_to_int,
+    ETHERTYPE_IPV4,
+    IP_PROTO_TCP,
+    IP_PROTO_UDP,
+    IP_TTL,
+    TCP_ACK,
+    TCP_FIN,
+    TCP_MSS,
+    TCP_PSH,
+    TCP_RST,
+    TCP_SYN,
+    ip_to_int,
+    mac_to_int,
 )
 
 __all__ = ["TcpPeerModel", "parse_tcp_frame", "tcp_options_mss", "tcp_frame", "udp_frame",

@@ -8,17 +8,35 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from hdl.net import NetStack
-from hdl.net.stack import STACK_COUNTERS
-from hdl.net.tcp import TCP_COUNTERS
-from hdl.ros1.registers import PHASES
 from hdl.net.crc import Crc32
 from hdl.net.frames import IFG, PREAMBLE, SFD
+from hdl.net.stack import STACK_COUNTERS
+from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1 import TcprosNode
+from hdl.ros1.registers import PHASES
 from hdl.stream import AXIStreamSignature, StreamFIFO
 
-__all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_bytes"]
+__all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_bytes",
+           "NET_BENCH_CONFIGS", "ROS1_BENCH_CONFIG", "build_net_bench_top",
+           "build_ros1_bench_top"]
 
 WORD_BYTES = 64
+
+#: the throughput bench tops ``make bench`` builds: case -> :class:`NetBenchTop` parameters
+NET_BENCH_CONFIGS = {"linux_64k": dict(tx_depth=65536, rx_depth=65536),
+                     "seed_16k": dict(tx_depth=16384, rx_depth=65536)}
+#: the TCPROS node bench top (64 KiB buffers each way)
+ROS1_BENCH_CONFIG = dict(tx_depth=65536, rx_depth=65536)
+
+
+def build_net_bench_top(**params):
+    """The engine throughput bench top (``net_bench``), for :func:`tb.harness.run_bench`."""
+    return NetBenchTop(**params)
+
+
+def build_ros1_bench_top(**params):
+    """The TCPROS node bench top (``ros1_bench``), for :func:`tb.harness.run_bench`."""
+    return Ros1BenchTop(**params)
 
 
 def pattern_bytes(start, count):

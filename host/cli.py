@@ -9,9 +9,9 @@ import sys
 import time
 from pathlib import Path
 
-from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from gen.config import ConfigError
 from gen.msg.model import MessageDefinitionError
+from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
 __all__ = ["main"]
@@ -202,14 +202,21 @@ def _run_msg_plan(args):
 # projects ----------------------------------------------------------------------------------
 
 def _project(args):
-    from gen.config import load_project
-    return load_project(args.build_cfg)
+    from gen.config import apply_parameters, load_project
+    project = load_project(args.build_cfg)
+    try:
+        return apply_parameters(project, args.param)
+    except ValueError as exc:
+        args.parser.error(str(exc))
 
 
 def _add_project_commands(commands):
     def add(name, helptext, func, description=None):
         p = commands.add_parser(name, help=helptext, description=description or helptext)
         p.add_argument("build_cfg", type=Path, help="the ReconROS project file (build.cfg)")
+        p.add_argument("--param", action="append", default=[], metavar="THREAD.NAME=VALUE",
+                       help="set a thread parameter over the build.cfg's Parameters "
+                            "(repeatable), e.g. Sobel.mode=reconros")
         p.set_defaults(func=func, options={}, parser=p)
         return p
 
@@ -238,6 +245,9 @@ def _add_project_commands(commands):
                    help="passed to the software nodes as ctx.args (repeatable)")
     p.add_argument("--limit-ms", type=float, default=1000.0,
                    help="simulated-time limit in ms (default 1000)")
+    p.add_argument("--stall-ms", type=float, default=10.0,
+                   help="end the run when nothing happens (no OS call, memory access or "
+                        "message) for this long in simulated time (default 10 ms)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="folder for the nodes' files (default build/<name>/sim)")
     p = add("report", "resources per core (yosys synth_xilinx) and the last simulation's "
@@ -327,30 +337,44 @@ def _default_out(p, leaf):
 
 
 def _run_sim(args):
-    from tb.project_sim import run_project_sim
+    from host.console import Console
+    from host.project_sim import ProjectError, load_sim_module, run_project_sim
+    from host.simulator import SimulationFailed
+    console = Console(f"{PROG} sim")
     p = _project(args)
     out = args.output or _default_out(p, "sim")
-    import os
-    if args.waves:
-        os.environ["WAVES"] = "1"
-    print(f"-- exporting, building and simulating {p.name} under {args.sim} "
-          f"(the first Verilator build takes minutes)", flush=True)
-    start = time.monotonic()
+    started = time.time()
     try:
-        results = run_project_sim(p.path, args.sim, out=out,
-                                  args=_key_values(args.arg, "--arg"),
-                                  limit_ms=args.limit_ms, quiet=True)
-    except AssertionError as exc:
-        print(f"{PROG} sim: simulation failed: {exc}", file=sys.stderr)
+        with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "
+                          f"{args.sim}, then simulating"):
+            results = run_project_sim(
+                p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
+                thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
+                waves=args.waves, progress=console.progress,
+                log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
+    except ProjectError as exc:
+        console.error(exc)
+        return 2
+    except SimulationFailed as exc:
+        console.error(f"simulation failed: {exc}")
         return 1
-    import json
-    print(json.dumps(results, indent=2))
-    print(f"-- {out / 'sim_results.json'} ({time.monotonic() - start:.0f} s)")
+    module = load_sim_module(p)
+    if module is not None and hasattr(module, "summary"):
+        for line in module.summary(results, p.clock_mhz):
+            console.print(line)
+    else:
+        import json
+        console.print(json.dumps(results, indent=2))
+    written = sorted(f.name for f in Path(out).iterdir()
+                     if f.is_file() and f.stat().st_mtime >= started)
+    console.done(f"{len(written)} files to {out}/ ({', '.join(written[:6])}"
+                 f"{', ...' if len(written) > 6 else ''})")
     return 0
 
 
 def _run_report(args):
     import json
+
     from gen.export.resources import YOSYS_COMMAND, estimate_resources
     from gen.export.verilog import export_verilog, write_if_changed
     from gen.system import build_system
@@ -411,6 +435,10 @@ def main(argv=None):
     except (MessageDefinitionError, KeyError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:
+        # a tool failed (a simulator build, yosys): its own message says which and where
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

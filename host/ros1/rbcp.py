@@ -4,7 +4,12 @@ import socket
 import threading
 
 from hdl.net.frames import (
-    DEFAULT_RBCP_PORT, RBCP_BUS_ERROR, RBCP_HEADER, RBCP_READ, RBCP_REPLY, RBCP_VERSION,
+    DEFAULT_RBCP_PORT,
+    RBCP_BUS_ERROR,
+    RBCP_HEADER,
+    RBCP_READ,
+    RBCP_REPLY,
+    RBCP_VERSION,
     RBCP_WRITE,
 )
 

@@ -1,12 +1,21 @@
 """Drive one hardware TCPROS endpoint through its RBCP registers (spec net.md §7.2)."""
 
+from gen.msg.ros1 import decode_connection_header, encode_connection_header
 from hdl.net.frames import ip_to_int
 from hdl.ros1.registers import (
-    CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, CTRL, ENDPOINT_STRIDE, ERRORS, EXPECTED, HDR_ERR,
-    HDR_RX, HDR_TX, PHASES, REG,
+    CHECK_DEFAULT,
+    COUNTERS,
+    COUNTERS_OFFSET,
+    CTRL,
+    ENDPOINT_STRIDE,
+    ERRORS,
+    EXPECTED,
+    HDR_ERR,
+    HDR_RX,
+    HDR_TX,
+    PHASES,
+    REG,
 )
-
-from ..msg.ros1 import decode_connection_header, encode_connection_header
 
 __all__ = ["EndpointClient", "connection_header_fields"]
 

@@ -15,7 +15,11 @@ from amaranth.lib.wiring import In, Out
 
 from hdl.dds import Topic
 
-__all__ = ["TopicTrafficBench", "SEQ_BITS"]
+__all__ = ["TopicTrafficBench", "SEQ_BITS", "TOPOLOGIES", "WIDTHS", "build_topic_bench_top"]
+
+#: the (publishers, subscribers) and data widths of the topics ``make bench`` measures
+TOPOLOGIES = [(1, 1), (1, 4), (4, 1), (4, 4)]
+WIDTHS = (64, 512)
 
 SEQ_BITS = 28
 
@@ -141,3 +145,8 @@ class TopicTrafficBench(wiring.Component):
             m.d.sync += done.eq(1)
         m.d.comb += self.done.eq(done)
         return m
+
+
+def build_topic_bench_top(*, pubs, subs, data_width):
+    """The topic traffic bench top (``topic_bench``), for :func:`tb.harness.run_bench`."""
+    return TopicTrafficBench(pubs, subs, data_width)

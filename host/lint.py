@@ -1,4 +1,4 @@
-"""Lint exported Verilog with ``verilator --lint-only -Wall`` (toolchain.md pitfall 4).
+"""Lint exported Verilog with ``verilator --lint-only -Wall``.
 
 Waived, each for a reason that belongs to the generator rather than the design:
 DECLFILENAME (Amaranth names submodules ``top.sub`` in one file), UNUSEDSIGNAL (unused bits of
@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from host.toolchain import put_verilator_on_path
+
 __all__ = ["WAIVERS", "LINT_ARGS", "lint_verilog", "main"]
 
 WAIVERS = ("DECLFILENAME", "UNUSEDSIGNAL", "PROCASSINIT", "WIDTHEXPAND", "WIDTHTRUNC",
@@ -23,7 +25,6 @@ LINT_ARGS = ("-Wall", *(f"-Wno-{w}" for w in WAIVERS))
 
 
 def _verilator():
-    from tb.toolchain import put_verilator_on_path
     exe = put_verilator_on_path()
     if exe is None:
         raise RuntimeError("verilator not found: install the project (make setup)")

@@ -2,424 +2,41 @@
 
 Written from the spec (reconos.md §3, §4, §5.4, §6, §7), not from the RTL:
 
-* :class:`ProcessMemory`: the process's virtual memory in physical memory behind the AXI4
-  port (cocotbext-axi ``AxiRam``), with a page table the model builds (ARMv8 4 KiB / 39-bit,
-  three levels, for r64; ARMv7 short descriptors with pages and 1 MiB sections for r32),
-  demand-mapped pages and a page-fault handler;
-* :class:`MessageMemory`: ROS messages as rosidl C structs in that memory (layout of
-  :class:`gen.msg.layout.CLayout` for the chosen architecture);
-* :class:`Broker`: an in-process ROS graph (topics, services) for hardware and Python nodes;
+* :class:`~host.reconos.memory.ProcessMemory`: the process's virtual memory;
+* :class:`~host.reconos.messages.MessageMemory`: ROS messages as rosidl C structs in it;
+* :class:`~host.reconos.broker.Broker`: an in-process ROS graph;
 * :class:`ReconosRuntime`: the runtime: thread create/suspend/resume through proc_control,
   one delegate per slot that reads OSIF commands through the reconos_osif registers (waiting
   for the osif_intc interrupt as the Linux driver does) and answers with the spec's words.
 """
 
 import collections
-import struct
 
 import cocotb
-from cocotb.triggers import Event, RisingEdge, Timer, First
+from cocotb.triggers import Event, First, RisingEdge, Timer
 
-from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT as _FMT
-from hdl.reconos.protocol import (CMD_MASK, call, INTERRUPTED_REPLY, SIGNAL_THREAD_RESUME,
-                                  SIGNAL_THREAD_START, Command, OsifRegister,
-                                  ProcControlRegister, ResourceType, arch as get_arch,
-                                  osif_register_offset, proc_control_offset)
+from hdl.reconos.protocol import (
+    CMD_MASK,
+    INTERRUPTED_REPLY,
+    SIGNAL_THREAD_RESUME,
+    SIGNAL_THREAD_START,
+    Command,
+    OsifRegister,
+    ProcControlRegister,
+    ResourceType,
+    call,
+    osif_register_offset,
+    proc_control_offset,
+)
+from hdl.reconos.protocol import arch as get_arch
 
-__all__ = ["ProcessMemory", "MessageMemory", "Broker", "Resource", "ReconosRuntime",
-           "ProtocolError", "PAGE"]
+from .broker import Queue
 
-PAGE = 4096
+__all__ = ["Resource", "ReconosRuntime", "ProtocolError"]
 
 
 class ProtocolError(AssertionError):
     """The hardware broke the ReconOS protocol (the real delegate would panic)."""
-
-
-class ProcessMemory:
-    """Virtual memory of one process in ``ram`` (an object with ``read(addr, n)`` and
-    ``write(addr, data)``, e.g. cocotbext-axi's AxiRam).
-
-    Parameters
-    ----------
-    arch : str
-        ``"r32"`` or ``"r64"``.
-    ram : Memory
-    ram_size : int
-        Bytes of physical memory; frames are handed out from ``phys_base`` upwards.
-    heap_base : int
-        First virtual address of :meth:`malloc` (r64 default above 4 GiB, so pointers need
-        the full word: spec §11 defect 5).
-    """
-
-    def __init__(self, arch, ram, ram_size, *, phys_base=0x1000, heap_base=None):
-        self.arch = get_arch(arch)
-        self.ram = ram
-        self.ram_size = ram_size
-        self._next_frame = phys_base
-        self._next_va = heap_base if heap_base is not None else (
-            0x12_3450_0000 if self.arch.name == "r64" else 0x4000_0000)
-        self.pages = {}        # vpn -> pfn, pages the process owns
-        self.mapped = set()    # vpns present in the hardware page table
-        self.sections = {}     # r32: 1 MiB section index -> physical base
-        self.faults = []       # VAs the fault handler was called for
-        self.pgd = self._frame(align=16 * 1024 if self.arch.name == "r32" else PAGE,
-                               size=16 * 1024 if self.arch.name == "r32" else PAGE)
-        self._tables = {}
-
-    # ---- physical frames and page tables ----
-    def _frame(self, *, align=PAGE, size=PAGE):
-        base = -(-self._next_frame // align) * align
-        if base + size > self.ram_size:
-            raise MemoryError("the co-simulation's physical memory is exhausted")
-        self._next_frame = base + size
-        self.ram.write(base, bytes(size))
-        return base
-
-    def _word(self, pa, value=None):
-        n = self.arch.word_bytes
-        if value is None:
-            return int.from_bytes(self.ram.read(pa, n), "little")
-        self.ram.write(pa, value.to_bytes(n, "little"))
-
-    def _table(self, key, size=PAGE, align=PAGE):
-        if key not in self._tables:
-            self._tables[key] = self._frame(size=size, align=align)
-        return self._tables[key]
-
-    def _map(self, vpn, pfn):
-        va = vpn * PAGE
-        if self.arch.name == "r64":
-            l1 = self.pgd + ((va >> 30) & 0x1FF) * 8
-            l2t = self._table(("l2", va >> 30))
-            self._word(l1, l2t | 0b11)
-            l2 = l2t + ((va >> 21) & 0x1FF) * 8
-            l3t = self._table(("l3", va >> 21))
-            self._word(l2, l3t | 0b11)
-            self._word(l3t + ((va >> 12) & 0x1FF) * 8, (pfn * PAGE) | 0b11 | (1 << 10))
-        else:
-            l1 = self.pgd + (va >> 20) * 4
-            l2t = self._table(("l2", va >> 20), size=1024, align=1024)
-            self._word(l1, l2t | 0b01)
-            self._word(l2t + ((va >> 12) & 0xFF) * 4, (pfn * PAGE) | 0b10)
-        self.mapped.add(vpn)
-
-    def unmap(self, va):
-        """Remove the page of ``va`` from the hardware page table (the process keeps it)."""
-        vpn = va // PAGE
-        if self.arch.name == "r64":
-            l3t = self._tables[("l3", (vpn * PAGE) >> 21)]
-            self._word(l3t + (vpn & 0x1FF) * 8, 0)
-        else:
-            l2t = self._tables[("l2", (vpn * PAGE) >> 20)]
-            self._word(l2t + (vpn & 0xFF) * 4, 0)
-        self.mapped.discard(vpn)
-
-    def remap(self, va, other_va):
-        """Point the page of ``va`` at the frame of ``other_va`` (page table only)."""
-        self._map(va // PAGE, self.pages[other_va // PAGE])
-
-    def map_section(self, size=1 << 20):
-        """r32: allocate a 1 MiB-aligned region mapped by one ARMv7 section descriptor
-        (spec §11 defect 11); return its VA."""
-        if self.arch.name != "r32":
-            raise ValueError("sections are an ARMv7 (r32) feature")
-        va = -(-self._next_va // (1 << 20)) * (1 << 20)
-        pa = self._frame(size=1 << 20, align=1 << 20)
-        self._word(self.pgd + (va >> 20) * 4, pa | 0b10)
-        for i in range((1 << 20) // PAGE):
-            self.pages[va // PAGE + i] = pa // PAGE + i
-        self.sections[va >> 20] = pa
-        self._next_va = va + (1 << 20)
-        return va
-
-    # ---- the process's view ----
-    def malloc(self, size, *, populate=True, align=64):
-        """Allocate ``size`` bytes (zeroed) and return the VA. With ``populate=False`` the pages
-        exist but are missing from the hardware page table until the first fault."""
-        va = -(-self._next_va // align) * align
-        end = va + max(size, 1)
-        for vpn in range(va // PAGE, -(-end // PAGE)):
-            if vpn not in self.pages:
-                self.pages[vpn] = self._frame() // PAGE
-                if populate:
-                    self._map(vpn, self.pages[vpn])
-        self._next_va = end
-        return va
-
-    def translate(self, va):
-        vpn = va // PAGE
-        if vpn not in self.pages:
-            raise KeyError(f"virtual address 0x{va:x} is not allocated")
-        return self.pages[vpn] * PAGE + va % PAGE
-
-    def read(self, va, n):
-        out = bytearray()
-        while n > 0:
-            k = min(n, PAGE - va % PAGE)
-            out += self.ram.read(self.translate(va), k)
-            va, n = va + k, n - k
-        return bytes(out)
-
-    def write(self, va, data):
-        data = bytes(data)
-        while data:
-            k = min(len(data), PAGE - va % PAGE)
-            self.ram.write(self.translate(va), data[:k])
-            va, data = va + k, data[k:]
-
-    def handle_fault(self, va):
-        """The page-fault handler (``proc_pgfhandler``): map the page if the process owns it.
-        The page's contents are kept (ReconOS writes 0 to the faulting word: defect 7).
-        Return whether the fault was resolved."""
-        self.faults.append(va)
-        vpn = va // PAGE
-        if vpn in self.pages:
-            self._map(vpn, self.pages[vpn])
-            return True
-        return False
-
-
-
-
-class MessageMemory:
-    """ROS messages as rosidl C structs in :class:`ProcessMemory` (spec §6).
-
-    Values are dicts of field name to value: primitives as ints/floats, strings as ``str``,
-    nested messages as dicts, ``uint8``/``byte``/``char`` sequences and arrays as ``bytes``,
-    other sequences and arrays of primitives as lists.
-    """
-
-    def __init__(self, memory, library):
-        from gen.msg.layout import CLayout
-        self.mem = memory
-        self.library = library
-        self.layout = CLayout(library, "arm64" if memory.arch.name == "r64" else "arm32")
-        self.p = self.layout.pointer
-
-    def sizeof(self, type_name):
-        return self.layout.struct(type_name).size
-
-    def create(self, type_name):
-        """``pkg__msg__Type__create()``: a zeroed struct; return its VA."""
-        return self.mem.malloc(self.sizeof(type_name))
-
-    def _ptr(self, va, value=None):
-        if value is None:
-            return int.from_bytes(self.mem.read(va, self.p), "little")
-        self.mem.write(va, value.to_bytes(self.p, "little"))
-
-    def member(self, type_name, path):
-        """Byte offset of a field path (``"data"``, ``"header.stamp.sec"``)."""
-        offset = 0
-        for part in path.split("."):
-            s = self.layout.struct(type_name)
-            mem = next(m for m in s.members if m.name == part)
-            offset += mem.offset
-            type_name = getattr(mem.type, "typename", None)
-        return offset
-
-    def set_sequence(self, va, elem_size, count):
-        """``ROS_MESSAGE_SET_SIZE``: reallocate the sequence at ``va`` for ``count`` elements
-        (keeping the old contents), size = capacity = count; return the data pointer."""
-        old, size, cap = self._ptr(va), self._ptr(va + self.p), self._ptr(va + 2 * self.p)
-        if count != cap:
-            data = self.mem.malloc(count * elem_size) if count else 0
-            if old and data:
-                self.mem.write(data, self.mem.read(old, min(size, count) * elem_size))
-            self._ptr(va, data)
-        self._ptr(va + self.p, count)
-        self._ptr(va + 2 * self.p, count)
-        return self._ptr(va)
-
-    def _primitive_size(self, name):
-        return struct.calcsize("<" + _FMT[name])
-
-    def write(self, va, type_name, value):
-        from gen.msg.model import Array, Named, Primitive, Sequence
-        for m in self.layout.struct(type_name).members:
-            if m.name == "structure_needs_at_least_one_member":
-                continue
-            v = value[m.name]
-            at = va + m.offset
-            t = m.type
-            if isinstance(t, Named):
-                self.write(at, t.typename, v)
-            elif isinstance(t, Primitive) and t.is_string:
-                raw = v.encode() + b"\0"
-                buf = self.mem.malloc(len(raw))
-                self.mem.write(buf, raw)
-                self._ptr(at, buf)
-                self._ptr(at + self.p, len(raw) - 1)
-                self._ptr(at + 2 * self.p, len(raw))
-            elif isinstance(t, Primitive):
-                self.mem.write(at, struct.pack("<" + _FMT[t.name], v))
-            elif isinstance(t, (Sequence, Array)):
-                raw = self._pack_elements(t.element, v)
-                if isinstance(t, Array):
-                    self.mem.write(at, raw)
-                else:
-                    n = len(v)
-                    buf = self.mem.malloc(max(len(raw), 1)) if n else 0
-                    if n:
-                        self.mem.write(buf, raw)
-                    self._ptr(at, buf)
-                    self._ptr(at + self.p, n)
-                    self._ptr(at + 2 * self.p, n)
-            else:
-                raise TypeError(f"cannot store field {m.name} of {type_name}")
-
-    def _pack_elements(self, element, v):
-        from gen.msg.model import Primitive
-        if not isinstance(element, Primitive) or element.is_string:
-            raise TypeError("the co-simulation model stores sequences of primitives only")
-        if isinstance(v, (bytes, bytearray)):
-            return bytes(v)
-        return struct.pack(f"<{len(v)}{_FMT[element.name]}", *v)
-
-    def read(self, va, type_name):
-        from gen.msg.model import Array, Named, Primitive
-        out = {}
-        for m in self.layout.struct(type_name).members:
-            if m.name == "structure_needs_at_least_one_member":
-                continue
-            at = va + m.offset
-            t = m.type
-            if isinstance(t, Named):
-                out[m.name] = self.read(at, t.typename)
-            elif isinstance(t, Primitive) and t.is_string:
-                ptr, n = self._ptr(at), self._ptr(at + self.p)
-                out[m.name] = self.mem.read(ptr, n).decode() if n else ""
-            elif isinstance(t, Primitive):
-                raw = self.mem.read(at, self._primitive_size(t.name))
-                out[m.name] = struct.unpack("<" + _FMT[t.name], raw)[0]
-            else:
-                esz = self._primitive_size(t.element.name)
-                if isinstance(t, Array):
-                    ptr, n = at, t.length
-                else:
-                    ptr, n = self._ptr(at), self._ptr(at + self.p)
-                raw = self.mem.read(ptr, n * esz) if n else b""
-                if t.element.name in BYTE_ELEMENTS:
-                    out[m.name] = raw
-                else:
-                    out[m.name] = list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
-        return out
-
-
-class Broker:
-    """An in-process ROS graph: topics with any number of publishers and subscribers, and
-    services. Python nodes subscribe with :meth:`subscribe` (a queue) and publish with
-    :meth:`publish`; services are Python callables or hardware servers."""
-
-    def __init__(self):
-        self._subs = collections.defaultdict(list)
-        self.published = collections.defaultdict(list)   # topic -> values, in order
-        self._services = {}
-        self._actions = {}
-
-    def subscribe(self, topic):
-        q = _Queue()
-        self._subs[topic].append(q)
-        return q
-
-    def publish(self, topic, value):
-        self.published[topic].append(value)
-        for q in self._subs[topic]:
-            q.put(value)
-
-    def serve(self, service, server):
-        """Register a server: a :class:`_Queue` of ``(request, reply_queue)`` pairs."""
-        self._services[service] = server
-
-    def server_queue(self, service):
-        q = _Queue()
-        self._services[service] = q
-        return q
-
-    async def call(self, service, request):
-        """Call a service; return the response value."""
-        reply = _Queue()
-        self._services[service].put((request, reply))
-        return await reply.get()
-
-    def action_server_queue(self, action):
-        """Register an action server: a :class:`_Queue` of :class:`ActionGoal`."""
-        q = _Queue()
-        self._actions[action] = q
-        return q
-
-    def send_goal(self, action, goal, goal_id=None):
-        """Send a goal (the ``goal`` part of ``<Action>_SendGoal_Request``) to ``action``;
-        return its :class:`ActionGoal` (acceptance, feedback and result queues)."""
-        g = ActionGoal(goal, goal_id if goal_id is not None else bytes(range(16)))
-        self._actions[action].put(g)
-        return g
-
-
-class ActionGoal:
-    """One goal of an action, as both ends see it (rclc's goal handle).
-
-    ``accepted`` receives the server's decision (a bool); :meth:`request_result` is the
-    client's ``get_result`` request, which the server's ACTIONS_RESULT_TAKE waits for;
-    ``feedback`` receives ``<Action>_FeedbackMessage`` values; ``result`` the
-    ``<Action>_GetResult_Response`` value.
-    """
-
-    def __init__(self, goal, goal_id):
-        self.goal_id = bytes(goal_id)
-        self.request = {"goal_id": {"uuid": list(self.goal_id)}, "goal": goal}
-        self.accepted = _Queue()
-        self.feedback = _Queue()
-        self.result = _Queue()
-        self.result_requested = Event()
-
-    def request_result(self):
-        self.result_requested.set()
-
-
-class _Queue:
-    """An unbounded FIFO for coroutines."""
-
-    def __init__(self, maxsize=0):
-        self.items = collections.deque()
-        self.maxsize = maxsize
-        self._event = Event()
-        self._space = Event()
-
-    def put_nowait(self, item):
-        if self.maxsize and len(self.items) >= self.maxsize:
-            return False
-        self.put(item)
-        return True
-
-    def put(self, item):
-        self.items.append(item)
-        self._event.set()
-
-    async def put_wait(self, item):
-        while self.maxsize and len(self.items) >= self.maxsize:
-            self._space.clear()
-            await self._space.wait()
-        self.put(item)
-
-    def get_nowait(self):
-        if not self.items:
-            return None
-        item = self.items.popleft()
-        self._space.set()
-        return item
-
-    async def get(self):
-        while not self.items:
-            self._event.clear()
-            await self._event.wait()
-        item = self.items.popleft()
-        self._space.set()
-        return item
-
-    def __len__(self):
-        return len(self.items)
 
 
 class Resource:
@@ -543,6 +160,9 @@ class ReconosRuntime:
         self._subs = {}
         self.unresolved_faults = []
         self.errors = []
+        #: OS calls read so far, and the call each slot's delegate is serving now
+        self.commands = 0
+        self.pending = {}
         self._threads = {}
 
     # ---- registers ----
@@ -683,7 +303,7 @@ class ReconosRuntime:
             return
         k = r.kind
         if k == "mbox":
-            r.state = _Queue(maxsize=int(r.args[0]))
+            r.state = Queue(maxsize=int(r.args[0]))
         elif k == "sem":
             r.state = _Semaphore(int(r.args[0]) if r.args else 0)
         elif k == "mutex":
@@ -736,6 +356,8 @@ class ReconosRuntime:
                 continue
             args = [await self.osif_read(slot) for _ in c.args]
             handler = getattr(self, "do_" + c.method, None)
+            self.commands += 1
+            self.pending[slot] = (c.method, tuple(args))
             try:
                 if handler is None:
                     raise ProtocolError(f"slot {slot}: {c.method} is not modelled")
@@ -744,6 +366,8 @@ class ReconosRuntime:
                 self.ignored[slot].append((word, args, str(exc)))
                 self.errors.append(str(exc))
                 continue
+            finally:
+                self.pending.pop(slot, None)
             self.log[slot].append((c.method, tuple(args), tuple(replies)))
             for r in replies:
                 await self.osif_write(slot, r & ((1 << self.w) - 1))
@@ -893,7 +517,7 @@ class ReconosRuntime:
     async def do_ros_servicec_request(self, slot, hc, hm):
         cli = self._resource(slot, hc, "rossrvc")
         req = self._resource(slot, hm, "rossrvmsgreq")
-        reply = _Queue()
+        reply = Queue()
         self.broker._services[cli.args[0]].put((self.msgs.read(req.ptr, req.args[0]), reply))
         cli.state["reply"] = reply
         return [0]

@@ -1,0 +1,62 @@
+"""What the ``rosgate`` commands print: steps with a live status while they run, lines
+logged by the simulation, errors on standard error, and a last line saying what was written
+where. Built on rich; on a terminal the status animates, in a log file each step is one line.
+"""
+
+import contextlib
+import time
+
+from rich.console import Console as RichConsole
+
+__all__ = ["Console"]
+
+
+class Console:
+    """Output of one ``rosgate`` command.
+
+    Parameters
+    ----------
+    prog : str
+        The command, for error lines (``rosgate sim``).
+    """
+
+    def __init__(self, prog):
+        self.prog = prog
+        self.out = RichConsole(highlight=False, soft_wrap=True)
+        self.err = RichConsole(stderr=True, highlight=False, soft_wrap=True)
+        self._status = None
+        self._start = time.monotonic()
+
+    def print(self, text=""):
+        self.out.print(text, markup=False)
+
+    def error(self, text):
+        self.err.print(f"{self.prog}: error: {text}", markup=False)
+
+    @contextlib.contextmanager
+    def step(self, text):
+        """A step that takes a while: a status line that :meth:`progress` updates, then one
+        line with the step's time."""
+        start = time.monotonic()
+        if self.out.is_terminal:
+            with self.out.status(text, spinner="dots") as status:
+                self._status = (status, text)
+                try:
+                    yield
+                finally:
+                    self._status = None
+        else:
+            self.print(f"-- {text}")
+            yield
+        self.print(f"-- {text}: done in {time.monotonic() - start:.1f} s")
+
+    def progress(self, stage, detail):
+        """Show ``detail`` on the running step's status line (nothing when not a
+        terminal)."""
+        if self._status is not None:
+            status, text = self._status
+            status.update(f"{text} ({detail})")
+
+    def done(self, what):
+        """The last line: what was written where, and the command's time."""
+        self.print(f"{self.prog}: wrote {what} ({time.monotonic() - self._start:.0f} s)")

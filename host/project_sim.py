@@ -1,0 +1,456 @@
+"""``rosgate sim``: co-simulate a ReconROS project's system top with its software side.
+
+:func:`run_project_sim` exports the project's ``rosgate_system``, builds it for the simulator
+and runs :func:`run_project` (a cocotb test) against it: the ReconOS runtime model
+(:mod:`host.reconos`) starts, every Amaranth hardware thread of the project is created in its
+slots with the resources of its ``build.cfg`` groups (handles in build.cfg order), and the
+project's software nodes run.
+
+Software nodes live in ``<project>/sim.py``:
+
+``NODES``
+    A list of ``async def node(ctx)`` callables, run concurrently; the simulation ends when
+    all of them have returned.
+``setup(ctx)`` (optional)
+    Called after the threads are created and before the nodes start, as a ReconROS
+    application's ``main()`` prepares messages after ``reconos_app_init``.
+``check(ctx)`` (optional)
+    Called in the ``rosgate`` process before the simulator is built (the system's Verilog is
+    written first, in seconds), with a :class:`CheckContext`:
+    raise ``ValueError`` to refuse the run's arguments (for example an image the hardware
+    cannot take) with a message naming the bad value.
+``summary(results, clock_mhz)`` (optional)
+    Returns the lines ``rosgate sim`` prints for the nodes' results.
+
+``ctx`` of the nodes is a :class:`SimContext`. An exception raised in ``sim.py`` ends the run
+and reaches the user as its own message with the file and line it came from; a run in which
+nothing happens for ``stall_ms`` of simulated time (no OS call, no memory access, no message)
+while no node sleeps on purpose ends with what each slot and node waits for.
+"""
+
+import hashlib
+import importlib.util
+import json
+import os
+import sys
+import threading
+import traceback
+from pathlib import Path
+
+import cocotb
+from cocotb.triggers import ClockCycles, Event, First
+
+from .reconos import ReconosCosim, Resource
+from .simulator import SimulationFailed, export_top, run_top, top_params
+from .toolchain import cache_dir
+
+__all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "model_resources",
+           "top_ports", "load_sim_module"]
+
+TOP = "rosgate_system"
+#: files the simulation writes into the output folder, besides the nodes' own
+RESULTS, ERROR, PROGRESS, LOG = "sim_results.json", "sim_error.json", "sim_progress.jsonl", \
+    "sim.log"
+
+
+class ProjectError(Exception):
+    """The project's ``sim.py`` refused the run or failed in it; the message names the file
+    and line the error came from."""
+
+
+def model_resources(thread):
+    """The software model's resource list of ``thread`` (index = handle)."""
+    from gen.config import unquote
+    out = []
+    for r in thread.resources:
+        a = r.args
+        if r.type in ("mbox", "mem"):
+            args = (int(a[0]),)
+        elif r.type == "sem":
+            args = (int(a[-1]),)
+        elif r.type in ("mutex", "cond"):
+            args = ()
+        elif r.type == "rosnode":
+            args = (unquote(a[0]),)
+        elif r.msgtype is not None:
+            args = (r.msgtype,)
+        elif r.type in ("rossub", "rospub"):
+            args = (unquote(a[2]),)
+        elif r.type in ("rossrvs", "rossrvc", "rosactions", "rosactionc"):
+            args = (unquote(a[2]) if len(a) > 2 else r.name,)
+        else:
+            args = tuple(a)
+        out.append(Resource(r.type, *args, name=r.name))
+    return out
+
+
+class CheckContext:
+    """What a project's ``check(ctx)`` gets, before the simulator is built.
+
+    Attributes
+    ----------
+    project : gen.config.Project
+    args : dict
+        ``--arg key=value`` options (strings).
+    threads : dict
+        Thread name -> the Amaranth component of its first slot (``None`` for a thread
+        without Amaranth source), to read the limits the hardware was built with.
+    clock_mhz : float
+        The system clock.
+    """
+
+    def __init__(self, project, args, threads):
+        self.project = project
+        self.args = dict(args)
+        self.threads = threads
+        self.clock_mhz = project.clock_mhz
+
+
+class SimContext:
+    """What a project's software nodes get.
+
+    Attributes
+    ----------
+    project : gen.config.Project
+    broker : host.reconos.Broker
+        Topics, services and actions: ``publish``, ``subscribe``, ``call``, ``serve``,
+        ``send_goal``.
+    runtime, messages, memory :
+        The ReconOS runtime model, the rosidl message memory and the process memory.
+    args : dict
+        ``--arg key=value`` options of ``rosgate sim`` (strings).
+    out : pathlib.Path
+        A folder for the nodes' files.
+    results : dict
+        Anything JSON-serialisable; ``rosgate sim`` prints and saves it.
+    clock_mhz : float
+        The system clock.
+    """
+
+    def __init__(self, cosim, project, args, out):
+        self.cosim = cosim
+        self.project = project
+        self.broker = cosim.broker
+        self.runtime = cosim.runtime
+        self.messages = cosim.messages
+        self.memory = cosim.memory
+        self.args = args
+        self.out = Path(out)
+        self.results = {}
+        self.clock_mhz = project.clock_mhz
+        self._resources = {}
+        self._start = cocotb.utils.get_sim_time("ns")
+        self._sleeping = 0
+        self._progress = None
+
+    def now(self):
+        """System clock cycles since the nodes started."""
+        return round((cocotb.utils.get_sim_time("ns") - self._start) * self.clock_mhz / 1000)
+
+    async def cycles(self, n):
+        """Sleep ``n`` system clock cycles (the stall check waits while a node sleeps)."""
+        self._sleeping += 1
+        try:
+            await ClockCycles(self.cosim.dut.aclk, n)
+        finally:
+            self._sleeping -= 1
+
+    def resource(self, thread, name, slot=None):
+        """The model object of resource ``name`` of ``thread`` (in its first slot by default):
+        ``.ptr`` is the message's address for message resources."""
+        t = next(t for t in self.project.threads if t.name == thread)
+        slot = t.slots[0].id if slot is None else slot
+        return self._resources[slot][t.handle(name)]
+
+    def log(self, text):
+        """Log a line; ``rosgate sim`` shows it while the simulation runs."""
+        self.cosim.dut._log.info(text)
+        if self._progress is not None:
+            self._progress.write(json.dumps({"cycle": self.now(), "text": str(text)}) + "\n")
+            self._progress.flush()
+
+
+def load_sim_module(project):
+    """Import the project's ``sim.py`` (``None`` if it has none); an error in it becomes a
+    :class:`ProjectError` naming its file and line."""
+    path = project.dir / "sim.py"
+    if not path.is_file():
+        return None
+    spec = importlib.util.spec_from_file_location(f"rosgate_sim_{project.name.lower()}", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.path.insert(0, str(project.dir))
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:
+        raise ProjectError(_located(exc, path)) from exc
+    finally:
+        sys.path.remove(str(project.dir))
+    return module
+
+
+def _origin(exc, path):
+    """(file, line) of the deepest frame of ``exc``'s traceback in ``path``, else its last."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    if isinstance(exc, SyntaxError) and exc.filename:
+        return exc.filename, exc.lineno
+    inside = [f for f in frames if Path(f.filename).resolve() == Path(path).resolve()]
+    frame = (inside or frames or [None])[-1]
+    return (frame.filename, frame.lineno) if frame else (str(path), None)
+
+
+def _located(exc, path):
+    file, line = _origin(exc, path)
+    where = f"{file}:{line}" if line else str(file)
+    return f"{where}: {type(exc).__name__}: {exc}"
+
+
+def _stall_report(cosim, running):
+    """What everything waits for, for a stall or time-out message."""
+    slots = ", ".join(f"slot {s} in {m.upper()}{tuple(a)}" for s, (m, a) in
+                      sorted(cosim.runtime.pending.items())) or "no slot in an OS call"
+    nodes = ", ".join(getattr(n, "__name__", str(n)) for n in running) or "none"
+    return f"{slots}; nodes still running: {nodes}"
+
+
+async def _watch_progress(cosim, ctx, stall_cycles, running, failures, ended, period=20_000):
+    """End the run when nothing happens for ``stall_cycles`` while no node sleeps on
+    purpose."""
+    def activity():
+        return (cosim.runtime.commands, cosim.memory_accesses, cosim.broker.events)
+    last, quiet = activity(), 0
+    while True:
+        await ClockCycles(cosim.dut.aclk, period)
+        now = activity()
+        if now != last or ctx._sleeping:
+            last, quiet = now, 0
+            continue
+        quiet += period
+        if quiet >= stall_cycles:
+            failures.append(ProjectError(
+                f"no progress for {quiet} cycles ({quiet / (ctx.clock_mhz * 1000):g} ms "
+                f"simulated at {ctx.clock_mhz:g} MHz): no OS call, memory access or message; "
+                f"{_stall_report(cosim, running)}"))
+            ended.set()
+            return
+
+
+def _write_error(out, message):
+    Path(out).mkdir(parents=True, exist_ok=True)
+    (Path(out) / ERROR).write_text(json.dumps({"error": message}) + "\n")
+
+
+@cocotb.test()
+async def run_project(dut):
+    """Create the project's threads and run its software nodes to completion."""
+    from gen.config import apply_parameters, load_project, project_library
+    from gen.system import thread_module_path
+
+    p = top_params()
+    out = Path(p["out"])
+    project = apply_parameters(load_project(p["build_cfg"]), p.get("thread_params", []))
+    sim_py = project.dir / "sim.py"
+    try:
+        module = load_sim_module(project)
+    except ProjectError as exc:
+        _write_error(out, str(exc))
+        raise
+    cosim = ReconosCosim(dut, arch=p["arch"], num_hwts=len(p["threads"]),
+                         clock_ns=p["clock_ns"],
+                         slot_clocks={int(k): v for k, v in p["slot_clock_ns"].items()
+                                      if int(k) in p["async_slots"]},
+                         ram_size=p.get("ram_size", 1 << 25))
+    for name in os.environ.get("ROSGATE_EXTERNAL_INPUTS", "").split():
+        getattr(dut, name).value = 0     # ports of slots without a thread: idle
+    await cosim.reset()
+    await cosim.start_runtime(project_library(project))
+    ctx = SimContext(cosim, project, p.get("args", {}), out)
+    out.mkdir(parents=True, exist_ok=True)
+    ctx._progress = open(out / PROGRESS, "a")
+    created = []
+    for thread in project.threads:
+        if not thread_module_path(project, thread).is_file():
+            continue
+        for slot in thread.slots:
+            res = model_resources(thread)
+            ctx._resources[slot.id] = res
+            await cosim.runtime.create_thread(slot.id, res)
+            created.append(slot.id)
+    nodes = list(getattr(module, "NODES", [])) if module is not None else []
+    ended, failures, running = Event(), [], {}
+
+    async def guarded(node):
+        try:
+            await node(ctx)
+        except Exception as exc:
+            failures.append(exc)
+        finally:
+            running.pop(node, None)
+            if failures or not running:
+                ended.set()
+
+    try:
+        if module is not None and hasattr(module, "setup"):
+            module.setup(ctx)
+        ctx._start = cocotb.utils.get_sim_time("ns")
+        running.update((node, cocotb.start_soon(guarded(node))) for node in nodes)
+        if not nodes:
+            ended.set()
+        limit_cycles = round(float(p["limit_ms"]) * 1000 * ctx.clock_mhz)
+        stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
+        watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running, failures,
+                                                  ended))
+        await First(ended.wait(), ClockCycles(dut.aclk, limit_cycles))
+        watch.cancel()
+        if failures:
+            raise failures[0]
+        if running:
+            raise ProjectError(
+                f"the software nodes did not finish within {p['limit_ms']:g} ms of "
+                f"simulated time ({limit_cycles} cycles); {_stall_report(cosim, running)}")
+    except ProjectError as exc:
+        _write_error(out, str(exc))
+        raise
+    except Exception as exc:
+        _write_error(out, _located(exc, sim_py))
+        raise
+    finally:
+        ctx._progress.close()
+    if cosim.runtime.errors:
+        message = f"ReconOS protocol errors: {'; '.join(cosim.runtime.errors)}"
+        _write_error(out, message)
+        raise ProjectError(message)
+    ctx.results.setdefault("cycles", ctx.now())
+    ctx.results.setdefault("slots_running", created)
+    (out / RESULTS).write_text(json.dumps(ctx.results, indent=2) + "\n")
+
+
+def _follow(path, show, stop):
+    """Call ``show(line)`` for each line appended to ``path`` until ``stop`` is set."""
+    position = 0
+    while True:
+        finished = stop.wait(0.5)
+        if Path(path).is_file():
+            with open(path) as f:
+                f.seek(position)
+                for line in f:
+                    if line.endswith("\n"):
+                        show(json.loads(line))
+                        position += len(line.encode())
+                    else:
+                        break
+        if finished:
+            return
+
+
+def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
+                    limit_ms=1000.0, stall_ms=10.0, seed=None, build_dir=None, quiet=True,
+                    waves=False, progress=None, log=None):
+    """Export, build and run the project's system under ``sim``; return the nodes' results.
+
+    Parameters
+    ----------
+    build_cfg : path
+    sim : str
+        ``"icarus"`` or ``"verilator"``.
+    out : path
+        Folder of the nodes' files, ``sim_results.json`` and the simulator's log.
+    args : dict
+        ``ctx.args`` of the nodes.
+    thread_params : list of str
+        ``THREAD.NAME=VALUE`` settings over the build.cfg's thread ``Parameters``.
+    limit_ms, stall_ms : float
+        Simulated time after which the run ends unfinished; simulated time without any
+        activity after which it ends as stalled.
+    build_dir : path or None
+        Where the Verilog and the simulator build go (default: the per-user cache).
+    quiet : bool
+        Send the simulator's output to ``<out>/sim.log`` instead of this process's output.
+    progress : callable or None
+        ``progress(stage, text)`` for the build's progress.
+    log : callable or None
+        ``log(cycle, text)`` for each line the nodes log while the simulation runs.
+
+    Raises
+    ------
+    ProjectError
+        ``sim.py`` refused the arguments, raised, or the run stalled or timed out.
+    SimulationFailed
+        The simulation failed for another reason (see the log).
+    """
+    from gen.config import apply_parameters, load_project
+    from gen.system import build_system
+
+    build_cfg = Path(build_cfg).resolve()
+    project = apply_parameters(load_project(build_cfg), thread_params)
+    out = Path(out).resolve()
+    args = dict(args or {})
+    module = load_sim_module(project)
+    system = build_system(project)
+    digest = hashlib.sha1(f"{build_cfg} {sorted(thread_params)}".encode()).hexdigest()[:8]
+    build_dir = Path(build_dir) if build_dir else \
+        cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{sim}"
+    # the Verilog first (seconds): the threads' parameters are final, and check() may read
+    # them before minutes go into the simulator build
+    vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus")
+    if module is not None and hasattr(module, "check"):
+        slots = sorted(project.slots, key=lambda s: s.id)
+        threads = {}
+        for s, component in zip(slots, system.threads):
+            if s.thread is not None and s.thread.name not in threads:
+                threads[s.thread.name] = component
+        try:
+            module.check(CheckContext(project, args, threads))
+        except Exception as exc:
+            raise ProjectError(_located(exc, project.dir / "sim.py")) from exc
+    params = {"build_cfg": str(build_cfg), "arch": project.arch,
+              "threads": [s.name for s in sorted(project.slots, key=lambda s: s.id)],
+              "async_slots": [s.id for s in project.slots
+                              if s.clock is not project.system_clock],
+              "clock_ns": _period_ns(project.system_clock.freq),
+              "slot_clock_ns": {str(s.id): _period_ns(s.clock.freq) for s in project.slots},
+              "args": args, "thread_params": list(thread_params), "out": str(out),
+              "limit_ms": float(limit_ms),
+              "stall_ms": float(stall_ms)}
+    inputs = [name for name, flow in top_ports(system).items()
+              if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
+    out.mkdir(parents=True, exist_ok=True)
+    for name in (RESULTS, ERROR, PROGRESS):
+        if (out / name).exists():
+            (out / name).unlink()
+    stop = threading.Event()
+    follower = None
+    if log is not None:
+        follower = threading.Thread(target=_follow, daemon=True,
+                                    args=(out / PROGRESS, lambda e: log(e["cycle"], e["text"]),
+                                          stop))
+        follower.start()
+    try:
+        run_top(__name__, TOP, system, sim, build_dir, params=params, seed=seed,
+                extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)},
+                log_file=out / LOG if quiet else None, waves=waves, progress=progress,
+                exported=vfile)
+    except SimulationFailed as exc:
+        if (out / ERROR).is_file():
+            raise ProjectError(json.loads((out / ERROR).read_text())["error"]) from None
+        raise SimulationFailed(f"{exc}; simulator log: {out / LOG}" if quiet else str(exc),
+                               failed=exc.failed, total=exc.total,
+                               results=exc.results) from None
+    finally:
+        stop.set()
+        if follower is not None:
+            follower.join()
+    return json.loads((out / RESULTS).read_text())
+
+
+def _period_ns(freq):
+    """The clock period in ns, rounded to an even number of picoseconds (cocotb's clock
+    needs equal high and low halves at the 1 ps precision)."""
+    return round(1e12 / freq / 2) * 2 / 1000
+
+
+def top_ports(component):
+    """Ports of ``component`` as exported: name -> ``"in"`` or ``"out"``."""
+    from amaranth.lib import wiring
+    from gen.export.verilog import exported_ports
+    return {name: "in" if flow == wiring.In else "out"
+            for name, (_, flow) in exported_ports(component).items()}

@@ -1,0 +1,134 @@
+"""ROS messages as rosidl C structs in the process memory (the layout of
+:class:`gen.msg.layout.CLayout` for the system's architecture)."""
+
+import struct
+
+from gen.msg.wire import BYTE_ELEMENTS
+from gen.msg.wire import STRUCT_FORMAT as _FMT
+
+__all__ = ["MessageMemory"]
+
+
+class MessageMemory:
+    """ROS messages as rosidl C structs in :class:`ProcessMemory` (spec §6).
+
+    Values are dicts of field name to value: primitives as ints/floats, strings as ``str``,
+    nested messages as dicts, ``uint8``/``byte``/``char`` sequences and arrays as ``bytes``,
+    other sequences and arrays of primitives as lists.
+    """
+
+    def __init__(self, memory, library):
+        from gen.msg.layout import CLayout
+        self.mem = memory
+        self.library = library
+        self.layout = CLayout(library, "arm64" if memory.arch.name == "r64" else "arm32")
+        self.p = self.layout.pointer
+
+    def sizeof(self, type_name):
+        return self.layout.struct(type_name).size
+
+    def create(self, type_name):
+        """``pkg__msg__Type__create()``: a zeroed struct; return its VA."""
+        return self.mem.malloc(self.sizeof(type_name))
+
+    def _ptr(self, va, value=None):
+        if value is None:
+            return int.from_bytes(self.mem.read(va, self.p), "little")
+        self.mem.write(va, value.to_bytes(self.p, "little"))
+
+    def member(self, type_name, path):
+        """Byte offset of a field path (``"data"``, ``"header.stamp.sec"``)."""
+        offset = 0
+        for part in path.split("."):
+            s = self.layout.struct(type_name)
+            mem = next(m for m in s.members if m.name == part)
+            offset += mem.offset
+            type_name = getattr(mem.type, "typename", None)
+        return offset
+
+    def set_sequence(self, va, elem_size, count):
+        """``ROS_MESSAGE_SET_SIZE``: reallocate the sequence at ``va`` for ``count`` elements
+        (keeping the old contents), size = capacity = count; return the data pointer."""
+        old, size, cap = self._ptr(va), self._ptr(va + self.p), self._ptr(va + 2 * self.p)
+        if count != cap:
+            data = self.mem.malloc(count * elem_size) if count else 0
+            if old and data:
+                self.mem.write(data, self.mem.read(old, min(size, count) * elem_size))
+            self._ptr(va, data)
+        self._ptr(va + self.p, count)
+        self._ptr(va + 2 * self.p, count)
+        return self._ptr(va)
+
+    def _primitive_size(self, name):
+        return struct.calcsize("<" + _FMT[name])
+
+    def write(self, va, type_name, value):
+        from gen.msg.model import Array, Named, Primitive, Sequence
+        for m in self.layout.struct(type_name).members:
+            if m.name == "structure_needs_at_least_one_member":
+                continue
+            v = value[m.name]
+            at = va + m.offset
+            t = m.type
+            if isinstance(t, Named):
+                self.write(at, t.typename, v)
+            elif isinstance(t, Primitive) and t.is_string:
+                raw = v.encode() + b"\0"
+                buf = self.mem.malloc(len(raw))
+                self.mem.write(buf, raw)
+                self._ptr(at, buf)
+                self._ptr(at + self.p, len(raw) - 1)
+                self._ptr(at + 2 * self.p, len(raw))
+            elif isinstance(t, Primitive):
+                self.mem.write(at, struct.pack("<" + _FMT[t.name], v))
+            elif isinstance(t, (Sequence, Array)):
+                raw = self._pack_elements(t.element, v)
+                if isinstance(t, Array):
+                    self.mem.write(at, raw)
+                else:
+                    n = len(v)
+                    buf = self.mem.malloc(max(len(raw), 1)) if n else 0
+                    if n:
+                        self.mem.write(buf, raw)
+                    self._ptr(at, buf)
+                    self._ptr(at + self.p, n)
+                    self._ptr(at + 2 * self.p, n)
+            else:
+                raise TypeError(f"cannot store field {m.name} of {type_name}")
+
+    def _pack_elements(self, element, v):
+        from gen.msg.model import Primitive
+        if not isinstance(element, Primitive) or element.is_string:
+            raise TypeError("the co-simulation model stores sequences of primitives only")
+        if isinstance(v, (bytes, bytearray)):
+            return bytes(v)
+        return struct.pack(f"<{len(v)}{_FMT[element.name]}", *v)
+
+    def read(self, va, type_name):
+        from gen.msg.model import Array, Named, Primitive
+        out = {}
+        for m in self.layout.struct(type_name).members:
+            if m.name == "structure_needs_at_least_one_member":
+                continue
+            at = va + m.offset
+            t = m.type
+            if isinstance(t, Named):
+                out[m.name] = self.read(at, t.typename)
+            elif isinstance(t, Primitive) and t.is_string:
+                ptr, n = self._ptr(at), self._ptr(at + self.p)
+                out[m.name] = self.mem.read(ptr, n).decode() if n else ""
+            elif isinstance(t, Primitive):
+                raw = self.mem.read(at, self._primitive_size(t.name))
+                out[m.name] = struct.unpack("<" + _FMT[t.name], raw)[0]
+            else:
+                esz = self._primitive_size(t.element.name)
+                if isinstance(t, Array):
+                    ptr, n = at, t.length
+                else:
+                    ptr, n = self._ptr(at), self._ptr(at + self.p)
+                raw = self.mem.read(ptr, n * esz) if n else b""
+                if t.element.name in BYTE_ELEMENTS:
+                    out[m.name] = raw
+                else:
+                    out[m.name] = list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
+        return out

