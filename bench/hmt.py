@@ -1,4 +1,4 @@
-"""Hardware-mapped topic benchmark (issue: foundation §6; spec hmt.md §7).
+"""Hardware-mapped topic benchmark (issue: foundation §6; docs/topics.md).
 
 All numbers are simulated clock cycles of the real :class:`hdl.dds.Topic` RTL under Verilator
 (generator and checker in :mod:`tb.topic_traffic`), converted to time at 100 MHz, the clock of
@@ -16,7 +16,7 @@ from tb.topic_traffic import TOPOLOGIES, WIDTHS, build_topic_bench_top
 
 CLOCK_MHZ = 100
 
-#: fpgaDDS Table I (hmt.md §7): message bytes -> (CycloneDDS ms, fpgaDDS ms); the sizes are
+#: fpgaDDS Table I (docs/topics.md): message bytes -> (CycloneDDS ms, fpgaDDS ms); the sizes are
 #: square RGB images 32^2..1024^2 x 3 bytes.
 PAPER_TABLE_I = {
     3 * 32 ** 2: ("3 kB", 0.06, "<0.01"),
@@ -156,6 +156,7 @@ def markdown(results, resources):
     lines.append(f"| target: verilog-axis axis_arb_mux + axis_broadcast, 4:4 64 b (issue) | "
                  f"{RESOURCE_TARGET['LUT']} | - | {RESOURCE_TARGET['FF']} | - | 0 | - | - |")
     lines.append("")
+    lines += ["", "![plot](hmt_transfer_time.png)", ""]
     return "\n".join(lines)
 
 

@@ -1,5 +1,5 @@
-"""Streaming kernels benchmark (issue: kernels; spec kernels.md, reconos.md §9, finemb.md
-§6): cycles per 640x480 frame or per item under Verilator at 100 MHz beside the papers'
+"""Streaming kernels benchmark (issue: kernels; docs/kernels.md, docs/reconos.md,
+docs/kernels.md): cycles per 640x480 frame or per item under Verilator at 100 MHz beside the papers'
 numbers and the issue's targets; yosys synth_xilinx resources of each kernel."""
 
 import json
@@ -119,7 +119,7 @@ def markdown(results, resources):
         lines.append(f"| {r['label']} | {cycles} | {r.get('first_frame_cycles', '-')} | "
                      f"{r['ms']:.5f} | {target} | {paper} |")
     lines += resource_table(resources, "label", "kernel", detail=", 640x480 maximum frame")
-    lines += ["", "Anchors (kernels.md §9): Vitis Vision xFSobel 3x3 1 px/clk 616 LUT, 609 FF, "
+    lines += ["", "Anchors (docs/kernels.md): Vitis Vision xFSobel 3x3 1 px/clk 616 LUT, 609 FF, "
               "3 BRAM18; 8 px/clk 1892 LUT; ReconROS Sobel thread 13 625 LUT, 10 BRAM "
               "(Table 5).", ""]
     return "\n".join(lines)

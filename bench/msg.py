@@ -1,5 +1,5 @@
-"""Message (de)serializer benchmark (issue: ROS messages in hardware §6; specs ros_wire.md §2,
-hmt.md §5.2).
+"""Message (de)serializer benchmark (issue: ROS messages in hardware §6; docs/messages.md,
+docs/topics.md).
 
 Simulated cycles of the generated :class:`hdl.msg.Serializer` / :class:`hdl.msg.Deserializer`
 RTL under Verilator at full rate (no idle, no backpressure), each output checked against
@@ -34,7 +34,7 @@ CASES = [
     ("uint32[2048]", SORTDATA, "reconros", 64, SEQ_2048),
 ]
 
-#: hmt.md §5.2 [derived]: ReconROS 640x480 bgr8 Image = 115 217 beats = 1.152 ms at 100 MHz
+#: docs/topics.md [derived]: ReconROS 640x480 bgr8 Image = 115 217 beats = 1.152 ms at 100 MHz
 RECONROS_IMAGE_BEATS = 115217
 
 
@@ -101,7 +101,7 @@ def markdown(results, resources):
             f"{r['deserialize_cycles']} ({r['deserialize_ms']:.4f}) | "
             f"{r['deserialize_bytes_per_cycle']:.3f} ({pct(r, 'deserialize')}) | "
             f"{r['payload_bytes_per_cycle']:.3f} | {r['limit_bytes_per_cycle']} |")
-    lines += ["", f"ReconROS framing (one 64-bit beat per primitive, hmt.md §5.2): the spec "
+    lines += ["", f"ReconROS framing (one 64-bit beat per primitive, docs/topics.md): the spec "
               f"derives {RECONROS_IMAGE_BEATS} beats = "
               f"{RECONROS_IMAGE_BEATS / (CLOCK_MHZ * 1e3):.3f} ms for the 640x480 bgr8 Image.",
               ]

@@ -1,10 +1,11 @@
-"""Network engine benchmark (issue: SiTCP-like engine; spec net.md §3, §4, seed paper
+"""Network engine benchmark (issue: SiTCP-like engine; docs/network.md, seed paper
 Figs. 12-14): goodput of long transfers in each direction against a peer model that
 acknowledges like Linux, the seed paper's image transfers through the TCPROS node, in
 simulated cycles at 125 MHz; yosys synth_xilinx resources of one engine and of the TCPROS
 endpoints beside SiTCP's and LiteEth's published figures."""
 
 import json
+from pathlib import Path
 
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
@@ -17,6 +18,8 @@ from tb.net_bench_tops import (
 )
 
 CLOCK_MHZ = 125
+#: where the captures go (the first 400 frames each way of each run, simulated time stamps)
+RESULTS = Path(__file__).resolve().parent / "results"
 CEILING_MBPS = 949.3
 MB = 1024 * 1024
 
@@ -44,6 +47,7 @@ def measure(log=print):
         run_bench("bench.net_bench", "net_bench", case, top, "verilator", quiet=True,
                   build=build_net_bench_top, testcase="measure_tcp",
                   extra_env={"ROSGATE_BENCH_OUT": str(out),
+                             "ROSGATE_BENCH_PCAP": str(RESULTS / f"net_{case}.pcap"),
                              "ROSGATE_BENCH_CASE": json.dumps(dict(bytes=nbytes, peer=peer))})
         results["tcp"][case] = dict(json.loads(out.read_text()), label=label)
     out = SIM_BUILD / "bench-net-images.json"
@@ -51,6 +55,7 @@ def measure(log=print):
     run_bench("bench.net_bench", "ros1_bench", "images", ROS1_BENCH_CONFIG,
               "verilator", quiet=True, build=build_ros1_bench_top, testcase="measure_image",
               extra_env={"ROSGATE_BENCH_OUT": str(out),
+                         "ROSGATE_BENCH_PCAP": str(RESULTS / "net_tcpros_images.pcap"),
                          "ROSGATE_BENCH_CASE": json.dumps(dict(images=IMAGES))})
     results["image"] = json.loads(out.read_text())
     return results
@@ -119,7 +124,7 @@ def markdown(results, resources):
                   "175 ms (Fig. 12); receive-dominated FPGA 57 ms, PC-PC 67 ms (Fig. 13); "
                   "send-dominated FPGA 116 ms, PC-ARM 106 ms (Fig. 14).", ""]
     lines += resource_table(resources, "block", "block")
-    lines += ["", "Anchors (net.md §4): seed paper Table 1, two SiTCP + pub/sub logic + FIFOs on "
+    lines += ["", "Anchors (docs/network.md): seed paper Table 1, two SiTCP + pub/sub logic + FIFOs on "
               "a Spartan-6: 7110 LUT, 9035 registers, 129 RAMB16; LiteEth UDP core (MAC + ARP + "
               "ICMP + IP + UDP, GMII): 1938 LUT / 2119 FF; verilog-ethernet udp_complete + "
               "eth_mac_1g: about 2538 LUT / 3086 FF before FIFOs; COM-5502 TCP_SERVER (1 "
@@ -151,6 +156,11 @@ def markdown(results, resources):
               "4235, 4425, 4207 and 4200 LUT; writing the timer branches' shared condition "
               "once (the same logic) then gave 4174 LUT, the figure above, and TcpSession "
               "alone 2032 (measured 2026-11-22).", ""]
+    lines += ["", "![plot](net_image_latency.png)", "",
+              "Captures of each run (the first 400 frames each way, simulated time stamps; "
+              "open with Wireshark): [net_linux_64k.pcap](net_linux_64k.pcap), "
+              "[net_seed_16k.pcap](net_seed_16k.pcap), "
+              "[net_tcpros_images.pcap](net_tcpros_images.pcap).", ""]
     return "\n".join(lines)
 
 

@@ -46,6 +46,26 @@ def pattern(n, start=0):
     return pattern_bytes(start, n)
 
 
+class Capture:
+    """The first ``limit`` frames each way, as a pcap file Wireshark opens, stamped with
+    simulated time (``PCAP`` in the environment names the file; none without it)."""
+
+    def __init__(self, path, limit=400):
+        from scapy.utils import PcapWriter
+        self.writer = PcapWriter(str(path), linktype=1, nano=True, sync=False) if path else None
+        self.left = {"in": limit, "out": limit}
+
+    def record(self, direction, frame, cycle):
+        if self.writer is None or not self.left[direction]:
+            return
+        self.left[direction] -= 1
+        ns = cycle * CLOCK_NS
+        self.writer.write_packet(bytes(frame), sec=ns // 10**9, usec=ns % 10**9)
+        if not any(self.left.values()):
+            self.writer.close()
+            self.writer = None
+
+
 class WordLink:
     """Python side of :class:`~tb.net_bench_tops.GmiiWordPeer`: frames in and out as words; the
     coroutine wakes once per word while frames move and every ``idle`` cycles otherwise."""
@@ -59,10 +79,12 @@ class WordLink:
         self.rx = bytearray()
         self.cycle = 0
         self.hooks = []
+        self.capture = Capture(os.environ.get("ROSGATE_BENCH_PCAP"))
         dut.peer_in_tvalid.value = 0
         dut.peer_out_tready.value = 0
 
     def send(self, frame):
+        self.capture.record("in", bytes(frame).ljust(60, b"\0"), self.cycle)
         frame = bytes(frame).ljust(60, b"\0")
         frame += zlib.crc32(frame).to_bytes(4, "little")
         chunks = [frame[i:i + WORD_BYTES] for i in range(0, len(frame), WORD_BYTES)]
@@ -102,6 +124,7 @@ class WordLink:
                     frame, self.rx = bytes(self.rx), bytearray()
                     assert zlib.crc32(frame[:-4]).to_bytes(4, "little") == frame[-4:], \
                         "engine frame with a bad FCS"
+                    self.capture.record("out", frame[:-4], self.cycle)
                     self.on_frame(frame[:-4], self.cycle)
             for hook in self.hooks:
                 hook(self.cycle)
@@ -161,7 +184,7 @@ class BenchPeer:
 
 
 class LinkRbcp(RbcpClient):
-    """:class:`gen.ros1.RbcpClient` whose datagrams a cocotb coroutine carries over the bench
+    """:class:`host.ros1.RbcpClient` whose datagrams a cocotb coroutine carries over the bench
     link, so software code (``EndpointClient``) runs unchanged in a thread."""
 
     def __init__(self, peer):

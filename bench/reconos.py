@@ -1,5 +1,5 @@
-"""ReconOS infrastructure benchmark (issue: ReconOS-compatible infrastructure §4; spec
-reconos.md §5, §10).
+"""ReconOS infrastructure benchmark (issue: ReconOS-compatible infrastructure §4;
+docs/docs/reconos.md).
 
 * MEMIF bandwidth: copies of 4 B .. 10 MiB by a memory-test thread through the MEMIF engine,
   MMU (16-entry TLB, page walks included) and AXI4 controller, into cocotbext-axi's AxiRam
@@ -26,6 +26,8 @@ from tb.harness import SIM_BUILD, run_bench
 
 CLOCK_MHZ = 100
 SIZES = [4, 8192, 1 << 20, 6 << 20, 10 << 20]
+#: lengths of the single read requests (MEMIF bursts never exceed 256 B)
+BURSTS = [4, 8, 16, 32, 64, 128, 256]
 LABELS = {4: "4 B", 8192: "8 KiB", 1 << 20: "1 MiB", 6 << 20: "6 MiB", 10 << 20: "10 MiB"}
 #: P-RR Table 4, raw copy columns (ms): SW (ARM), HW (ReconROS HLS thread, 100 MHz)
 PAPER_RAW_COPY = {4: (0.01, 0.01), 8192: (0.03, 0.13), 1 << 20: (3.59, 12.81),
@@ -38,12 +40,14 @@ def measure_copies(arch, log=print):
     out = SIM_BUILD / f"bench-reconos-{arch}.json"
     log(f"  simulating copies {', '.join(LABELS.get(s, f'{s} B') for s in SIZES)} on {arch} "
         f"(Verilator)...")
+    bursts = [n for n in BURSTS if n >= a.word_bytes]
     run_bench("bench.reconos_bench", "reconos", f"bench-memtest_{arch}",
               {"arch": arch, "threads": [{"kind": "memtest", "h_cmd": 0, "h_result": 1}]},
               "verilator", quiet=True,
-              extra_env={"ROSGATE_BENCH_CASE": json.dumps({"sizes": sizes}),
+              extra_env={"ROSGATE_BENCH_CASE": json.dumps({"sizes": sizes, "bursts": bursts}),
                          "ROSGATE_BENCH_OUT": str(out)})
-    rows = json.loads(out.read_text())
+    measured = json.loads(out.read_text())
+    rows = measured["copies"]
     for row, nominal in zip(rows, SIZES):
         moved = 2 * row["bytes"]
         row.update(
@@ -53,7 +57,10 @@ def measure_copies(arch, log=print):
             op_efficiency=moved / row["op_cycles"] / a.word_bytes,
             op_ms=row["op_cycles"] / (CLOCK_MHZ * 1e3),
             paper_sw_ms=PAPER_RAW_COPY[nominal][0], paper_hw_ms=PAPER_RAW_COPY[nominal][1])
-    return rows
+    for row in measured["bursts"]:
+        row.update(arch=arch, word_bytes=a.word_bytes,
+                   bytes_per_cycle=row["length"] / row["bus_cycles"])
+    return rows, measured["bursts"]
 
 
 class _OsifBench(wiring.Component):
@@ -136,12 +143,14 @@ def measure_resources(log=print):
 
 
 def measure(log=print):
-    copies = []
+    copies, bursts = [], []
     for arch in ("r64", "r32"):
-        copies += measure_copies(arch, log)
+        rows, reads = measure_copies(arch, log)
+        copies += rows
+        bursts += reads
     log("  OS-call cycles (amaranth.sim)...")
     calls = {arch: measure_calls(arch) for arch in ("r64", "r32")}
-    return {"clock_mhz": CLOCK_MHZ, "copies": copies, "calls": calls}
+    return {"clock_mhz": CLOCK_MHZ, "copies": copies, "bursts": bursts, "calls": calls}
 
 
 def markdown(results, resources):
@@ -162,7 +171,17 @@ def markdown(results, resources):
             f"{r['bus_cycles']} | {r['bus_bytes_per_cycle']:.3f} | "
             f"{100 * r['bus_efficiency']:.1f} % / {100 * r['op_efficiency']:.1f} % | "
             f"{r['paper_sw_ms']} / {r['paper_hw_ms']} |")
-    lines += ["", "## OS calls (hardware side, delegate answering at once)", "",
+    lines += ["", "## Single read requests (MEMIF bursts)", "",
+              "One raw read request of each length at a 256-B boundary, from the first AXI "
+              "address handshake to the last data beat (MMU hit: the TLB is warm).", "",
+              "| arch | burst bytes | bus cycles | bytes/cycle | share of one word/cycle |",
+              "|---|---|---|---|---|"]
+    for r in results.get("bursts", []):
+        lines.append(f"| {r['arch']} | {r['length']} | {r['bus_cycles']} | "
+                     f"{r['bytes_per_cycle']:.2f} | "
+                     f"{100 * r['bytes_per_cycle'] / r['word_bytes']:.0f} % |")
+    lines += ["", "![MEMIF throughput](memif_throughput.png)", "",
+              "## OS calls (hardware side, delegate answering at once)", "",
               "| call | command | words written | replies | cycles r64 | cycles r32 |",
               "|---|---|---|---|---|---|"]
     r64, r32 = results["calls"]["r64"], results["calls"]["r32"]

@@ -1,6 +1,7 @@
 """cocotb side of ``make bench`` for the ReconOS memory path: copies through the MEMIF engine
 of a memory-test thread (one slot, zero-wait AxiRam), each checked byte for byte; cycles of the
-whole operation and of the AXI activity (first address handshake to last response)."""
+whole operation and of the AXI activity (first address handshake to last response); and single
+raw read requests of each burst length, their data checked."""
 
 import json
 import os
@@ -10,7 +11,7 @@ import cocotb
 from cocotb.triggers import FallingEdge
 
 from host.reconos import PAGE
-from tb.reconos_memory_tb import COPY, MemoryTB
+from tb.reconos_memory_tb import COPY, READ, MemoryTB
 
 
 class BusWatch:
@@ -70,5 +71,16 @@ async def measure(dut):
                         "bus_cycles": watch.last - watch.first + 1, "beats": watch.beats})
         dut._log.info("copy %d B: %d cycles (bus %d, %d beats)", size, cycles,
                       records[-1]["bus_cycles"], watch.beats)
+    bursts = []
+    for length in json.loads(os.environ["ROSGATE_BENCH_CASE"]).get("bursts", []):
+        # one raw read request of ``length`` bytes at a 256-B boundary (never split)
+        watch.reset()
+        words = -(-length // tb.arch.word_bytes)
+        got, _ = await tb.op(0, READ, src, length, results=words)
+        assert b"".join(w.to_bytes(tb.arch.word_bytes, "little") for w in got) == \
+            mem.read(src, words * tb.arch.word_bytes), f"read of {length} B differs"
+        bursts.append({"length": length, "bus_cycles": watch.last - watch.first + 1,
+                       "beats": watch.beats})
+        dut._log.info("read burst %d B: %d bus cycles", length, bursts[-1]["bus_cycles"])
     with open(os.environ["ROSGATE_BENCH_OUT"], "w") as f:
-        json.dump(records, f)
+        json.dump({"copies": records, "bursts": bursts}, f)

@@ -33,7 +33,7 @@ def resource_table(rows, label, title, *, detail="", extra=()):
     from gen.export.resources import YOSYS_COMMAND
     columns = RESOURCE_COLUMNS + tuple(extra)
     lines = ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`{detail}; LUT = LUT1..LUT6 as in "
-             "spec net.md §4, INV cells apart: see gen/export/resources.py)", "",
+             "docs/network.md, INV cells apart: see gen/export/resources.py)", "",
              "| " + " | ".join([title] + [c for c, _ in columns]) + " |",
              "|" + "---|" * (len(columns) + 1)]
     for r in rows:

@@ -1,4 +1,5 @@
-"""``make bench``: every benchmark, results to bench/results/ (JSON + Markdown).
+"""``make bench``: every benchmark, results to bench/results/ (JSON, Markdown, PNG plots and,
+for the network engine, pcap captures).
 
 ``--resources-only`` (``make bench-resources``) keeps the cycle results of the last run and
 re-measures only the yosys resource estimates; bench names (``hmt``, ``net``, ...) select
@@ -12,6 +13,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench import hmt, kernels, msg, net, reconos, reconos_apps  # noqa: E402
+from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -43,7 +45,7 @@ def main(argv=None):
         name = module.__name__.rsplit(".", 1)[-1]
         if only and name not in only:
             continue
-        print(f"rosgate bench: {title}")
+        print(f"rosgate bench: {title}", flush=True)
         if resources_only:
             # the cycle results of the last full run, with fresh yosys estimates
             saved = json.loads((RESULTS / f"{name}.json").read_text())
@@ -52,8 +54,10 @@ def main(argv=None):
             results = module.measure()
         resources = module.measure_resources()
         print(module.write_results(results, resources, RESULTS))
-        print(f"wrote {RESULTS / (name + '.json')} and {RESULTS / (name + '.md')} "
-              f"({time.monotonic() - start:.0f} s)")
+        plots = write_plots([name], log=lambda _: None)
+        print(f"wrote {RESULTS / (name + '.json')}, {RESULTS / (name + '.md')}"
+              f"{''.join(', ' + str(p) for p in plots)} ({time.monotonic() - start:.0f} s)",
+              flush=True)
     return 0
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""ReconROS ``build.cfg`` project files, read unchanged (spec reconos.md §7, hmt.md §3).
+"""ReconROS ``build.cfg`` project files, read unchanged (docs/reconos.md, docs/topics.md).
 
 :func:`load_project` parses a project file the way ReconROS' ``project.py`` does
 (``RawConfigParser`` with case-sensitive keys, sections matched by prefix, arguments split on
@@ -12,10 +12,11 @@ What rosgate derives from the file:
   ``rosactionmsg`` into ``_goal_req``, ``_result_res``, ``_feedback`` in place, range groups
   ``[ResourceGroup@G(a:b)]`` into ``G_a``..``G_b`` with ``%`` replaced by the index;
 * each thread's resource list (its handles) = the resources of its groups in global parse
-  order, hardware-topic endpoints excluded (§7.3); thread ids: ``ReconosThread`` sections in
+  order, hardware-topic endpoints excluded (docs/build-cfg.md); thread ids: ``ReconosThread``
+  sections in
   file order, then ``ROSGateway`` sections;
 * hardware topics: every ``rossub``/``rospub`` marked ``hw`` grouped by topic name, with the
-  topology of hmt.md §2; a gateway subscribes and publishes its ``HWTopic``.
+  topology of docs/topics.md; a gateway subscribes and publishes its ``HWTopic``.
 
 The partial-reconfiguration ``Reconf`` thread is not generated: rosgate builds static systems
 (``PartialReconfiguration = true`` is refused with a clear error).
@@ -285,7 +286,7 @@ class Thread:
 
     @property
     def handles(self):
-        """Thread-local handle of each resource, by C name and by bare name (§7.3)."""
+        """Thread-local handle of each resource, by C name and by bare name (docs/build-cfg.md)."""
         out = {}
         for h, r in enumerate(self.resources):
             out[r.c_name] = h
@@ -430,7 +431,7 @@ def _message_type(args, kind, where):
     if sub != expected:
         raise ConfigError(where, f"expected {expected!r} as the second argument of {kind}, "
                                  f"found {sub!r}")
-    if typ == "U_Int32":       # ReconROS' naming quirk (spec §7.2)
+    if typ == "U_Int32":       # ReconROS' naming quirk (docs/build-cfg.md)
         typ = "UInt32"
     return f"{pkg}/{sub}/{typ}"
 
@@ -597,7 +598,7 @@ def parse_project(text, path="build.cfg", *, msg_dirs=None):
                     raise ConfigError(ep.where, f"hardware topic {topic.name!r} runs on the "
                                                 f"system clock {sysclk}, but slot {slot.name} "
                                                 f"of thread {ep.thread.name} is on "
-                                                f"{slot.clock.name} (hmt.md §2)")
+                                                f"{slot.clock.name} (docs/topics.md)")
     return project
 
 
@@ -656,7 +657,7 @@ def _hw_endpoint(key, kind, rest, group, where):
     if hw_at != 3 or (kind == "rospub" and len(rest) != 4) or len(rest) > 5:
         raise ConfigError(where, f"expected '{kind}, node, pkg/Type, \"topic\", hw"
                                  f"{' [, depth]' if kind == 'rossub' else ''}' for a hardware "
-                                 f"topic (hmt.md §3); found {', '.join([kind] + rest)}")
+                                 f"topic (docs/topics.md); found {', '.join([kind] + rest)}")
     msgtype = rest[1]
     if msgtype.count("/") != 1:
         raise ConfigError(where, f"a hardware topic's message is 'pkg/Type', found {msgtype!r}")
@@ -718,7 +719,7 @@ def _thread_resources(thread, resources):
 
 
 def _gateway(sec, file, tid, slots, resources, groups):
-    """A ``[ROSGateway@N]``: group ``N_ressourcegroup`` (hmt.md §3)."""
+    """A ``[ROSGateway@N]``: group ``N_ressourcegroup`` (docs/topics.md)."""
     name, _ = _name_after_at(sec, file, ranged=False)
     tslots = _match_slots(sec, "Slot", slots, file)
     msgtype = sec.values["MsgType"].strip()

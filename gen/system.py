@@ -1,9 +1,9 @@
-"""System assembly: a parsed project (:mod:`gen.config`) to one Amaranth design (spec
-reconos.md §1, §8; hmt.md §1-3).
+"""System assembly: a parsed project (:mod:`gen.config`) to one Amaranth design (
+docs/docs/reconos.md; docs/topics.md).
 
 Discovery as in the fpgaDDS paper: each ReconOS thread is built into its slots, every
 hardware topic becomes a :class:`~hdl.dds.Topic` whose topology follows from its publisher
-and subscriber counts (hmt.md §2) with the subscribers' FIFOs, and the ReconOS
+and subscriber counts (docs/topics.md) with the subscribers' FIFOs, and the ReconOS
 infrastructure is sized for the slots.
 
 Thread implementations
@@ -35,7 +35,7 @@ from .config import ConfigError, Location, project_library
 __all__ = ["HW_TOPIC_STREAM", "ThreadContext", "SystemTop", "thread_module_path",
            "build_thread", "build_system", "thread_sources"]
 
-#: a hardware topic's stream: 64-bit beats with TKEEP and a 1-bit TUSER (hmt.md §2)
+#: a hardware topic's stream: 64-bit beats with TKEEP and a 1-bit TUSER (docs/topics.md)
 HW_TOPIC_STREAM = AXIStreamSignature(64, user_width=1)
 
 

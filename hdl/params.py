@@ -30,7 +30,8 @@ class ParameterError(ValueError):
 
 
 def check_int(name, value, lo, hi=None, *, multiple_of=1):
-    """Return ``value`` if it is an ``int`` in ``lo..hi`` (inclusive) and a multiple of ``multiple_of``."""
+    """Return ``value`` if it is an ``int`` in ``lo..hi`` (inclusive) and a multiple of
+    ``multiple_of``."""
     if hi is None:
         allowed = f"an integer >= {lo}"
     else:

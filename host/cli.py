@@ -388,7 +388,8 @@ def _run_report(args):
             rows.append((s.thread.core_name, f"thread {s.thread.name}", c))
     folder = _default_out(p, "report")
     print(f"{p.name}: resources per core from yosys `{YOSYS_COMMAND}` (estimates)", flush=True)
-    print("| core | what | LUT | FF | LUTRAM | BRAM18 equiv. | DSP |\n|---|---|---|---|---|---|---|")
+    print("| core | what | LUT | FF | LUTRAM | BRAM18 equiv. | DSP |\n"
+          "|---|---|---|---|---|---|---|")
     for name, what, component in rows:
         text, _ = export_verilog(component, name)
         vfile = folder / f"{name}.v"

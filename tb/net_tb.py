@@ -1,4 +1,4 @@
-"""Shared cocotb harness of the network-engine benches (spec net.md §5.2): GMII models from
+"""Shared cocotb harness of the network-engine benches (docs/network.md): GMII models from
 cocotbext-eth, scapy frames, an RBCP register-bus model and counter decoding."""
 
 import logging
@@ -23,12 +23,12 @@ __all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_cou
 
 CLOCK_NS = 8
 #: The network benches' configuration: one build per simulator, shared by the scripted and
-#: the Linux benches (the address is the TAP namespace's; net.md §5.2).
+#: the Linux benches (the address is the TAP namespace's; docs/network.md).
 #: the engine's and the peer's addresses (RFC 2544 block; on the TAP inside the namespace)
 ENGINE_IP = "198.18.0.16"
 PEER_IP = "198.18.0.1"
 #: The ISS clock starts 12,000 below 2**32 at reset, so a connection opened soon after a
-#: reset sends across 2**32 within its first 12 KB (net.md §1.5: tests wrap 2**32).
+#: reset sends across 2**32 within its first 12 KB (docs/network.md: tests wrap 2**32).
 NET_CONFIGS = {"stack": dict(ip=ENGINE_IP, sessions=2, tx_depth=4096, rx_depth=4096,
                              rto_us=200, msl_us=20, arp_retry_us=40, iss_seed=2**32 - 12_000)}
 #: The same engine with 32-bit user streams (``user_width``), for the benches of the user side.

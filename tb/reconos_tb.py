@@ -49,9 +49,10 @@ BAD_PROGRAM = [["sem_post", [1]], ["sem_post", [2]], ["command", [0x123]]]
 
 def _system(arch):
     """One system per architecture for every ``reconos`` bench module (one build each):
-    0 echo node (in its own clock: the slot's FIFOs cross clock domains), 1 copy node, 2 a thread making bad calls, 3 and 4 memory-test threads,
+    0 echo node (in its own clock: the slot's FIFOs cross clock domains), 1 copy node, 2 a
+    thread making bad calls, 3 and 4 memory-test threads,
     5 the OS-call sequencer of the compatibility bench."""
-    # sensor_msgs/Image.data (spec §6: 72 on arm64, 48 on arm32)
+    # sensor_msgs/Image.data (docs/reconos.md: 72 on arm64, 48 on arm32)
     offset = struct_offsets(arch, "sensor_msgs/msg/Image")["data"]
     return {"arch": arch, "async_slots": [0], "threads": [
         {"kind": "echo", "h_sub": 1, "h_pub": 2, "h_msg": 3},
@@ -69,7 +70,7 @@ def system_configs():
 
 
 def struct_offsets(arch, type_name, library=None):
-    """Member offsets of ``type_name`` in the rosidl C layout of ``arch`` (spec §6)."""
+    """Member offsets of ``type_name`` in the rosidl C layout of ``arch`` (docs/reconos.md)."""
     from gen.msg import MessageLibrary
     from gen.msg.layout import CLayout
     library = library or MessageLibrary(EXAMPLE_MESSAGES, store="ros2_humble")

@@ -1,6 +1,7 @@
 # amaranth: UnusedElaboratable=no
 """Golden models and parameters of the kernels: the models against the spec's own numbers
-(finemb.md §6.2 PID vectors, reconos.md §9.3 fixed-point constants, kernels.md §3 tables),
+(docs/docs/kernels.md PID vectors, docs/docs/reconos.md fixed-point constants,
+docs/docs/kernels.md tables),
 OpenCV's border modes, and parameter errors that name the bad value."""
 
 import numpy as np

@@ -1,9 +1,9 @@
-"""Bench of the exported ``msg_codec`` top: hdl.msg.Serializer and Deserializer (ros_wire.md
-§1.2, §2; hmt.md §5; issue: ROS messages in hardware).
+"""Bench of the exported ``msg_codec`` top: hdl.msg.Serializer and Deserializer
+(docs/messages.md; docs/topics.md; issue: ROS messages in hardware).
 
 Golden models: rosbags serializes every random message (CDR with the ROS 2 store, ROS 1 with
 the noetic store); the ReconROS framing comes from :func:`tb.models.msgstream.reconros_beats`,
-written from hmt.md §5. Every input port gets random idle, every output port random
+written from docs/topics.md. Every input port gets random idle, every output port random
 backpressure.
 """
 

@@ -1,5 +1,5 @@
-"""Stream plans (gen.msg.plan) against rosbags and the spec (ros_wire.md §1.2, §2.3; hmt.md
-§5): executing a plan in Python must give rosbags' bytes (CDR, ROS 1) or the ReconROS model's."""
+"""Stream plans (gen.msg.plan) against rosbags and the spec (docs/messages.md; docs/topics.md):
+executing a plan in Python must give rosbags' bytes (CDR, ROS 1) or the ReconROS model's."""
 
 import random
 
@@ -96,7 +96,7 @@ def test_ros1_image_plan_matches_spec_example(ros1):
 
 
 def test_reconros_flattening_of_image_matches_spec(ros2):
-    """hmt.md §5.1: primitives height, width, is_bigendian, step, header.stamp.sec,
+    """docs/topics.md: primitives height, width, is_bigendian, step, header.stamp.sec,
     header.stamp.nanosec; 8-bit arrays encoding, data, header.frame_id."""
     library, _ = ros2
     plan = stream_plan(library, "sensor_msgs/msg/Image", "reconros")
@@ -112,7 +112,7 @@ def test_reconros_flattening_of_image_matches_spec(ros2):
 
 
 def test_reconros_640x480_bgr8_image_is_115217_beats(ros2):
-    """hmt.md §5.2 [derived]: 2 + 6 + 3 x 2 + 1 + 115 200 + 1 + 1 beats."""
+    """docs/topics.md [derived]: 2 + 6 + 3 x 2 + 1 + 115 200 + 1 + 1 beats."""
     library, _ = ros2
     plan = stream_plan(library, "sensor_msgs/msg/Image", "reconros")
     value = {"header": {"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "cam"},

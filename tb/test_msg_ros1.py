@@ -1,4 +1,4 @@
-"""ROS 1 md5sums and message definitions (gen.msg.ros1) against ros_wire.md §1.3 and rosbags'
+"""ROS 1 md5sums and message definitions (gen.msg.ros1) against docs/messages.md and rosbags'
 independent generator."""
 
 import pytest
@@ -84,7 +84,7 @@ def test_message_definition_of_parsed_message(ros1):
 
 
 def test_connection_header_wiki_example():
-    """ros_wire.md §1.1: the ROS wiki's /chatter header, byte for byte (176-byte body)."""
+    """docs/messages.md: the ROS wiki's /chatter header, byte for byte (176-byte body)."""
     from gen.msg.ros1 import decode_connection_header, encode_connection_header, frame_message
     fields = [("message_definition", "string data\n\n"),
               ("callerid", "/rostopic_4767_1316912741557"), ("latching", "1"),

@@ -1,4 +1,4 @@
-"""CDR and ROS 1 encodings (gen.msg.wire) byte for byte against rosbags (ros_wire.md §1.2, §2)."""
+"""CDR and ROS 1 encodings (gen.msg.wire) byte for byte against rosbags (docs/messages.md)."""
 
 import random
 from pathlib import Path

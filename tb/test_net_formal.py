@@ -1,4 +1,4 @@
-"""Formal checks of the network engine's header path (spec net.md §5.2 "Unit": "yowasp-sby:
+"""Formal checks of the network engine's header path (docs/network.md "Unit": "yowasp-sby:
 no read past frame end, no dead FSM state").
 
 * :class:`FrameParser`, fed any byte stream shaped like :class:`GmiiRx`'s output: payload
@@ -227,7 +227,7 @@ class RbcpServerProperty(Elaboratable):
     """Strobes only for a well-formed request inside a window, at its addresses in order;
     buffer writes only to the reply's flag byte and data bytes."""
 
-    #: the stack's windows with the default user window (net.md §7.2)
+    #: the stack's windows with the default user window (docs/network.md)
     WINDOWS = ((0, 0x10000), (GLOBAL_BASE, 0x10000))
 
     def elaborate(self, platform):
@@ -264,7 +264,7 @@ class RbcpServerProperty(Elaboratable):
         with m.Elif(bus.ack):
             m.d.sync += outstanding.eq(0)
 
-        # the request as net.md §2.2 defines a good one
+        # the request as docs/network.md defines a good one
         end = base + count
         inside = 0
         for wbase, wsize in self.WINDOWS:

@@ -1,4 +1,4 @@
-"""Fuzzing the engine with a live TCP session (spec net.md §5.2 "Fuzzing"): scapy ``fuzz()``
+"""Fuzzing the engine with a live TCP session (docs/network.md "Fuzzing"): scapy ``fuzz()``
 frames per layer and seeded mutations of valid frames (bit flips, truncation at every offset,
 bad IP/UDP lengths, TCP data offsets below 5 or past the end, SYN+FIN, SYN+RST, no flags,
 sequence and acknowledgement numbers at the window edges), interleaved with a transfer in

@@ -1,4 +1,4 @@
-"""The engine against the Linux kernel's own network stack (spec net.md §5.2 "Real peer"):
+"""The engine against the Linux kernel's own network stack (docs/network.md "Real peer"):
 the bench runs the simulator inside a private network namespace whose TAP device carries the
 simulated GMII, and the kernel's ARP, ICMP, UDP and TCP answer through ordinary sockets,
 ``ping`` and sitcpy's RBCP client. Kernel timers run on wall time while the simulation is
@@ -32,7 +32,7 @@ CASES = [("clean", 0.0, 64 * 1024, "stack"), ("megabytes", 0.0, 2 * 1024 * 1024,
          ("impaired", 0.02, 1024 * 1024, "stack"), ("options_off", 0.0, 256 * 1024, "stack"),
          ("wide_user", 0.02, 256 * 1024, "stack_w32")]
 CONFIGS = dict(NET_CONFIGS, **WIDE_USER_CONFIGS)
-#: case -> the namespace's sysctls (net.md §5.2: the kernel without timestamps, SACK and
+#: case -> the namespace's sysctls (docs/network.md: the kernel without timestamps, SACK and
 #: window scaling; the other cases offer all three, which the engine ignores)
 SYSCTLS = {"options_off": {"net.ipv4.tcp_timestamps": 0, "net.ipv4.tcp_sack": 0,
                            "net.ipv4.tcp_window_scaling": 0}}
@@ -231,7 +231,7 @@ async def run_linux_server_engine_client(dut):
 
 @cocotb.test()
 async def run_linux_ipv6_dropped_and_counted(dut):
-    """net.md §5.2: IPv6 stays on in the namespace. A datagram to an unknown link-local
+    """docs/network.md: IPv6 stays on in the namespace. A datagram to an unknown link-local
     neighbour makes the kernel send a neighbour solicitation (to a multicast MAC); the
     engine drops it and whatever else the kernel sends meanwhile, and counts every frame:
     ``frames_in`` grows by exactly the frames the pump delivered, ``not_mine`` by at least

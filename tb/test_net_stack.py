@@ -1,5 +1,5 @@
 """Protocol conformance of the network engine with scapy-built frames through cocotbext-eth
-GMII models (spec net.md §5.2 "Protocol"): ARP, ICMP echo, RBCP (reference replies from
+GMII models (docs/network.md "Protocol"): ARP, ICMP echo, RBCP (reference replies from
 sitcpy's pseudo device), bad frames and their drop counters, TCP against a scripted peer.
 
 Golden models: scapy (frame dissection and checksums), zlib via cocotbext-eth (FCS), sitcpy's
@@ -305,7 +305,7 @@ async def run_tcp_server_scripted(dut):
 
 @cocotb.test()
 async def run_tcp_malformed_options(dut):
-    """net.md §1.3: a malformed option (length below 2, or running past the data offset)
+    """docs/network.md: a malformed option (length below 2, or running past the data offset)
     stops the option walk, the segment is processed all the same and ``tcp_bad_options``
     counts it; an MSS option before the fault is used, one after it is not. Without an MSS
     option the peer's MSS is 536."""
@@ -548,7 +548,7 @@ async def client_open(tb, k, port, seed):
 
 @cocotb.test()
 async def run_tcp_fin_wait_2_timeout(dut):
-    """net.md §1.4: FIN-WAIT-2 does not last forever (the spec proposes a 60 s timer; here
+    """docs/network.md: FIN-WAIT-2 does not last forever (the spec proposes a 60 s timer; here
     2**FIN_WAIT_2_SCALE MSL of silence from the peer). Data still arrives after our FIN and
     restarts the timer; when the peer stays silent the engine sends RST, closes and
     reports TIMEOUT."""
@@ -587,7 +587,7 @@ async def run_tcp_fin_wait_2_timeout(dut):
 
 @cocotb.test()
 async def run_tcp_fin_wait_2_last_cycle(dut):
-    """net.md §1.4: FIN-WAIT-2 ends after 2**FIN_WAIT_2_SCALE MSL *without a segment from the
+    """docs/network.md: FIN-WAIT-2 ends after 2**FIN_WAIT_2_SCALE MSL *without a segment from the
     peer*, also when the peer's segment arrives in the very cycle the timer runs out.
 
     The timer counts ticks, so the last cycle cannot be aimed at from outside; it is swept
@@ -668,7 +668,7 @@ async def run_tcp_fin_wait_2_last_cycle(dut):
 
 @cocotb.test()
 async def run_tcp_close_cases(dut):
-    """net.md §5.2 "close" and "loss" with §1.4's states: a FIN that is not acknowledged is
+    """docs/network.md "close" and "loss" with RFC 9293's states: a FIN that is not acknowledged is
     resent after the RTO; both sides closing at once go FIN-WAIT-1, CLOSING, TIME-WAIT; a
     repeated FIN in TIME-WAIT is acknowledged again and restarts the 2 MSL, after which the
     session is CLOSED; a FIN that acknowledges ours goes from FIN-WAIT-1 straight to
@@ -739,7 +739,7 @@ async def run_tcp_close_cases(dut):
 
 @cocotb.test()
 async def run_tcp_receive_window_closes_and_reopens(dut):
-    """net.md §5.2 "window" (0 advertised, update on reopen): while the user reads nothing
+    """docs/network.md "window" (0 advertised, update on reopen): while the user reads nothing
     the advertised window shrinks by what arrives, down to 0 when the receive ring is full;
     data beyond it is dropped and answered with the unchanged ACK; once the user has read
     enough (SWS avoidance: min(2 MSS, half the ring)) a window update goes out by itself,
@@ -775,7 +775,7 @@ async def run_tcp_receive_window_closes_and_reopens(dut):
 
 @cocotb.test()
 async def run_tcp_send_sequence_wraps(dut):
-    """net.md §1.5 "Tests MUST wrap 2**32 inside a transfer", on the send side (the peers of
+    """docs/network.md "Tests MUST wrap 2**32 inside a transfer", on the send side (the peers of
     the other tests wrap the receive side): 24 KiB leave across SND.NXT = 2**32 in segments
     of the peer's MSS of 400 bytes, so that the 4 KiB buffer holds enough of them in flight
     for three duplicate ACKs; the segment that holds the wrap is lost once and comes again
@@ -820,7 +820,7 @@ async def run_tcp_send_sequence_wraps(dut):
 
 @cocotb.test()
 async def run_tcp_ack_every_second_segment(dut):
-    """net.md §5.2 "data": at most 2 full segments per ACK (RFC 5681 §4.2, RFC 9293
+    """docs/network.md "data": at most 2 full segments per ACK (RFC 5681 §4.2, RFC 9293
     §3.8.6.3): four in-order segments without PSH get an ACK after the second and the
     fourth; a single one waits for the delayed ACK, sent within 20 us (2,500 cycles)."""
     tb = NetTB(dut)
@@ -1009,7 +1009,7 @@ async def run_tcp_fast_retransmit(dut):
 
 @cocotb.test()
 async def run_tcp_peer_mac_refreshed_by_arp(dut):
-    """net.md §1.2 (RFC 826): an ARP frame from the connected peer's IP refreshes its MAC,
+    """docs/network.md (RFC 826): an ARP frame from the connected peer's IP refreshes its MAC,
     whoever the ARP is for (a gratuitous ARP gets no answer but moves the connection); ARP
     from other addresses changes nothing; an ARP request for the engine moves it back and is
     answered at the requester's address."""
@@ -1054,7 +1054,7 @@ async def run_tcp_peer_mac_refreshed_by_arp(dut):
 
 @cocotb.test()
 async def run_arp_pending_blocks_nothing(dut):
-    """net.md §6 (verilog-ethernet #11, #42, #155) and §5.2 "back-to-back": while a client
+    """docs/network.md (verilog-ethernet #11, #42, #155) (back-to-back frames): while a client
     session waits for an ARP reply that never comes, 1,000 (Icarus: 100) ICMP echo and RBCP
     read requests (3 to 1) sent back to back at the minimum inter-frame gap are each
     answered once, at their source MAC, or counted as ``busy`` (the one reply slot): none
@@ -1121,7 +1121,7 @@ async def run_arp_pending_blocks_nothing(dut):
 
 @cocotb.test()
 async def run_tcp_client_syn_sent_rules(dut):
-    """Client mode, net.md §1.4 SYN-SENT and §5.2 "loss"/"RST": a lost SYN is resent after
+    """Client mode, docs/network.md SYN-SENT, loss and RST rules: a lost SYN is resent after
     the RTO with the same ISS; an RST without ACK is ignored; an ACK that does not
     acknowledge the SYN gets an RST at its ACK number; a bare SYN (simultaneous open) leads
     to SYN-RECEIVED and a SYN-ACK, its ACK to ESTABLISHED; data then moves both ways."""

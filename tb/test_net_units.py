@@ -1,11 +1,11 @@
 # amaranth: UnusedElaboratable=no
-"""Network unit blocks in amaranth.sim against independent references (spec net.md §1.1,
-§5.2 "Unit"): Crc32 against ``zlib.crc32`` (check value, lengths 0..80 and full frames, 1, 4
+"""Network unit blocks in amaranth.sim against independent references (docs/network.md "Unit"):
+Crc32 against ``zlib.crc32`` (check value, lengths 0..80 and full frames, 1, 4
 and 8 bytes per beat with partial last beats, the good-frame residue), InternetChecksum
 against scapy's ``checksum`` (RFC 1071; odd lengths, a preset pseudo-header sum), and the
 FrameParser (with GmiiRx) against scapy's dissection: every captured field, the payload
 bytes, TCP options, IP options, UDP without checksum, and the checksum verdict; the
-EventCounters bank against a count kept in Python (spec net.md §7.2 counters)."""
+EventCounters bank against a count kept in Python (docs/network.md counters)."""
 
 import random
 import zlib
@@ -292,8 +292,7 @@ def parse_frames(frames, mac, ip):
 
 def test_frame_parser_matches_scapy():
     """Every header field the parser captures equals scapy's dissection of the same frame;
-    checksums, lengths and options decide the verdict as scapy's checksums say (spec net.md
-    §1.2, §1.3, §5.2 "Unit")."""
+    checksums, lengths and options decide the verdict as scapy's checksums say (docs/network.md)."""
     from scapy.layers.inet import ICMP, IP, TCP, UDP, in4_chksum
     from scapy.layers.l2 import ARP, Ether
     from scapy.packet import Raw
@@ -332,7 +331,7 @@ def test_frame_parser_matches_scapy():
                                                    options=b"\x01" * 8) /
         TCP(sport=9, dport=10, flags="A") / Raw(b"ip options"),
     ]
-    # option bytes as written (scapy would re-encode them): malformed ones (net.md §1.3:
+    # option bytes as written (scapy would re-encode them): malformed ones (docs/network.md:
     # length 0 or 1, or past the data offset; an MSS before the fault counts), an MSS of
     # the wrong length, junk after EOL, one option of 40 bytes, an unknown kind before MSS
     scapy_options = len(pkts)

@@ -1,4 +1,4 @@
-"""ReconROS build.cfg parsing (spec reconos.md §7, hmt.md §3): the spec's handle examples,
+"""ReconROS build.cfg parsing (docs/reconos.md, docs/topics.md): the spec's handle examples,
 every example project, and one clear error (file, line, section, key) per kind of bad input."""
 
 
@@ -18,7 +18,8 @@ def handles(project, thread):
 
 
 def test_spec_handle_examples():
-    """§7.3: the Sobel server app's Video group -> 0..4; the sort service demo -> Address 0,
+    """Handle numbering (docs/build-cfg.md): the Sobel server app's Video group -> 0..4; the
+    sort service demo -> Address 0,
     Acknowledge 1, sort_srv_res 2, sort_srv_req 3, node_1 4, srv 5."""
     sobel = load_project(ROOT / "examples/sobel_topic/build.cfg")
     assert handles(sobel, "Sobel") == {"image_msg": 0, "image_msg_out": 1, "node_1": 2,
@@ -39,7 +40,7 @@ def test_spec_handle_examples():
 
 
 def test_listing1_and_gateway_topology():
-    """The paper's Listing 1 (two groups sharing a service message name) and hmt.md §3's
+    """The paper's Listing 1 (two groups sharing a service message name) and docs/topics.md's
     gateway demo: nicehwtopic has publishers Threadb + Gateway1 (``_out``) and subscribers
     Threada + Gateway1 (``_in``): N_TO_M; hardware-topic endpoints have no handle."""
     p = load_project(ROOT / "examples/sobel_dip/build.cfg")

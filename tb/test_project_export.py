@@ -97,7 +97,7 @@ def test_tcl_references_and_interfaces(exported, name):
 
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_block_design(exported, name):
-    """ReconROS addresses (reconos.md §1), interrupt positions, memory port and clocks."""
+    """ReconROS addresses (docs/docs/reconos.md), interrupt positions, memory port and clocks."""
     project, folder, manifest = exported[name]
     text = (folder / "bd" / "design_1.tcl").read_text()
     board = BOARDS[project.board]
@@ -195,7 +195,7 @@ def test_fusesoc_reads_and_lints_the_cores(exported, tmp_path):
 
 def test_export_msg_headers(tmp_path):
     """``rosgate export-msg`` writes a C header per message type of the project; the Image
-    data offset is the spec's (§6: 72 on arm64)."""
+    data offset is rosidl's (72 on arm64, docs/messages.md)."""
     cfg = ROOT / "examples" / "sobel_dip" / "build.cfg"
     assert rosgate(["export-msg", str(cfg), "-o", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())

@@ -1,4 +1,4 @@
-"""The hardware topic of ReconROS' gateway demo as rosgate assembles it (hmt.md §2-3):
+"""The hardware topic of ReconROS' gateway demo as rosgate assembles it (docs/topics.md):
 ``nicehwtopic`` with publishers Threadb (slot 1) and Gateway1 (slot 2, ``_out``) and
 subscribers Threada (slot 0, 64-beat FIFO) and Gateway1 (``_in``): N:M. No slot has an
 Amaranth thread, so the topic ports are ports of the system top; this bench drives them with

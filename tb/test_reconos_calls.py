@@ -1,8 +1,9 @@
 """ReconROS compatibility of the hardware-thread API: every OS call's command code and word
-sequence (spec reconos.md §3.1, §3.3) as the thread writes them, the replies it reads (full
-word width: defect 5), the fixed sequences of defects 1-3, the interruptible take (§3.4,
+sequence (docs/docs/reconos.md) as the thread writes them, the replies it reads (full
+word width: defect 5), the fixed sequences of defects 1-3, the interruptible take (
 including a late reply followed by a stray 0x904: defect 25), and HWT_Signal during a
-blocking call (§3.2). The test plays the delegate through the reconos_osif registers."""
+blocking call (docs/docs/reconos.md). The test plays the delegate through the reconos_osif
+registers."""
 
 import cocotb
 

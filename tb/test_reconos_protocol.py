@@ -1,6 +1,6 @@
 # amaranth: UnusedElaboratable=no
-"""rosgate's ReconOS tables against the literal values of spec reconos.md §3.1, §3.3, §4,
-§5.1, §5.2 and §7.2 (numbers copied from the spec, not from hdl/reconos/protocol.py)."""
+"""rosgate's ReconOS tables against the literal values of docs/reconos.md (numbers copied from
+the spec, not from hdl/reconos/protocol.py)."""
 
 import pytest
 
@@ -22,7 +22,7 @@ from hdl.reconos.protocol import (
     proc_control_offset,
 )
 
-# spec §3.1, in table order
+# docs/reconos.md, in table order
 SPEC_CODES = {
     "THREAD_GET_INIT_DATA": 0x0A0, "THREAD_GET_STATE_ADDR": 0x0A1, "THREAD_EXIT": 0x0A2,
     "THREAD_YIELD": 0x0A3, "THREAD_CLEAR_SIGNAL": 0x0A4, "SEM_POST": 0x0B0, "SEM_WAIT": 0x0B1,
@@ -47,7 +47,7 @@ SPEC_CODES = {
     "ROS_ACTIONC_CANCEL_TAKE": 0x949, "ROS_ACTIONC_CANCEL_TRYTAKE": 0x950,
 }
 
-# spec §3.3: command -> (argument words, reply words), defects 1-3 fixed
+# docs/reconos.md: command -> (argument words, reply words), defects 1-3 fixed
 SPEC_WORDS = {
     0x0A0: (0, 1), 0x0A1: (0, 1), 0x0A2: (0, 0), 0x0A4: (0, 0), 0x0B0: (1, 1), 0x0B1: (1, 1),
     0x0C0: (1, 1), 0x0C1: (1, 1), 0x0C2: (1, 1), 0x0D0: (2, 1), 0x0D1: (1, 1), 0x0D2: (1, 1),

@@ -1,5 +1,5 @@
 """The software ROS master (gen/ros1/master.py) over real XML-RPC on loopback, against the
-Master API of ros_wire.md §1.4: every call answers ``[code, statusMessage, value]`` with
+Master API of docs/messages.md: every call answers ``[code, statusMessage, value]`` with
 1 = SUCCESS and -1 = ERROR; registering a publisher returns the subscribers' APIs and sends
 each subscriber ``publisherUpdate`` with the topic's publishers; unknown nodes and services
 answer ERROR."""

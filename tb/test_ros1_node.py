@@ -1,4 +1,4 @@
-"""The seed paper's setup (sitcp_ros_component_en.md §4, Fig. 8; spec net.md §7): a software
+"""The seed paper's setup (sitcp_ros_component_en.md §4, Fig. 8; docs/network.md): a software
 publisher ``snd_data``, the hardware node between them, a software subscriber ``rcv_data``,
 and a ROS master, all real sockets inside the TAP namespace.
 
@@ -7,7 +7,7 @@ software half learned it through ``publisherUpdate``/``requestTopic``; its publi
 listens, and ``rcv_data`` connects to it after ``requestTopic`` on the hardware node. Received
 messages are published again unchanged in hardware (loopback). Golden models: rosbags (ROS 1
 serialization, md5sum, definitions), the software peers of tb/models/ros1_peers.py written
-from ros_wire.md, and the Linux TCP stack.
+from docs/messages.md, and the Linux TCP stack.
 """
 
 import cocotb

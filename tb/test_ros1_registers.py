@@ -1,4 +1,4 @@
-"""The TCPROS endpoints' RBCP register map (spec net.md §7.2, hdl/ros1/registers.py) on the
+"""The TCPROS endpoints' RBCP register map (docs/network.md, hdl/ros1/registers.py) on the
 ``ros1_node`` top, through RBCP frames on GMII, on both simulators: identification, roles,
 defaults, read/write registers, the expected-value and header memories, write-1-to-clear,
 counters, and a bus error for an address outside every endpoint."""

@@ -1,4 +1,4 @@
-"""The hardware node's Slave API (gen/ros1/node.py, ros_wire.md §1.5, net.md §7.1-§7.2) over
+"""The hardware node's Slave API (gen/ros1/node.py, docs/messages.md, docs/network.md) over
 real XML-RPC on loopback, with the endpoints' register space modelled as memory (the register
 map of hdl/ros1/registers.py and the stack's global block): ``requestTopic`` names the port the
 hardware publisher really listens on, a publisher's port 0 is the engine's ``tcp_port``

@@ -1,4 +1,4 @@
-"""Bench of the exported ``topic`` top (hdl.dds.Topic; spec hmt.md §1-2, issue: foundation).
+"""Bench of the exported ``topic`` top (hdl.dds.Topic; docs/topics.md, issue: foundation).
 
 Every publisher port gets random idle, every subscriber port random backpressure
 (cocotbext-axi pause generators); :class:`tb.models.topic.TopicScoreboard` checks that each

@@ -1,4 +1,4 @@
-"""``rosgate export-hw``: a project's hardware for Vivado and FuseSoC (spec reconos.md §8).
+"""``rosgate export-hw``: a project's hardware for Vivado and FuseSoC (docs/docs/reconos.md).
 
 Layout of the output folder::
 

@@ -1,6 +1,6 @@
 """FPGA resource estimates with Debian's Yosys: ``synth_xilinx -flatten -family xc7``.
 
-Estimates for trends and comparisons, not Vivado's numbers (toolchain.md, Vivado-free checks).
+Estimates for trends and comparisons, not Vivado's numbers (docs/testing.md, Vivado-free checks).
 """
 
 import re
@@ -17,7 +17,7 @@ def estimate_resources(verilog, top):
     """Return ``{"LUT", "INV", "FF", "LUTRAM", "BRAM36", "BRAM18", "DSP", "CARRY4", "cells"}``
     for ``top``.
 
-    LUT counts LUT1..LUT6, as the anchors of spec net.md §4 were measured. INV cells are
+    LUT counts LUT1..LUT6, as the anchors of docs/network.md were measured. INV cells are
     counted apart: ``synth_xilinx`` leaves one per flip-flop for the exported active-low
     ``aresetn`` (its flip-flop map inverts the reset inside every cell), where Vivado drives
     all reset pins from one inverter, so adding them would count the reset once per

@@ -2,7 +2,7 @@
 
 The exported module has an ``aclk`` clock and an active-low synchronous ``aresetn`` (AMBA
 convention) and flat ports with single-underscore AMBA names (``s0_axis_tdata``) so that Vivado's
-interface inference and cocotbext-axi recognise them (toolchain.md pitfalls 5 and 7). The text
+interface inference and cocotbext-axi recognise them (docs/testing.md pitfalls 5 and 7). The text
 is stable: no source locations, no internal attributes, no host paths (pitfall 8). Yosys'
 ``always @*`` trigger registers are initialised in an ``initial`` block so that Icarus evaluates
 combinational logic at t=0 (pitfall 3).

@@ -1,6 +1,6 @@
 """ROS message knowledge, defined once: definitions, C layouts, encodings.
 
-Specs: shared/spec/ros_wire.md, shared/spec/reconos.md §6.
+Specs: docs/messages.md, docs/docs/reconos.md.
 """
 
 from .library import MessageLibrary, normalize_name

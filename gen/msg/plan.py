@@ -21,13 +21,14 @@ The plan is a list of :class:`Step`:
 Framings (``FRAMINGS``):
 
 ``cdr``
-    ROS 2 XCDR1 little endian (ros_wire.md §2): 4-byte encapsulation header, alignment counted
+    ROS 2 XCDR1 little endian (docs/messages.md): 4-byte encapsulation header, alignment counted
     after it, strings with a NUL counted in their length, no padding before the elements of an
     empty sequence.
 ``ros1``
-    one TCPROS message (ros_wire.md §1.2): ``uint32`` body length, then the body, unaligned.
+    one TCPROS message (docs/messages.md): ``uint32`` body length, then the body, unaligned.
 ``reconros``
-    ReconROS hardware topics (hmt.md §5), 64-bit beats, with the defects D2-D5 fixed: beat 0 and
+    ReconROS hardware topics (docs/topics.md), 64-bit beats, with the defects D2-D5 fixed: beat
+    0 and
     1 carry publisher id + 1000, then every primitive in ReconROS' flattening order (nested
     fields after top-level ones) as one beat each (signed values sign-extended, floats bit-cast,
     bool/byte/char carried), then the arrays by element width (8, 16, 32, 64 bits), each as
@@ -52,7 +53,7 @@ FRAMINGS = ("cdr", "ros1", "reconros")
 #: CDR_LE encapsulation; a reader checks the representation id (first two bytes) only.
 CDR_HEADER = b"\x00\x01\x00\x00"
 CDR_HEADER_MASK = b"\xff\xff\x00\x00"
-#: ReconROS beat 0 = publisher thread id + 1000 (hmt.md §5.2)
+#: ReconROS beat 0 = publisher thread id + 1000 (docs/topics.md)
 RECONROS_ID_OFFSET = 1000
 
 _SIGNED = {"int8", "int16", "int32", "int64"}
@@ -371,7 +372,7 @@ def _ros1(nodes):
 
 
 def reconros_order(nodes):
-    """ReconROS' flattening (hmt.md §5.1, ``msg_parsing._deep_replace``), one nesting level per
+    """ReconROS' flattening (docs/topics.md, ``msg_parsing._deep_replace``), one nesting level per
     round: every nested message is removed and its fields appended at the end, in order; then
     every fixed array of messages is removed and its elements' fields appended at the end."""
     items = list(nodes)

@@ -1,5 +1,5 @@
 """ROS 1 type identity: the md5sum TCPROS headers carry (genmsg ``compute_md5_text``,
-ros_wire.md §1.3).
+docs/messages.md).
 
 md5 text of a message: one line per constant ``TYPE NAME=VALUE``, then one line per field:
 ``TYPE NAME`` for built-in types (primitives, ``time``, ``duration``, with their array suffix),
@@ -109,7 +109,7 @@ class ConnectionHeaderError(ValueError):
 
 
 def encode_connection_header(fields):
-    """TCPROS connection header (ros_wire.md §1.1): ``uint32_le`` total length, then per field
+    """TCPROS connection header (docs/messages.md): ``uint32_le`` total length, then per field
     ``uint32_le`` length + ``key=value``. ``fields`` is a mapping or a sequence of pairs, kept
     in order."""
     items = fields.items() if hasattr(fields, "items") else fields

@@ -1,4 +1,4 @@
-"""Wire encodings of ROS messages (ros_wire.md §1.2, §2): ROS 2 CDR (XCDR1, little endian) and
+"""Wire encodings of ROS messages (docs/messages.md): ROS 2 CDR (XCDR1, little endian) and
 ROS 1 (TCPROS body). Values are dicts (nested dicts for nested messages) or objects with the
 field names as attributes (rosbags messages work).
 

@@ -1,6 +1,6 @@
 """Hardware-mapped topics (fpgaDDS): AXI4-Stream fabrics that carry ROS topics between nodes.
 
-Spec: ``shared/spec/hmt.md``.
+Spec: docs/topics.md.
 """
 
 from .arbiter import TopicArbiter

@@ -1,4 +1,4 @@
-"""Message-granular round-robin arbiter (hmt.md §1, defect D1 fixed)."""
+"""Message-granular round-robin arbiter (docs/topics.md, defect D1 fixed)."""
 
 from amaranth.hdl import Array, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -16,7 +16,8 @@ class TopicArbiter(wiring.Component):
     Once a publisher's first beat is offered on ``m_axis``, that publisher keeps the grant until
     its ``tlast`` beat transfers: messages never interleave, whatever the publishers do with
     ``tvalid`` in the middle of a message (ReconROS's ``ARB_ON_TLAST = 0`` interconnect could
-    switch mid-message, hmt.md D1). The grant is chosen combinationally, so the message after
+    switch mid-message, docs/topics.md D1). The grant is chosen combinationally, so the message
+    after
     a ``tlast`` can start in the very next cycle. Round robin: the search for the next message
     starts after the publisher served last, so a publisher with a message waiting is served
     within N messages. Purely combinational datapath (zero latency); follow it with a

@@ -1,4 +1,4 @@
-"""Lock-step broadcast of one stream to M subscribers (hmt.md §1)."""
+"""Lock-step broadcast of one stream to M subscribers (docs/topics.md)."""
 
 from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring

@@ -1,4 +1,4 @@
-"""A hardware-mapped topic: N publishers, M subscribers (hmt.md §1-2)."""
+"""A hardware-mapped topic: N publishers, M subscribers (docs/topics.md)."""
 
 from amaranth.hdl import Module
 from amaranth.lib import wiring
@@ -55,7 +55,7 @@ class TopicMonitorSignature(wiring.Signature):
 class Topic(wiring.Component):
     """Hardware-mapped topic for ``pubs`` publishers and ``subs`` subscribers.
 
-    Structure (hmt.md §2, topology by counts): 1:1 is a wire (or a FIFO); with several
+    Structure (docs/topics.md, topology by counts): 1:1 is a wire (or a FIFO); with several
     publishers a :class:`TopicArbiter` merges whole messages round robin; with several
     subscribers a :class:`TopicBroadcast` gives each one every message; a
     :class:`~hdl.stream.RegisterSlice` between them breaks the ``tready`` path, so the topic

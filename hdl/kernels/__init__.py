@@ -1,4 +1,5 @@
-"""Streaming compute kernels for hardware nodes (spec kernels.md, reconos.md §9, finemb.md §6)."""
+"""Streaming compute kernels for hardware nodes (docs/kernels.md, docs/reconos.md,
+docs/kernels.md)."""
 
 from .colour import BgrToGray, BgrToHsv, InRange, PixelKernel, TrafficLightDetector
 from .equalize import EqualizeHist

@@ -1,4 +1,4 @@
-"""Gaussian blur, bit-exact with ``cv2.GaussianBlur(sigma=0)`` (spec kernels.md §2)."""
+"""Gaussian blur, bit-exact with ``cv2.GaussianBlur(sigma=0)`` (docs/docs/kernels.md)."""
 
 from amaranth.hdl import Cat
 

@@ -1,4 +1,4 @@
-"""Sobel filters (spec reconos.md §9.1; kernels.md)."""
+"""Sobel filters (docs/docs/reconos.md; docs/docs/kernels.md)."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -13,7 +13,7 @@ __all__ = ["Sobel", "SobelByteLanes"]
 
 
 class SobelByteLanes(wiring.Component):
-    """The ReconROS demo's Sobel filter, "per byte lane" (spec reconos.md §9.1), streaming.
+    """The ReconROS demo's Sobel filter, "per byte lane" (docs/docs/reconos.md), streaming.
 
     The image is a ``height`` x ``words`` array of little-endian 32-bit words; each byte
     lane k of a word is filtered on its own (horizontal neighbours are 4 bytes apart)::
@@ -161,7 +161,7 @@ def _absdiff(a, b):
 
 
 class Sobel(WindowFilter):
-    """3 x 3 Sobel edge filter on an image stream (spec kernels.md §1, reconos.md §9.1).
+    """3 x 3 Sobel edge filter on an image stream (docs/docs/kernels.md, docs/docs/reconos.md).
 
     Modes:
 
@@ -174,7 +174,7 @@ class Sobel(WindowFilter):
         The ReconROS demo filter: a pixel is one 32-bit word (``channels=4``; a 640-pixel
         ``bgr8`` row is 480 such "pixels"), each byte lane filtered on its own,
         ``(|Gx| + |Gy|) >> 3``. Interior pixels equal ReconROS'; the frame's edge rows and
-        columns, which ReconROS leaves unwritten (stale; reconos.md defect 12), are 0.
+        columns, which ReconROS leaves unwritten (stale; docs/docs/reconos.md defect 12), are 0.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Sorting a block of unsigned integers (the ReconROS sort node, spec reconos.md §9.2)."""
+"""Sorting a block of unsigned integers (the ReconROS sort node, docs/reconos.md)."""
 
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
@@ -36,7 +36,8 @@ class MergeSorter(wiring.Component):
     length : In(range(block_size + 1))
         Elements per block, sampled at the first beat of a block; 0 means ``block_size``.
     err_short : Out(1)
-        One-cycle pulse (registered): a block ended (``tlast``) before ``length`` elements. The block is
+        One-cycle pulse (registered): a block ended (``tlast``) before ``length`` elements. The
+        block is
         padded with all-ones elements to ``length`` (so they sort to the end).
     err_long : Out(1)
         One-cycle pulse: a block had more than ``length`` elements. The extra beats are

@@ -1,6 +1,6 @@
 """ROS messages in hardware: (de)serializers generated from a stream plan (``gen.msg.plan``).
 
-Specs: shared/spec/ros_wire.md §1.2 and §2 (ROS 1, CDR), shared/spec/hmt.md §5 (ReconROS).
+Specs: docs/messages.md (ROS 1, CDR), docs/topics.md (ReconROS).
 """
 
 from .bytes import BytePacker, ByteUnpacker, ChunkSignature

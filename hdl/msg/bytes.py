@@ -51,7 +51,8 @@ class BytePacker(wiring.Component):
 
     Takes one chunk per cycle and gives one beat per cycle in steady state, whatever the chunk
     sizes (a message may end with an empty chunk); a full beat leaves once the next byte or the
-    end of the message is known, so latency is one to two cycles. ``first`` marks the first beat of a
+    end of the message is known, so latency is one to two cycles. ``first`` marks the first beat
+    of a
     message (ReconROS' ``TUSER`` is its complement except on the last beat).
 
     Members

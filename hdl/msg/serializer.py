@@ -85,7 +85,7 @@ class Serializer(wiring.Component):
         and drained up to its ``tlast``; both are reported on ``error``.
     m_axis : Out(AXIStreamSignature(data_width[, user_width=1]))
         The messages, one packet each, ``tkeep`` all ones but on the last beat. ReconROS
-        framing: ``tuser`` is 0 on the first and the last beat and 1 between (hmt.md §5.2).
+        framing: ``tuser`` is 0 on the first and the last beat and 1 between (docs/topics.md).
     error : Out(ErrorSignature())
     """
 

@@ -1,4 +1,4 @@
-"""Network engine building blocks (spec net.md)."""
+"""Network engine building blocks (docs/network.md)."""
 
 from .checksum import InternetChecksum
 from .crc import CRC32_RESIDUE, Crc32

@@ -1,5 +1,5 @@
-"""Internet checksum (RFC 1071) of a byte stream, as IPv4, ICMP, UDP and TCP use it (spec
-net.md §1.2, §1.3)."""
+"""Internet checksum (RFC 1071) of a byte stream, as IPv4, ICMP, UDP and TCP use it (
+docs/network.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring

@@ -1,4 +1,4 @@
-"""Event counters kept in distributed RAM (spec net.md §7.2 "counters")."""
+"""Event counters kept in distributed RAM (docs/network.md "counters")."""
 
 from amaranth.hdl import Array, Module, Mux, Signal
 from amaranth.lib import data, wiring

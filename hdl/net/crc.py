@@ -1,4 +1,4 @@
-"""Ethernet FCS: CRC-32 over up to ``W`` bytes per cycle (spec net.md §1.1)."""
+"""Ethernet FCS: CRC-32 over up to ``W`` bytes per cycle (docs/network.md)."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring

@@ -1,4 +1,4 @@
-"""Wire constants of the network engine, defined once (spec net.md §1, §2.2).
+"""Wire constants of the network engine, defined once (docs/network.md).
 
 Offsets are byte offsets from the first byte of the destination MAC address (the byte after
 the SFD). The hardware parser and builder and the Python models import them from here.
@@ -27,7 +27,7 @@ MIN_FRAME = 64                # dst MAC .. FCS
 MAX_FRAME = 1518
 ETHERTYPE_IPV4 = 0x0800
 ETHERTYPE_ARP = 0x0806
-#: not handled: counted as ``not_mine`` (net.md §5.2, the kernel's neighbour discovery)
+#: not handled: counted as ``not_mine`` (docs/network.md, the kernel's neighbour discovery)
 ETHERTYPE_IPV6 = 0x86DD
 
 ETH_SRC_OFFSET = 6
@@ -83,7 +83,7 @@ DEFAULT_MAC = "02:00:c0:a8:0a:10"   # locally administered; SiTCP reads its MAC 
 DEFAULT_TCP_PORT = 24
 DEFAULT_RBCP_PORT = 4660
 
-#: Why a received frame was dropped, in the order of the stack's drop counters (net.md §7.2
+#: Why a received frame was dropped, in the order of the stack's drop counters (docs/network.md
 #: "drop counters per reason").
 DROP_REASONS = (
     "fcs",          # bad FCS

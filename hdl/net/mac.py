@@ -1,4 +1,4 @@
-"""GMII 8-bit Ethernet MAC, receive and transmit halves (spec net.md §1.1)."""
+"""GMII 8-bit Ethernet MAC, receive and transmit halves (docs/network.md)."""
 
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring

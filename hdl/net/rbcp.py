@@ -1,5 +1,5 @@
 """SiTCP's RBCP register protocol over UDP: the request in a buffer becomes byte accesses on
-a local bus, the buffer becomes the reply (spec net.md §2.2)."""
+a local bus, the buffer becomes the reply (docs/network.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring

@@ -1,5 +1,5 @@
 """Receive-side frame parser: Ethernet, ARP, IPv4, ICMP, UDP and TCP headers and checksums,
-checked on the fly at one byte per cycle (spec net.md §1.1-§1.3)."""
+checked on the fly at one byte per cycle (docs/network.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, enum, wiring
@@ -78,14 +78,14 @@ class FrameParser(wiring.Component):
         The frame passed every check: an ARP request or reply for ``local_ip``, an ICMP echo
         request, a UDP datagram or a TCP segment to ``local_ip`` with correct checksums.
     reason : Out(range(len(DROP_REASONS)))
-        Why it was dropped, when ``accept`` is low (net.md §7.2 counters).
+        Why it was dropped, when ``accept`` is low (docs/network.md counters).
     arp_seen : Out(1)
         With ``done``: the frame was a well-formed ARP request or reply for this MAC or
         broadcast, whatever its target address (RFC 826 refreshes a known sender's entry
         before it looks at the target; ``fields.sender_*`` are its sender's addresses).
     options_malformed : Out(1)
         With ``done``: the frame was a TCP segment whose options were malformed (a length
-        below 2, or an option running past the data offset, net.md §1.3). Options are parsed
+        below 2, or an option running past the data offset, docs/network.md). Options are parsed
         up to there (an MSS option before it counts); the verdict does not change.
     """
 
@@ -226,7 +226,7 @@ class FrameParser(wiring.Component):
 
         # TCP options (RFC 9293 §3.2): only MSS (length 4) is used; everything else is
         # skipped by length. A length below 2, or an option that runs past the data offset,
-        # is malformed (net.md §1.3): parsing stops, the segment is processed, the stack
+        # is malformed (docs/network.md): parsing stops, the segment is processed, the stack
         # counts it.
         opt_is_mss = Signal()
         opt_left = Signal(8)

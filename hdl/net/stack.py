@@ -1,5 +1,5 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
-one MAC and IP address (spec net.md §1-§2, §7.2)."""
+one MAC and IP address (docs/network.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -27,10 +27,10 @@ __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLO
 #: Stack counters, in the order of their read addresses (``counter_index``, RBCP): every
 #: received frame ends in exactly one of ``delivered`` and the drop reasons;
 #: ``tcp_bad_options`` counts TCP segments that passed every check and had malformed
-#: options (processed all the same, net.md §1.3).
+#: options (processed all the same, docs/network.md).
 STACK_COUNTERS = ("frames_in", "delivered") + DROP_REASONS + ("frames_out", "tcp_bad_options")
 
-#: RBCP base of the stack's own registers (net.md §7.2 "global block")
+#: RBCP base of the stack's own registers (docs/network.md "global block")
 GLOBAL_BASE = 0xFFFF0000
 #: offset -> (name, bytes, writable) of the global block; multi-byte values big-endian
 GLOBAL_REGS = {
@@ -57,7 +57,7 @@ _CLOCK_HZ = 125_000_000
 
 class TcpUserSignature(wiring.Signature):
     """One TCP session's user side (``Out`` = towards the user), after SiTCP's interface
-    (net.md §2.1); see :class:`TcpSession` for each member's meaning.
+    (docs/network.md); see :class:`TcpSession` for each member's meaning.
 
     Parameters
     ----------
@@ -122,8 +122,8 @@ class NetStack(wiring.Component):
         congestion window never exceeds one less.
     rto_us, msl_us, arp_retry_us : int
         Initial retransmission timeout, maximum segment lifetime and a client's ARP retry
-        interval in microseconds at 125 MHz (defaults 200 ms, 1 s and 2 s; net.md §1.2,
-        §1.4, §1.6); registers at :data:`GLOBAL_BASE` change them at run time.
+        interval in microseconds at 125 MHz (defaults 200 ms, 1 s and 2 s; docs/network.md);
+        registers at :data:`GLOBAL_BASE` change them at run time.
     user_window : int
         Bytes of RBCP address space from 0 that the user bus decodes.
     iss_seed : int

@@ -1,5 +1,5 @@
 """One TCP session: server or client, sliding window, retransmission, both directions
-(spec net.md §1.3-§1.6, §2.1; RFC 9293, RFC 5681, RFC 6298)."""
+(docs/network.md; RFC 9293, RFC 5681, RFC 6298)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import enum, wiring
@@ -22,7 +22,7 @@ __all__ = ["TcpState", "TcpError", "TcpSession", "TCP_COUNTERS"]
 
 class TcpState(enum.Enum, shape=4):
     """Connection states (RFC 9293 §3.3.2) plus ARP resolution before a client's SYN; the
-    value is the TCP_STATE register code (net.md §7.2)."""
+    value is the TCP_STATE register code (docs/network.md)."""
     CLOSED = 0
     LISTEN = 1
     SYN_SENT = 2
@@ -38,7 +38,7 @@ class TcpState(enum.Enum, shape=4):
 
 
 class TcpError(enum.Enum, shape=4):
-    """Sticky error codes (net.md §7.2 ERROR register)."""
+    """Sticky error codes (docs/network.md ERROR register)."""
     NONE = 0
     REFUSED = 1
     TIMEOUT = 2
@@ -46,15 +46,15 @@ class TcpError(enum.Enum, shape=4):
     RESET = 6
 
 
-#: Initial congestion window in segments (net.md §1.4: 3 x 1460 bytes)
+#: Initial congestion window in segments (docs/network.md: 3 x 1460 bytes)
 INITIAL_WINDOW = 3
 #: Back-offs of the retransmission timeout: it doubles per expiry up to 2**5 times the RTO
 MAX_BACKOFF = 5
 #: FIN-WAIT-2 ends after 2**6 MSL without a segment from the peer (64 s at the default MSL of
-#: 1 s; net.md §1.4 proposes 60 s)
+#: 1 s; docs/network.md proposes 60 s)
 FIN_WAIT_2_SCALE = 6
 
-#: Session counters, in the order of the ``counters`` output (net.md §7.2 "counters").
+#: Session counters, in the order of the ``counters`` output (docs/network.md "counters").
 TCP_COUNTERS = ("bytes_tx", "bytes_rx", "segments_tx", "segments_rx", "rto", "fast_retransmit",
                 "dup_acks", "rst_rx", "dropped_segments")
 
@@ -100,7 +100,7 @@ class TcpSession(wiring.Component):
         ``seg_payload_*`` (payload bytes as they arrive), ``seg_done``, ``seg_accept`` (the
         parser's verdict) and ``seg_arp`` (an ARP frame from anyone to anyone: one from the
         peer's IP resolves it for a client and refreshes its MAC on a live connection,
-        net.md §1.2).
+        docs/network.md).
     conn_match, listen_match : Out(1)
         The segment of the current verdict matches the connection; it is a SYN to the
         listening port (whatever ``listen_block``). A segment that no session matches is

@@ -1,5 +1,5 @@
 """Transmit-side frame builder: Ethernet, ARP, IPv4, ICMP, UDP and TCP headers with their
-checksums, then the payload read from the requester's buffer (spec net.md §1.1-§1.3)."""
+checksums, then the payload read from the requester's buffer (docs/network.md)."""
 
 from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, wiring

@@ -1,4 +1,4 @@
-"""The MEMIF AXI4 memory controller (spec reconos.md §5.5, with defects 6 and 9 fixed)."""
+"""The MEMIF AXI4 memory controller (docs/reconos.md, with defects 6 and 9 fixed)."""
 
 from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
@@ -25,7 +25,8 @@ class MemoryController(wiring.Component):
 
     Ordering: up to :data:`READS_IN_FLIGHT` read bursts overlap; a write starts only when no
     read is outstanding, and the next request of any kind starts only after the write's
-    response (spec §11 defect 9: ReconOS does not wait for B). ``RREADY`` follows the ready
+    response (ReconROS defect 9, docs/reconos.md: ReconOS does not wait for B). ``RREADY``
+    follows the ready
     of ``m_rdata``, i.e. the requester's FIFO space (defect 9).
 
     Bad requests (length 0, not a multiple of W, over 256 B, crossing a 256-B boundary, or

@@ -1,5 +1,5 @@
 """The MEMIF MMU: virtual to physical translation with a TLB and a hardware page-table walk
-(spec reconos.md §5.4)."""
+(docs/reconos.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import stream, wiring
@@ -34,7 +34,8 @@ class TLB(wiring.Component):
         Store ``write_vpn -> write_ppn`` into the next entry of the round-robin pointer.
     write_vpn, write_ppn : In
     flush : In(1)
-        Invalidate every entry (spec §11 defect 8: ReconOS only clears them on system reset).
+        Invalidate every entry (ReconROS defect 8, docs/reconos.md: ReconOS only clears them on
+        system reset).
     """
 
     def __init__(self, vpn_bits, ppn_bits, entries):
@@ -81,7 +82,7 @@ class MMU(wiring.Component):
     * r32: ARMv7 short descriptors: L1 at ``pgd[31:14] + VA[31:20]*4``; ``bits[1:0]`` 00 =
       fault, 01 = page table (L2 at ``L1d[31:10] + VA[19:12]*4``), 1x = section
       (``d[31:20] | VA[19:0]``, or with bit 18 a 16 MiB supersection ``d[31:24] | VA[23:0]``;
-      spec §11 defect 11). L2: 00 = fault, 01 = 64 KiB large page, 1x = 4 KiB page.
+      ReconROS defect 11, docs/reconos.md). L2: 00 = fault, 01 = 64 KiB large page, 1x = 4 KiB page.
 
     A fault raises ``pgf`` with ``fault_addr`` = VA and waits: ``retry`` restarts the walk at
     the first level (the software has mapped the page); ``abort`` forwards the request with

@@ -322,7 +322,8 @@ class _SortingThread(HardwareThread):
 
 
 class SortServiceThread(_SortingThread):
-    """The ReconROS sort service server (``sorter_msgs/srv/Sort``, spec §9.2), with defect 14
+    """The ReconROS sort service server (``sorter_msgs/srv/Sort``, docs/docs/reconos.md), with
+    defect 14
     fixed: the response carries the sorted data.
 
     Loop: SERVICES_TAKE the request; read ``unsorted``'s data pointer and size; sort; size
@@ -389,7 +390,7 @@ def _float32_bits(value):
 
 
 class SortActionThread(_SortingThread):
-    """The ReconROS sort action server (``sorter_msgs/action/Sort``, spec §9.2): goal,
+    """The ReconROS sort action server (``sorter_msgs/action/Sort``, docs/docs/reconos.md): goal,
     feedback, result.
 
     Loop: ACTIONS_GOAL_TAKE; read ``goal.unsorted``; ACTIONS_GOAL_DECIDE (accept when it has
@@ -407,7 +408,7 @@ class SortActionThread(_SortingThread):
         message.
     goal_offset, res_offset, fb_offset : int
         Byte offsets of ``goal.unsorted`` in the goal request, ``result.sorted`` in the result
-        response and ``feedback.percent`` in the feedback message (spec §6).
+        response and ``feedback.percent`` in the feedback message (docs/docs/reconos.md).
     block_size : int
         Largest goal (default 2048).
     """
@@ -483,7 +484,7 @@ class SortActionThread(_SortingThread):
 
 
 class MailboxSortThread(_SortingThread):
-    """The ReconOS sort demo's hardware thread (the VHDL variant of spec §9.2): get an
+    """The ReconOS sort demo's hardware thread (the VHDL variant of docs/docs/reconos.md): get an
     address from mailbox ``h_in``, sort the ``block_size`` unsigned 32-bit words there in
     place, put the address into mailbox ``h_out``; an all-ones address ends the thread
     (THREAD_EXIT).
@@ -647,7 +648,7 @@ class SobelServerThread(HardwareThread):
         Handles of the service server and its request and response messages.
     image_offsets : dict
         Byte offsets in ``sensor_msgs/Image`` of ``height``, ``encoding``,
-        ``is_bigendian``, ``step`` and ``data`` for the target ABI (spec §6).
+        ``is_bigendian``, ``step`` and ``data`` for the target ABI (docs/docs/reconos.md).
     req_image_offset, res_image_offset : int
         Offset of the image in the request and in the response (``img``: 0 and 0).
     mode : str

@@ -1,4 +1,4 @@
-"""ROS 1 (TCPROS) data connections in hardware (spec net.md §7)."""
+"""ROS 1 (TCPROS) data connections in hardware (docs/network.md)."""
 
 from .node import TcprosNode
 from .tcpros import ROLES, TcprosEndpoint, message_stream_signature

@@ -1,5 +1,5 @@
 """A ROS 1 hardware node: one network engine and a TCPROS endpoint per TCP session, with
-the endpoints' registers on RBCP (spec net.md §7.1, §7.2; seed paper Fig. 8)."""
+the endpoints' registers on RBCP (docs/network.md; seed paper Fig. 8)."""
 
 from amaranth.hdl import Array, Module, Signal
 from amaranth.lib import wiring

@@ -1,4 +1,4 @@
-"""RBCP register map of a TCPROS endpoint (spec net.md §7.2), shared by the hardware and the
+"""RBCP register map of a TCPROS endpoint (docs/network.md), shared by the hardware and the
 software that drives it. Endpoint ``k`` sits at ``k * ENDPOINT_STRIDE``; multi-byte values
 are big-endian."""
 

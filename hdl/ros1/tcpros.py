@@ -1,4 +1,4 @@
-"""TCPROS data connections in hardware (spec net.md §7, ros_wire.md §1.1-§1.2): the
+"""TCPROS data connections in hardware (docs/network.md, docs/messages.md): the
 connection-header exchange and length-prefixed message streaming on one TCP session."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal

@@ -1,6 +1,6 @@
 """A Python model of the software side of ReconROS, for co-simulation of hardware threads.
 
-Written from the spec (reconos.md §3, §4, §5.4, §6, §7), not from the RTL:
+Written from the spec (docs/reconos.md), not from the RTL:
 
 * :class:`~host.reconos.memory.ProcessMemory`: the process's virtual memory;
 * :class:`~host.reconos.messages.MessageMemory`: ROS messages as rosidl C structs in it;
@@ -40,7 +40,7 @@ class ProtocolError(AssertionError):
 
 
 class Resource:
-    """One entry of a thread's resource list (its index is the handle, spec §7.3).
+    """One entry of a thread's resource list (its index is the handle, docs/reconos.md).
 
     ``kind`` is a :class:`ResourceType` name in lower case (``"mbox"``, ``"sem"``,
     ``"mutex"``, ``"cond"``, ``"mem"``, ``"rosnode"``, ``"rosmsg"``, ``"rossub"``, ``"rospub"``,
@@ -351,7 +351,7 @@ class ReconosRuntime:
             if c is None or c.method == "ros_take_interruptable_cancel":
                 # Unknown codes, OSIF_INTERRUPTED and a stray 0x904 are ignored (no reply):
                 # 0x904 is read inside an interruptible take, and one sent after the reply
-                # arrives here (spec §3.4, defect 25).
+                # arrives here (docs/reconos.md, defect 25).
                 self.ignored[slot].append(word)
                 continue
             args = [await self.osif_read(slot) for _ in c.args]
@@ -472,7 +472,8 @@ class ReconosRuntime:
         return [msg.ptr, 0]
 
     async def do_ros_take_interruptable(self, slot, hs, hm):
-        """Loop: a message -> its pointer; any word from the thread -> all ones (§3.4)."""
+        """Loop: a message -> its pointer; any word from the thread -> all ones
+        (docs/reconos.md)."""
         sub = self._resource(slot, hs, "rossub")
         msg = self._resource(slot, hm, "rosmsg")
         while True:
@@ -539,7 +540,7 @@ class ReconosRuntime:
         return [res.ptr, 0]
 
 
-    # ---- action server (rclc action server semantics, spec §3.3 and §9.2) ----
+    # ---- action server (rclc action server semantics, docs/reconos.md) ----
     def _goal(self, slot, ha):
         srv = self._resource(slot, ha, "rosactions")
         if srv.state["goal"] is None:

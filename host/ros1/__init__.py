@@ -1,4 +1,4 @@
-"""The software half of a ROS 1 hardware node (spec net.md §7.1, ros_wire.md §1.4-§1.5):
+"""The software half of a ROS 1 hardware node (docs/network.md, docs/messages.md):
 RBCP register access, an XML-RPC ROS master, and the node-side Slave API that hands TCPROS
 data connections to the hardware endpoints."""
 

@@ -1,4 +1,4 @@
-"""Drive one hardware TCPROS endpoint through its RBCP registers (spec net.md §7.2)."""
+"""Drive one hardware TCPROS endpoint through its RBCP registers (docs/network.md)."""
 
 from gen.msg.ros1 import decode_connection_header, encode_connection_header
 from hdl.net.frames import ip_to_int
@@ -21,7 +21,7 @@ __all__ = ["EndpointClient", "connection_header_fields"]
 
 
 def connection_header_fields(role, *, callerid, topic, typename, md5sum, definition):
-    """The fields a hardware endpoint sends (ros_wire.md §1.1 "hardware publisher minimum"):
+    """The fields a hardware endpoint sends (docs/messages.md "hardware publisher minimum"):
     a publisher answers with callerid, md5sum, type, topic, latching=0 and
     message_definition; a subscriber sends callerid, topic, md5sum, type, tcp_nodelay=1 and
     message_definition."""

@@ -1,4 +1,4 @@
-"""A ROS 1 master: the Master API over XML-RPC (ros_wire.md §1.4; wiki ROS/Master_API;
+"""A ROS 1 master: the Master API over XML-RPC (docs/messages.md; wiki ROS/Master_API;
 ros_comm rosmaster/master_api.py)."""
 
 import os

@@ -1,4 +1,4 @@
-"""The node-side Slave API of a ROS 1 hardware node (ros_wire.md §1.4, §1.5; seed paper
+"""The node-side Slave API of a ROS 1 hardware node (docs/messages.md; seed paper
 Figs. 6-7): XML-RPC stays in software, each topic's TCPROS connection is a hardware endpoint.
 """
 
@@ -38,7 +38,7 @@ class HardwareNode:
         port the hardware really listens on.
 
     A hardware publisher has one TCP session, so ``requestTopic`` answers a second subscriber
-    with code 0 while the first is connected (net.md §7.1). A hardware subscriber connects to
+    with code 0 while the first is connected (docs/network.md). A hardware subscriber connects to
     the first publisher it learns of, from ``registerSubscriber`` or ``publisherUpdate``.
     """
 

@@ -1,4 +1,4 @@
-"""RBCP client: SiTCP's register protocol over UDP (spec net.md §2.2)."""
+"""RBCP client: SiTCP's register protocol over UDP (docs/network.md)."""
 
 import socket
 import threading
@@ -19,7 +19,7 @@ MAX_CHUNK = 255
 
 
 def rbcp_request(cmd, ident, address, length, data=b""):
-    """An RBCP request datagram (spec net.md §2.2): Ver/Type, CMD/Flag, ID, Length, the
+    """An RBCP request datagram (docs/network.md): Ver/Type, CMD/Flag, ID, Length, the
     32-bit address MSB first, then the write data."""
     return bytes([RBCP_VERSION, cmd, ident, length]) + address.to_bytes(4, "big") + bytes(data)
 

@@ -1,5 +1,6 @@
-"""Golden models of the image kernels: OpenCV where OpenCV defines the operation (spec
-kernels.md §1-§5), the ReconROS Sobel from the spec (reconos.md §9.1), and the frame guard's
+"""Golden models of the image kernels: OpenCV where OpenCV defines the operation (
+docs/docs/kernels.md), the ReconROS Sobel from the spec (docs/docs/reconos.md), and the frame
+guard's
 padding and cutting rule."""
 
 from pathlib import Path
@@ -35,8 +36,8 @@ def load_image(name):
 
 
 def sobel(image, border="reflect101"):
-    """``cv2.add(convertScaleAbs(Sobel dx), convertScaleAbs(Sobel dy))`` (spec kernels.md
-    §1, rosgate native Sobel)."""
+    """``cv2.add(convertScaleAbs(Sobel dx), convertScaleAbs(Sobel dy))`` (docs/docs/kernels.md,
+    rosgate native Sobel)."""
     cv2 = _cv2()
     gx = cv2.Sobel(image, cv2.CV_16S, 1, 0, ksize=3, borderType=_border(border))
     gy = cv2.Sobel(image, cv2.CV_16S, 0, 1, ksize=3, borderType=_border(border))

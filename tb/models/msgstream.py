@@ -3,7 +3,7 @@
 The fixed part is the plan's struct layout filled from the value (little-endian bit packing,
 floats as IEEE-754 bits, bool/byte/char as octets); each variable-length field is its raw
 bytes (strings without NUL, elements little endian). The golden wire bytes come from rosbags
-(CDR, ROS 1) or :func:`reconros_beats` (hmt.md §5.2 with the §5.4 fixes), never from the RTL.
+(CDR, ROS 1) or :func:`reconros_beats` (docs/topics.md, with rosgate's fixes), never from the RTL.
 """
 
 import re
@@ -88,7 +88,7 @@ def expected_fields(plan, value, publisher=0):
 
 
 def reconros_fields(library, typename):
-    """``[(path, type)]`` in ReconROS' flattening order (hmt.md §5.1; ReconROS
+    """``[(path, type)]`` in ReconROS' flattening order (docs/topics.md; ReconROS
     ``msg_parsing._deep_replace``): per round, nested messages are replaced by their fields
     appended at the end, then fixed arrays of messages by their elements' fields."""
     items = [(f.name, f.type) for f in library[typename].fields]
@@ -116,7 +116,7 @@ def reconros_fields(library, typename):
 
 
 def reconros_beats(library, typename, value, publisher):
-    """ReconROS framing (hmt.md §5.2, with D2-D5 fixed as in §5.4) of ``value``:
+    """ReconROS framing (docs/topics.md, with D2-D5 fixed) of ``value``:
     a list of ``(tdata, tuser, tlast)`` 64-bit beats, written from the spec."""
     beats = [publisher + RECONROS_ID_OFFSET] * 2
     arrays = {1: [], 2: [], 4: [], 8: []}

@@ -1,5 +1,5 @@
-"""Software ROS 1 nodes that speak TCPROS over ordinary sockets, written from ros_wire.md
-§1 (the behaviour of rospy's publisher and subscriber): the peers of the hardware node."""
+"""Software ROS 1 nodes that speak TCPROS over ordinary sockets, written from docs/messages.md
+(the behaviour of rospy's publisher and subscriber): the peers of the hardware node."""
 
 import socket
 import threading

@@ -1,4 +1,4 @@
-"""Golden models of the Sobel filters, written from the spec (reconos.md §9.1)."""
+"""Golden models of the Sobel filters, written from the spec (docs/docs/reconos.md)."""
 
 import numpy as np
 

@@ -103,8 +103,8 @@ def parse_tcp_frame(frame):
 
 
 def tcp_options_mss(options):
-    """Walk a TCP header's option bytes as a minimal receiver does (RFC 9293 §3.2, spec
-    net.md §1.3): EOL ends the list, NOP is one byte, every other option is skipped by its
+    """Walk a TCP header's option bytes as a minimal receiver does (RFC 9293 §3.2,
+    docs/network.md): EOL ends the list, NOP is one byte, every other option is skipped by its
     length; MSS is taken from a kind-2 option of length 4. Return ``(mss or None,
     malformed)``, where ``malformed`` says that a length below 2 or an option running past
     the end stopped the walk (an MSS before that point is kept)."""

@@ -1,4 +1,4 @@
-"""Golden model of a hardware-mapped topic's delivery rules (hmt.md §1), for scoreboards.
+"""Golden model of a hardware-mapped topic's delivery rules (docs/topics.md), for scoreboards.
 
 Publishers tag their messages (:func:`tagged_message`) so that a subscriber's received message
 names its publisher. The model checks, per subscriber, that each received message is the next
