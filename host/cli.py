@@ -319,6 +319,7 @@ def _run_export_msg(args):
             print(f"wrote {args.output / name}")
     except OSError as exc:
         return _cannot_write("export-msg", args.output, exc)
+    print(f"wrote {len(types)} C headers ({', '.join(types)}) to {args.output}")
     return 0
 
 
@@ -403,6 +404,7 @@ def _run_report(args):
         print(json.dumps(json.loads(path.read_text()), indent=2))
     else:
         print(f"no simulation results at {path} (run `rosgate sim {args.build_cfg}`)")
+    print(f"wrote the Verilog of {len(rows)} cores to {folder} (what yosys read)")
     return 0
 
 
