@@ -115,8 +115,29 @@ def build_ros1_node(**params):
     return TcprosNode(**params)
 
 
+def _io_descriptor(io):
+    """The IO descriptor of description file ``io``."""
+    from gen.finemb import load_io_description
+    return load_io_description(io)
+
+
+def build_finemb_node(**params):
+    """A :class:`hdl.finemb.FinembPidNode`: ``io`` (an IO description file), ``mac``,
+    ``serial``, ``app_deadline``."""
+    from hdl.finemb import FinembPidNode
+    return FinembPidNode(_io_descriptor(params.pop("io")), **params)
+
+
+def build_finemb_line(**params):
+    """A :class:`hdl.finemb.FinembLine` of ``nodes`` PID nodes described by ``io``."""
+    from hdl.finemb import FinembLine
+    return FinembLine(_io_descriptor(params.pop("io")), params.pop("nodes"), **params)
+
+
 #: name -> builder
 TOPS = {
+    "finemb_node": build_finemb_node,
+    "finemb_line": build_finemb_line,
     "ros1_node": build_ros1_node,
     "net": build_net,
     "kernels": build_kernels,

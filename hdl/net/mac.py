@@ -8,7 +8,8 @@ from ..stream import AXIStreamSignature
 from .crc import Crc32
 from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, SFD
 
-__all__ = ["GmiiSignature", "GmiiRx", "GmiiTx", "RxByteSignature"]
+__all__ = ["GmiiSignature", "GmiiRx", "GmiiTx", "RxByteSignature", "FrameStreamSignature",
+           "FRAME_STATUS_BITS"]
 
 _PREAMBLE_BYTE = 0x55
 
@@ -55,6 +56,17 @@ class RxByteSignature(wiring.Signature):
             "data": Out(8), "valid": Out(1), "index": Out(11), "end": Out(1), "ok": Out(1),
             "err_fcs": Out(1), "err_rx_er": Out(1), "err_size": Out(1),
         })
+
+
+#: ``tuser`` of a frame stream's last byte: bit 0 the frame is bad (``not ok``), bits 1-3
+#: why (FCS, RX_ER, size), as :class:`RxByteSignature` reports them
+FRAME_STATUS_BITS = 4
+
+
+def FrameStreamSignature():
+    """Whole frames as bytes, destination MAC to FCS, ``tlast`` on the last byte, whose
+    ``tuser`` carries the frame's status (:data:`FRAME_STATUS_BITS`)."""
+    return AXIStreamSignature(8, keep=False, user_width=FRAME_STATUS_BITS)
 
 
 class GmiiRx(wiring.Component):
@@ -144,18 +156,32 @@ class GmiiTx(wiring.Component):
         ``gmii_tx_er`` set, which makes the PHY corrupt the frame, and counts in ``underruns``.
     gmii_txd, gmii_tx_en, gmii_tx_er : Out
         To the PHY, registered.
+    r_axis : In(FrameStreamSignature()), with ``raw``
+        Whole frames to repeat as they are, destination MAC to FCS (no padding, no FCS
+        added), from a :class:`~hdl.net.queue.FrameQueue`; ``tuser[0]`` on the last byte
+        (a bad frame) sends that byte with ``gmii_tx_er``, so the next receiver drops the
+        frame. Served before ``s_axis`` when both wait. The same no-gap rule applies.
     frames : Out(32)
         Frames sent.
     underruns : Out(16)
         Frames sent with ``gmii_tx_er``.
+
+    Parameters
+    ----------
+    raw : bool
+        Add the ``r_axis`` input (a node that forwards frames between two ports).
     """
 
-    def __init__(self):
-        super().__init__({
+    def __init__(self, *, raw=False):
+        self._raw = bool(raw)
+        members = {
             "s_axis": In(AXIStreamSignature(8, keep=False)),
             "gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
             "frames": Out(32), "underruns": Out(16),
-        })
+        }
+        if raw:
+            members["r_axis"] = In(FrameStreamSignature())
+        super().__init__(members)
 
     def elaborate(self, platform):
         m = Module()
@@ -169,18 +195,42 @@ class GmiiTx(wiring.Component):
         m.d.comb += crc.data.eq(byte)
         fcs_byte = Signal(2)
 
+        raw = Signal()              # the frame being sent comes from r_axis
         with m.FSM():
             with m.State("IDLE"):
-                with m.If(self.s_axis.tvalid):
-                    m.d.sync += count.eq(0)
-                    m.next = "PREAMBLE"
+                if self._raw:
+                    with m.If(self.r_axis.tvalid):
+                        m.d.sync += [count.eq(0), raw.eq(1)]
+                        m.next = "PREAMBLE"
+                    with m.Elif(self.s_axis.tvalid):
+                        m.d.sync += [count.eq(0), raw.eq(0)]
+                        m.next = "PREAMBLE"
+                else:
+                    with m.If(self.s_axis.tvalid):
+                        m.d.sync += count.eq(0)
+                        m.next = "PREAMBLE"
             with m.State("PREAMBLE"):
                 m.d.comb += [en.eq(1), byte.eq(Mux(count == PREAMBLE, SFD, _PREAMBLE_BYTE)),
                              crc.clear.eq(1)]
                 m.d.sync += count.eq(count + 1)
                 with m.If(count == PREAMBLE):
                     m.d.sync += [count.eq(0), underrun.eq(0), fcs_byte.eq(0)]
-                    m.next = "DATA"
+                    m.next = "RAW" if self._raw else "DATA"
+                    if self._raw:
+                        with m.If(~raw):
+                            m.next = "DATA"
+            if self._raw:
+                with m.State("RAW"):
+                    r = self.r_axis
+                    m.d.comb += [en.eq(1), r.tready.eq(1), byte.eq(r.tdata),
+                                 err.eq(~r.tvalid | (r.tlast & r.tuser[0]))]
+                    with m.If(~r.tvalid):
+                        m.d.sync += underrun.eq(1)
+                    with m.Elif(r.tlast):
+                        m.d.sync += [count.eq(0), self.frames.eq(self.frames + 1)]
+                        with m.If(underrun):
+                            m.d.sync += self.underruns.eq(self.underruns + 1)
+                        m.next = "GAP"
             with m.State("DATA"):
                 m.d.comb += [en.eq(1), self.s_axis.tready.eq(1), byte.eq(self.s_axis.tdata),
                              crc.valid.eq(1), err.eq(~self.s_axis.tvalid)]

@@ -79,6 +79,9 @@ class FrameParser(wiring.Component):
         request, a UDP datagram or a TCP segment to ``local_ip`` with correct checksums.
     reason : Out(range(len(DROP_REASONS)))
         Why it was dropped, when ``accept`` is low (docs/network.md counters).
+    group : Out(1), with ``groups`` or ``limited_broadcast``
+        With ``done``: the frame was sent to a multicast group or to the IPv4 limited
+        broadcast address (accepted only as UDP, see the parameters).
     arp_seen : Out(1)
         With ``done``: the frame was a well-formed ARP request or reply for this MAC or
         broadcast, whatever its target address (RFC 826 refreshes a known sender's entry
@@ -87,9 +90,21 @@ class FrameParser(wiring.Component):
         With ``done``: the frame was a TCP segment whose options were malformed (a length
         below 2, or an option running past the data offset, docs/network.md). Options are parsed
         up to there (an MSS option before it counts); the verdict does not change.
+
+    Parameters
+    ----------
+    groups : sequence of (int, int)
+        The MAC and IPv4 address of each multicast group whose UDP datagrams are accepted
+        (a FinEmbP node's group); none by default.
+    limited_broadcast : bool
+        Accept UDP datagrams to 255.255.255.255 in broadcast frames (a node without an
+        address, as DHCP clients).
     """
 
-    def __init__(self):
+    def __init__(self, *, groups=(), limited_broadcast=False):
+        # (MAC, IP) of multicast groups whose UDP datagrams are accepted, as ints
+        self._groups = tuple((int(mac), int(ip)) for mac, ip in groups)
+        self._limited_broadcast = bool(limited_broadcast)
         super().__init__({
             "rx": In(RxByteSignature()),
             "local_mac": In(48), "local_ip": In(32),
@@ -98,6 +113,7 @@ class FrameParser(wiring.Component):
             "kind": Out(FrameKind),
             "done": Out(1), "accept": Out(1), "reason": Out(range(len(DROP_REASONS))),
             "arp_seen": Out(1), "options_malformed": Out(1),
+            **({"group": Out(1)} if groups or limited_broadcast else {}),
         })
 
     def elaborate(self, platform):
@@ -134,6 +150,14 @@ class FrameParser(wiring.Component):
             m.d.sync += [dst_mine.eq(1), dst_bcast.eq(1), l4_off.eq(2047), pl_start.eq(2047),
                          ip_acc.eq(0), l4_acc.eq(0), pseudo_acc.eq(0), f.has_mss.eq(0),
                          f.ip_len.eq(0xFFFF), f.doff.eq(0), f.mss.eq(0)]
+        dst_group = Signal(max(len(self._groups), 1))
+        with m.If(v & (i < 6)):
+            for g, (gmac, _) in enumerate(self._groups):
+                gbyte = Const(gmac, 48).word_select((5 - i[:3]).as_unsigned()[:3], 8)
+                with m.If(byte != gbyte):
+                    m.d.sync += dst_group[g].eq(0)
+                with m.If(i == 0):
+                    m.d.sync += dst_group[g].eq(byte == (gmac >> 40))
         with m.If(v & (i < 6)):
             own = self.local_mac.word_select((5 - i[:3]).as_unsigned()[:3], 8)
             with m.If(byte != own):
@@ -310,6 +334,16 @@ class FrameParser(wiring.Component):
             with m.Default():
                 m.d.comb += f.payload_len.eq(f.l4_len - Cat(Const(0, 2), f.doff))
 
+        # a group's (or the limited broadcast's) datagrams: UDP only, in a frame to that
+        # group's MAC (or to broadcast)
+        group_ok = Signal()
+        is_udp = f.ip_proto == IP_PROTO_UDP
+        for g, (_, gip) in enumerate(self._groups):
+            with m.If(is_udp & dst_group[g] & (f.ip_dst == gip)):
+                m.d.comb += group_ok.eq(1)
+        if self._limited_broadcast:
+            with m.If(is_udp & dst_bcast & (f.ip_dst == 0xFFFFFFFF)):
+                m.d.comb += group_ok.eq(1)
         reason = Signal(range(len(DROP_REASONS)))
         accept = Signal()
         with m.If(rx.err_size):
@@ -318,7 +352,7 @@ class FrameParser(wiring.Component):
             m.d.comb += reason.eq(DROP_CODE["rx_er"])
         with m.Elif(~rx.ok):
             m.d.comb += reason.eq(DROP_CODE["fcs"])
-        with m.Elif(~(dst_mine | dst_bcast)):
+        with m.Elif(~(dst_mine | dst_bcast | (dst_group.any() if self._groups else 0))):
             m.d.comb += reason.eq(DROP_CODE["not_mine"])
         with m.Elif(ethertype == ETHERTYPE_ARP):
             with m.If(arp_ok):
@@ -331,7 +365,8 @@ class FrameParser(wiring.Component):
             m.d.comb += reason.eq(DROP_CODE["ip_header"])
         with m.Elif(frag[13] | (frag[0:13] != 0)):
             m.d.comb += reason.eq(DROP_CODE["fragment"])
-        with m.Elif(f.ip_dst != self.local_ip):
+        with m.Elif((f.ip_dst != self.local_ip) &
+                    (~group_ok if self._groups or self._limited_broadcast else 1)):
             m.d.comb += reason.eq(DROP_CODE["not_mine"])
         with m.Elif(~proto_ok):
             m.d.comb += reason.eq(DROP_CODE["protocol"])
@@ -343,4 +378,6 @@ class FrameParser(wiring.Component):
                      self.arp_seen.eq(~rx.err_size & ~rx.err_rx_er & rx.ok &
                                       (dst_mine | dst_bcast) & arp_frame & arp_well_formed),
                      self.options_malformed.eq(~arp_frame & is_tcp & (opt_bad | options_cut))]
+        if self._groups or self._limited_broadcast:
+            m.d.sync += self.group.eq(group_ok)
         return m

@@ -5,6 +5,7 @@ from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..params import check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
@@ -75,6 +76,9 @@ class FrameBuilder(wiring.Component):
     ----------
     ports : int
         Number of requesters.
+    ttl : int
+        The IPv4 time to live of every frame (64; a FinEmbP node sends 1: its frames stay in
+        the layer-2 domain).
 
     Members
     -------
@@ -84,13 +88,18 @@ class FrameBuilder(wiring.Component):
         Source addresses.
     m_axis : Out(AXIStreamSignature(8, keep=False))
         Frames for :class:`GmiiTx` (no preamble, padding or FCS).
+    grant : Out(range(ports))
+        The requester whose frame is on ``m_axis`` (a parent that sends frames to several
+        ports picks the port by it).
     """
 
-    def __init__(self, ports):
-        self._ports = ports
+    def __init__(self, ports, *, ttl=IP_TTL):
+        self._ports = check_int("ports", ports, 1, 64)
+        self._ttl = check_int("ttl", ttl, 1, 255)
         members = {f"req_{k}": In(TxRequestSignature()) for k in range(ports)}
         members.update({"local_mac": In(48), "local_ip": In(32),
-                        "m_axis": Out(AXIStreamSignature(8, keep=False))})
+                        "m_axis": Out(AXIStreamSignature(8, keep=False)),
+                        "grant": Out(range(max(ports, 2)))})
         super().__init__(members)
 
     def elaborate(self, platform):
@@ -99,6 +108,7 @@ class FrameBuilder(wiring.Component):
         reqs = [getattr(self, f"req_{k}") for k in range(n)]
         r = Signal(TX_REQUEST)
         grant = Signal(range(max(n, 2)))
+        m.d.comb += self.grant.eq(grant)
         busy = Signal()
         ip_id = Signal(16)
 
@@ -177,7 +187,7 @@ class FrameBuilder(wiring.Component):
 
         def ipv4(proto):
             version_ihl = (IP_VERSION << 4) | MIN_HEADER_WORDS
-            return ([version_ihl, 0x00] + ip_fields + [0x40, 0x00, IP_TTL, proto] +
+            return ([version_ihl, 0x00] + ip_fields + [0x40, 0x00, self._ttl, proto] +
                     ip_csum_bytes + local_ip + ip_dst)
 
         def frame(variant, kind):

@@ -1,0 +1,411 @@
+"""The FinEmbP client state machine of a node: init -> preop -> op (-> reinit), its answers
+to the master, and the process data pages (docs/finemb.md)."""
+
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from hdl.net.checksum import ones_complement_add
+from hdl.net.frames import ip_to_int, mac_to_int
+from hdl.net.responders import ParsedFrameSignature
+from hdl.net.rx import FrameKind
+from hdl.net.tx import TxRequestSignature
+
+from ..params import ParameterError, check_int
+from .descriptor import IoDescriptor
+from .protocol import (
+    BROADCAST_IP, BROADCAST_MAC, FINEMB_PORT, HEADER, MAGIC, NODE_ALL, STATE_SHIFT, VENDOR_ROSGATE,
+    VERSION, Flag, MsgType, NodeState, ReinitReason,
+)
+
+__all__ = ["FinembClient", "CLIENT_EVENTS", "CLOCK_HZ"]
+
+#: the node's clock: the GMII byte clock
+CLOCK_HZ = 125_000_000
+
+#: what the client counts (the node's counters include these)
+CLIENT_EVENTS = ("finemb_rx", "bad_header", "other_node", "bad_page", "overrun", "id_conflict",
+                 "missed_cycles", "late_app", "responses", "response_busy")
+
+#: the longest IO descriptor chunk one IODESC_RES carries
+IODESC_CHUNK = 256
+_BODY = 16      # body bytes the client keeps of a request (the longest fixed request body)
+
+
+class FinembClient(wiring.Component):
+    """A node's FinEmbP client: follows the master's requests, keeps the node's state and
+    address, writes received output pages into the :class:`~hdl.finemb.page.PageBuffer` and
+    answers with the node's input page, its identity, address or IO descriptor.
+
+    States (:class:`~hdl.finemb.protocol.NodeState`):
+
+    * **INIT**, no address (source IP 0.0.0.0): ID_REQ is answered with ID_RES (broadcast);
+      ADDR_REQ for this node's MAC sets the address and node id (ADDR_RES) -> PREOP.
+    * **PREOP**: IODESC_REQ is answered with the requested part of the IO descriptor; the
+      first ISEND_REQ -> OP.
+    * **OP**: each ISEND_REQ for this node with a page of the right size is written into the
+      output page, flipped once its UDP checksum is known to be good, and answered with
+      ISEND_RES carrying the newest input page, sent once the application commits its next
+      input page or ``app_deadline`` cycles after the flip, whichever comes first. Three
+      cycle periods (from the SoC) without an SoC -> REINIT (counted as ``missed_cycles``).
+    * **REINIT**: the address is kept; ADDR_REQ and IODESC_REQ are answered again; the next
+      ISEND_REQ -> OP. REINIT for this node enters it; REINIT for every node with reason
+      MASTER_RESTART returns every node to INIT (a master that starts again re-initialises
+      the network without a power cycle).
+
+    An ADDR_REQ that gives this node's id to another MAC makes the node give up its address
+    (INIT, ``id_conflict``): two nodes never keep one id. A request with a bad magic,
+    version or length field is dropped (``bad_header``); an ISEND page of the wrong size is
+    answered with the ERROR flag and not written (``bad_page``). Every response carries the
+    node's state in flags bits 8-9.
+
+    Parameters
+    ----------
+    mac : int
+        The node's MAC address.
+    descriptor : IoDescriptor
+        The application's ports (page sizes; the descriptor bytes it sends).
+    serial : int
+        Serial number reported in ID_RES.
+    app_deadline : int
+        Cycles an ISEND_RES waits for the application's next input page, 0..4095.
+
+    Members
+    -------
+    frame : In(ParsedFrameSignature())
+        The frames the node consumes, from its parser.
+    rx_tag : In(1)
+        The port the current frame came in on ...
+    tx_tag : Out(1)
+        ... and the port of the pending response (the request's).
+    tx : Out(TxRequestSignature())
+        Responses, to the frame builder.
+    local_ip : Out(32)
+        The node's address (0.0.0.0 until assigned).
+    page_* : the :class:`~hdl.finemb.page.PageBuffer` ports (see there; ``page_in_ready``
+        is the buffer's ``app.in_ready``: low while it sums a committed input page)
+    app_commit : In(1)
+        The application committed an input page (the buffer's ``app.in_commit``).
+    state : Out(NodeState)
+    node_id : Out(16)
+        0xFFFF until assigned.
+    soc : Out(1)
+        Pulse: a start of cycle arrived (the application may align to it).
+    events : Out(StructLayout)
+        One pulse per :data:`CLIENT_EVENTS` counter.
+    """
+
+    def __init__(self, *, mac, descriptor, serial=0, app_deadline=256):
+        if not isinstance(descriptor, IoDescriptor):
+            raise ParameterError("descriptor", descriptor, "an IoDescriptor")
+        self._mac = check_int("mac", mac, 0, (1 << 48) - 1)
+        self._desc = descriptor
+        self._serial = check_int("serial", serial, 0, (1 << 32) - 1)
+        self._deadline = check_int("app_deadline", app_deadline, 0, 4095)
+        po, pi = descriptor.page_out_bytes, descriptor.page_in_bytes
+        from amaranth.lib import data
+        super().__init__({
+            "frame": In(ParsedFrameSignature()),
+            "rx_tag": In(1), "tx_tag": Out(1),
+            "tx": Out(TxRequestSignature()),
+            "local_ip": Out(32),
+            "page_out_begin": Out(1), "page_out_accept": In(1),
+            "page_out_we": Out(1), "page_out_waddr": Out(range(max(po, 2))),
+            "page_out_wdata": Out(8), "page_out_commit": Out(1),
+            "page_in_claim": Out(1), "page_in_held": In(1), "page_in_sum": In(16),
+            "page_in_raddr": Out(range(max(pi, 2))), "page_in_rdata": In(8),
+            "page_in_release": Out(1), "page_in_ready": In(1),
+            "app_commit": In(1),
+            "state": Out(NodeState), "node_id": Out(16), "soc": Out(1),
+            "events": Out(data.StructLayout({name: 1 for name in CLIENT_EVENTS})),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        f, tx = self.frame, self.tx
+        fld = f.fields
+        desc = self._desc
+        po, pi = desc.page_out_bytes, desc.page_in_bytes
+        rom_bytes = desc.encode()
+        ev = self.events
+
+        state = Signal(NodeState)
+        node_id = Signal(16, init=NODE_ALL)
+        local_ip = Signal(32)
+        m.d.comb += [self.state.eq(state), self.node_id.eq(node_id),
+                     self.local_ip.eq(local_ip)]
+
+        # ---- the request as it arrives: the header, the first body bytes, the page
+        ours = (f.kind == FrameKind.UDP) & (fld.dst_port == FINEMB_PORT)
+        hdr = Signal(8 * HEADER)
+        body = Signal(8 * _BODY)
+        off = f.payload_offset
+        with m.If(f.payload_valid & ours):
+            for k in range(HEADER):
+                with m.If(off == k):
+                    m.d.sync += hdr.word_select(k, 8).eq(f.payload_data)
+            for k in range(_BODY):
+                with m.If(off == HEADER + k):
+                    m.d.sync += body.word_select(k, 8).eq(f.payload_data)
+        h_magic, h_version, h_type = hdr[0:16], hdr[16:24], hdr[24:32]
+        h_node, h_cycle = hdr[32:48], hdr[64:96]
+        h_length, h_seq = hdr[96:112], hdr[112:128]
+        addressed = state != NodeState.INIT
+
+        # the page of an ISEND_REQ for this node goes straight into the output page (the
+        # header is complete when its first byte arrives); the buffer refuses it when the
+        # application holds the page it would go to
+        page_req = Signal()       # this frame is an ISEND_REQ for this node ...
+        page_ok = Signal()        # ... whose page the buffer accepted
+        begin = (f.payload_valid & ours & (off == HEADER) & addressed &
+                 (h_type == MsgType.ISEND_REQ) & (h_node == node_id) & ~page_req)
+        with m.If(f.first):
+            m.d.sync += [page_req.eq(0), page_ok.eq(0)]
+        with m.If(begin):
+            m.d.comb += self.page_out_begin.eq(1)
+            m.d.sync += [page_req.eq(1), page_ok.eq(self.page_out_accept)]
+            with m.If(~self.page_out_accept):
+                m.d.comb += ev.overrun.eq(1)
+        in_page = (off >= HEADER) & (off < HEADER + po)
+        m.d.comb += [self.page_out_we.eq(f.payload_valid & ours & in_page &
+                                         ((page_req & page_ok) | begin)),
+                     self.page_out_waddr.eq(off - HEADER), self.page_out_wdata.eq(f.payload_data)]
+
+        # ---- the verdict
+        # the response being prepared (latched when it starts; the FSM below sends it)
+        r_type = Signal(8)
+        r_node = Signal(16)
+        r_flags = Signal(16)
+        r_cycle = Signal(32)
+        r_seq = Signal(16)
+        r_len = Signal(11)        # body bytes
+        r_eth = Signal(48)
+        r_ip = Signal(32)
+        r_port = Signal(16)
+        r_body = Signal(8 * 20)   # fixed body bytes (ID_RES 18, ADDR_RES 13, IODESC_RES 4)
+        io_off = Signal(16)       # IODESC_RES: first descriptor byte ...
+        io_len = Signal(11)       # ... and how many
+        resp_busy = Signal()      # a response is being prepared or sent
+
+        good_header = ((h_magic == MAGIC) & (h_version == VERSION) &
+                       (fld.payload_len >= HEADER) & (h_length == fld.payload_len - HEADER))
+        verdict = f.done & f.accept & ours
+        for_me = addressed & (h_node == node_id)
+
+        b_mac = body[0:48]
+        addr_ip = body[48:80]           # ADDR_REQ: mac, ipv4 (bytes in order), netmask, id
+        addr_id = body[112:128]
+        io_req_off, io_req_len = body[0:16], body[16:32]
+        soc_period = body[0:32]         # SoC: cycle period in ns
+        reinit_reason = body[0:8]
+
+        def bswap(value, nbytes):
+            return Cat(*(value.word_select(nbytes - 1 - k, 8) for k in range(nbytes)))
+
+        mac_wire = bswap(Const(self._mac, 48), 6)    # the MAC's bytes in wire order
+        started = Signal()        # a response starts this cycle
+
+        r_state = Signal(NodeState)     # the state a response reports
+
+        def reply(type_, body_len, body_value, *, node, new_state, flags=0, broadcast=False):
+            """Start a response to the request of this verdict (dropped, and counted,
+            while another is pending: the master asks again)."""
+            with m.If(resp_busy):
+                m.d.comb += ev.response_busy.eq(1)
+            with m.Else():
+                m.d.comb += started.eq(1)
+                m.d.sync += [r_type.eq(type_), r_len.eq(body_len), r_node.eq(node),
+                             r_flags.eq(flags), r_cycle.eq(h_cycle), r_seq.eq(h_seq),
+                             r_body.eq(body_value), r_state.eq(new_state),
+                             self.tx_tag.eq(self.rx_tag)]
+                if broadcast:
+                    m.d.sync += [r_eth.eq(mac_to_int(BROADCAST_MAC)),
+                                 r_ip.eq(ip_to_int(BROADCAST_IP)), r_port.eq(FINEMB_PORT)]
+                else:
+                    m.d.sync += [r_eth.eq(fld.sender_mac), r_ip.eq(fld.sender_ip),
+                                 r_port.eq(fld.src_port)]
+
+        # ---- the cycle watchdog (three cycle periods without SoC -> REINIT)
+        period_cycles = Signal(32)
+        since_soc = Signal(32)
+        with m.If(since_soc != 0xFFFFFFFF):
+            m.d.sync += since_soc.eq(since_soc + 1)
+
+        with m.If(verdict):
+            m.d.comb += ev.finemb_rx.eq(1)
+            with m.If(~good_header):
+                m.d.comb += ev.bad_header.eq(1)
+            with m.Else():
+                with m.Switch(h_type):
+                    with m.Case(MsgType.SOC):
+                        m.d.comb += self.soc.eq(1)
+                        m.d.sync += [since_soc.eq(0),
+                                     period_cycles.eq(soc_period >> 3)]   # 8 ns per cycle
+                    with m.Case(MsgType.ID_REQ):
+                        with m.If(state == NodeState.INIT):
+                            reply(MsgType.ID_RES, 18, Cat(
+                                mac_wire, Const(VENDOR_ROSGATE, 16), Const(self._serial, 32),
+                                Const(2, 8), Const(0b01, 8), Const(pi, 16), Const(po, 16)),
+                                node=NODE_ALL, new_state=NodeState.INIT, broadcast=True)
+                    with m.Case(MsgType.ADDR_REQ):
+                        with m.If(b_mac == mac_wire):
+                            new_state = Mux(state == NodeState.OP, NodeState.OP,
+                                            NodeState.PREOP)
+                            m.d.sync += [local_ip.eq(bswap(addr_ip, 4)), node_id.eq(addr_id),
+                                         state.eq(new_state)]
+                            reply(MsgType.ADDR_RES, 13,
+                                  Cat(mac_wire, addr_ip, addr_id, Const(0, 8)), node=addr_id,
+                                  new_state=new_state)
+                        with m.Elif(addressed & (addr_id == node_id)):
+                            # another node is given this node's id: give it up
+                            m.d.comb += ev.id_conflict.eq(1)
+                            m.d.sync += [state.eq(NodeState.INIT), node_id.eq(NODE_ALL),
+                                         local_ip.eq(0)]
+                    with m.Case(MsgType.IODESC_REQ):
+                        with m.If(for_me):
+                            total = len(rom_bytes)
+                            first = Mux(io_req_off > total, total, io_req_off)
+                            left = Signal(16)
+                            count = Signal(16)
+                            m.d.comb += [left.eq(total - first),
+                                         count.eq(Mux(io_req_len < left, io_req_len, left))]
+                            n = Mux(count > IODESC_CHUNK, IODESC_CHUNK, count)
+                            reply(MsgType.IODESC_RES, 4 + n, Cat(first[:16], Const(total, 16)),
+                                  node=node_id, new_state=state)
+                            with m.If(~resp_busy):
+                                m.d.sync += [io_off.eq(first), io_len.eq(n)]
+                        with m.Else():
+                            m.d.comb += ev.other_node.eq(1)
+                    with m.Case(MsgType.ISEND_REQ):
+                        with m.If(for_me):
+                            # the master cycles: (back) to OP, the watchdog re-armed
+                            m.d.sync += [state.eq(NodeState.OP), since_soc.eq(0)]
+                            with m.If(h_length != po):
+                                m.d.comb += ev.bad_page.eq(1)
+                                reply(MsgType.ISEND_RES, pi, 0, node=node_id,
+                                      new_state=NodeState.OP, flags=Flag.ERROR)
+                            with m.Else():
+                                with m.If(page_ok):
+                                    m.d.comb += self.page_out_commit.eq(1)
+                                reply(MsgType.ISEND_RES, pi, 0, node=node_id,
+                                      new_state=NodeState.OP)
+                        with m.Else():
+                            m.d.comb += ev.other_node.eq(1)
+                    with m.Case(MsgType.REINIT):
+                        with m.If((h_node == NODE_ALL) &
+                                  (reinit_reason == ReinitReason.MASTER_RESTART)):
+                            m.d.sync += [state.eq(NodeState.INIT), node_id.eq(NODE_ALL),
+                                         local_ip.eq(0)]
+                        with m.Elif(for_me | ((h_node == NODE_ALL) & addressed)):
+                            m.d.sync += state.eq(NodeState.REINIT)
+                    with m.Case(MsgType.SOA, MsgType.EOA, MsgType.ASND):
+                        pass
+                    with m.Default():
+                        m.d.comb += ev.bad_header.eq(1)
+        # the watchdog
+        with m.If((state == NodeState.OP) & (period_cycles != 0) &
+                  (since_soc > 3 * period_cycles)):
+            m.d.comb += ev.missed_cycles.eq(1)
+            m.d.sync += state.eq(NodeState.REINIT)
+
+        # ---- the response: header, fixed body, then IO descriptor bytes or the input page
+        rom_depth = 1 << max(len(rom_bytes) - 1, 1).bit_length()
+        m.submodules.iodesc = rom = Memory(
+            shape=8, depth=rom_depth, init=list(rom_bytes) + [0] * (rom_depth - len(rom_bytes)))
+        rom_rd = rom.read_port()
+        req = tx.request
+        header_out = Cat(Const(MAGIC, 16), Const(VERSION, 8), r_type, r_node,
+                         (r_flags | r_state.shift_left(STATE_SHIFT))[:16], r_cycle,
+                         Cat(r_len, Const(0, 5)), r_seq)
+        fixed = Cat(header_out, r_body)          # header + fixed body
+        fixed_bytes = Array(fixed.word_select(k, 8) for k in range(HEADER + 20))
+
+        def words_sum(value, nbytes):
+            """One's complement sum of big-endian 16-bit words of little-endian bytes."""
+            acc = Const(0, 16)
+            for k in range(0, nbytes, 2):
+                hi = value.word_select(k, 8)
+                lo = value.word_select(k + 1, 8) if k + 1 < nbytes else Const(0, 8)
+                acc = ones_complement_add(acc, Cat(lo, hi))
+            return acc
+        is_isend = r_type == MsgType.ISEND_RES
+        is_iodesc = r_type == MsgType.IODESC_RES
+        fixed_len = Mux(is_isend, HEADER, Mux(is_iodesc, HEADER + 4, HEADER + r_len))
+        header_sum = Signal(16)
+        body_sum = Signal(16)
+        chunk_sum = Signal(16)
+        m.d.sync += [header_sum.eq(words_sum(header_out, HEADER)),
+                     body_sum.eq(Mux(is_isend, 0, words_sum(r_body, 20)))]
+        payload_sum = Signal(16)
+        m.d.comb += payload_sum.eq(ones_complement_add(
+            ones_complement_add(header_sum, body_sum),
+            Mux(is_isend, self.page_in_sum, Mux(is_iodesc, chunk_sum, 0))))
+
+        rd = tx.rd_addr
+        sel_fixed = Signal()
+        fixed_byte = Signal(8)
+        m.d.sync += [sel_fixed.eq(rd < fixed_len), fixed_byte.eq(fixed_bytes[rd[:6]])]
+        m.d.comb += [rom_rd.addr.eq(io_off + rd - (HEADER + 4)),
+                     self.page_in_raddr.eq(rd - HEADER),
+                     tx.rd_data.eq(Mux(sel_fixed, fixed_byte,
+                                       Mux(is_isend, self.page_in_rdata, rom_rd.data)))]
+        m.d.comb += [req.kind.eq(FrameKind.UDP), req.eth_dst.eq(r_eth), req.ip_dst.eq(r_ip),
+                     req.src_port.eq(FINEMB_PORT), req.dst_port.eq(r_port),
+                     req.length.eq(HEADER + r_len), req.payload_sum.eq(payload_sum)]
+
+        wait = Signal(range(self._deadline + 2))
+        sum_k = Signal(11)
+        sum_odd = Signal()
+        with m.FSM() as fsm:
+            with m.State("IDLE"):
+                with m.If(started):
+                    m.d.sync += [wait.eq(self._deadline), chunk_sum.eq(0), sum_k.eq(0),
+                                 sum_odd.eq(0)]
+                    m.next = "DISPATCH"
+            with m.State("DISPATCH"):
+                with m.If(is_isend):
+                    m.next = "APP"
+                with m.Elif(is_iodesc):
+                    m.next = "SUM"
+                with m.Else():
+                    m.next = "REQUEST"
+            with m.State("APP"):
+                # the application's next input page, or the deadline
+                with m.If(self.app_commit):
+                    m.next = "SUMMING"
+                with m.Elif(wait == 0):
+                    m.d.comb += ev.late_app.eq(1)
+                    m.next = "SUMMING"
+                with m.Else():
+                    m.d.sync += wait.eq(wait - 1)
+            with m.State("SUMMING"):
+                # the page buffer sums a committed page before it becomes the newest
+                with m.If(self.page_in_ready):
+                    m.d.comb += self.page_in_claim.eq(1)
+                    m.next = "SETTLE"
+            with m.State("SUM"):
+                # the descriptor chunk's sum, one byte per cycle (its first byte is an even
+                # payload byte)
+                m.d.comb += rom_rd.addr.eq(io_off + sum_k)
+                m.d.sync += sum_k.eq(sum_k + 1)
+                with m.If(sum_k != 0):
+                    word = Mux(sum_odd, Cat(rom_rd.data, Const(0, 8)),
+                               Cat(Const(0, 8), rom_rd.data))
+                    m.d.sync += [chunk_sum.eq(ones_complement_add(chunk_sum, word)),
+                                 sum_odd.eq(~sum_odd)]
+                with m.If(sum_k == io_len):
+                    m.next = "SETTLE"
+            with m.State("SETTLE"):
+                m.next = "REQUEST"
+            with m.State("REQUEST"):
+                m.d.comb += tx.valid.eq(1)
+                with m.If(tx.ready):
+                    m.d.comb += ev.responses.eq(1)
+                    m.next = "SENDING"
+            with m.State("SENDING"):
+                with m.If(tx.done):
+                    m.d.comb += self.page_in_release.eq(is_isend)
+                    m.next = "IDLE"
+        m.d.comb += resp_busy.eq(~fsm.ongoing("IDLE"))
+        return m

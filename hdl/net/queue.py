@@ -1,0 +1,179 @@
+"""Queues of received frames: keep or drop a frame on a decision made from its first bytes,
+read it out while it still arrives (cut-through) or later (store-and-forward)."""
+
+from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.lib import wiring
+from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import ParameterError, check_int
+from .mac import FRAME_STATUS_BITS, FrameStreamSignature, RxByteSignature
+
+__all__ = ["FRAME_STATUS_BITS", "FrameStreamSignature", "FrameQueue", "FrameToRxBytes"]
+
+class FrameQueue(wiring.Component):
+    """Received frames in a block-RAM queue, kept or dropped on a decision.
+
+    A frame's bytes are written as they arrive. While it arrives, ``decide`` with ``keep``
+    says whether to keep it (the parent looks at the destination address); a dropped frame,
+    or one that ends without a decision, is rewound out of the queue, and so is a kept frame
+    that does not fit (``overflow`` pulses). A kept frame can be read from the moment it is
+    kept, one byte behind the writer, so with a reader that keeps up the queue adds a few
+    cycles of latency (cut-through); a reader that waits gets the whole frame later
+    (store-and-forward).
+
+    Parameters
+    ----------
+    depth : int
+        Bytes of queue, a power of two in 64..65536.
+    frames : int
+        Kept frames the queue may hold at once (the status FIFO's depth), 2..64.
+
+    Members
+    -------
+    rx : In(RxByteSignature())
+        Bytes and end status from a :class:`~hdl.net.mac.GmiiRx`.
+    decide : In(1)
+        Pulse while the frame arrives (at or after its first byte, before its end): the
+        decision ...
+    keep : In(1)
+        ... to keep it.
+    m_axis : Out(FrameStreamSignature())
+        The kept frames. Once a frame's first byte is offered its bytes follow without a gap
+        as long as the frame arrives without one.
+    overflow : Out(1)
+        Pulse: a kept frame was dropped because the queue was full.
+    level : Out(range(depth + 1))
+        Bytes in the queue.
+    """
+
+    def __init__(self, depth=2048, frames=8):
+        check_int("depth", depth, 64, 65536)
+        if depth & (depth - 1):
+            raise ParameterError("depth", depth, "a power of two in 64..65536")
+        self._depth = depth
+        self._frames = check_int("frames", frames, 2, 64)
+        super().__init__({
+            "rx": In(RxByteSignature()), "decide": In(1), "keep": In(1),
+            "m_axis": Out(FrameStreamSignature()), "overflow": Out(1),
+            "level": Out(range(depth + 1)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        n = self._depth
+        aw = (n - 1).bit_length()
+        m.submodules.mem = mem = Memory(shape=9, depth=n, init=[])     # byte + last
+        wr = mem.write_port()
+        rd = mem.read_port()
+        m.submodules.status = status = SyncFIFO(width=FRAME_STATUS_BITS, depth=self._frames)
+        rx = self.rx
+
+        wp = Signal(aw + 1)          # next byte of the arriving frame
+        start = Signal(aw + 1)       # its first byte
+        done_wp = Signal(aw + 1)     # end of the last complete kept frame
+        rp = Signal(aw + 1)
+        arriving = Signal()
+        kept = Signal()
+        decided = Signal()
+        full_seen = Signal()
+        last_byte = Signal(8)
+        m.d.comb += self.level.eq(wp - rp)
+        full = (wp - rp) == n - 1
+
+        with m.If(rx.valid):
+            with m.If(rx.index == 0):
+                # a new frame (one cut off without an end is overwritten)
+                base = Mux(arriving, start, wp)
+                m.d.sync += [arriving.eq(1), kept.eq(0), decided.eq(0), start.eq(base),
+                             full_seen.eq(0)]
+                with m.If((base - rp)[:aw + 1] == n - 1):
+                    m.d.sync += [full_seen.eq(1), wp.eq(base)]
+                with m.Else():
+                    m.d.comb += [wr.en.eq(1), wr.addr.eq(base[:aw]), wr.data.eq(rx.data)]
+                    m.d.sync += [wp.eq(base + 1), last_byte.eq(rx.data)]
+            with m.Elif(arriving & ~full_seen):
+                with m.If(full):
+                    m.d.sync += full_seen.eq(1)
+                with m.Else():
+                    m.d.comb += [wr.en.eq(1), wr.addr.eq(wp[:aw]), wr.data.eq(rx.data)]
+                    m.d.sync += [wp.eq(wp + 1), last_byte.eq(rx.data)]
+        with m.If(self.decide & arriving & ~decided):
+            m.d.sync += [decided.eq(1), kept.eq(self.keep)]
+        keep_now = kept | (self.decide & arriving & ~decided & self.keep)
+        with m.If(rx.end & arriving):
+            m.d.sync += arriving.eq(0)
+            with m.If(keep_now & ~full_seen & status.w_rdy & (wp != start)):
+                # mark the last byte and record the frame's status
+                m.d.comb += [wr.en.eq(1), wr.addr.eq((wp - 1)[:aw]),
+                             wr.data.eq(Cat(last_byte, 1)),
+                             status.w_en.eq(1),
+                             status.w_data.eq(Cat(~rx.ok, rx.err_fcs, rx.err_rx_er,
+                                                  rx.err_size))]
+                m.d.sync += done_wp.eq(wp)
+            with m.Else():
+                m.d.sync += wp.eq(start)
+                with m.If(keep_now):
+                    m.d.comb += self.overflow.eq(1)
+
+        # reading: up to the byte before the arriving kept frame's newest, whole frames after
+        reading_kept = arriving & keep_now & ~full_seen
+        visible = Signal(aw + 1)
+        m.d.comb += visible.eq(Mux(reading_kept & (wp != start), wp - 1, done_wp))
+        out_valid = Signal()
+        out = self.m_axis
+        fetch = (rp != visible) & (~out_valid | out.tready)
+        m.d.comb += [rd.addr.eq(rp[:aw]), rd.en.eq(fetch)]
+        with m.If(fetch):
+            m.d.sync += [rp.eq(rp + 1), out_valid.eq(1)]
+        with m.Elif(out.tready):
+            m.d.sync += out_valid.eq(0)
+        last = rd.data[8]
+        m.d.comb += [out.tvalid.eq(out_valid), out.tdata.eq(rd.data[:8]), out.tlast.eq(last),
+                     out.tuser.eq(Mux(last, status.r_data, 0)),
+                     status.r_en.eq(out.tvalid & out.tready & last)]
+        return m
+
+
+class FrameToRxBytes(wiring.Component):
+    """A frame stream back into the :class:`~hdl.net.mac.RxByteSignature` a
+    :class:`~hdl.net.rx.FrameParser` takes: bytes with their index, then the end pulse with
+    the status, then ``gap`` idle cycles so the parser's consumers can read its fields.
+
+    Parameters
+    ----------
+    gap : int
+        Idle cycles after each frame's end (at least 1).
+
+    Members
+    -------
+    s_axis : In(FrameStreamSignature())
+        Frames; a gap inside a frame becomes a gap in ``rx.valid``.
+    rx : Out(RxByteSignature())
+    """
+
+    def __init__(self, gap=16):
+        self._gap = check_int("gap", gap, 1, 255)
+        super().__init__({"s_axis": In(FrameStreamSignature()), "rx": Out(RxByteSignature())})
+
+    def elaborate(self, platform):
+        m = Module()
+        s, rx = self.s_axis, self.rx
+        index = Signal(range(2048))
+        wait = Signal(range(self._gap + 2))
+        m.d.comb += [s.tready.eq(wait == 0), rx.data.eq(s.tdata),
+                     rx.valid.eq(s.tvalid & s.tready), rx.index.eq(index)]
+        m.d.sync += rx.end.eq(0)
+        with m.If(wait != 0):
+            m.d.sync += wait.eq(wait - 1)
+        with m.If(wait == 1):
+            m.d.sync += index.eq(0)
+        with m.If(s.tvalid & s.tready):
+            # at the end pulse ``index`` is the frame's length, as a MAC reports it
+            m.d.sync += index.eq(Mux(index == 2047, index, index + 1))
+            with m.If(s.tlast):
+                m.d.sync += [rx.end.eq(1), wait.eq(self._gap + 1),
+                             rx.ok.eq(~s.tuser[0]), rx.err_fcs.eq(s.tuser[1]),
+                             rx.err_rx_er.eq(s.tuser[2]), rx.err_size.eq(s.tuser[3])]
+        return m

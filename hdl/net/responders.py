@@ -1,0 +1,197 @@
+"""Responders on a :class:`~hdl.net.tx.FrameBuilder` request port: each answers one kind of
+received frame (docs/network.md)."""
+
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import ParameterError, check_int
+from .checksum import ones_complement_add
+from .frames import ARP_REPLY, ARP_REQUEST
+from .rx import RX_FIELDS, FrameKind
+from .tx import TxRequestSignature
+
+__all__ = ["ParsedFrameSignature", "ArpResponder", "IcmpEchoResponder"]
+
+
+class ParsedFrameSignature(wiring.Signature):
+    """What a :class:`~hdl.net.rx.FrameParser` tells its consumers, seen from the parser
+    (``Out``); see its members of the same names.
+
+    Members
+    -------
+    fields : Out(RX_FIELDS)
+    kind : Out(FrameKind)
+    payload_data, payload_valid, payload_offset : Out
+    first : Out(1)
+        The frame's first byte arrives (a consumer may claim a buffer for it).
+    done, accept : Out(1)
+        The verdict.
+    """
+
+    def __init__(self):
+        super().__init__({
+            "fields": Out(RX_FIELDS), "kind": Out(FrameKind),
+            "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
+            "first": Out(1), "done": Out(1), "accept": Out(1),
+        })
+
+    @staticmethod
+    def connect_parser(m, parser, port, rx, *, accept=None):
+        """Drive ``port`` (an ``In(ParsedFrameSignature())``) from ``parser`` and the byte
+        stream ``rx`` it parses; ``accept`` replaces the parser's verdict (to gate it)."""
+        m.d.comb += [port.fields.eq(parser.fields), port.kind.eq(parser.kind),
+                     port.payload_data.eq(parser.payload_data),
+                     port.payload_valid.eq(parser.payload_valid),
+                     port.payload_offset.eq(parser.payload_offset),
+                     port.first.eq(rx.valid & (rx.index == 0)),
+                     port.done.eq(parser.done),
+                     port.accept.eq(parser.accept if accept is None else accept)]
+
+
+class ArpResponder(wiring.Component):
+    """Answers an ARP request for this node's address (the parser accepts only those) with
+    a reply to the requester's addresses.
+
+    Parameters
+    ----------
+    tag_width : int
+        Width of ``rx_tag``/``tx_tag`` (0: none): something the parent wants back with the
+        reply, such as the port the request came in on.
+
+    Members
+    -------
+    frame : In(ParsedFrameSignature())
+    tx : Out(TxRequestSignature())
+        To the builder.
+    rx_tag : In(tag_width)
+        Sampled at the verdict of a request that is answered ...
+    tx_tag : Out(tag_width)
+        ... and held while its reply is pending.
+    busy : Out(1)
+        A reply is pending: a request answered now would be dropped (count it as busy).
+    """
+
+    def __init__(self, *, tag_width=0):
+        self._tag = check_int("tag_width", tag_width, 0, 8)
+        members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
+                   "busy": Out(1)}
+        if tag_width:
+            members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
+        super().__init__(members)
+
+    def elaborate(self, platform):
+        m = Module()
+        f, tx = self.frame, self.tx
+        req = tx.request
+        pending = Signal()
+        m.d.comb += [self.busy.eq(pending), tx.valid.eq(pending),
+                     req.kind.eq(FrameKind.ARP), req.arp_oper.eq(ARP_REPLY)]
+        eth, ip = Signal(48), Signal(32)
+        m.d.comb += [req.eth_dst.eq(eth), req.ip_dst.eq(ip)]
+        with m.If(tx.ready):
+            m.d.sync += pending.eq(0)
+        with m.If(f.done & f.accept & (f.kind == FrameKind.ARP) &
+                  (f.fields.arp_oper == ARP_REQUEST) & ~pending):
+            m.d.sync += [pending.eq(1), eth.eq(f.fields.sender_mac), ip.eq(f.fields.sender_ip)]
+            if self._tag:
+                m.d.sync += self.tx_tag.eq(self.rx_tag)
+        return m
+
+
+class IcmpEchoResponder(wiring.Component):
+    """Answers an ICMP echo request with its echo reply: the message is kept as it arrives,
+    its type set to 0 and its checksum updated (RFC 1624), and sent back to the sender.
+
+    A request that arrives while a reply is pending, or whose message is longer than the
+    buffer, is not answered (``dropped`` pulses).
+
+    Parameters
+    ----------
+    buffer_bytes : int
+        The longest ICMP message answered (header and data), a power of two in 64..2048
+        (2048 holds the largest unfragmented ping, 1480 bytes).
+    tag_width : int
+        As for :class:`ArpResponder`.
+
+    Members
+    -------
+    frame : In(ParsedFrameSignature())
+    tx : Out(TxRequestSignature())
+    rx_tag, tx_tag :
+        As for :class:`ArpResponder`.
+    busy : Out(1)
+        The buffer holds a reply.
+    dropped : Out(1)
+        Pulse with the verdict of an accepted echo request that is not answered.
+    """
+
+    def __init__(self, *, buffer_bytes=2048, tag_width=0):
+        check_int("buffer_bytes", buffer_bytes, 64, 2048)
+        if buffer_bytes & (buffer_bytes - 1):
+            raise ParameterError("buffer_bytes", buffer_bytes, "a power of two in 64..2048")
+        self._bytes = buffer_bytes
+        self._tag = check_int("tag_width", tag_width, 0, 8)
+        members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
+                   "busy": Out(1), "dropped": Out(1)}
+        if tag_width:
+            members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
+        super().__init__(members)
+
+    def elaborate(self, platform):
+        m = Module()
+        f, tx = self.frame, self.tx
+        req = tx.request
+        aw = (self._bytes - 1).bit_length()
+        m.submodules.buffer = mem = Memory(shape=8, depth=self._bytes, init=[])
+        wp = mem.write_port()
+        rp = mem.read_port(transparent_for=())
+        eth, ip = Signal(48), Signal(32)
+        length = Signal(11)
+        csum = Signal(16)
+        claim = Signal()          # this frame's message goes into the buffer
+        m.d.comb += [req.kind.eq(FrameKind.ICMP), req.eth_dst.eq(eth), req.ip_dst.eq(ip),
+                     req.length.eq(length), rp.addr.eq(tx.rd_addr[:aw]), tx.rd_data.eq(rp.data)]
+        with m.FSM() as fsm:
+            with m.State("IDLE"):
+                with m.If(f.first):
+                    m.d.sync += claim.eq(1)
+                with m.If(f.payload_valid & claim & (f.kind == FrameKind.ICMP) &
+                          (f.payload_offset < self._bytes)):
+                    m.d.comb += [wp.addr.eq(f.payload_offset[:aw]), wp.data.eq(f.payload_data),
+                                 wp.en.eq(1)]
+                with m.If(f.done):
+                    m.d.sync += claim.eq(0)
+                    with m.If(f.accept & (f.kind == FrameKind.ICMP)):
+                        with m.If(claim & (f.fields.payload_len <= self._bytes)):
+                            m.d.sync += [eth.eq(f.fields.sender_mac), ip.eq(f.fields.sender_ip),
+                                         length.eq(f.fields.payload_len),
+                                         csum.eq(f.fields.icmp_csum)]
+                            if self._tag:
+                                m.d.sync += self.tx_tag.eq(self.rx_tag)
+                            m.next = "TYPE"
+                        with m.Else():
+                            m.d.comb += self.dropped.eq(1)
+            with m.State("TYPE"):
+                # echo reply: type 8 -> 0; checksum updated per RFC 1624 (m = 0x0800, m' = 0)
+                m.d.comb += [wp.addr.eq(0), wp.data.eq(0), wp.en.eq(1)]
+                m.d.sync += csum.eq(~ones_complement_add(~csum, 0xF7FF))
+                m.next = "CSUM_HI"
+            with m.State("CSUM_HI"):
+                m.d.comb += [wp.addr.eq(2), wp.data.eq(csum[8:]), wp.en.eq(1)]
+                m.next = "CSUM_LO"
+            with m.State("CSUM_LO"):
+                m.d.comb += [wp.addr.eq(3), wp.data.eq(csum[:8]), wp.en.eq(1)]
+                m.next = "REQUEST"
+            with m.State("REQUEST"):
+                m.d.comb += tx.valid.eq(1)
+                with m.If(tx.ready):
+                    m.next = "SENDING"
+            with m.State("SENDING"):
+                with m.If(tx.done):
+                    m.next = "IDLE"
+        with m.If(~fsm.ongoing("IDLE") & f.done & f.accept & (f.kind == FrameKind.ICMP)):
+            m.d.comb += self.dropped.eq(1)
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        return m

@@ -1,0 +1,188 @@
+"""The test bench of the FinEmbP node and line tops: GMII models on each port, a master that
+builds and reads FinEmbP frames (tb/models/finemb.py), and the node's counters."""
+
+import logging
+import struct
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, RisingEdge
+from cocotbext.eth import GmiiFrame, GmiiSink, GmiiSource
+from scapy.layers.inet import IP
+from scapy.layers.l2 import Ether
+
+from gen.finemb import load_io_description
+from hdl.finemb import NODE_COUNTERS
+from hdl.finemb.protocol import (
+    BROADCAST_IP, BROADCAST_MAC, NODE_ALL, Direction, MsgType, NodeState, ReinitReason,
+)
+from hdl.net.frames import int_to_mac, mac_to_int
+
+from .harness import ROOT, bench_params
+from .models.finemb import body_of, finemb_frame, parse_finemb
+from .net_tb import read_counter_bank
+from .streams import reset_aresetn
+
+__all__ = ["CLOCK_NS", "PID_IO", "NodeTB", "Port", "node_ip"]
+
+CLOCK_NS = 8
+PID_IO = str(ROOT / "examples" / "finemb" / "pid_node.toml")
+
+
+def node_ip(k):
+    """The address the benches give node ``k`` (RFC 2544 block)."""
+    return f"198.18.0.{16 + k}"
+
+
+class Port:
+    """GMII source and sink on one port of a node or line top (``<prefix>_rxd`` ...)."""
+
+    def __init__(self, dut, prefix):
+        self.dut = dut
+        self.source = GmiiSource(getattr(dut, f"{prefix}_rxd"), getattr(dut, f"{prefix}_rx_er"),
+                                 getattr(dut, f"{prefix}_rx_dv"), dut.aclk, dut.aresetn,
+                                 reset_active_level=False)
+        self.sink = GmiiSink(getattr(dut, f"{prefix}_txd"), getattr(dut, f"{prefix}_tx_er"),
+                             getattr(dut, f"{prefix}_tx_en"), dut.aclk, dut.aresetn,
+                             reset_active_level=False)
+        for model in (self.source, self.sink):
+            model.log.setLevel(logging.WARNING)
+
+    async def send(self, frame, *, fcs=True, error=False, raw=None):
+        """Send a scapy frame (FCS added), or ``raw`` bytes as they are."""
+        gf = GmiiFrame.from_raw_payload(raw) if raw is not None else \
+            GmiiFrame.from_payload(bytes(frame)) if fcs else \
+            GmiiFrame.from_raw_payload(bytes(frame))
+        if error:
+            gf.error = [0] * len(gf.data)
+            gf.error[len(gf.data) // 2] = 1
+        await self.source.send(gf)
+
+    def take(self):
+        """The next frame sent on this port, as ``(GmiiFrame, scapy Ether or None)``, or
+        ``None``."""
+        if self.sink.empty():
+            return None
+        gf = self.sink.recv_nowait()
+        ok = gf.check_fcs() and not any(gf.error or [])
+        payload = bytes(gf.get_payload())
+        return gf, (Ether(payload) if ok else None)
+
+
+class NodeTB:
+    """One FinEmbP node (``finemb_node`` top) with its two ports and a master on port 0."""
+
+    def __init__(self, dut):
+        self.dut = dut
+        self.params = bench_params()
+        self.io = load_io_description(self.params["io"])
+        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        self.ports = [Port(dut, "port0"), Port(dut, "port1")]
+        dut.counter_index.value = 0
+        self.cycle = 0
+        self.seq = 0
+        cocotb.start_soon(self._count())
+
+    async def _count(self):
+        while True:
+            await RisingEdge(self.dut.aclk)
+            self.cycle += 1
+
+    async def reset(self):
+        await reset_aresetn(self.dut)
+
+    async def counters(self):
+        return await read_counter_bank(self.dut.aclk, self.dut.counter_index,
+                                       self.dut.counter_value, NODE_COUNTERS)
+
+    @property
+    def state(self):
+        return NodeState(int(self.dut.state.value))
+
+    async def send(self, frame, port=0, **kw):
+        await self.ports[port].send(frame, **kw)
+
+    async def recv(self, port=0, timeout_cycles=5000, *, finemb=True):
+        """The next frame on ``port`` (a FinEmbP message dict when ``finemb``, else the
+        scapy frame), or ``None``."""
+        for _ in range(timeout_cycles // 8):
+            got = self.ports[port].take()
+            if got is not None:
+                gf, frame = got
+                assert frame is not None, "a frame from the node with a bad FCS or TX_ER"
+                if IP in frame:
+                    frame = Ether(bytes(frame)[:14 + frame[IP].len])
+                return parse_finemb(frame) if finemb else frame
+            await ClockCycles(self.dut.aclk, 8)
+        return None
+
+    async def expect_silence(self, port=0, cycles=2000):
+        got = await self.recv(port, cycles, finemb=False)
+        assert got is None, f"unexpected frame on port {port}: {got!r}"
+
+    async def drain(self, port, cycles=200):
+        """Frames sent on ``port`` within ``cycles`` (scapy)."""
+        out = []
+        await ClockCycles(self.dut.aclk, cycles)
+        while (got := self.ports[port].take()) is not None:
+            out.append(got[1])
+        return out
+
+    # ---- a master's requests
+    def request(self, type_, node_id, body=b"", **kw):
+        self.seq = (self.seq + 1) & 0xFFFF
+        return finemb_frame(type_, node_id, body, seq=self.seq, **kw)
+
+    async def exchange(self, frame, *, port=0, timeout_cycles=5000):
+        await self.send(frame, port)
+        return await self.recv(port, timeout_cycles)
+
+    async def init(self, node_id=1, ip=None, port=0):
+        """ID, address and IO descriptor exchange; return the descriptor bytes read."""
+        ip = ip or node_ip(node_id)
+        res = await self.exchange(self.request(MsgType.ID_REQ, NODE_ALL, body_of(MsgType.ID_REQ, 1),
+                                               dst_mac=BROADCAST_MAC, dst_ip=BROADCAST_IP),
+                                  port=port)
+        assert res and res["type"] == MsgType.ID_RES, res
+        mac = res["body"][:6]
+        res = await self.exchange(self.request(
+            MsgType.ADDR_REQ, NODE_ALL,
+            body_of(MsgType.ADDR_REQ, mac, _ip_bytes(ip),
+                    _ip_bytes("255.255.255.0"), node_id),
+            dst_mac=BROADCAST_MAC, dst_ip=BROADCAST_IP), port=port)
+        assert res and res["type"] == MsgType.ADDR_RES and res["node_id"] == node_id, res
+        desc = b""
+        total = None
+        while total is None or len(desc) < total:
+            res = await self.exchange(self.request(
+                MsgType.IODESC_REQ, node_id, body_of(MsgType.IODESC_REQ, len(desc), 40),
+                dst_mac=self.node_mac, dst_ip=ip), port=port)
+            assert res and res["type"] == MsgType.IODESC_RES, res
+            offset, total = struct.unpack_from("<HH", res["body"])
+            assert offset == len(desc), (offset, len(desc))
+            desc += res["body"][4:]
+        return desc
+
+    @property
+    def node_mac(self):
+        return int_to_mac(mac_to_int(self.params.get("mac", "02:00:00:00:46:01")))
+
+    async def isend(self, node_id, values, *, cycle=0, port=0, ip=None, **kw):
+        """One ISEND_REQ with the output page of ``values``; the ISEND_RES message."""
+        page = self.io.pack(Direction.OUT, values)
+        return await self.exchange(self.request(
+            MsgType.ISEND_REQ, node_id, page, cycle=cycle, dst_mac=self.node_mac,
+            dst_ip=ip or node_ip(node_id), **kw), port=port)
+
+    def soc(self, period_ns=40_000, cycle=0, nodes=1):
+        return self.request(MsgType.SOC, NODE_ALL, body_of(MsgType.SOC, period_ns, 0, nodes, 0),
+                            cycle=cycle)
+
+    def reinit_all(self):
+        return self.request(MsgType.REINIT, NODE_ALL,
+                            body_of(MsgType.REINIT, ReinitReason.MASTER_RESTART))
+
+
+def _ip_bytes(ip):
+    return bytes(int(x) for x in ip.split("."))
+
