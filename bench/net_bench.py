@@ -33,6 +33,7 @@ from hdl.ros1.registers import PHASES
 from host.ros1.rbcp import RbcpClient, rbcp_reply_ok
 from tb.models.tcp_peer import TcpPeerModel, udp_frame
 from tb.net_bench_tops import WORD_BYTES, pattern_bytes
+from host.pcap import SimCapture
 from tb.net_tb import CLOCK_NS, PEER_MAC, read_counter_bank
 from tb.streams import reset_aresetn
 
@@ -44,26 +45,6 @@ STREAMING = PHASES.index("streaming")
 
 def pattern(n, start=0):
     return pattern_bytes(start, n)
-
-
-class Capture:
-    """The first ``limit`` frames each way, as a pcap file Wireshark opens, stamped with
-    simulated time (``PCAP`` in the environment names the file; none without it)."""
-
-    def __init__(self, path, limit=400):
-        from scapy.utils import PcapWriter
-        self.writer = PcapWriter(str(path), linktype=1, nano=True, sync=False) if path else None
-        self.left = {"in": limit, "out": limit}
-
-    def record(self, direction, frame, cycle):
-        if self.writer is None or not self.left[direction]:
-            return
-        self.left[direction] -= 1
-        ns = cycle * CLOCK_NS
-        self.writer.write_packet(bytes(frame), sec=ns // 10**9, usec=ns % 10**9)
-        if not any(self.left.values()):
-            self.writer.close()
-            self.writer = None
 
 
 class WordLink:
@@ -79,7 +60,7 @@ class WordLink:
         self.rx = bytearray()
         self.cycle = 0
         self.hooks = []
-        self.capture = Capture(os.environ.get("ROSGATE_BENCH_PCAP"))
+        self.capture = SimCapture(os.environ.get("ROSGATE_BENCH_PCAP"), clock_ns=CLOCK_NS)
         dut.peer_in_tvalid.value = 0
         dut.peer_out_tready.value = 0
 

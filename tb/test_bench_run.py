@@ -17,3 +17,4 @@ def test_unknown_argument_is_named(args, bad):
     assert result.returncode != 0
     assert f"unknown argument '{bad}'" in result.stderr and "benches: hmt" in result.stderr, \
         result.stderr
+
