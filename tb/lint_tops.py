@@ -28,8 +28,11 @@ def benchmark_tops():
         build_ros1_bench_top,
     )
     from tb.topic_traffic import TOPOLOGIES, WIDTHS, build_topic_bench_top
+    from tb.finemb_line_top import build_finemb_line_bench_top
+    from tb.finemb_tb import PID_IO
     for case, params in NET_BENCH_CONFIGS.items():
         yield "net_bench", case, params, build_net_bench_top
+    yield "finemb_line", "n2", {"io": PID_IO, "nodes": 2}, build_finemb_line_bench_top
     yield "ros1_bench", "images", ROS1_BENCH_CONFIG, build_ros1_bench_top
     for width in WIDTHS:
         for pubs, subs in TOPOLOGIES:
