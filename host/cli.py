@@ -14,6 +14,8 @@ from gen.msg.model import MessageDefinitionError
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
+from .tap_cli import add_export_finemb, add_tap_commands
+
 __all__ = ["main"]
 
 PROG = "rosgate"
@@ -419,8 +421,10 @@ def build_parser():
                                  description="Export one core as Verilog and a JSON manifest.")
     cores = export.add_subparsers(dest="core", metavar="CORE", required=True)
     _add_export_topic(cores)
+    add_export_finemb(cores)
     _add_msg(commands)
     _add_project_commands(commands)
+    add_tap_commands(commands)
     return parser
 
 

@@ -7,7 +7,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.finemb import load_io_description
-from hdl.finemb import FinembLine, PortSignature
+from hdl.finemb import FinembLine
+from hdl.net.mac import GmiiSignature
 from hdl.finemb.protocol import NodeState
 from hdl.params import check_int
 
@@ -27,7 +28,7 @@ class LossyLink(wiring.Component):
 
     Members
     -------
-    west, east : In(PortSignature())
+    west, east : In(GmiiSignature())
     loss_threshold : In(16)
         Frames lost per 65536.
     lost : Out(16)
@@ -36,7 +37,7 @@ class LossyLink(wiring.Component):
 
     def __init__(self, seed):
         self._seed = check_int("seed", seed, 1, 0xFFFF)
-        super().__init__({"west": In(PortSignature()), "east": In(PortSignature()),
+        super().__init__({"west": In(GmiiSignature()), "east": In(GmiiSignature()),
                           "loss_threshold": In(16), "lost": Out(16)})
 
     def elaborate(self, platform):
@@ -68,7 +69,7 @@ class FinembLineBench(wiring.Component):
 
     Members
     -------
-    port0 : Out(PortSignature())
+    port0 : Out(GmiiSignature())
         The master's link (through a :class:`LossyLink`).
     loss_threshold : In(16)
         Every link's (see :class:`LossyLink`).
@@ -89,7 +90,7 @@ class FinembLineBench(wiring.Component):
         self._line = FinembLine(descriptor, nodes, link=link)
         self._master_link = LossyLink(seed=seed % 65535 + 1)
         super().__init__({
-            "port0": Out(PortSignature()), "loss_threshold": In(16), "lost": Out(32),
+            "port0": Out(GmiiSignature()), "loss_threshold": In(16), "lost": Out(32),
             "state": Out(NodeState).array(nodes), "node_id": Out(16).array(nodes),
             "updates": Out(32).array(nodes), "soc": Out(1).array(nodes),
             "hop_in": Out(1), "hop_out": Out(1),

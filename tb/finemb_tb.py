@@ -212,6 +212,7 @@ class LineMaster:
         self.late = {}            # node id -> cycles without an answer in time
         self.answered = {}        # node id -> answers
         self.cycle_no = 0
+        self.last_sent = []
         dut.loss_threshold.value = 0
         cocotb.start_soon(self._receive())
 
@@ -322,8 +323,10 @@ class LineMaster:
 
     def isend(self, node_id, values):
         node = self.nodes[node_id]
-        return self.request(MsgType.ISEND_REQ, node_id, self.io.pack(Direction.OUT, values),
-                            cycle=self.cycle_no, dst_mac=node["mac"], dst_ip=node["ip"])
+        frame = self.request(MsgType.ISEND_REQ, node_id, self.io.pack(Direction.OUT, values),
+                             cycle=self.cycle_no, dst_mac=node["mac"], dst_ip=node["ip"])
+        self.last_sent.append(frame)
+        return frame
 
     def values(self, rng, node_id):
         """The next output page of a node: new set point and measurement, fixed gains."""
@@ -343,8 +346,10 @@ class LineMaster:
         cycle or None, {node: answer})``; a node that did not answer counts as late."""
         start = self.now()
         ids = sorted(self.nodes)
-        self.send(self.request(MsgType.SOC, NODE_ALL, body_of(
-            MsgType.SOC, 40_000, start * CLOCK_NS, len(ids), 0), cycle=self.cycle_no))
+        soc = self.request(MsgType.SOC, NODE_ALL, body_of(
+            MsgType.SOC, 40_000, start * CLOCK_NS, len(ids), 0), cycle=self.cycle_no)
+        self.send(soc)
+        self.last_sent = [soc]         # the frames of this cycle, for wire-time sums
         sent = {k: self.values(rng, k) for k in ids}
         got = {}
         last = None

@@ -19,7 +19,7 @@ from tb.models.finemb import body_of
 from .finemb_line_top import build_finemb_line_bench_top, loss_threshold
 from .finemb_tb import PID_IO, LineMaster
 
-NODES = int(os.environ.get("ROSGATE_FINEMB_NODES", "3"))
+NODES = int(os.environ.get("ROSGATE_FINEMB_NODES", "2"))
 #: a period with room for the iso phase of every node and one asynchronous exchange
 SLOW_PERIOD = 1500 + 900 * NODES
 #: how long a cycle waits for answers (some may be lost) before the next one starts

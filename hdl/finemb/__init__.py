@@ -4,10 +4,10 @@ machine, the two-port node with layer-2 forwarding, and the PID benchmark applic
 
 from .descriptor import IoDescriptor, IoPort
 from .line import FinembLine, line_mac
-from .node import NODE_COUNTERS, FinembNode, PortSignature
+from .node import NODE_COUNTERS, FinembNode
 from .page import PageAppSignature, PageBuffer
 from .pid_app import PID_PORTS, FinembPidNode, PidApplication
 
 __all__ = ["IoDescriptor", "IoPort", "FinembLine", "line_mac", "NODE_COUNTERS", "FinembNode",
-           "PortSignature", "PageAppSignature", "PageBuffer", "PID_PORTS", "FinembPidNode",
+           "PageAppSignature", "PageBuffer", "PID_PORTS", "FinembPidNode",
            "PidApplication"]

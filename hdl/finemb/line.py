@@ -6,9 +6,9 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from hdl.net.frames import int_to_mac
+from hdl.net.mac import GmiiSignature
 
 from ..params import ParameterError, check_int
-from .node import PortSignature
 from .pid_app import FinembPidNode
 from .protocol import NodeState
 
@@ -25,12 +25,12 @@ class Wire(wiring.Component):
 
     Members
     -------
-    west, east : In(PortSignature())
-        The two ports it joins (each side connects a node's ``Out(PortSignature())``).
+    west, east : In(GmiiSignature())
+        The two ports it joins (each side connects a node's ``Out(GmiiSignature())``).
     """
 
     def __init__(self):
-        super().__init__({"west": In(PortSignature()), "east": In(PortSignature())})
+        super().__init__({"west": In(GmiiSignature()), "east": In(GmiiSignature())})
 
     def elaborate(self, platform):
         m = Module()
@@ -58,7 +58,7 @@ class FinembLine(wiring.Component):
 
     Members
     -------
-    port0, port1 : Out(PortSignature())
+    port0, port1 : Out(GmiiSignature())
         The line's two ends.
     state : Out(NodeState).array(nodes)
     node_id : Out(16).array(nodes)
@@ -77,7 +77,7 @@ class FinembLine(wiring.Component):
         self._links = [(link or Wire)(*(() if link is None else (k,)))
                        for k in range(nodes - 1)]
         super().__init__({
-            "port0": Out(PortSignature()), "port1": Out(PortSignature()),
+            "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
             "state": Out(NodeState).array(nodes), "node_id": Out(16).array(nodes),
             "updates": Out(32).array(nodes), "soc": Out(1).array(nodes),
         })

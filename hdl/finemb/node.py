@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 from hdl.dds.arbiter import TopicArbiter
 from hdl.net.counters import EventCounters
 from hdl.net.frames import DROP_REASONS, ip_to_int, mac_to_int
-from hdl.net.mac import GmiiRx, GmiiTx
+from hdl.net.mac import GmiiRx, GmiiSignature, GmiiTx
 from hdl.net.queue import FrameQueue, FrameStreamSignature, FrameToRxBytes
 from hdl.net.responders import ArpResponder, IcmpEchoResponder, ParsedFrameSignature
 from hdl.net.rx import FrameKind, FrameParser
@@ -20,28 +20,13 @@ from .descriptor import IoDescriptor
 from .page import PageAppSignature, PageBuffer
 from .protocol import FINEMB_PORT, GROUP_IP, GROUP_MAC, IP_TTL_FINEMB, NodeState
 
-__all__ = ["PortSignature", "FinembNode", "NODE_COUNTERS"]
+__all__ = ["FinembNode", "NODE_COUNTERS"]
 
 #: the node's counters, in the order of ``counter_index``
 NODE_COUNTERS = (("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0", "forwarded1",
                   "forward_dropped0", "forward_dropped1", "consume_dropped", "delivered") +
                  DROP_REASONS + CLIENT_EVENTS + ("arp_replies", "icmp_replies",
                                                  "icmp_dropped"))
-
-
-class PortSignature(wiring.Signature):
-    """One GMII port of a node, seen from the node (``Out`` = towards the PHY or the next
-    node's port).
-
-    Members
-    -------
-    txd, tx_en, tx_er : Out
-    rxd, rx_dv, rx_er : In
-    """
-
-    def __init__(self):
-        super().__init__({"txd": Out(8), "tx_en": Out(1), "tx_er": Out(1),
-                          "rxd": In(8), "rx_dv": In(1), "rx_er": In(1)})
 
 
 class FinembNode(wiring.Component):
@@ -80,7 +65,7 @@ class FinembNode(wiring.Component):
 
     Members
     -------
-    port0, port1 : Out(PortSignature())
+    port0, port1 : Out(GmiiSignature())
         The two Ethernet ports.
     app : Out(PageAppSignature)
         The application's side of the page buffer.
@@ -109,7 +94,7 @@ class FinembNode(wiring.Component):
         self._deadline = check_int("app_deadline", app_deadline, 0, 4095)
         self._queue = check_int("queue_bytes", queue_bytes, 2048, 65536)
         super().__init__({
-            "port0": Out(PortSignature()), "port1": Out(PortSignature()),
+            "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
             "app": Out(PageAppSignature(descriptor.page_out_bytes, descriptor.page_in_bytes)),
             "state": Out(NodeState), "node_id": Out(16), "local_ip": Out(32), "soc": Out(1),
             "counter_index": In(range(len(NODE_COUNTERS))), "counter_value": Out(32),

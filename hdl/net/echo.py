@@ -1,0 +1,75 @@
+"""The network engine as a peer to try out from a host: RBCP registers in block RAM and TCP
+sessions that send back what they receive (``rosgate tap engine``, docs/network.md)."""
+
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import check_power_of_two
+from .frames import DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT
+from .mac import GmiiSignature
+from .stack import STACK_COUNTERS, NetStack
+
+__all__ = ["EchoEngine"]
+
+
+class EchoEngine(wiring.Component):
+    """A :class:`NetStack` with something behind it: ``registers`` bytes of RAM at RBCP
+    address 0 (read and written with SiTCP's RBCP, e.g. sitcpy), and every TCP session
+    listening on the TCP port (``tcp_port``; several sessions serve as many connections) and
+    echoing each byte it receives. When the peer closes, the session closes too and listens
+    again.
+
+    Parameters
+    ----------
+    mac, ip, rbcp_port, tcp_port, sessions :
+        As :class:`NetStack`.
+    registers : int
+        Bytes of register RAM, a power of two in 16..65536.
+
+    Members
+    -------
+    gmii : Out(GmiiSignature())
+        The Ethernet port.
+    counter_index, counter_value :
+        The engine's counters (:data:`~hdl.net.stack.STACK_COUNTERS`).
+    """
+
+    def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
+                 tcp_port=DEFAULT_TCP_PORT, sessions=2, registers=256):
+        self._registers = check_power_of_two("registers", registers, 16, 65536)
+        self._stack = NetStack(mac=mac, ip=ip, rbcp_port=rbcp_port, tcp_port=tcp_port,
+                               sessions=sessions, user_window=registers)
+        self._sessions = sessions
+        super().__init__({"gmii": Out(GmiiSignature()),
+                          "counter_index": In(range(len(STACK_COUNTERS))),
+                          "counter_value": Out(32)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.stack = stack = self._stack
+        g = self.gmii
+        m.d.comb += [stack.gmii_rxd.eq(g.rxd), stack.gmii_rx_dv.eq(g.rx_dv),
+                     stack.gmii_rx_er.eq(g.rx_er), g.txd.eq(stack.gmii_txd),
+                     g.tx_en.eq(stack.gmii_tx_en), g.tx_er.eq(stack.gmii_tx_er),
+                     stack.counter_index.eq(self.counter_index),
+                     self.counter_value.eq(stack.counter_value)]
+
+        # RBCP: register RAM, every access acknowledged the next cycle
+        m.submodules.registers = mem = Memory(shape=8, depth=self._registers, init=[])
+        wr, rd = mem.write_port(), mem.read_port()
+        bus = stack.rbcp
+        aw = (self._registers - 1).bit_length()
+        ack = Signal()
+        m.d.comb += [wr.addr.eq(bus.addr[:aw]), wr.data.eq(bus.wd), wr.en.eq(bus.we),
+                     rd.addr.eq(bus.addr[:aw]), bus.rd.eq(rd.data), bus.ack.eq(ack)]
+        m.d.sync += ack.eq(bus.we | bus.re)
+
+        # TCP: listen, echo, close when the peer closes
+        for k in range(self._sessions):
+            s = getattr(stack, f"tcp{k}")
+            wiring.connect(m, s.rx, s.tx)
+            m.d.comb += [s.open_req.eq(1), s.active.eq(0), s.local_port.eq(0),
+                         s.close_ack.eq(s.close_req)]
+        return m

@@ -1,0 +1,58 @@
+"""The cocotb side of :class:`host.tapsim.TapSimulation`: clocks and resets the design, bridges
+its GMII port to the TAP device, writes a status file every few thousand cycles (simulated
+time, and whatever the design reports), and ends when the stop file appears. Runs inside the
+simulator; :class:`~host.tapsim.TapSimulation` starts it."""
+
+import json
+import logging
+import os
+import time
+from pathlib import Path
+
+import cocotb
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles
+from cocotbext.eth import GmiiSink, GmiiSource
+
+from host.simulator import top_params
+from host.tap import TapBridge
+
+#: cycles between looks at the stop file and status updates
+POLL_CYCLES = 4096
+
+
+@cocotb.test()
+async def serve(dut):
+    """Run the design on the TAP device until the stop file appears."""
+    params = top_params()
+    port = params["port"]
+    cocotb.start_soon(Clock(dut.aclk, 8, unit="ns").start())
+
+    def pin(name):
+        return getattr(dut, f"{port}_{name}")
+    source = GmiiSource(pin("rxd"), pin("rx_er"), pin("rx_dv"), dut.aclk, dut.aresetn,
+                        reset_active_level=False)
+    sink = GmiiSink(pin("txd"), pin("tx_er"), pin("tx_en"), dut.aclk, dut.aresetn,
+                    reset_active_level=False)
+    for model in (source, sink):
+        model.log.setLevel(logging.WARNING)
+    dut.aresetn.value = 0
+    await ClockCycles(dut.aclk, 4)
+    dut.aresetn.value = 1
+    await ClockCycles(dut.aclk, 2)
+    bridge = TapBridge(source, sink, dut.aclk, tap=params["tap"], strict=False,
+                       poll_cycles=params.get("poll_cycles", 64))
+    stop = Path(params["stop_file"])
+    status = Path(params["status_file"])
+    watch = params.get("watch", [])
+    cycles = 0
+    started = time.monotonic()
+    while not stop.exists():
+        await ClockCycles(dut.aclk, POLL_CYCLES)
+        cycles += POLL_CYCLES
+        report = {"cycles": cycles, "wall_s": time.monotonic() - started,
+                  "bridge": bridge.stats,
+                  "signals": {name: int(getattr(dut, name).value) for name in watch}}
+        tmp = status.with_suffix(".tmp")
+        tmp.write_text(json.dumps(report))
+        os.replace(tmp, status)
