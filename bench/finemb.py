@@ -5,6 +5,7 @@ frames, the hop latency and the cycle jitter at the far end; the Python socket m
 through a TAP device against 2 nodes; yosys resources of a node beside the TCP engine's."""
 
 import json
+from pathlib import Path
 
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
@@ -59,7 +60,8 @@ def measure_socket_master(log=print):
     log(f"  the Python socket master through TAP against {SOCKET_NODES} nodes "
         f"({SOCKET_CYCLES} cycles)...")
     stats = run_line_with_master(load_io_description(PID_IO), SOCKET_NODES,
-                                 cycles=SOCKET_CYCLES, build_dir=SIM_BUILD / "bench-finemb-tap")
+                                 cycles=SOCKET_CYCLES,
+                                 build_dir=SIM_BUILD / f"tap-finemb-n{SOCKET_NODES}")
     return {"nodes": SOCKET_NODES, "polling": "pipelined", "cycles": stats["cycles"],
             "cycle_rate_hz": round(stats["cycle_rate_hz"], 1), "late": stats["late"],
             "states": stats["states"],
@@ -75,15 +77,16 @@ def measure(log=print):
 
 def measure_resources(log=print):
     from hdl.finemb import FinembPidNode
-    from hdl.net import NetStack
     io = load_io_description(PID_IO)
     rows = []
     log(f"  yosys {YOSYS_COMMAND}: FinEmbP PID node...")
     rows.append({"design": "FinEmbP PID node (2 ports, forwarding, client, page buffer, PID)",
                  **component_resources(FinembPidNode(io), "finemb_node", "finemb-node")})
-    log(f"  yosys {YOSYS_COMMAND}: TCP/IP engine...")
-    rows.append({"design": "TCP/IP engine (NetStack, 1 session, RBCP)",
-                 **component_resources(NetStack(), "net_stack", "finemb-net-stack")})
+    # the engine as the network bench measured it, by the same flow
+    net = json.loads((Path(__file__).resolve().parent / "results" / "net.json").read_text())
+    engine = next(r for r in net["resources"] if r["block"].startswith("engine"))
+    rows.append({**engine, "design": f"TCP/IP engine (bench/results/net.json): "
+                                     f"{engine['block']}"})
     return rows
 
 
@@ -120,6 +123,7 @@ def markdown(results, resources):
                      f"{s['cycle_rate_hz']} Hz, {s['late']} late answers, final states "
                      f"{s['states']}. {s['note']}.")
     lines += resource_table(resources, "design", "design")
+    lines += ["", "![plot](finemb_cycle_rate.png)"]
     return "\n".join(lines) + "\n"
 
 

@@ -158,10 +158,41 @@ def plot_kernels(kernels, apps):
     return _save(fig, "kernels_vs_reconros")
 
 
+#: P-FIN's PID loop on a Nios II soft core (FINROC), cycles per second
+PFIN_PID_HZ = 25_000
+
+
+def plot_finemb(data):
+    """FinEmbP cycle rate vs line length, sequential and pipelined, beside the wire limit of
+    the same frames, the goals and P-FIN's soft core."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for polling, colour in (("sequential", "tab:blue"), ("pipelined", "tab:green")):
+        rows = sorted((r for r in data["line"] if r["polling"] == polling),
+                      key=lambda r: r["nodes"])
+        ax.plot([r["nodes"] for r in rows], [r["cycle_rate_hz"] / 1e3 for r in rows], "o-",
+                color=colour, label=f"rosgate, {polling} polling")
+        if polling == "pipelined":
+            ax.plot([r["nodes"] for r in rows], [r["wire_limit_hz"] / 1e3 for r in rows],
+                    ":", color="tab:gray", label="wire limit of the same frames (1 Gbit/s)")
+    goals = [(r["nodes"], r["goal_hz"]) for r in data["line"] if r["goal_hz"]]
+    ax.plot([n for n, _ in goals], [g / 1e3 for _, g in goals], "v", color="tab:red",
+            markersize=9, label="goal")
+    ax.axhline(PFIN_PID_HZ / 1e3, color="tab:orange", linestyle="--",
+               label="P-FIN: PID on a Nios II (25 kHz)")
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xlabel("nodes in the line")
+    ax.set_ylabel("cycle rate (kHz)")
+    ax.set_title("FinEmbP: PID cycles per second, every node answered every cycle")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, "finemb_cycle_rate")
+
+
 def write_plots(names=None, log=print):
     """Redraw the plots of the given benches (default: every bench with results)."""
     written = []
-    wanted = set(names or ("hmt", "net", "reconos", "kernels", "reconos_apps"))
+    wanted = set(names or ("hmt", "net", "reconos", "kernels", "reconos_apps", "finemb"))
     if "hmt" in wanted and (data := _load("hmt")):
         written.append(plot_topics(data))
     if "net" in wanted and (data := _load("net")):
@@ -170,6 +201,8 @@ def write_plots(names=None, log=print):
         written.append(plot_memif(data))
     if wanted & {"kernels", "reconos_apps"} and (data := _load("kernels")):
         written.append(plot_kernels(data, _load("reconos_apps")))
+    if "finemb" in wanted and (data := _load("finemb")):
+        written.append(plot_finemb(data))
     for path in written:
         log(f"wrote {path}")
     return written

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from gen.config import ConfigError
+from gen.finemb import IoDescriptionError
 from gen.msg.model import MessageDefinitionError
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
@@ -436,7 +437,7 @@ def main(argv=None):
     except ParameterError as exc:
         option = args.options.get(exc.name, exc.name)
         args.parser.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
-    except ConfigError as exc:
+    except (ConfigError, IoDescriptionError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     except (MessageDefinitionError, KeyError) as exc:

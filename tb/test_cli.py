@@ -166,3 +166,35 @@ def test_msg_plan_rejects_unstreamable_type():
     result = run_cli("msg", "plan", "sensor_msgs/PointCloud2")
     assert result.returncode == 2
     assert "fields is sensor_msgs/msg/PointField[]" in result.stderr
+
+
+@pytest.mark.parametrize("app", ["page", "pid"])
+def test_export_finemb_writes_node_manifest_and_vivado_tcl(tmp_path, app, capsys):
+    from gen.finemb import load_io_description
+    from tb.finemb_tb import PID_IO
+    out = tmp_path / app
+    assert main(["export", "finemb", "--io", PID_IO, "--app", app, "--serial", "9",
+                 "-o", str(out)]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith(f"wrote {out / 'hdl' / 'finemb_node.v'} (module finemb_node")
+    verilog = out / "hdl" / "finemb_node.v"
+    assert lint_verilog(verilog, "finemb_node") == ""
+    ports = verilog_ports(verilog.read_text(), "finemb_node")
+    assert {"port0_rxd", "port0_txd", "port1_rx_dv", "port1_tx_en"} <= set(ports)
+    assert ("app_out_claim" in ports) == (app == "page")
+    manifest = json.loads((out / "finemb_node.json").read_text())
+    io = load_io_description(PID_IO)
+    assert manifest["io_descriptor_hex"] == io.encode().hex()
+    assert (manifest["page_out_bytes"], manifest["page_in_bytes"], manifest["serial"]) == \
+        (10, 8, 9)
+    assert [p["offset"] for p in manifest["io_ports"]] == [p.offset for p in io.ports]
+    tcl = (out / "ip" / "package_finemb_node.tcl").read_text()
+    assert "ipx::package_project" in tcl and "finemb_node.v" in tcl
+
+
+def test_export_finemb_names_a_bad_io_file(tmp_path, capsys):
+    bad = tmp_path / "node.toml"
+    bad.write_text('name = "x"\n[[port]]\nname = "a"\ndirection = "out"\ntype = "i17"\n')
+    assert main(["export", "finemb", "--io", str(bad), "-o", str(tmp_path / "o")]) == 2
+    assert f"{bad}:5: port 1" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

@@ -28,7 +28,7 @@ def in_namespace(ns, *cmd, timeout=120):
 
 
 def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
-    proc = subprocess.Popen([*ROSGATE, "tap", "engine", "--build-dir",
+    proc = subprocess.Popen([*ROSGATE, "tap", "engine", "--sessions", "1", "--build-dir",
                              str(SIM_BUILD / "tap-engine")], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True,
                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
