@@ -155,23 +155,24 @@ async def master_restart_mid_operation(dut):
     assert states(dut) == [NodeState.OP] * NODES
 
 
-#: the tests Icarus runs in ``make test`` (a line is slow in Icarus: the lossy runs are
-#: Verilator's there, and both simulators' in ``make test-full``)
-ICARUS_QUICK = ["whole_line_cycles_sequential_and_pipelined", "hot_join_while_the_others_cycle",
-                "master_restart_mid_operation"]
+#: what each simulator runs in ``make test`` (a line is slow in Icarus); ``make test-full``
+#: runs every test on both
+QUICK = {"icarus": ["whole_line_cycles_sequential_and_pipelined",
+                    "master_restart_mid_operation"],
+         "verilator": ["whole_line_cycles_sequential_and_pipelined",
+                       "hot_join_while_the_others_cycle", "ten_percent_loss_on_every_link",
+                       "master_restart_mid_operation"]}
 
 
 @pytest.mark.parametrize("sim", SIMULATORS)
 def test_finemb_line(sim):
     params = {"io": PID_IO, "nodes": NODES}
     run_bench(__name__, "finemb_line", f"n{NODES}", params, sim,
-              build=build_finemb_line_bench_top,
-              testcase=ICARUS_QUICK if sim == "icarus" else None)
+              build=build_finemb_line_bench_top, testcase=QUICK[sim])
 
 
 @pytest.mark.full
-def test_finemb_line_lossy_on_icarus():
-    run_bench(__name__, "finemb_line", f"n{NODES}", {"io": PID_IO, "nodes": NODES}, "icarus",
-              build=build_finemb_line_bench_top,
-              testcase=["one_percent_loss_on_every_link", "ten_percent_loss_on_every_link"],
-              run_name="lossy")
+@pytest.mark.parametrize("sim", SIMULATORS)
+def test_finemb_line_all(sim):
+    run_bench(__name__, "finemb_line", f"n{NODES}", {"io": PID_IO, "nodes": NODES}, sim,
+              build=build_finemb_line_bench_top, run_name="all")

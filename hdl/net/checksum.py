@@ -5,7 +5,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["InternetChecksum", "ones_complement_add"]
+__all__ = ["InternetChecksum", "ones_complement_add", "echo_reply_checksum"]
 
 
 def ones_complement_add(a, b):
@@ -56,3 +56,10 @@ class InternetChecksum(wiring.Component):
         with m.Elif(self.valid):
             m.d.sync += [acc.eq(ones_complement_add(acc, word)), low.eq(~low)]
         return m
+
+
+def echo_reply_checksum(request_checksum):
+    """The ICMP checksum of the echo reply to a request with ``request_checksum``: only the
+    type changes (8 -> 0), so the checksum is updated per RFC 1624 (HC' = ~(~HC + ~m + m'),
+    m = 0x0800, m' = 0) instead of summed again."""
+    return ~ones_complement_add(~request_checksum, 0xF7FF)

@@ -7,7 +7,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from .checksum import ones_complement_add
+from .checksum import echo_reply_checksum
 from .frames import ARP_REPLY, ARP_REQUEST
 from .rx import RX_FIELDS, FrameKind
 from .tx import TxRequestSignature
@@ -50,6 +50,17 @@ class ParsedFrameSignature(wiring.Signature):
                      port.accept.eq(parser.accept if accept is None else accept)]
 
 
+def _responder_members(tag_width, **more):
+    """The members every responder has: the parsed frame in, the request to the frame
+    builder out, ``busy``, and with a tag the port the request came in on and the answer goes
+    out of."""
+    members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
+               "busy": Out(1), **more}
+    if tag_width:
+        members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
+    return members
+
+
 class ArpResponder(wiring.Component):
     """Answers an ARP request for this node's address (the parser accepts only those) with
     a reply to the requester's addresses.
@@ -75,11 +86,7 @@ class ArpResponder(wiring.Component):
 
     def __init__(self, *, tag_width=0):
         self._tag = check_int("tag_width", tag_width, 0, 8)
-        members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
-                   "busy": Out(1)}
-        if tag_width:
-            members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
-        super().__init__(members)
+        super().__init__(_responder_members(tag_width))
 
     def elaborate(self, platform):
         m = Module()
@@ -133,11 +140,7 @@ class IcmpEchoResponder(wiring.Component):
             raise ParameterError("buffer_bytes", buffer_bytes, "a power of two in 64..2048")
         self._bytes = buffer_bytes
         self._tag = check_int("tag_width", tag_width, 0, 8)
-        members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
-                   "busy": Out(1), "dropped": Out(1)}
-        if tag_width:
-            members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
-        super().__init__(members)
+        super().__init__(_responder_members(tag_width, dropped=Out(1)))
 
     def elaborate(self, platform):
         m = Module()
@@ -174,9 +177,9 @@ class IcmpEchoResponder(wiring.Component):
                         with m.Else():
                             m.d.comb += self.dropped.eq(1)
             with m.State("TYPE"):
-                # echo reply: type 8 -> 0; checksum updated per RFC 1624 (m = 0x0800, m' = 0)
+                # echo reply: type 8 -> 0
                 m.d.comb += [wp.addr.eq(0), wp.data.eq(0), wp.en.eq(1)]
-                m.d.sync += csum.eq(~ones_complement_add(~csum, 0xF7FF))
+                m.d.sync += csum.eq(echo_reply_checksum(csum))
                 m.next = "CSUM_HI"
             with m.State("CSUM_HI"):
                 m.d.comb += [wp.addr.eq(2), wp.data.eq(csum[8:]), wp.en.eq(1)]

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, StreamDownsizer, StreamUpsizer
-from .checksum import ones_complement_add
+from .checksum import echo_reply_checksum
 from .counters import EventCounters
 from .frames import (
     ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT,
@@ -377,9 +377,9 @@ class NetStack(wiring.Component):
                 with m.If(verdict):
                     m.d.sync += claim.eq(0)
             with m.State("ICMP_TYPE"):
-                # echo reply: type 8 -> 0; checksum updated per RFC 1624 (m = 0x0800, m' = 0)
+                # echo reply: type 8 -> 0
                 m.d.comb += [wp.addr.eq(0), wp.data.eq(0), wp.en.eq(1)]
-                m.d.sync += icmp_csum.eq(~ones_complement_add(~icmp_csum, 0xF7FF))
+                m.d.sync += icmp_csum.eq(echo_reply_checksum(icmp_csum))
                 m.next = "ICMP_CSUM_HI"
             with m.State("ICMP_CSUM_HI"):
                 m.d.comb += [wp.addr.eq(2), wp.data.eq(icmp_csum[8:]), wp.en.eq(1)]
