@@ -123,9 +123,9 @@ async def one_percent_loss_on_every_link(dut):
 
 @cocotb.test()
 async def ten_percent_loss_on_every_link(dut):
-    """10 % of frames spoiled on every link for 40 cycles: answers go missing (never more
+    """10 % of frames spoiled on every link for 30 cycles: answers go missing (never more
     than frames spoiled), and every node is back in OP and answering afterwards."""
-    lost, missing = await lossy_cycles(dut, 0.10, 40)
+    lost, missing = await lossy_cycles(dut, 0.10, 30)
     assert lost > 0 and missing > 0, (lost, missing)
 
 
@@ -157,10 +157,8 @@ async def master_restart_mid_operation(dut):
 
 #: what each simulator runs in ``make test`` (a line is slow in Icarus); ``make test-full``
 #: runs every test on both
-QUICK = {"icarus": ["whole_line_cycles_sequential_and_pipelined",
-                    "master_restart_mid_operation"],
-         "verilator": ["whole_line_cycles_sequential_and_pipelined",
-                       "hot_join_while_the_others_cycle", "ten_percent_loss_on_every_link",
+QUICK = {"icarus": ["whole_line_cycles_sequential_and_pipelined"],
+         "verilator": ["hot_join_while_the_others_cycle", "ten_percent_loss_on_every_link",
                        "master_restart_mid_operation"]}
 
 
