@@ -869,6 +869,44 @@ async def run_tcp_rst_rules(dut):
     s.set(open_req=0)
 
 
+#: segments with neither SYN, ACK nor RST (port scanners' probes): flags, payload
+NO_SYN_PROBES = [("", b""), ("F", b""), ("FPU", b""), ("P", b"data"), ("FP", b"bye"),
+                 ("U", b""), ("FPUEC", b"")]
+
+
+@cocotb.test()
+async def run_tcp_listen_drops_segments_without_syn(dut):
+    """RFC 9293 §3.10.7.2: a listening port drops a segment with neither SYN, ACK nor RST (a
+    NULL, FIN or Xmas probe, with or without data) silently and counts it as
+    ``listen_no_syn``; the same segments to a closed port get RST+ACK (§3.10.7.1), an ACK to
+    the listening port gets a RST, and the listener still accepts a SYN afterwards."""
+    from hdl.net.tcp import TcpState
+    from tb.net_tb import SessionPort
+    tb = NetTB(dut)
+    await tb.reset()
+    s = SessionPort(dut, 0, random.Random(5))
+    s.set(active=0, local_port=27, open_req=1)
+    await s.wait_state(TcpState.LISTEN)
+    for k, (flags, data) in enumerate(NO_SYN_PROBES):
+        before = await tb.counters()
+        probe = ScriptedPeer(tb, 42000 + k, 27, isn=1000 * k)
+        await probe.send(flags, data)
+        await tb.expect_silence(1000)
+        assert s.get("state") == TcpState.LISTEN.value, flags
+        assert_counts(before, await tb.counters(), listen_no_syn=1)
+        closed = ScriptedPeer(tb, 42000 + k, 28, isn=1000 * k)
+        await closed.send(flags, data, advance=False)
+        fin = "F" in flags
+        await closed.expect("RA", seq=0, ack=1000 * k + len(data) + fin)
+    acker = ScriptedPeer(tb, 42100, 27, isn=9)
+    await acker.send("A", ack=777)
+    await acker.expect("R", seq=777)
+    peer = ScriptedPeer(tb, 42101, 27, isn=50)
+    await peer.send("S")
+    await peer.expect("SA", ack=51)
+    s.set(open_req=0)
+
+
 @cocotb.test()
 async def run_tcp_request_withdrawn_by_arrival(dut):
     """A segment waiting for the frame builder is withdrawn when a segment arrives, and the

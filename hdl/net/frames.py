@@ -96,6 +96,7 @@ DROP_REASONS = (
     "l4_checksum",  # bad ICMP, UDP or TCP checksum or length
     "no_port",      # UDP to a closed port, TCP answered with RST
     "busy",         # reply buffer or reply slot in use
+    "listen_no_syn",  # TCP to a listening port without SYN, ACK or RST (RFC 9293 §3.10.7.2)
 )
 
 

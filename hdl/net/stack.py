@@ -259,6 +259,10 @@ class NetStack(wiring.Component):
         # a segment is claimed when any session matches it: a blocked listener's SYN is
         # taken by the session that blocks it
         claimed = Cat(*(Cat(s.conn_match, s.listen_match) for s in sessions)).any()
+        # RFC 9293 §3.10.7.2: in LISTEN, a segment with neither SYN, ACK nor RST (a NULL, FIN
+        # or Xmas probe) is dropped without an answer
+        listen_drop = (Cat(*(s.port_listening for s in sessions)).any() & ~claimed &
+                       ~f.flags[1] & ~f.flags[2] & ~f.flags[4])
 
         # ---- reply slot: ARP replies, ICMP echo replies, RBCP replies, RST
         m.submodules.reply_mem = mem = Memory(shape=8, depth=2048, init=[])
@@ -364,7 +368,7 @@ class NetStack(wiring.Component):
                                              server.length.eq(f.payload_len)]
                                 m.next = "RBCP"
                         with m.Case(FrameKind.TCP):
-                            with m.If(~claimed & ~f.flags[2]):
+                            with m.If(~claimed & ~f.flags[2] & ~listen_drop):
                                 syn_fin = f.flags[1] + f.flags[0]
                                 m.d.sync += [r_kind.eq(FrameKind.TCP), r_eth.eq(f.sender_mac),
                                              r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
@@ -437,6 +441,8 @@ class NetStack(wiring.Component):
                     with m.Case(FrameKind.TCP):
                         with m.If(claimed):
                             m.d.comb += bump("delivered")
+                        with m.Elif(listen_drop):
+                            m.d.comb += bump("listen_no_syn")
                         with m.Else():
                             m.d.comb += bump("no_port")
                         with m.If(parser.options_malformed):

@@ -105,6 +105,10 @@ class TcpSession(wiring.Component):
         The segment of the current verdict matches the connection; it is a SYN to the
         listening port (whatever ``listen_block``). A segment that no session matches is
         answered by the stack with RST.
+    port_listening : Out(1)
+        The session listens on the current segment's destination port (whatever its flags):
+        the stack drops a segment to it without SYN, ACK and RST silently (RFC 9293
+        §3.10.7.2).
     listen_block : In(1)
         Another session takes this SYN (its connection, or a lower-numbered listener on the
         same port): do not accept it.
@@ -171,7 +175,7 @@ class TcpSession(wiring.Component):
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
             "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
             "seg_done": In(1), "seg_accept": In(1), "seg_arp": In(1),
-            "conn_match": Out(1), "listen_match": Out(1),
+            "conn_match": Out(1), "listen_match": Out(1), "port_listening": Out(1),
             "listen_block": In(1),
             "tx": Out(TxRequestSignature()),
             "s_axis": In(AXIStreamSignature(8, keep=False)),
@@ -577,12 +581,13 @@ class TcpSession(wiring.Component):
         # ---- segment arrival: the verdict's fields are latched; the sequence engine
         # compares them and applies the outcome (DECIDE) and the new sequence numbers
         seg = self.seg_done & self.seg_accept & is_tcp
-        listen_match = ((state == S.LISTEN) & (f.dst_port == local_port) & f.flags[1] &
-                        ~f.flags[2] & ~f.flags[4])
+        port_listening = (state == S.LISTEN) & (f.dst_port == local_port)
+        listen_match = port_listening & f.flags[1] & ~f.flags[2] & ~f.flags[4]
         listen_hit = listen_match & ~self.listen_block
         connected = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP)
         conn_hit = connected & tuple_match
-        m.d.comb += [self.conn_match.eq(conn_hit), self.listen_match.eq(listen_match)]
+        m.d.comb += [self.conn_match.eq(conn_hit), self.listen_match.eq(listen_match),
+                     self.port_listening.eq(port_listening)]
         arp_from_peer = self.seg_done & self.seg_arp & (f.sender_ip == remote_ip)
         arp_hit = arp_from_peer & (state == S.ARP)
         # RFC 826: a known sender's hardware address is refreshed (gratuitous ARP after a
