@@ -19,7 +19,7 @@ WAVES ?= 0
 SEED ?=
 RUNS ?= 10
 
-.PHONY: help setup debs demo test test-full sim soak lint bench bench-resources train-mnist clean
+.PHONY: help setup debs demo test test-full sim soak lint bench bench-resources timing train-mnist clean
 
 help:
 	@echo "rosgate make targets:"
@@ -32,6 +32,7 @@ help:
 	@echo "  make lint        verilator --lint-only -Wall on every exported top"
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
 	@echo "  make bench-resources   re-measure only the yosys estimates in bench/results/"
+	@echo "  make timing [CORES=\"engine kernel_pid\"]   place and route the cores on ECP5 (3 seeds) -> bench/results/timing.*"
 	@echo "  make train-mnist retrain the MNIST kernel's network (installs PyTorch 2.13.0, CPU)"
 	@echo "  make clean       remove simulator output"
 
@@ -84,6 +85,9 @@ bench: setup
 
 bench-resources: setup
 	$(PY) bench/run.py --resources-only
+
+timing: setup
+	$(PY) bench/timing.py $(CORES)
 
 train-mnist: setup
 	$(PY) -m pip install -q --disable-pip-version-check torch==2.13.0

@@ -101,17 +101,29 @@ def measure(widths=WIDTHS, sizes=tuple(PAPER_TABLE_I), topologies=TOPOLOGIES, lo
     return results
 
 
+#: (name, label, parameters) of the topic configurations whose resources and timing are measured
+RESOURCE_CONFIGS = (
+    ("4x4_w64", "4:4 64 b, no FIFO, no monitor", dict(fifo_depth=0, monitor=False)),
+    ("4x4_w64_mon", "4:4 64 b, no FIFO, monitor counters", dict(fifo_depth=0, monitor=True)),
+    ("4x4_w64_fifo", "4:4 64 b, 512-deep FIFOs, no monitor", dict(fifo_depth=512, monitor=False)),
+    ("4x4_w64_fifo_mon", "4:4 64 b, 512-deep FIFOs, monitor counters",
+     dict(fifo_depth=512, monitor=True)))
+
+
+def resource_configs():
+    """(name, {"label", "build"}) of each configuration of :data:`RESOURCE_CONFIGS`."""
+    return [(name, {"label": label,
+                    "build": lambda p=params: build_top("topic", pubs=4, subs=4, data_width=64,
+                                                        **p)})
+            for name, label, params in RESOURCE_CONFIGS]
+
+
 def measure_resources(log=print):
     rows = []
-    for label, params in (
-            ("4:4 64 b, no FIFO, no monitor", dict(fifo_depth=0, monitor=False)),
-            ("4:4 64 b, no FIFO, monitor counters", dict(fifo_depth=0, monitor=True)),
-            ("4:4 64 b, 512-deep FIFOs, no monitor", dict(fifo_depth=512, monitor=False)),
-            ("4:4 64 b, 512-deep FIFOs, monitor counters", dict(fifo_depth=512, monitor=True))):
-        log(f"  yosys {YOSYS_COMMAND}: {label}...")
-        component = build_top("topic", pubs=4, subs=4, data_width=64, **params)
-        rows.append({"config": label,
-                     **component_resources(component, "topic", f"topic-{len(rows)}")})
+    for _, config in resource_configs():
+        log(f"  yosys {YOSYS_COMMAND}: {config['label']}...")
+        rows.append({"config": config["label"],
+                     **component_resources(config["build"](), "topic", f"topic-{len(rows)}")})
     return rows
 
 

@@ -89,6 +89,11 @@ RESOURCE_SPECS = {"equalize_p1": (dict(kind="equalize", max_width=128, max_heigh
                                   "equalizeHist, 128x128 frame buffer (640x480: + ~63 RAMB36)")}
 
 
+#: kernels too large for the timing device (bench/timing.py), and the smaller configurations
+#: placed instead, largest first: (parameter, value)
+TIMING_FALLBACKS = {"ik": (("lanes", 8),), "mnist": (("pixels_per_beat", 1),)}
+
+
 def measure_resources(log=print):
     rows = []
     for name, (spec, label, *_) in {**IMAGE, **CONTROL, **MNIST}.items():

@@ -67,15 +67,23 @@ def measure(log=print):
     return {"clock_mhz": CLOCK_MHZ, "runs": runs}
 
 
+def resource_blocks():
+    """(name, label, build) of the (de)serializers whose resources and timing are measured."""
+    def block(cls, width):
+        return lambda: cls(message_plan(IMAGE, "cdr", DIRS[IMAGE]), width)
+    return [(f"image_{kind.lower()}_w{width}", f"sensor_msgs/Image {kind}, CDR, {width} bit",
+             block(cls, width))
+            for kind, cls, width in (("Deserializer", Deserializer, 64),
+                                     ("Serializer", Serializer, 64),
+                                     ("Deserializer", Deserializer, 512))]
+
+
 def measure_resources(log=print):
     rows = []
-    for kind, cls, width in (("Deserializer", Deserializer, 64), ("Serializer", Serializer, 64),
-                             ("Deserializer", Deserializer, 512)):
-        log(f"  yosys {YOSYS_COMMAND}: Image {kind} (CDR, {width} bit)...")
-        plan = message_plan(IMAGE, "cdr", DIRS[IMAGE])
-        rows.append({"config": f"sensor_msgs/Image {kind}, CDR, {width} bit",
-                     **component_resources(cls(plan, width), "msg_block",
-                                           f"image-{kind.lower()}-w{width}")})
+    for name, label, build in resource_blocks():
+        log(f"  yosys {YOSYS_COMMAND}: {label}...")
+        rows.append({"config": label, **component_resources(
+            build(), "msg_block", name.replace("image_", "image-").replace("_w", "-w"))})
     return rows
 
 

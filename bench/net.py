@@ -61,7 +61,8 @@ def measure(log=print):
     return results
 
 
-def measure_resources(log=print):
+def resource_blocks():
+    """(name, label, build) of the blocks whose resources are measured."""
     from hdl.net import FrameBuilder, FrameParser, GmiiRx, GmiiTx, NetStack, RbcpServer, TcpSession
     from hdl.net.counters import EventCounters
     from hdl.net.stack import GLOBAL_BASE, STACK_COUNTERS
@@ -87,8 +88,17 @@ def measure_resources(log=print):
          lambda: TcprosEndpoint("publisher")),
         ("subscriber", "TCPROS subscriber endpoint", lambda: TcprosEndpoint("subscriber")),
     ]
+    return blocks
+
+
+#: the blocks of :func:`resource_blocks` placed and routed by bench/timing.py: the engine
+#: (its parts are inside it) and the TCPROS endpoints
+TIMING_BLOCKS = ("engine", "publisher", "subscriber")
+
+
+def measure_resources(log=print):
     rows = []
-    for name, label, make in blocks:
+    for name, label, make in resource_blocks():
         log(f"  yosys {YOSYS_COMMAND}: {name}...")
         rows.append({"block": label, **component_resources(make(), f"net_{name}",
                                                            f"net-{name}")})

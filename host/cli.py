@@ -257,6 +257,10 @@ def _add_project_commands(commands):
                       "numbers", _run_report)
     p.add_argument("--sim-results", type=Path, default=None,
                    help="sim_results.json to include (default build/<name>/sim/...)")
+    p.add_argument("--timing", action="store_true",
+                   help="also place and route each core out of context on a Lattice "
+                        "LFE5UM5G-85F-8 (yosys synth_ecp5, nextpnr-ecp5) at the system clock "
+                        "over 3 seeds: worst Fmax, LUT4/FF/DP16KD/MULT18, critical path")
 
 
 def _run_info(args):
@@ -394,13 +398,17 @@ def _run_report(args):
     print(f"{p.name}: resources per core from yosys `{YOSYS_COMMAND}` (estimates)", flush=True)
     print("| core | what | LUT | FF | LUTRAM | BRAM18 equiv. | DSP |\n"
           "|---|---|---|---|---|---|---|")
+    vfiles = []
     for name, what, component in rows:
         text, _ = export_verilog(component, name)
         vfile = folder / f"{name}.v"
         write_if_changed(vfile, text)
+        vfiles.append(vfile)
         r = estimate_resources(vfile, name)
         print(f"| {name} | {what} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
               f"{r['BRAM18_equiv']} | {r['DSP']} |", flush=True)
+    if args.timing:
+        _report_timing(p, rows, vfiles, folder)
     path = args.sim_results or _default_out(p, "sim") / "sim_results.json"
     if path.is_file():
         print(f"last simulation ({path}):")
@@ -409,6 +417,36 @@ def _run_report(args):
         print(f"no simulation results at {path} (run `rosgate sim {args.build_cfg}`)")
     print(f"wrote the Verilog of {len(rows)} cores to {folder} (what yosys read)")
     return 0
+
+
+def _report_timing(project, rows, vfiles, folder):
+    import json
+
+    from host.timing import DEVICE, MARGIN, SEEDS, TimingError, time_verilog
+    mhz = project.clock_mhz
+    print(f"timing: {DEVICE}, out of context at {mhz:g} MHz, seeds "
+          f"{', '.join(map(str, SEEDS))} (PASS: worst Fmax >= {MARGIN} x {mhz:g} MHz)",
+          flush=True)
+    print("| core | Fmax MHz (worst seed) | LUT4+carry | FF | DP16KD | MULT18 | critical path | "
+          "|\n|---|---|---|---|---|---|---|---|")
+    results = {}
+    for (name, _, _), vfile in zip(rows, vfiles):
+        print(f"  placing and routing {name}...", flush=True)
+        try:
+            r = time_verilog(vfile, name, {"clk": mhz}, folder / "timing" / name)
+        except TimingError as exc:
+            print(f"| {name} | not placed: {str(exc).splitlines()[0]} | | | | | | FAIL |")
+            results[name] = {"error": str(exc)}
+            continue
+        results[name] = r
+        path = r["critical_path"] or {}
+        print(f"| {name} | {r['fmax_mhz']} | {r['lut4']} | {r['ff']} | {r['bram']} | "
+              f"{r['dsp']} | `{path.get('from', '-')}` -> `{path.get('to', '-')}` | "
+              f"{'PASS' if r['pass'] else 'FAIL'} |", flush=True)
+    out = folder / "timing.json"
+    out.write_text(json.dumps({"device": DEVICE, "clock_mhz": mhz, "cores": results},
+                              indent=1) + "\n")
+    print(f"wrote the timing of {len(results)} cores to {out}")
 
 
 # main --------------------------------------------------------------------------------------

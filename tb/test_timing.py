@@ -1,0 +1,82 @@
+"""The open place-and-route flow of host/timing.py (docs/timing.md) on small cores whose timing
+is known from their structure: a chain of eight 24-bit adders between two registers is slower
+than one registered adder, the critical path runs between the registers named in the design,
+and the margin rule decides PASS."""
+
+import pytest
+from amaranth.hdl import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from gen.export.verilog import export_verilog
+from host.timing import MARGIN, TimingError, readable_cell, time_verilog
+
+
+class AdderChain(wiring.Component):
+    """``depth`` 24-bit additions between the input register ``held`` and the output register
+    ``total``."""
+
+    def __init__(self, depth):
+        self._depth = depth
+        super().__init__({"a": In(24), "y": Out(24)})
+
+    def elaborate(self, platform):
+        m = Module()
+        held = [Signal(24, name=f"held{k}") for k in range(self._depth + 1)]
+        total = Signal(24, name="total")
+        m.d.sync += held[0].eq(self.a)
+        m.d.sync += [held[k + 1].eq(held[k] ^ (held[k] >> 3)) for k in range(self._depth)]
+        acc = held[0]
+        for k in range(self._depth):
+            acc = (acc + held[k + 1])[:24]
+        m.d.sync += total.eq(acc)
+        m.d.comb += self.y.eq(total)
+        return m
+
+
+def _place(tmp_path, depth, mhz, seeds=(1, 2)):
+    text, _ = export_verilog(AdderChain(depth), "adder_chain")
+    vfile = tmp_path / "adder_chain.v"
+    vfile.write_text(text)
+    return time_verilog(vfile, "adder_chain", {"clk": mhz}, tmp_path / f"d{depth}",
+                        seeds=seeds, log=lambda _: None)
+
+
+def test_adder_chain_is_slower_than_one_adder_and_margin_decides(tmp_path):
+    short = _place(tmp_path, 1, 100)
+    long = _place(tmp_path, 8, 100)
+    for r in (short, long):
+        assert r["seeds"] == [1, 2] and set(r["per_seed"]) == {1, 2}
+        assert r["fmax_mhz"] == min(next(iter(v.values())) for v in r["per_seed"].values())
+        assert r["lut4"] > 0 and r["ff"] >= 24 and r["bram"] == 0
+        assert r["pass"] == (r["fmax_mhz"] >= MARGIN * r["clock_mhz"])
+    assert long["fmax_mhz"] < 0.8 * short["fmax_mhz"], (short["fmax_mhz"], long["fmax_mhz"])
+    assert long["lut4"] > short["lut4"]
+    # the slow path ends at the output register (named after the port it drives) and starts
+    # at one of the held values
+    assert long["critical_path"]["to"].rsplit(".", 1)[-1] in ("total", "y"), \
+        long["critical_path"]
+    assert "held" in long["critical_path"]["from"], long["critical_path"]
+    # a target the chain cannot reach fails, one it reaches with margin passes
+    too_fast = _place(tmp_path, 8, round(long["fmax_mhz"] * 2), seeds=(1,))
+    assert not too_fast["pass"]
+    easy = _place(tmp_path, 8, round(long["fmax_mhz"] / 2), seeds=(1,))
+    assert easy["pass"]
+
+
+def test_tool_failure_names_the_log(tmp_path):
+    text, _ = export_verilog(AdderChain(1), "adder_chain")
+    vfile = tmp_path / "adder_chain.v"
+    vfile.write_text(text)
+    with pytest.raises(TimingError, match=r"yosys on no_such_top failed \(log .*yosys.log\)"):
+        time_verilog(vfile, "no_such_top", {"clk": 100}, tmp_path / "bad", seeds=(1,))
+
+
+@pytest.mark.parametrize("cell,name", [
+    ("core.total_TRELLIS_FF_Q_30", "core.total"),
+    ("kernel.sum_CCU2C_S0_4", "kernel.sum"),
+    ("u.mem.0.0_DP16KD_DOA", "u.mem.0.0"),
+    ("plain", "plain"),
+])
+def test_readable_cell(cell, name):
+    assert readable_cell(cell) == name
