@@ -21,6 +21,8 @@ GOALS = {1: 250_000, 16: 40_000}
 HOP_GOAL_NS = 200
 SOCKET_NODES = 2
 SOCKET_CYCLES = 200
+#: lines this long are compiled optimised: the simulation, not the build, dominates
+OPTIMISE_FROM = 8
 
 
 def measure_lines(log=print):
@@ -30,8 +32,8 @@ def measure_lines(log=print):
         log(f"  simulating a line of {n} node{'s' * (n > 1)} (Verilator)...")
         run_bench("bench.finemb_bench", "finemb_line", f"bench_n{n}",
                   {"io": PID_IO, "nodes": n}, "verilator", build=build_finemb_line_bench_top,
-                  quiet=True, extra_env={"ROSGATE_BENCH_OUT": str(out),
-                                         "ROSGATE_FINEMB_NODES": str(n)})
+                  quiet=True, optimise=n >= OPTIMISE_FROM,
+                  extra_env={"ROSGATE_BENCH_OUT": str(out), "ROSGATE_FINEMB_NODES": str(n)})
         rec = json.loads(out.read_text())
         for polling, mode in rec["modes"].items():
             period_ns = mode["period_cycles"] * CLOCK_NS

@@ -78,7 +78,7 @@ def rerun_hint(seed):
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
-              extra_env=None, quiet=False, run_name=None):
+              extra_env=None, quiet=False, run_name=None, optimise=False):
     """Export, build and run the cocotb tests of ``module`` against ``top`` in
     ``sim_build/<top>-<config_id>-<sim>/``; raise on failure, naming each failed test's seed
     and the command that repeats the pytest item with it.
@@ -87,10 +87,12 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     (built without lint); ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the
     build folder; ``run_name`` keeps the results and log of one case of a parametrised test
     apart from the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
-    environment, else a new one) seeds cocotb.
+    environment, else a new one) seeds cocotb. ``optimise`` compiles a top of
+    :data:`QUICK_BUILD_TOPS` optimised all the same, in a build folder of its own (long runs).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}"
+    quick = top in QUICK_BUILD_TOPS and not optimise
+    build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     env = {
         "ROSGATE_CONFIG": config_id,
@@ -104,7 +106,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         return run_top(module, top, component, sim, build_dir, params=params,
                        testcase=testcase, seed=seed, extra_env=env,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
-                       run_name=run_name, lint=build is None, quick=top in QUICK_BUILD_TOPS,
+                       run_name=run_name, lint=build is None, quick=quick,
                        waves=_waves())
     except SimulationFailed as exc:
         seeds = sorted({s for s in exc.failed.values() if s is not None})
