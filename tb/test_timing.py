@@ -4,7 +4,8 @@ than one registered adder, the critical path runs between the registers named in
 and the margin rule decides PASS."""
 
 import pytest
-from amaranth.hdl import Module, Signal
+from amaranth.back import verilog
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -80,3 +81,44 @@ def test_tool_failure_names_the_log(tmp_path):
 ])
 def test_readable_cell(cell, name):
     assert readable_cell(cell) == name
+
+
+class TwoClockChains(wiring.Component):
+    """A one-adder chain on ``clk`` and an eight-adder chain on ``rx_clk``, crossing nowhere:
+    each clock's Fmax is its own chain's."""
+
+    def __init__(self):
+        super().__init__({"rx_clk": In(1), "a": In(24), "b": In(24), "y": Out(24),
+                          "z": Out(24)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.rx = rx = ClockDomain(reset_less=True)
+        m.d.comb += rx.clk.eq(self.rx_clk)
+        m.submodules.fast = fast = AdderChain(1)
+        m.submodules.slow = slow = DomainRenamer("rx")(AdderChain(8))
+        m.d.comb += [fast.a.eq(self.a), self.y.eq(fast.y), slow.a.eq(self.b),
+                     self.z.eq(slow.y)]
+        return m
+
+
+def test_two_clocks_are_timed_and_judged_each(tmp_path):
+    text = verilog.convert(TwoClockChains(), name="two_clocks")
+    vfile = tmp_path / "two_clocks.v"
+    vfile.write_text(text)
+    one = _place(tmp_path, 1, 100, seeds=(1,))["fmax_mhz"]
+    # the slow chain's clock asks for what only the short chain reaches
+    target = {"clk": round(one / 2), "rx_clk": round(one / 2)}
+    r = time_verilog(vfile, "two_clocks", target, tmp_path / "two", seeds=(1, 2),
+                     log=lambda _: None)
+    assert r["clock_mhz"] == target
+    assert set(r["fmax_mhz"]) == {"clk", "rx_clk"}
+    assert r["fmax_mhz"]["rx_clk"] < 0.8 * r["fmax_mhz"]["clk"], r["fmax_mhz"]
+    for clock in target:
+        assert r["fmax_mhz"][clock] == min(v[clock] for v in r["per_seed"].values())
+        assert r["critical_path"][clock] is not None
+    assert r["pass"] == all(r["fmax_mhz"][c] >= MARGIN * target[c] for c in target)
+    assert "held" in r["critical_path"]["rx_clk"]["from"], r["critical_path"]
+    with pytest.raises(TimingError, match=r"clock\(s\) \['tx_clk'\] not found"):
+        time_verilog(vfile, "two_clocks", {"clk": 100, "tx_clk": 100}, tmp_path / "three",
+                     seeds=(1,), log=lambda _: None)
