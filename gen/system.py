@@ -1,5 +1,5 @@
 """System assembly: a parsed project (:mod:`gen.config`) to one Amaranth design (
-docs/docs/reconos.md; docs/topics.md).
+docs/reconos.md; docs/topics.md).
 
 Discovery as in the fpgaDDS paper: each ReconOS thread is built into its slots, every
 hardware topic becomes a :class:`~hdl.dds.Topic` whose topology follows from its publisher

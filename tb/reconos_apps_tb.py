@@ -75,7 +75,7 @@ class AppsTB(ReconosTB):
                   Resource("rossrvs", "sobelservice"),
                   Resource("rossrvmsgres", SOBEL_SRV + "_Response")]
         await rt.create_thread(self.SOBEL, server)
-        # the application's main() prepares the response image (docs/docs/reconos.md: bgr8)
+        # the application's main() prepares the response image (docs/reconos.md: bgr8)
         import numpy as np
         rt.msgs.write(server[3].ptr, SOBEL_SRV + "_Response",
                       {"img": image_msg(np.zeros((0, 0, 3), np.uint8))})

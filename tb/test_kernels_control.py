@@ -1,5 +1,5 @@
-"""Bench of the non-image kernels in one ``kernels`` top: MergeSorter (docs/docs/reconos.md),
-PidController (docs/docs/kernels.md), InverseKinematics (docs/docs/reconos.md).
+"""Bench of the non-image kernels in one ``kernels`` top: MergeSorter (docs/reconos.md),
+PidController (docs/kernels.md), InverseKinematics (docs/reconos.md).
 
 Golden models: Python's ``sorted``; the AVR221 model of tb/models/pid.py (checked against the
 spec's test vectors in tb/test_kernels_models.py); the ap_fixed model of

@@ -1,6 +1,6 @@
 """EqualizeHist in amaranth.sim against ``cv2.equalizeHist`` on many small frames with
 awkward histograms (one grey level, two levels, narrow and skewed ranges, every size class):
-the exact float32 look-up table (docs/docs/kernels.md) must agree on every pixel."""
+the exact float32 look-up table (docs/kernels.md) must agree on every pixel."""
 
 import cv2
 import numpy as np

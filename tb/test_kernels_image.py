@@ -1,5 +1,5 @@
 """Bench of the image kernels (hdl/kernels: Sobel, GaussianBlur, BgrToGray, BgrToHsv, InRange,
-TrafficLightDetector; docs/docs/kernels.md, docs/docs/reconos.md) in one ``kernels`` top.
+TrafficLightDetector; docs/kernels.md, docs/reconos.md) in one ``kernels`` top.
 
 Every kernel gets real photographs (examples/images), random frames of random sizes and of the
 corner sizes it accepts (narrowest, widest, fewest and most rows) under random idle at its

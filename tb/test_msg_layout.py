@@ -38,7 +38,7 @@ def offsets(library, arch, typename):
     return {path: offset for path, offset, _, _ in CLayout(library, arch).flat(typename)}
 
 
-# docs/docs/reconos.md, arm64 / arm32 columns
+# docs/reconos.md, arm64 / arm32 columns
 SPEC_TABLE = [
     ("std_msgs/msg/String", "data.data", 0, 0), ("std_msgs/msg/String", "data.size", 8, 4),
     ("std_msgs/msg/String", "data.capacity", 16, 8),

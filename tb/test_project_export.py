@@ -97,7 +97,7 @@ def test_tcl_references_and_interfaces(exported, name):
 
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_block_design(exported, name):
-    """ReconROS addresses (docs/docs/reconos.md), interrupt positions, memory port and clocks."""
+    """ReconROS addresses (docs/reconos.md), interrupt positions, memory port and clocks."""
     project, folder, manifest = exported[name]
     text = (folder / "bd" / "design_1.tcl").read_text()
     board = BOARDS[project.board]

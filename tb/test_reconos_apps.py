@@ -1,7 +1,7 @@
 """The ReconROS demo nodes as hardware threads, co-simulated with the software model:
-the sort service server and action server (docs/docs/reconos.md, defect 14 fixed), the
+the sort service server and action server (docs/reconos.md, defect 14 fixed), the
 ReconOS mailbox sort thread, two threads sharing a counter under a mutex, and the Sobel
-service pair of the paper's Listings 2 and 3 (docs/docs/reconos.md) on a real photograph."""
+service pair of the paper's Listings 2 and 3 (docs/reconos.md) on a real photograph."""
 
 import random
 import struct

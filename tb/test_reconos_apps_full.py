@@ -1,5 +1,5 @@
 """Long runs of the ReconROS demo nodes (``make test-full``): the Sobel service pair on the
-paper's 640x480 ``bgr8`` frame (docs/docs/reconos.md), a real photograph, bit-exact."""
+paper's 640x480 ``bgr8`` frame (docs/reconos.md), a real photograph, bit-exact."""
 
 import cocotb
 import pytest

@@ -1,8 +1,8 @@
 """ReconROS compatibility of the hardware-thread API: every OS call's command code and word
-sequence (docs/docs/reconos.md) as the thread writes them, the replies it reads (full
+sequence (docs/reconos.md) as the thread writes them, the replies it reads (full
 word width: defect 5), the fixed sequences of defects 1-3, the interruptible take (
 including a late reply followed by a stray 0x904: defect 25), and HWT_Signal during a
-blocking call (docs/docs/reconos.md). The test plays the delegate through the reconos_osif
+blocking call (docs/reconos.md). The test plays the delegate through the reconos_osif
 registers."""
 
 import cocotb

@@ -1,4 +1,4 @@
-"""ReconOS FIFOs in amaranth.sim (docs/docs/reconos.md): first-word fall-through, push iff
+"""ReconOS FIFOs in amaranth.sim (docs/reconos.md): first-word fall-through, push iff
 WE & ~Full, pop iff RE & ~Empty, Fill/Remm, FIFO_Has_Data, reset; the clock-crossing version
 under random writer and reader pauses with a scoreboard."""
 

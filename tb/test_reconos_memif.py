@@ -1,6 +1,6 @@
 """The MEMIF path in amaranth.sim: MemifEngine -> FIFOs -> MemifArbiter -> MMU ->
 MemoryController -> a Python AXI4 memory with random response delays, against a byte-array
-model. Spec: docs/docs/reconos.md (request format, splitting, arbiter, MMU walk, controller)."""
+model. Spec: docs/reconos.md (request format, splitting, arbiter, MMU walk, controller)."""
 
 import random
 

@@ -1,7 +1,7 @@
 """The MEMIF path of the ``reconos`` top under real and bad requests: copies through the
 MEMIF engine in two contending slots, raw requests of bad lengths, page faults with and
 without a mapping, TLB invalidation, AXI error responses and (r32) 1 MiB sections.
-docs/docs/reconos.md, ReconROS defects 6, 7, 8, 9 and 11."""
+docs/reconos.md, ReconROS defects 6, 7, 8, 9 and 11."""
 
 import random
 

@@ -1,6 +1,6 @@
 """ReconROS ping-pong nodes in hardware threads (paper §5.1, Tables 3 and 4): an echo node
 and a copy node, co-simulated with the software model (delegates, broker, process memory with
-a page table the MMU walks). Spec: docs/docs/reconos.md."""
+a page table the MMU walks). Spec: docs/reconos.md."""
 
 import cocotb
 

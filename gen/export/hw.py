@@ -1,4 +1,4 @@
-"""``rosgate export-hw``: a project's hardware for Vivado and FuseSoC (docs/docs/reconos.md).
+"""``rosgate export-hw``: a project's hardware for Vivado and FuseSoC (docs/reconos.md).
 
 Layout of the output folder::
 

@@ -27,7 +27,7 @@ RESET = ("xilinx.com:signal:reset:1.0", "xilinx.com:signal:reset_rtl:1.0")
 
 
 def reconos_fifo_bus(kind, width):
-    """ReconOS' FIFO bus definition (docs/docs/reconos.md): ``FIFO_M``/``FIFO64_M`` for the write
+    """ReconOS' FIFO bus definition (docs/reconos.md): ``FIFO_M``/``FIFO64_M`` for the write
     side, ``FIFO_S``/``FIFO64_S`` for the read side; VLNV ``cs.upb.de:reconos:<name>:1.0``."""
     name = f"FIFO{'64' if width == 64 else ''}_{kind}"
     return name, (f"cs.upb.de:reconos:{name}:1.0", f"cs.upb.de:reconos:{name}_rtl:1.0")

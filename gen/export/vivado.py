@@ -1,4 +1,4 @@
-"""Vivado TCL for an exported project (docs/docs/reconos.md): IP packaging of each core with
+"""Vivado TCL for an exported project (docs/reconos.md): IP packaging of each core with
 ReconOS' VLNVs and FIFO bus definitions, the block design ``design_1`` with the ReconROS
 address map, interrupt positions and clocks, and ``build.tcl`` (synthesis, implementation,
 bitstream and ``.bin``).
@@ -18,7 +18,7 @@ VENDOR = "cs.upb.de"
 LIBRARY = "reconos"
 CONTROL_RANGE = 0x1_0000
 
-#: processing system of each TargetBoard (docs/docs/reconos.md: control through the general-purpose
+#: processing system of each TargetBoard (docs/reconos.md: control through the general-purpose
 #: master, memory through HPC0 (ZynqMP) or ACP (Zynq), osif_intc and page-fault interrupts on
 #: the concat inputs of the ReconROS templates)
 BOARDS = {

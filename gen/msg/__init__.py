@@ -1,6 +1,6 @@
 """ROS message knowledge, defined once: definitions, C layouts, encodings.
 
-Specs: docs/messages.md, docs/docs/reconos.md.
+Specs: docs/messages.md, docs/reconos.md.
 """
 
 from .library import MessageLibrary, normalize_name

@@ -1,4 +1,4 @@
-"""rosidl C struct layout (docs/docs/reconos.md): what hardware threads address over MEMIF.
+"""rosidl C struct layout (docs/reconos.md): what hardware threads address over MEMIF.
 
 A message is a C struct of its fields in order, each at its natural alignment; nested
 messages are embedded structs; ``string`` is ``rosidl_runtime_c__String {char *data; size_t

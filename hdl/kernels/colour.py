@@ -1,4 +1,4 @@
-"""Per-pixel colour kernels, bit-exact with OpenCV (docs/docs/kernels.md): BGR to GRAY,
+"""Per-pixel colour kernels, bit-exact with OpenCV (docs/kernels.md): BGR to GRAY,
 BGR to HSV, ``inRange``, and a traffic-light detector built from them."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal, signed

@@ -1,4 +1,4 @@
-"""Histogram equalization, bit-exact with ``cv2.equalizeHist`` (docs/docs/kernels.md)."""
+"""Histogram equalization, bit-exact with ``cv2.equalizeHist`` (docs/kernels.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring

@@ -1,4 +1,4 @@
-"""Image streams and the frame guard in front of every image kernel (docs/docs/kernels.md).
+"""Image streams and the frame guard in front of every image kernel (docs/kernels.md).
 
 An image stream carries a frame of ``height`` rows of ``width`` pixels, row by row, ``P``
 pixels per beat (pixel ``k`` of a beat in bits ``[k*8*C, (k+1)*8*C)``, channel ``c`` of a

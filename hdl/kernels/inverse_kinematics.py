@@ -1,4 +1,4 @@
-"""Inverse kinematics of the ReconROS ball-on-plate Stewart platform (docs/docs/reconos.md),
+"""Inverse kinematics of the ReconROS ball-on-plate Stewart platform (docs/reconos.md),
 bit-exact with the HLS fixed-point algorithm, defect 15 fixed."""
 
 import math

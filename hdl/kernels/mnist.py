@@ -1,4 +1,4 @@
-"""Integer MNIST CNN: 3 x (conv3x3 + ReLU + maxpool2), FC + ReLU, FC (docs/docs/kernels.md)."""
+"""Integer MNIST CNN: 3 x (conv3x3 + ReLU + maxpool2), FC + ReLU, FC (docs/kernels.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import data, wiring

@@ -1,4 +1,4 @@
-"""Discrete PID controller with AVR221 semantics (docs/docs/kernels.md), one update per clock."""
+"""Discrete PID controller with AVR221 semantics (docs/kernels.md), one update per clock."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal, signed
 from amaranth.lib import data, wiring
@@ -22,7 +22,7 @@ class PidController(wiring.Component):
     """AVR221 discrete PID as a pipeline: one (set point, measurement) pair in and one
     control output out per clock.
 
-    Per update (docs/docs/kernels.md; all the quirks kept): ``e = sp - pv`` wrapped to int16;
+    Per update (docs/kernels.md; all the quirks kept): ``e = sp - pv`` wrapped to int16;
     P term ``P e``, or +-32767 when ``|e| > maxError``; I term ``I sum`` with ``sum += e``, or
     +-(2**30 - 1) with ``sum`` clamped to +-``maxSumError`` when it would leave that range; D
     term ``D (last_pv - pv)`` wrapped to int16 (derivative on the measurement); output

@@ -1,4 +1,4 @@
-"""ReconOS/ReconROS-compatible hardware-thread infrastructure (docs/docs/reconos.md).
+"""ReconOS/ReconROS-compatible hardware-thread infrastructure (docs/reconos.md).
 
 :mod:`.protocol` holds the command codes, word sequences and register maps; the components
 are the OSIF/MEMIF FIFOs (:mod:`.fifo`), the AXI4-Lite control blocks (:mod:`.control`), the

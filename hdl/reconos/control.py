@@ -1,5 +1,5 @@
 """The software-visible ReconOS control blocks: reconos_osif, reconos_osif_intc and
-reconos_proc_control (docs/docs/reconos.md), each an AXI4-Lite subordinate."""
+reconos_proc_control (docs/reconos.md), each an AXI4-Lite subordinate."""
 
 from amaranth.hdl import Const, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -27,7 +27,7 @@ def _check_hwts(num_hwts):
 
 class ReconosOsif(wiring.Component):
     """reconos_osif: four registers per hardware thread between the CPU and the slot's OSIF
-    FIFOs (docs/docs/reconos.md; register ``4*i + k`` at byte offset ``(4*i + k) * W``).
+    FIFOs (docs/reconos.md; register ``4*i + k`` at byte offset ``(4*i + k) * W``).
 
     ======  =========  ================================================================
     k       access     function
@@ -105,7 +105,7 @@ class ReconosOsif(wiring.Component):
 
 class OsifIntc(wiring.Component):
     """reconos_osif_intc: a level interrupt when an enabled thread's hw2sw FIFO has data
-    (docs/docs/reconos.md).
+    (docs/reconos.md).
 
     Register ``j`` (byte offset ``4*j``, 32-bit semantics in the low half of a 64-bit bus):
     write = enable mask of threads ``32j..32j+31``; read = pending = ``has_data & enable``.
@@ -160,7 +160,7 @@ class OsifIntc(wiring.Component):
 
 class ProcControl(wiring.Component):
     """reconos_proc_control: thread resets and signals, MMU page table and faults, TLB and
-    memory-path status (docs/docs/reconos.md, register indices in :class:`ProcControlRegister`).
+    memory-path status (docs/reconos.md, register indices in :class:`ProcControlRegister`).
 
     r64: 64-bit registers at ``8*index``; r32: 32-bit registers at the driver's offsets
     (:func:`~hdl.reconos.protocol.proc_control_offset`).

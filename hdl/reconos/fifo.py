@@ -1,4 +1,4 @@
-"""ReconOS FIFO interfaces and the OSIF/MEMIF FIFO (docs/docs/reconos.md)."""
+"""ReconOS FIFO interfaces and the OSIF/MEMIF FIFO (docs/reconos.md)."""
 
 from amaranth.hdl import Module, ResetInserter
 from amaranth.lib import wiring

@@ -1,5 +1,5 @@
 """The hardware-thread API: slot ports, the OSIF call engine with per-call FSM helpers, and
-the MEMIF read/write engine (docs/docs/reconos.md).
+the MEMIF read/write engine (docs/reconos.md).
 
 A thread is a :class:`HardwareThread` (a component with the slot's ports). In its
 ``elaborate`` it calls :meth:`HardwareThread.os_and_memory` and writes an FSM whose states
@@ -290,7 +290,7 @@ def memif_command_layout(arch):
 
 class MemifEngine(wiring.Component):
     """MEM_READ/MEM_WRITE as streams: splits accesses into ReconOS requests (at most 256 B,
-    never crossing a 256-B boundary, docs/docs/reconos.md) and moves data at one word per cycle.
+    never crossing a 256-B boundary, docs/reconos.md) and moves data at one word per cycle.
 
     Addresses and lengths are in bytes and must be multiples of W (their low bits are
     ignored, as in ReconOS' VHDL library). A read and a write may run at the same time (a

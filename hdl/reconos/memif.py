@@ -1,5 +1,5 @@
 """The MEMIF request path between the slots and memory: request formats and the arbiter
-(docs/docs/reconos.md).
+(docs/reconos.md).
 
 Behind the arbiter a MEMIF request is no longer a word sequence but three streams:
 
@@ -11,7 +11,7 @@ Behind the arbiter a MEMIF request is no longer a word sequence but three stream
 A request carries ``ceil(length / W)`` data words. Only requests that ReconOS can emit
 (length a non-zero multiple of W, at most 256 B, not crossing a 256-B boundary) reach memory;
 the memory controller answers any other one without touching memory (:class:`MemStatus`
-``BAD_REQUEST``), so no length hangs the path (ReconROS defect 6, docs/docs/reconos.md).
+``BAD_REQUEST``), so no length hangs the path (ReconROS defect 6, docs/reconos.md).
 """
 
 from amaranth.hdl import Module, Mux, Signal

@@ -1,4 +1,4 @@
-"""ReconOS/ReconROS protocol facts, defined once (docs/docs/reconos.md).
+"""ReconOS/ReconROS protocol facts, defined once (docs/reconos.md).
 
 Everything here is plain Python: the hardware (:mod:`hdl.reconos`), the software model
 (:mod:`host.reconos`) and the compatibility tests import the same tables. Nothing in
@@ -32,9 +32,9 @@ class Arch:
     addr_bits : int
         Physical address width of the AXI4 memory port (r64: the controller's ``ADDR 40``).
     osif_base, intc_base, proc_control_base : int
-        Default AXI-Lite base addresses (docs/docs/reconos.md).
+        Default AXI-Lite base addresses (docs/reconos.md).
     axcache, axprot, axuser : int
-        Attributes of every memory burst (docs/docs/reconos.md; r64: coherent through HPC0; r32: the
+        Attributes of every memory burst (docs/reconos.md; r64: coherent through HPC0; r32: the
         ``axi_master_burst`` defaults, cache and user all ones). AxUSER is 2 bits wide.
     """
 
@@ -78,7 +78,7 @@ def arch(name):
 
 
 class Command(enum.IntEnum):
-    """OSIF command words (docs/docs/reconos.md). The delegate dispatches on ``word & CMD_MASK``."""
+    """OSIF command words (docs/reconos.md). The delegate dispatches on ``word & CMD_MASK``."""
 
     THREAD_GET_INIT_DATA = 0x0A0
     THREAD_GET_STATE_ADDR = 0x0A1
@@ -148,13 +148,13 @@ YIELD_MASK = 0x8000_0000
 
 def INTERRUPTED_REPLY(word_bits):
     """The all-ones reply that ends an interruptible take without a message
-    (docs/docs/reconos.md)."""
+    (docs/reconos.md)."""
     return (1 << word_bits) - 1
 
 
 @dataclass(frozen=True)
 class Call:
-    """The word sequence of one OS call (docs/docs/reconos.md): ``cmd, args... => replies...``.
+    """The word sequence of one OS call (docs/reconos.md): ``cmd, args... => replies...``.
 
     ``method`` is the name of the hardware-thread API method and of the software model's
     handler. ``args`` and ``replies`` name the words in order. A call with ``blocking=False``
@@ -173,7 +173,7 @@ def _c(method, command, args=(), replies=(), blocking=True):
 
 
 #: Every OS call a hardware thread can make, by method name. Defects 1-3 of ReconROS
-# (docs/docs/reconos.md) are fixed
+# (docs/reconos.md) are fixed
 #: here: COND_WAIT sends (cond, mutex); ACTIONC_RESULT_TRYTAKE reads (ptr, ret);
 #: ACTIONC_CANCEL_TRYTAKE sends (h_ac, h_msg).
 CALLS = {c.method: c for c in [
@@ -258,13 +258,13 @@ def call(command):
 
 
 class MemifOp(enum.IntEnum):
-    """MEMIF operation byte (docs/docs/reconos.md), in the top byte of request word 0."""
+    """MEMIF operation byte (docs/reconos.md), in the top byte of request word 0."""
 
     READ = 0x00
     WRITE = 0xF0
 
 
-#: Largest MEMIF request; requests never cross a multiple of it (docs/docs/reconos.md).
+#: Largest MEMIF request; requests never cross a multiple of it (docs/reconos.md).
 MEMIF_CHUNK = 256
 
 
@@ -284,7 +284,7 @@ def memif_decode(arch_, word):
 
 def memif_split(addr, length):
     """The ReconOS split of a memory access into ``(addr, length)`` requests
-    (docs/docs/reconos.md)."""
+    (docs/reconos.md)."""
     out = []
     while length > 0:
         n = min(length, MEMIF_CHUNK - (addr % MEMIF_CHUNK))
@@ -295,7 +295,7 @@ def memif_split(addr, length):
 
 
 class OsifRegister(enum.IntEnum):
-    """The four reconos_osif registers of one hardware thread (docs/docs/reconos.md)."""
+    """The four reconos_osif registers of one hardware thread (docs/reconos.md)."""
 
     HW2SW_DATA = 0   # read pops the hw2sw FIFO
     SW2HW_DATA = 1   # write pushes the sw2hw FIFO
@@ -309,9 +309,9 @@ def osif_register_offset(arch_, thread, register):
 
 
 class ProcControlRegister(enum.IntEnum):
-    """reconos_proc_control register indices (r64 layout, docs/docs/reconos.md; offset = 8*index).
+    """reconos_proc_control register indices (r64 layout, docs/reconos.md; offset = 8*index).
 
-    Indices 8-10 are rosgate additions (defects 6, 8, 9 of ReconROS (docs/docs/reconos.md)).
+    Indices 8-10 are rosgate additions (defects 6, 8, 9 of ReconROS (docs/reconos.md)).
     """
 
     NUM_HWTS = 0
@@ -331,7 +331,7 @@ class ProcControlRegister(enum.IntEnum):
 def proc_control_offset(arch_, register, num_hwts=1):
     """Byte offset of a proc_control register.
 
-    r64: ``8 * index``. r32 (docs/docs/reconos.md): 0x00..0x14 for indices 0..5, then one 32-bit
+    r64: ``8 * index``. r32 (docs/reconos.md): 0x00..0x14 for indices 0..5, then one 32-bit
     word per
     32 threads for the reset masks, as many for the signal masks, then the rosgate additions.
     Masks of threads 32 and up are not exposed by this function (rosgate supports up to 32
@@ -363,7 +363,7 @@ class MemStatus(enum.IntFlag):
 
 
 class ResourceType(enum.IntEnum):
-    """ReconOS resource type codes (docs/docs/reconos.md)."""
+    """ReconOS resource type codes (docs/reconos.md)."""
 
     MBOX = 0x1
     SEM = 0x2

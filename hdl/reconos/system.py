@@ -1,4 +1,4 @@
-"""The ReconOS infrastructure around a set of hardware threads (docs/docs/reconos.md)."""
+"""The ReconOS infrastructure around a set of hardware threads (docs/reconos.md)."""
 
 from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetInserter, ResetSignal
 from amaranth.lib.cdc import FFSynchronizer, ResetSynchronizer

@@ -322,7 +322,7 @@ class _SortingThread(HardwareThread):
 
 
 class SortServiceThread(_SortingThread):
-    """The ReconROS sort service server (``sorter_msgs/srv/Sort``, docs/docs/reconos.md), with
+    """The ReconROS sort service server (``sorter_msgs/srv/Sort``, docs/reconos.md), with
     defect 14
     fixed: the response carries the sorted data.
 
@@ -390,7 +390,7 @@ def _float32_bits(value):
 
 
 class SortActionThread(_SortingThread):
-    """The ReconROS sort action server (``sorter_msgs/action/Sort``, docs/docs/reconos.md): goal,
+    """The ReconROS sort action server (``sorter_msgs/action/Sort``, docs/reconos.md): goal,
     feedback, result.
 
     Loop: ACTIONS_GOAL_TAKE; read ``goal.unsorted``; ACTIONS_GOAL_DECIDE (accept when it has
@@ -408,7 +408,7 @@ class SortActionThread(_SortingThread):
         message.
     goal_offset, res_offset, fb_offset : int
         Byte offsets of ``goal.unsorted`` in the goal request, ``result.sorted`` in the result
-        response and ``feedback.percent`` in the feedback message (docs/docs/reconos.md).
+        response and ``feedback.percent`` in the feedback message (docs/reconos.md).
     block_size : int
         Largest goal (default 2048).
     """
@@ -484,7 +484,7 @@ class SortActionThread(_SortingThread):
 
 
 class MailboxSortThread(_SortingThread):
-    """The ReconOS sort demo's hardware thread (the VHDL variant of docs/docs/reconos.md): get an
+    """The ReconOS sort demo's hardware thread (the VHDL variant of docs/reconos.md): get an
     address from mailbox ``h_in``, sort the ``block_size`` unsigned 32-bit words there in
     place, put the address into mailbox ``h_out``; an all-ones address ends the thread
     (THREAD_EXIT).
@@ -648,7 +648,7 @@ class SobelServerThread(HardwareThread):
         Handles of the service server and its request and response messages.
     image_offsets : dict
         Byte offsets in ``sensor_msgs/Image`` of ``height``, ``encoding``,
-        ``is_bigendian``, ``step`` and ``data`` for the target ABI (docs/docs/reconos.md).
+        ``is_bigendian``, ``step`` and ``data`` for the target ABI (docs/reconos.md).
     req_image_offset, res_image_offset : int
         Offset of the image in the request and in the response (``img``: 0 and 0).
     mode : str

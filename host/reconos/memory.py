@@ -27,7 +27,7 @@ class ProcessMemory:
         Bytes of physical memory; frames are handed out from ``phys_base`` upwards.
     heap_base : int
         First virtual address of :meth:`malloc` (r64 default above 4 GiB, so pointers need
-        the full word: ReconROS defect 5, docs/docs/reconos.md).
+        the full word: ReconROS defect 5, docs/reconos.md).
     """
 
     def __init__(self, arch, ram, ram_size, *, phys_base=0x1000, heap_base=None):
@@ -99,7 +99,7 @@ class ProcessMemory:
 
     def map_section(self, size=1 << 20):
         """r32: allocate a 1 MiB-aligned region mapped by one ARMv7 section descriptor
-        (ReconROS defect 11, docs/docs/reconos.md); return its VA."""
+        (ReconROS defect 11, docs/reconos.md); return its VA."""
         if self.arch.name != "r32":
             raise ValueError("sections are an ARMv7 (r32) feature")
         va = -(-self._next_va // (1 << 20)) * (1 << 20)

@@ -10,7 +10,7 @@ __all__ = ["MessageMemory"]
 
 
 class MessageMemory:
-    """ROS messages as rosidl C structs in :class:`ProcessMemory` (docs/docs/reconos.md).
+    """ROS messages as rosidl C structs in :class:`ProcessMemory` (docs/reconos.md).
 
     Values are dicts of field name to value: primitives as ints/floats, strings as ``str``,
     nested messages as dicts, ``uint8``/``byte``/``char`` sequences and arrays as ``bytes``,

@@ -1,5 +1,5 @@
 """Golden models of the image kernels: OpenCV where OpenCV defines the operation (
-docs/docs/kernels.md), the ReconROS Sobel from the spec (docs/docs/reconos.md), and the frame
+docs/kernels.md), the ReconROS Sobel from the spec (docs/reconos.md), and the frame
 guard's
 padding and cutting rule."""
 
@@ -36,7 +36,7 @@ def load_image(name):
 
 
 def sobel(image, border="reflect101"):
-    """``cv2.add(convertScaleAbs(Sobel dx), convertScaleAbs(Sobel dy))`` (docs/docs/kernels.md,
+    """``cv2.add(convertScaleAbs(Sobel dx), convertScaleAbs(Sobel dy))`` (docs/kernels.md,
     rosgate native Sobel)."""
     cv2 = _cv2()
     gx = cv2.Sobel(image, cv2.CV_16S, 1, 0, ksize=3, borderType=_border(border))

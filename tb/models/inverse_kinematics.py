@@ -1,5 +1,5 @@
 """Inverse kinematics of the ReconROS ball-on-plate Stewart platform, written from
-docs/docs/reconos.md with HLS ``ap_fixed`` semantics (every assignment floors to the type's LSB
+docs/reconos.md with HLS ``ap_fixed`` semantics (every assignment floors to the type's LSB
 and wraps to its width; products and sums exact until assigned), computed with exact
 rationals, and with defect 15 fixed (the x10 of the angle is not wrapped to 16 bits)."""
 
@@ -70,7 +70,7 @@ def _sin_cos(raw):
 
 
 def solve(word):
-    """The output word ``(i_min << 21) | (leg << 18)`` for an input word (docs/docs/kernels.md)."""
+    """The output word ``(i_min << 21) | (leg << 18)`` for an input word (docs/kernels.md)."""
     alpha, beta, leg = decode_input(word)
     leg_word = leg
     if leg >= 6:

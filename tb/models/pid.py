@@ -1,4 +1,4 @@
-"""AVR221 discrete PID, written from docs/docs/kernels.md (C semantics of the 16-bit AVR:
+"""AVR221 discrete PID, written from docs/kernels.md (C semantics of the 16-bit AVR:
 int16 error and D term wrap, C division truncates toward zero)."""
 
 __all__ = ["AvrPid", "FirstOrderPlant", "wrap16"]

@@ -1,4 +1,4 @@
-"""Golden models of the Sobel filters, written from the spec (docs/docs/reconos.md)."""
+"""Golden models of the Sobel filters, written from the spec (docs/reconos.md)."""
 
 import numpy as np
 
