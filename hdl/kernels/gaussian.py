@@ -1,4 +1,4 @@
-"""Gaussian blur, bit-exact with ``cv2.GaussianBlur(sigma=0)`` (docs/docs/kernels.md)."""
+"""Gaussian blur, bit-exact with ``cv2.GaussianBlur(sigma=0)`` (docs/kernels.md)."""
 
 from amaranth.hdl import Cat
 
@@ -42,6 +42,9 @@ class GaussianBlur(WindowFilter):
                          pixels_per_beat=pixels_per_beat, max_width=max_width,
                          max_height=max_height, border=border, channel_choices=(1, 3, 4))
 
+    #: the vertical (column) sums, then the horizontal sum; the rounding at ``o``
+    compute_stages = 2
+
     def compute(self, m, pixel, ctx):
         taps, shift = GAUSSIAN_TAPS[self.ksize]
         k = self.ksize
@@ -49,9 +52,11 @@ class GaussianBlur(WindowFilter):
         for p in range(self.pixels_per_beat):
             lanes = []
             for c in range(self.channels):
-                columns = [sum(taps[dy] * pixel(p, dy, dx).word_select(c, 8) for dy in range(k))
+                columns = [ctx.register(sum(taps[dy] * pixel(p, dy, dx).word_select(c, 8)
+                                            for dy in range(k)), f"column{dx}_p{p}_c{c}")
                            for dx in range(k)]
-                total = sum(taps[dx] * columns[dx] for dx in range(k))
+                total = ctx.register(sum(taps[dx] * columns[dx] for dx in range(k)),
+                                     f"total_p{p}_c{c}")
                 lanes.append(((total + (1 << (shift - 1))) >> shift)[:8])
             outputs.append(Cat(*lanes))
         return outputs

@@ -1,4 +1,4 @@
-"""Sobel filters (docs/docs/reconos.md; docs/docs/kernels.md)."""
+"""Sobel filters (docs/reconos.md; docs/kernels.md)."""
 
 from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
@@ -13,7 +13,7 @@ __all__ = ["Sobel", "SobelByteLanes"]
 
 
 class SobelByteLanes(wiring.Component):
-    """The ReconROS demo's Sobel filter, "per byte lane" (docs/docs/reconos.md), streaming.
+    """The ReconROS demo's Sobel filter, "per byte lane" (docs/reconos.md), streaming.
 
     The image is a ``height`` x ``words`` array of little-endian 32-bit words; each byte
     lane k of a word is filtered on its own (horizontal neighbours are 4 bytes apart)::
@@ -161,7 +161,7 @@ def _absdiff(a, b):
 
 
 class Sobel(WindowFilter):
-    """3 x 3 Sobel edge filter on an image stream (docs/docs/kernels.md, docs/docs/reconos.md).
+    """3 x 3 Sobel edge filter on an image stream (docs/kernels.md, docs/reconos.md).
 
     Modes:
 
@@ -174,7 +174,7 @@ class Sobel(WindowFilter):
         The ReconROS demo filter: a pixel is one 32-bit word (``channels=4``; a 640-pixel
         ``bgr8`` row is 480 such "pixels"), each byte lane filtered on its own,
         ``(|Gx| + |Gy|) >> 3``. Interior pixels equal ReconROS'; the frame's edge rows and
-        columns, which ReconROS leaves unwritten (stale; docs/docs/reconos.md defect 12), are 0.
+        columns, which ReconROS leaves unwritten (stale; docs/reconos.md defect 12), are 0.
 
     Parameters
     ----------
@@ -206,6 +206,9 @@ class Sobel(WindowFilter):
 
     mode = property(lambda self: self._mode)
 
+    #: the four 3-tap sums, then their absolute differences; saturation and the sum at ``o``
+    compute_stages = 2
+
     def compute(self, m, pixel, ctx):
         outputs = []
         for p in range(self.pixels_per_beat):
@@ -213,12 +216,13 @@ class Sobel(WindowFilter):
             for c in range(self.channels):
                 def q(dy, dx):
                     return pixel(p, dy, dx).word_select(c, 8)
-                gx_pos = q(0, 2) + 2 * q(1, 2) + q(2, 2)
-                gx_neg = q(0, 0) + 2 * q(1, 0) + q(2, 0)
-                gy_pos = q(2, 0) + 2 * q(2, 1) + q(2, 2)
-                gy_neg = q(0, 0) + 2 * q(0, 1) + q(0, 2)
-                ax, ay = Signal(10), Signal(10)
-                m.d.comb += [ax.eq(_absdiff(gx_pos, gx_neg)), ay.eq(_absdiff(gy_pos, gy_neg))]
+                name = f"p{p}_c{c}"
+                gx_pos = ctx.register(q(0, 2) + 2 * q(1, 2) + q(2, 2), f"gx_pos_{name}")
+                gx_neg = ctx.register(q(0, 0) + 2 * q(1, 0) + q(2, 0), f"gx_neg_{name}")
+                gy_pos = ctx.register(q(2, 0) + 2 * q(2, 1) + q(2, 2), f"gy_pos_{name}")
+                gy_neg = ctx.register(q(0, 0) + 2 * q(0, 1) + q(0, 2), f"gy_neg_{name}")
+                ax = ctx.register(_absdiff(gx_pos, gx_neg)[:10], f"ax_{name}")
+                ay = ctx.register(_absdiff(gy_pos, gy_neg)[:10], f"ay_{name}")
                 if self._mode == "opencv":
                     sx, sy = Mux(ax > 255, 255, ax), Mux(ay > 255, 255, ay)
                     total = sx + sy
@@ -230,6 +234,8 @@ class Sobel(WindowFilter):
                 col = ctx.beat * self.pixels_per_beat + p
                 edge = ((ctx.row == 0) | (ctx.row == ctx.height - 1) | (col == 0) |
                         (col == ctx.width_beats * self.pixels_per_beat - 1))
+                for n in range(self.compute_stages):
+                    edge = ctx.register(edge, f"edge_p{p}_{n}")
                 value = Mux(edge, 0, value)
             outputs.append(value)
         return outputs

@@ -1,6 +1,6 @@
 """Streaming k x k neighbourhood filters with line buffers and OpenCV border modes."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import Out
@@ -35,10 +35,18 @@ class WindowContext:
         ``beat * P + p``.
     width_beats, height : Value
         Size of the frame, in beats per row and rows.
+
+    All four belong to the window's pipeline stage, like the pixels; a value derived from them
+    goes through :meth:`register` as often as the pixel arithmetic does.
     """
 
-    def __init__(self, row, beat, width_beats, height):
+    def __init__(self, row, beat, width_beats, height, register):
         self.row, self.beat, self.width_beats, self.height = row, beat, width_beats, height
+        self._register = register
+
+    def register(self, value, name="stage"):
+        """``value`` one pipeline stage later, held while the output stalls."""
+        return self._register(value, name)
 
 
 class WindowFilter(wiring.Component):
@@ -52,7 +60,11 @@ class WindowFilter(wiring.Component):
     Timing: a frame of ``height`` rows of ``width / P`` beats takes
     ``(height + R) * (width / P + L)`` cycles (``R`` rows drain after the last input row,
     ``L`` beats after each row) plus 4 between frames, when neither side stalls. A stall at
-    ``o`` stops the whole pipeline (one ``adv`` enable).
+    ``o`` stops the whole pipeline (one ``adv`` enable). The window's pixels are registered
+    after the border selection, and a subclass splits its arithmetic into
+    :attr:`compute_stages` registered stages (:meth:`WindowContext.register`), so that the
+    path between two registers stays short enough for the target clock; each stage adds a
+    cycle of latency, none of throughput.
 
     Parameters
     ----------
@@ -121,12 +133,17 @@ class WindowFilter(wiring.Component):
         """Cycles between frames when neither side stalls (see the class docstring)."""
         return (height + self._r) * (width // self._p + self._l) + 4
 
+    #: registered stages inside :meth:`compute` on every path from a pixel to an output
+    compute_stages = 0
+
     def compute(self, m, pixel, ctx):
         """Return the ``P`` output pixels (``8 * out_channels`` bits each).
 
         ``pixel(p, dy, dx)`` is the input pixel at row ``row + dy - R`` and column
         ``beat * P + p + dx - R`` (``dy, dx`` in ``0..k-1``), border applied; ``ctx`` is a
-        :class:`WindowContext`. The result is registered at ``o``.
+        :class:`WindowContext`. Every path from a pixel to a result passes
+        :attr:`compute_stages` times through ``ctx.register``; the result is registered at
+        ``o``.
         """
         raise NotImplementedError
 
@@ -232,7 +249,7 @@ class WindowFilter(wiring.Component):
                     m.d.sync += [hreg[b][t].eq(hreg[b + 1][t]) for t in range(k)]
                 m.d.sync += [hreg[2 * L][t].eq(taps2[t]) for t in range(k)]
 
-        # stage 3: horizontal border selection, the filter, the output register
+        # stage 3: horizontal border selection
         flat = [[hreg[f // P][t].word_select(f % P, pix_bits) for t in range(k)]
                 for f in range((2 * L + 1) * P)]
         left = [beat3 == c for c in range(L)]
@@ -262,15 +279,35 @@ class WindowFilter(wiring.Component):
                         alt = flat[(e + L) * P - 2 - x_rel][dy]
                     value = Mux(right[e - 1], alt, value)
             sig = Signal(pix_bits, name=f"win_p{p}_y{dy}_x{dx}")
-            m.d.comb += sig.eq(value)
+            with m.If(adv):
+                m.d.sync += sig.eq(value)
             cache[key] = sig
             return sig
 
-        ctx = WindowContext(row3, beat3, wb, h)
-        outputs = self.compute(m, pixel, ctx)
+        def register(value, name):
+            value = Value.cast(value)
+            reg = Signal(value.shape(), name=name)
+            with m.If(adv):
+                m.d.sync += reg.eq(value)
+            return reg
+
+        # stage 4: the window registered; the compute stages follow
+        v4, row4, beat4 = Signal(), Signal.like(row3), Signal.like(beat3)
+        wb4, h4, last4, user4 = Signal.like(wb), Signal.like(h), Signal(), Signal()
         with m.If(adv):
-            m.d.sync += [o_valid.eq(v3), o_data.eq(Cat(*outputs)),
-                         o_last.eq((row3 == h - 1) & (beat3 == wb - 1)),
-                         o_user.eq((row3 == 0) & (beat3 == 0))]
-        m.d.comb += self.busy.eq(run | v1 | v2 | v3 | o_valid)
+            m.d.sync += [v4.eq(v3), row4.eq(row3), beat4.eq(beat3), wb4.eq(wb), h4.eq(h),
+                         last4.eq((row3 == h - 1) & (beat3 == wb - 1)),
+                         user4.eq((row3 == 0) & (beat3 == 0))]
+        ctx = WindowContext(row4, beat4, wb4, h4, register)
+        outputs = self.compute(m, pixel, ctx)
+        valid, last, user = v4, last4, user4
+        stage_valids = [v4]
+        for n in range(self.compute_stages):
+            valid = register(valid, f"v_compute{n}")
+            last, user = register(last, f"last_compute{n}"), register(user, f"user_compute{n}")
+            stage_valids.append(valid)
+        with m.If(adv):
+            m.d.sync += [o_valid.eq(valid), o_data.eq(Cat(*outputs)), o_last.eq(last),
+                         o_user.eq(user)]
+        m.d.comb += self.busy.eq(run | v1 | v2 | v3 | o_valid | Cat(*stage_valids).any())
         return m
