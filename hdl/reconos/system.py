@@ -10,10 +10,11 @@ from .control import CONTROL_ADDR_WIDTH, MAX_HWTS, OsifIntc, ProcControl, Recono
 from .fifo import MEMIF_FIFO_DEPTH, OSIF_FIFO_DEPTH, ReconosFifo
 from .hwt import ThreadSignature
 from .memctrl import MemoryController
-from .memif import MemifArbiter
+from .memif import MemifArbiter, request_layout
 from .mmu import MMU
 from .protocol import arch as get_arch
 from ..params import check_int, check_power_of_two
+from ..stream import PayloadRegisterSlice
 
 __all__ = ["ReconosSystem"]
 
@@ -112,8 +113,15 @@ class ReconosSystem(wiring.Component):
         m.submodules.arbiter = arbiter
         m.submodules.mmu = mmu
         m.submodules.memctrl = ctrl
-        wiring.connect(m, arbiter.req, mmu.s_req)
-        wiring.connect(m, mmu.m_req, ctrl.s_req)
+        # the slices keep the FIFO heads, the arbitration, the translation and the AXI side
+        # in separate clock periods (a request takes two cycles more)
+        layout = request_layout(a, n)
+        m.submodules.req_slice = req_slice = ResetInserter(sys_rst)(PayloadRegisterSlice(layout))
+        m.submodules.mem_slice = mem_slice = ResetInserter(sys_rst)(PayloadRegisterSlice(layout))
+        wiring.connect(m, arbiter.req, req_slice.i)
+        wiring.connect(m, req_slice.o, mmu.s_req)
+        wiring.connect(m, mmu.m_req, mem_slice.i)
+        wiring.connect(m, mem_slice.o, ctrl.s_req)
         wiring.connect(m, arbiter.wdata, ctrl.s_wdata)
         wiring.connect(m, ctrl.m_rdata, mmu.s_rdata)
         wiring.connect(m, mmu.m_rdata, arbiter.rdata)

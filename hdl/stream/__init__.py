@@ -1,12 +1,13 @@
 """AXI4-Stream library: signature, register slice, FIFOs, width converters."""
 
 from .signature import AXIStreamSignature, PAYLOAD_MEMBERS, check_stream_signature
-from .skid import RegisterSlice
+from .skid import PayloadRegisterSlice, RegisterSlice
 from .fifo import StreamFIFO, AsyncStreamFIFO, OVERFLOW_POLICIES
 from .message_fifo import MessageFIFO
 
-__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "check_stream_signature", "RegisterSlice", "StreamFIFO",
-           "AsyncStreamFIFO", "OVERFLOW_POLICIES", "MessageFIFO"]
+__all__ = ["AXIStreamSignature", "PAYLOAD_MEMBERS", "check_stream_signature", "RegisterSlice",
+           "PayloadRegisterSlice", "StreamFIFO", "AsyncStreamFIFO", "OVERFLOW_POLICIES",
+           "MessageFIFO"]
 
 from .monitor import StreamMonitorSignature, StreamMonitor
 

@@ -1,12 +1,28 @@
-"""Register slice: breaks every combinational path of an AXI4-Stream link."""
+"""Register slices: break every combinational path of an AXI4-Stream or an
+``amaranth.lib.stream`` link."""
 
-from amaranth.hdl import Module, Signal
-from amaranth.lib import wiring
+from amaranth.hdl import Module, Shape, Signal
+from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from .signature import check_stream_signature
 
-__all__ = ["RegisterSlice"]
+__all__ = ["PayloadRegisterSlice", "RegisterSlice"]
+
+
+def _skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
+    # Payload registers need no reset: nothing reads them while the output valid is low.
+    skid = Signal(width, reset_less=True)
+    out = Signal(width, reset_less=True)
+    skid_valid = Signal()
+    m.d.comb += [i_ready.eq(~skid_valid), o_payload.eq(out)]
+    with m.If(~o_valid | o_ready):
+        with m.If(skid_valid):
+            m.d.sync += [out.eq(skid), o_valid.eq(1), skid_valid.eq(0)]
+        with m.Else():
+            m.d.sync += [out.eq(i_payload), o_valid.eq(i_valid)]
+    with m.Elif(i_valid & ~skid_valid):
+        m.d.sync += [skid.eq(i_payload), skid_valid.eq(1)]
 
 
 class RegisterSlice(wiring.Component):
@@ -37,19 +53,38 @@ class RegisterSlice(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         sig = self._stream
-        # Payload registers need no reset: nothing reads them while tvalid is low.
-        skid = Signal(sig.payload_width, reset_less=True)
-        out = Signal(sig.payload_width, reset_less=True)
-        skid_valid = Signal()
-
-        m.d.comb += self.s_axis.tready.eq(~skid_valid)
+        out = Signal(sig.payload_width)
         m.d.comb += sig.unpack(self.m_axis, out)
-        with m.If(~self.m_axis.tvalid | self.m_axis.tready):
-            with m.If(skid_valid):
-                m.d.sync += [out.eq(skid), self.m_axis.tvalid.eq(1), skid_valid.eq(0)]
-            with m.Else():
-                m.d.sync += [out.eq(sig.pack(self.s_axis)),
-                             self.m_axis.tvalid.eq(self.s_axis.tvalid)]
-        with m.Elif(self.s_axis.tvalid & ~skid_valid):
-            m.d.sync += [skid.eq(sig.pack(self.s_axis)), skid_valid.eq(1)]
+        _skid_buffer(m, sig.payload_width, self.s_axis.tvalid, self.s_axis.tready,
+                     sig.pack(self.s_axis), self.m_axis.tvalid, self.m_axis.tready, out)
+        return m
+
+
+class PayloadRegisterSlice(wiring.Component):
+    """:class:`RegisterSlice` for an ``amaranth.lib.stream`` link (``valid``, ``ready``,
+    ``payload``): every output and ``i.ready`` from flip-flops, one transfer per cycle, one
+    cycle of latency.
+
+    Parameters
+    ----------
+    payload_shape : ShapeLike
+        Shape of the payload.
+
+    Members
+    -------
+    i : In(stream.Signature(payload_shape))
+    o : Out(stream.Signature(payload_shape))
+        The same payloads in the same order.
+    """
+
+    def __init__(self, payload_shape):
+        self._shape = payload_shape
+        super().__init__({"i": In(stream.Signature(payload_shape)),
+                          "o": Out(stream.Signature(payload_shape))})
+
+    def elaborate(self, platform):
+        m = Module()
+        width = Shape.cast(self._shape).width
+        _skid_buffer(m, width, self.i.valid, self.i.ready, self.i.payload.as_value(),
+                     self.o.valid, self.o.ready, self.o.payload.as_value())
         return m
