@@ -118,6 +118,9 @@ class BgrToGray(PixelKernel):
         See :class:`PixelKernel`.
     """
 
+    #: the three weighted channels are registered before their sum
+    LATENCY = 1
+
     def __init__(self, *, pixels_per_beat=1, max_width=640, max_height=480):
         super().__init__(channels=3, out_channels=1, pixels_per_beat=pixels_per_beat,
                          max_width=max_width, max_height=max_height)
@@ -127,7 +130,8 @@ class BgrToGray(PixelKernel):
         for px in pixels:
             b, g, r = (px.word_select(c, 8) for c in range(3))
             wb, wg, wr = GRAY_WEIGHTS
-            outs.append(((wb * b + wg * g + wr * r + (1 << 14)) >> 15)[:8])
+            pb, pg, pr = stage(wb * b), stage(wg * g), stage(wr * r)
+            outs.append(((pb + pg + pr + (1 << 14)) >> 15)[:8])
         return outs
 
 
@@ -135,7 +139,7 @@ class BgrToHsv(PixelKernel):
     """``bgr8`` to 8-bit HSV (H in 0..179), bit-exact with ``cv2.cvtColor(COLOR_BGR2HSV)``
     (OpenCV's ``RGB2HSV_b``: two 256-entry reciprocal ROMs and two multipliers, no divider).
 
-    Output pixel bytes: H, S, V. Latency 2 cycles.
+    Output pixel bytes: H, S, V. Latency 5 cycles.
 
     Parameters
     ----------
@@ -143,7 +147,8 @@ class BgrToHsv(PixelKernel):
         See :class:`PixelKernel`.
     """
 
-    LATENCY = 1
+    #: the pixel, the ROM addresses, the reciprocal ROMs, the two products
+    LATENCY = 4
 
     def __init__(self, *, pixels_per_beat=1, max_width=640, max_height=480):
         super().__init__(channels=3, out_channels=3, pixels_per_beat=pixels_per_beat,
@@ -156,6 +161,9 @@ class BgrToHsv(PixelKernel):
         half = 1 << (HSV_SHIFT - 1)
         outs = []
         for px in pixels:
+            # the pixel registered first: the frame guard's padding multiplexer stays out of
+            # the comparisons
+            px = stage(px)
             b, g, r = (px.word_select(c, 8) for c in range(3))
             v = Signal(8)
             mn = Signal(8)
@@ -171,16 +179,21 @@ class BgrToHsv(PixelKernel):
                     m.d.comb += hn.eq(b - r + 2 * d)
                 with m.Else():
                     m.d.comb += hn.eq(r - g + 4 * d)
-            sp, hp = srom.read_port(), hrom.read_port()
-            m.d.comb += [sp.addr.eq(v), sp.en.eq(self.adv), hp.addr.eq(d), hp.en.eq(self.adv)]
+            # v, d and hn registered before they address the ROMs and again beside their data;
+            # the products registered before their rounding
             v1, d1, hn1 = stage(v), stage(d), stage(hn)
-            s = ((d1 * sp.data + half) >> HSV_SHIFT)[:8]
+            sp, hp = srom.read_port(), hrom.read_port()
+            m.d.comb += [sp.addr.eq(v1), sp.en.eq(self.adv), hp.addr.eq(d1), hp.en.eq(self.adv)]
+            v2, d2, hn2 = stage(v1), stage(d1), stage(hn1)
+            sprod = stage(d2 * sp.data)
             hprod = Signal(signed(32))
-            m.d.comb += hprod.eq(hn1 * hp.data)
+            m.d.comb += hprod.eq(hn2 * hp.data)
+            hprod, v3 = stage(hprod), stage(v2)
+            s = ((sprod + half) >> HSV_SHIFT)[:8]
             hq = Signal(signed(12))
             m.d.comb += hq.eq((hprod + half) >> HSV_SHIFT)
             h = Mux(hq < 0, hq + 180, hq)[:8]
-            outs.append(Cat(h, s, v1))
+            outs.append(Cat(h, s, v3))
         return outs
 
 
