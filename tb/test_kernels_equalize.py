@@ -66,3 +66,65 @@ def test_equalize_matches_opencv(pixels_per_beat):
         assert got == want, f"frame {n} ({img.shape}): {np.frombuffer(got, np.uint8)} != " \
                             f"{np.frombuffer(want, np.uint8)}"
         assert lasts == [False] * (count - 1) + [True]
+
+
+def _float32_round(value, sticky):
+    """IEEE round to nearest, ties to even, of ``value`` (+ a non-zero remainder below it when
+    ``sticky``) to 24 significant bits, as ``mantissa * 2**shift``."""
+    shift = max(value.bit_length() - 24, 0)
+    kept, rest = value >> shift, value & ((1 << shift) - 1)
+    half = 1 << (shift - 1) if shift else 0
+    up = shift and (rest > half or (rest == half and (sticky or kept & 1)))
+    kept += bool(up)
+    if kept >> 24:
+        kept, shift = kept >> 1, shift + 1
+    return kept, shift
+
+
+@pytest.mark.parametrize("registered", [False, True])
+def test_round_to_float32(registered):
+    """The rounding behind the exact table, unregistered and split by registers, against
+    numpy's float32 conversion (no sticky bit) and the IEEE rule (with one); ties, carries
+    into a new power of two and short values included."""
+    from amaranth.hdl import Module, Signal
+
+    from hdl.kernels.equalize import ROUND_STAGES, round_to_float32
+
+    m = Module()
+    value, sticky = Signal(57), Signal()
+    toggle = Signal()           # a sync domain for the simulator's clock either way
+    m.d.sync += toggle.eq(~toggle)
+
+    def reg(v, name):
+        r = Signal.like(v, name=name) if isinstance(v, Signal) else Signal(v.shape(), name=name)
+        m.d.sync += r.eq(v)
+        return r
+
+    mant, shift = round_to_float32(m, value, sticky, "t", stage=reg if registered else
+                                   (lambda v, name: v))
+    rng = np.random.default_rng(5)
+    cases = [(0, 0), (1, 0), ((1 << 24) - 1, 0), (1 << 24, 0), ((1 << 24) + 1, 0),
+             ((1 << 25) - 1, 0), ((1 << 25) + 2, 0), ((1 << 25) + 6, 0), ((1 << 25) + 2, 1)]
+    for _ in range(300):
+        bits = int(rng.integers(1, 58))
+        v = int(rng.integers(0, 1 << min(bits, 62))) & ((1 << 57) - 1)
+        if rng.random() < 0.3 and v.bit_length() > 25:   # an exact tie
+            s = v.bit_length() - 24
+            v = (v >> s << s) | (1 << (s - 1))
+        cases.append((v, int(rng.integers(0, 2))))
+    got = []
+
+    async def bench(ctx):
+        for v, st in cases:
+            ctx.set(value, v)
+            ctx.set(sticky, st)
+            for _ in range(ROUND_STAGES if registered else 0):
+                await ctx.tick()
+            await ctx.delay(1e-9)
+            got.append((ctx.get(mant), ctx.get(shift)))
+
+    simulate(m, bench)
+    for (v, st), (gm, gs) in zip(cases, got):
+        assert (gm, gs) == _float32_round(v, st), (v, st, gm, gs)
+        if not st and v < 1 << 53:      # numpy converts through float64 above
+            assert gm << gs == int(np.float32(v)), (v, gm, gs)

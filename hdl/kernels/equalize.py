@@ -1,6 +1,6 @@
 """Histogram equalization, bit-exact with ``cv2.equalizeHist`` (docs/kernels.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.memory import Memory
@@ -8,7 +8,7 @@ from amaranth.lib.memory import Memory
 from ..params import ParameterError
 from .image import FrameGuard, check_image_params, image_kernel_members
 
-__all__ = ["EqualizeHist", "round_to_float32"]
+__all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32"]
 
 #: the reciprocal 255 / D is computed as floor(255 * 2**SCALE_BITS / D) before rounding
 SCALE_BITS = 48
@@ -23,20 +23,35 @@ def _leading_one(m, value, name):
     return lead
 
 
-def round_to_float32(m, value, sticky_in, name):
+def _unregistered(value, name):
+    return value
+
+
+def round_to_float32(m, value, sticky_in, name, stage=_unregistered):
     """Round the non-negative integer ``value`` (with ``sticky_in``: a non-zero remainder
     below it) to 24 significant bits, to nearest, ties to even. Returns ``(mantissa,
-    shift)``: the rounded value is ``mantissa << shift`` (``mantissa < 2**24``)."""
+    shift)``: the rounded value is ``mantissa << shift`` (``mantissa < 2**24``).
+
+    ``stage(value, name)`` is applied after the leading-one search and after the rounding
+    decision: a register there splits the logic into three shorter paths (two cycles of
+    latency)."""
     lead = _leading_one(m, value, f"{name}_lead")
     shift = Signal(range(len(value) + 1), name=f"{name}_shift")
     m.d.comb += shift.eq(Mux(lead > 23, lead - 23, 0))
+    value, sticky_in = stage(value, f"{name}_value"), stage(sticky_in, f"{name}_sticky")
+    shift = stage(shift, f"{name}_shift_r")
     kept = Signal(24, name=f"{name}_kept")
     m.d.comb += kept.eq(value >> shift)
-    rest = Signal(len(value), name=f"{name}_rest")
-    m.d.comb += rest.eq(value - (kept << shift))
-    half = Signal(len(value), name=f"{name}_half")
-    m.d.comb += half.eq(Mux(shift == 0, 0, Const(1, len(value)) << (shift - 1).as_unsigned()))
-    up = (shift != 0) & ((rest > half) | ((rest == half) & (sticky_in | kept[0])))
+    # the first bit shifted out decides; the bits below it (and sticky_in) break a tie
+    below = (shift - 1).as_unsigned()
+    round_bit = Signal(name=f"{name}_round_bit")
+    m.d.comb += round_bit.eq((shift != 0) & (value >> below)[0])
+    lower = Signal(name=f"{name}_lower")
+    m.d.comb += lower.eq(sticky_in | (shift > 1) &
+                         (value & ((Const(1, len(value) + 1) << below) - 1)[:len(value)]).any())
+    up = round_bit & (lower | kept[0])
+    kept, up = stage(kept, f"{name}_kept_r"), stage(up, f"{name}_up")
+    shift = stage(shift, f"{name}_shift_r2")
     mantissa = Signal(25, name=f"{name}_mant")
     m.d.comb += mantissa.eq(kept + up)
     out_m = Signal(24, name=f"{name}_m")
@@ -46,6 +61,13 @@ def round_to_float32(m, value, sticky_in, name):
     with m.Else():
         m.d.comb += [out_m.eq(mantissa), out_s.eq(shift)]
     return out_m, out_s
+
+
+#: registers in :func:`round_to_float32` when it is pipelined
+ROUND_STAGES = 2
+#: registers between a bin's scan and its table entry (x, product, rounding, result,
+#: shift, rint)
+TABLE_STAGES = 5 + ROUND_STAGES
 
 
 class EqualizeHist(wiring.Component):
@@ -58,10 +80,12 @@ class EqualizeHist(wiring.Component):
     ``scale = float32(255) / float32(N - hist[i0])``, ``lut[j] = 0`` for ``j <= i0`` and
     ``round_half_even(float32((cdf[j] - hist[i0]) * scale))`` above (a frame of one grey
     level maps to it). The float32 division and products are computed on integers with the
-    IEEE round-to-nearest-even rule, so the result is exact, not an approximation. The frame
-    then streams out through the table while the next frame streams in.
+    IEEE round-to-nearest-even rule, so the result is exact, not an approximation. The
+    entries pass a pipeline of :data:`TABLE_STAGES` registers (product, rounding, scaling),
+    so one bin is scanned per cycle at 100 MHz. The frame then streams out through the table
+    while the next frame streams in.
 
-    Steady state: ``W H / P`` cycles per frame plus the table (about 320) and the division
+    Steady state: ``W H / P`` cycles per frame plus the table (about 330) and the division
     (``SCALE_BITS + 9`` = 57).
 
     Parameters
@@ -172,10 +196,49 @@ class EqualizeHist(wiring.Component):
         scale_s = Signal(range(SCALE_BITS + 12))
         hist_sum = sum(rd.data for _, rd in hists)
 
+        def reg(value, name):
+            # free-running: every stage follows its input one cycle later
+            value = Value.cast(value)
+            r = Signal(value.shape(), name=name)
+            m.d.sync += r.eq(value)
+            return r
+
+        # the table entry of a scanned bin, TABLE_STAGES cycles after its scan
+        scan_valid = Signal()
+        x = Signal(count_bits + 1)
+        valid, addr = reg(scan_valid, "table_v0"), reg(j[:8], "table_j0")
+        x_r = reg(x, "table_x")
+        prod = reg(x_r * scale_m, "table_prod")
+        pm, ps = round_to_float32(m, prod, Const(0), "prod", stage=reg)
+        pm, ps = reg(pm, "table_pm"), reg(ps, "table_ps")
+        # value = pm * 2**(ps + scale_s - SCALE_BITS); scale_s + ps < SCALE_BITS
+        frac = Signal(range(2 * SCALE_BITS + 4), name="table_frac")
+        m.d.sync += frac.eq(SCALE_BITS - scale_s - ps)
+        pm = reg(pm, "table_pm_r")
+        for n in range(TABLE_STAGES - 1):
+            valid, addr = reg(valid, f"table_v{n + 1}"), reg(addr, f"table_j{n + 1}")
+        # rint: the first fraction bit decides, the bits below it break a tie; from 25
+        # fraction bits on, pm < 2**24 is below one half and rounds to 0
+        whole = reg((pm >> frac)[:24], "table_whole")
+        below = (frac - 1).as_unsigned()
+        half_bit = reg((frac != 0) & (frac <= 24) & (pm >> below)[0], "table_half_bit")
+        lower = reg((frac > 1) & (pm & ((Const(1, 25) << below) - 1)[:24]).any(), "table_lower")
+        value = Signal(25)
+        m.d.comb += value.eq(whole + (half_bit & (lower | whole[0])))
+        with m.If(valid):
+            m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(addr),
+                         lut_wr.data.eq(Mux(value > 255, 255, value))]
+        in_flight = Signal(range(TABLE_STAGES + 1))
+
+        # the scale, once per frame, through the same rounding, pipelined
+        qm, qs = round_to_float32(m, quotient, remainder != 0, "scale", stage=reg)
+        round_wait = Signal(range(ROUND_STAGES + 1))
+
         def next_bin():
             # the next bin's read is issued now, so the scan takes one cycle per bin
             with m.If(j == 255):
-                m.next = "DONE"
+                m.d.sync += in_flight.eq(TABLE_STAGES)
+                m.next = "FLUSH"
             with m.Else():
                 for _, rd in hists:
                     m.d.comb += rd.addr.eq(j + 1)
@@ -212,25 +275,7 @@ class EqualizeHist(wiring.Component):
                     next_bin()
                 with m.Else():
                     # lut[j] = rint(fl(fl(x) * scale)), x = cdf[j] - h0 < 2**24
-                    x = new_cdf - h0
-                    prod = Signal(48)
-                    m.d.comb += prod.eq(x * scale_m)
-                    pm, ps = round_to_float32(m, prod, Const(0), "prod")
-                    # value = pm * 2**(ps + scale_s - SCALE_BITS); scale_s + ps < SCALE_BITS
-                    frac = Signal(range(2 * SCALE_BITS + 4))
-                    m.d.comb += frac.eq(SCALE_BITS - scale_s - ps)
-                    whole = Signal(24)
-                    m.d.comb += whole.eq(pm >> frac)
-                    rest = Signal(24)
-                    m.d.comb += rest.eq(pm - (whole << frac))
-                    half = Signal(25)
-                    m.d.comb += half.eq(Mux(frac == 0, 0, Const(1, 25) << (frac - 1).as_unsigned()))
-                    up = (frac != 0) & ((rest > half) | ((rest == half) & whole[0]))
-                    # from 25 fraction bits on, pm < 2**24 is below one half: rounds to 0
-                    value = Signal(25)
-                    m.d.comb += value.eq(Mux(frac > 24, 0, whole + up))
-                    m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j),
-                                 lut_wr.data.eq(Mux(value > 255, 255, value))]
+                    m.d.comb += [scan_valid.eq(1), x.eq(new_cdf - h0)]
                     next_bin()
             with m.State("DIVIDE"):
                 # floor(255 * 2**SCALE_BITS / denom), one quotient bit per cycle
@@ -239,11 +284,13 @@ class EqualizeHist(wiring.Component):
                 m.d.sync += [remainder.eq(Mux(ge, r - denom, r)), numer.eq(numer << 1),
                              quotient.eq(Cat(ge, quotient[:-1])), div_step.eq(div_step - 1)]
                 with m.If(div_step == 0):
+                    m.d.sync += round_wait.eq(ROUND_STAGES)
                     m.next = "ROUND"
             with m.State("ROUND"):
-                qm, qs = round_to_float32(m, quotient, remainder != 0, "scale")
-                m.d.sync += [scale_m.eq(qm), scale_s.eq(qs)]
-                m.next = "NEXT"
+                m.d.sync += round_wait.eq(round_wait - 1)
+                with m.If(round_wait == 0):
+                    m.d.sync += [scale_m.eq(qm), scale_s.eq(qs)]
+                    m.next = "NEXT"
             with m.State("SINGLE"):
                 # one grey level: the table maps everything to it
                 m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(j), lut_wr.data.eq(i0)]
@@ -256,6 +303,11 @@ class EqualizeHist(wiring.Component):
                     m.next = "DONE"
                 with m.Else():
                     m.next = "READ"
+            with m.State("FLUSH"):
+                # the last entries leave the table pipeline
+                m.d.sync += in_flight.eq(in_flight - 1)
+                with m.If(in_flight == 0):
+                    m.next = "DONE"
             with m.State("DONE"):
                 m.d.sync += [draining.eq(1), filling.eq(1), total.eq(0)]
                 m.next = "FILL"
