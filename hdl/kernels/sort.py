@@ -1,6 +1,6 @@
 """Sorting a block of unsigned integers (the ReconROS sort node, docs/reconos.md)."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -14,9 +14,11 @@ __all__ = ["MergeSorter"]
 class MergeSorter(wiring.Component):
     """Sorts blocks of up to ``block_size`` unsigned integers into ascending order.
 
-    A block streams in, is merged in ``log2(block_size)`` passes between two block RAMs (one
-    element per cycle; the heads of the next pair of runs are read during the last cycle of
-    a pair, so there is no gap) and the last pass streams out. ``(log2(block_size) + 1) *
+    A block streams in, is merged in ``log2(block_size)`` passes between the two halves of a
+    block RAM (one element per cycle; the heads of the next pair of runs are read during the
+    last cycle of a pair, so there is no gap) and the last pass streams out. The comparison
+    of the two heads never feeds a memory address (each run's port reads the element after
+    its head), which keeps the loop short enough for 100 MHz. ``(log2(block_size) + 1) *
     block_size + 3`` cycles per block from its first beat in to its last beat out when
     neither side stalls; 2048 elements: 24,579 cycles.
 
@@ -71,11 +73,11 @@ class MergeSorter(wiring.Component):
         m = Module()
         n, w, passes = self._block_size, self._width, self._passes
         ab = passes                      # address bits
-        m.submodules.mem_a = mem_a = Memory(shape=w, depth=n, init=[])
-        m.submodules.mem_b = mem_b = Memory(shape=w, depth=n, init=[])
-        wr = [mem_a.write_port(), mem_b.write_port()]
-        rx = [mem_a.read_port(), mem_b.read_port()]
-        ry = [mem_a.read_port(), mem_b.read_port()]
+        # the two buffers A and B are the halves of one memory (address bit ab): the pass
+        # chooses its half in the read address, not in a multiplexer after the data
+        m.submodules.mem = mem = Memory(shape=w, depth=2 * n, init=[])
+        wr = mem.write_port()
+        rx, ry = mem.read_port(), mem.read_port()
 
         length = Signal(range(n + 1))
         count = Signal(range(n + 1))        # elements stored
@@ -87,7 +89,11 @@ class MergeSorter(wiring.Component):
         m.d.comb += [self.progress.eq(p), src.eq(p[0])]
 
         def write(sel, addr, value):
-            m.d.comb += [wr[sel].en.eq(1), wr[sel].addr.eq(addr[:ab]), wr[sel].data.eq(value)]
+            m.d.comb += [wr.en.eq(1), wr.addr.eq(Cat(addr[:ab], sel)), wr.data.eq(value)]
+
+        # heads of the two runs being merged (see MERGE)
+        held_x, held_y = Signal(w), Signal(w)
+        fresh_x, fresh_y = Signal(), Signal()
 
         m.d.sync += [self.err_short.eq(0), self.err_long.eq(0)]
         with m.FSM():
@@ -118,20 +124,23 @@ class MergeSorter(wiring.Component):
                     m.d.sync += count.eq(count + 1)
             with m.State("PRIME"):
                 m.d.comb += self.busy.eq(1)
-                for s_ in (0, 1):
-                    m.d.comb += [rx[s_].addr.eq(0), ry[s_].addr.eq(1)]
-                m.d.sync += [i.eq(0), j.eq(1), k.eq(0), base.eq(0), run.eq(1)]
+                m.d.comb += [rx.addr.eq(0), ry.addr.eq(1)]
+                m.d.sync += [i.eq(0), j.eq(1), k.eq(0), base.eq(0), run.eq(1),
+                             fresh_x.eq(1), fresh_y.eq(1)]
                 m.next = "MERGE"
             with m.State("MERGE"):
-                # one element per cycle; the next pair's (or pass') heads are read in the last
-                # cycle of a pair, so pairs and passes follow without a gap; the last pass
-                # streams out instead of writing back
+                # one element per cycle. Each run's memory port always reads the element after
+                # its head, so the comparison never feeds a read address: a head is the port's
+                # data right after it was taken (fresh) and a register otherwise. The heads of
+                # the next pair (or pass) are read in the last cycle of a pair, so pairs and
+                # passes follow without a gap; the last pass streams out instead of writing
                 m.d.comb += self.busy.eq(1)
                 final = p == passes - 1
                 with m.If(final):
                     m.d.comb += self.progress.eq(passes)
-                hx = Mux(src, rx[1].data, rx[0].data)
-                hy = Mux(src, ry[1].data, ry[0].data)
+                hx, hy = Signal(w), Signal(w)
+                m.d.comb += [hx.eq(Mux(fresh_x, rx.data, held_x)),
+                             hy.eq(Mux(fresh_y, ry.data, held_y))]
                 x_ok = i != base + run
                 y_ok = j != base + 2 * run
                 take_x = Signal()
@@ -139,32 +148,36 @@ class MergeSorter(wiring.Component):
                 value = Mux(take_x, hx, hy)
                 step = Signal()
                 m.d.comb += step.eq(~final | ~ovalid | self.o.tready)
-                i_n, j_n = i + take_x, j + ~take_x
                 rd_i, rd_j = Signal.like(i), Signal.like(j)
-                m.d.comb += [rd_i.eq(i), rd_j.eq(j)]
+                rd_half = Signal()
+                m.d.comb += [rd_i.eq(i + 1), rd_j.eq(j + 1), rd_half.eq(src)]
+                m.d.sync += [held_x.eq(hx), held_y.eq(hy), fresh_x.eq(0), fresh_y.eq(0)]
                 with m.If(step):
-                    m.d.comb += [rd_i.eq(i_n), rd_j.eq(j_n)]
                     with m.If(final):
                         m.d.sync += [ovalid.eq(1), olast.eq(k == length - 1),
                                      self.o.tdata.eq(value)]
                         with m.If(k == length - 1):
                             m.next = "DRAIN"
-                    with m.Elif(src):
-                        write(0, k, value)
                     with m.Else():
-                        write(1, k, value)
-                    m.d.sync += [i.eq(i_n), j.eq(j_n), k.eq(k + 1)]
+                        write(~src, k, value)
+                    # the increments run beside the comparison, which only selects
+                    with m.If(take_x):
+                        m.d.sync += i.eq(i + 1)
+                    with m.Else():
+                        m.d.sync += j.eq(j + 1)
+                    m.d.sync += [k.eq(k + 1), fresh_x.eq(take_x), fresh_y.eq(~take_x)]
                     with m.If(k == base + 2 * run - 1):
                         nb = base + 2 * run
+                        m.d.sync += [fresh_x.eq(1), fresh_y.eq(1)]
                         with m.If(nb == n):
-                            m.d.comb += [rd_i.eq(0), rd_j.eq(2 * run)]
+                            m.d.comb += [rd_i.eq(0), rd_j.eq(2 * run), rd_half.eq(~src)]
                             m.d.sync += [p.eq(p + 1), run.eq(run << 1), base.eq(0), i.eq(0),
                                          j.eq(2 * run), k.eq(0)]
                         with m.Else():
                             m.d.comb += [rd_i.eq(nb), rd_j.eq(nb + run)]
                             m.d.sync += [base.eq(nb), i.eq(nb), j.eq(nb + run)]
-                for s_ in (0, 1):
-                    m.d.comb += [rx[s_].addr.eq(rd_i[:ab]), ry[s_].addr.eq(rd_j[:ab])]
+                m.d.comb += [rx.addr.eq(Cat(rd_i[:ab], rd_half)),
+                             ry.addr.eq(Cat(rd_j[:ab], rd_half))]
             with m.State("DRAIN"):
                 m.d.comb += [self.busy.eq(1), self.progress.eq(passes)]
                 with m.If(self.o.tready):
