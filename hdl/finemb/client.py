@@ -6,7 +6,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from hdl.net.checksum import ones_complement_add
+from hdl.net.checksum import ones_complement_add, ones_complement_fold, word_sum_tree
 from hdl.net.frames import ip_to_int, mac_to_int
 from hdl.net.responders import ParsedFrameSignature
 from hdl.net.rx import FrameKind
@@ -229,6 +229,7 @@ class FinembClient(wiring.Component):
         # ---- the cycle watchdog (three cycle periods without SoC -> REINIT)
         period_cycles = Signal(32)
         since_soc = Signal(32)
+        restart_watchdog = Signal()     # since_soc starts again from 0
         with m.If(since_soc != 0xFFFFFFFF):
             m.d.sync += since_soc.eq(since_soc + 1)
 
@@ -240,6 +241,7 @@ class FinembClient(wiring.Component):
                 with m.Switch(h_type):
                     with m.Case(MsgType.SOC):
                         m.d.comb += self.soc.eq(1)
+                        m.d.comb += restart_watchdog.eq(1)
                         m.d.sync += [since_soc.eq(0),
                                      period_cycles.eq(soc_period >> 3)]   # 8 ns per cycle
                     with m.Case(MsgType.ID_REQ):
@@ -280,6 +282,7 @@ class FinembClient(wiring.Component):
                     with m.Case(MsgType.ISEND_REQ):
                         with m.If(for_me):
                             # the master cycles: (back) to OP, the watchdog re-armed
+                            m.d.comb += restart_watchdog.eq(1)
                             m.d.sync += [state.eq(NodeState.OP), since_soc.eq(0)]
                             with m.If(h_length != po):
                                 m.d.comb += ev.bad_page.eq(1)
@@ -304,8 +307,13 @@ class FinembClient(wiring.Component):
                     with m.Default():
                         m.d.comb += ev.bad_header.eq(1)
         # the watchdog
-        with m.If((state == NodeState.OP) & (period_cycles != 0) &
-                  (since_soc > 3 * period_cycles)):
+        # registered: the limit when the period changes, the comparison a cycle later (a
+        # watchdog of three periods can be a cycle late)
+        limit = Signal(34)
+        overdue = Signal()
+        m.d.sync += [limit.eq(3 * period_cycles),
+                     overdue.eq(~restart_watchdog & (period_cycles != 0) & (since_soc > limit))]
+        with m.If((state == NodeState.OP) & overdue):
             m.d.comb += ev.missed_cycles.eq(1)
             m.d.sync += state.eq(NodeState.REINIT)
 
@@ -321,22 +329,23 @@ class FinembClient(wiring.Component):
         fixed = Cat(header_out, r_body)          # header + fixed body
         fixed_bytes = Array(fixed.word_select(k, 8) for k in range(HEADER + 20))
 
-        def words_sum(value, nbytes):
-            """One's complement sum of big-endian 16-bit words of little-endian bytes."""
-            acc = Const(0, 16)
-            for k in range(0, nbytes, 2):
-                hi = value.word_select(k, 8)
-                lo = value.word_select(k + 1, 8) if k + 1 < nbytes else Const(0, 8)
-                acc = ones_complement_add(acc, Cat(lo, hi))
-            return acc
+        def words(value, nbytes):
+            """Big-endian 16-bit words of little-endian bytes (an odd last byte padded)."""
+            return [Cat(value.word_select(k + 1, 8) if k + 1 < nbytes else Const(0, 8),
+                        value.word_select(k, 8)) for k in range(0, nbytes, 2)]
         is_isend = r_type == MsgType.ISEND_RES
         is_iodesc = r_type == MsgType.IODESC_RES
         fixed_len = Mux(is_isend, HEADER, Mux(is_iodesc, HEADER + 4, HEADER + r_len))
+        # the fixed part's sum in two registered steps (an adder tree, then the end-around
+        # folds): ready when a response reaches REQUEST, three cycles after it started
+        header_wide, body_wide = Signal(20), Signal(20)
         header_sum = Signal(16)
         body_sum = Signal(16)
         chunk_sum = Signal(16)
-        m.d.sync += [header_sum.eq(words_sum(header_out, HEADER)),
-                     body_sum.eq(Mux(is_isend, 0, words_sum(r_body, 20)))]
+        m.d.sync += [header_wide.eq(word_sum_tree(words(header_out, HEADER))),
+                     body_wide.eq(Mux(is_isend, 0, word_sum_tree(words(r_body, 20)))),
+                     header_sum.eq(ones_complement_fold(header_wide)),
+                     body_sum.eq(ones_complement_fold(body_wide))]
         payload_sum = Signal(16)
         m.d.comb += payload_sum.eq(ones_complement_add(
             ones_complement_add(header_sum, body_sum),
@@ -369,7 +378,7 @@ class FinembClient(wiring.Component):
                 with m.Elif(is_iodesc):
                     m.next = "SUM"
                 with m.Else():
-                    m.next = "REQUEST"
+                    m.next = "SETTLE"
             with m.State("APP"):
                 # the application's next input page, or the deadline
                 with m.If(self.app_commit):

@@ -5,13 +5,32 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["InternetChecksum", "ones_complement_add", "echo_reply_checksum"]
+__all__ = ["InternetChecksum", "ones_complement_add", "ones_complement_fold", "word_sum_tree",
+           "echo_reply_checksum"]
 
 
 def ones_complement_add(a, b):
     """16-bit one's complement sum of two 16-bit values (end-around carry)."""
     s = a + b
     return (s[:16] + s[16])[:16]
+
+
+def word_sum_tree(words):
+    """Plain binary sum of 16-bit ``words`` as a balanced adder tree (depth log2 of their
+    number); :func:`ones_complement_fold` turns it into their one's complement sum."""
+    words = list(words) or [Const(0, 16)]
+    while len(words) > 1:
+        words = [words[k] + words[k + 1] if k + 1 < len(words) else words[k]
+                 for k in range(0, len(words), 2)]
+    return words[0]
+
+
+def ones_complement_fold(value):
+    """The 16-bit one's complement sum of a binary sum of at most 16 words (up to 20 bits):
+    two end-around folds. Zero only when ``value`` is, like a chain of
+    :func:`ones_complement_add` over the same words."""
+    once = value[:16] + value[16:]
+    return (once[:16] + once[16:])[:16]
 
 
 class InternetChecksum(wiring.Component):
