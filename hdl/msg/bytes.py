@@ -6,9 +6,9 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
-from ..stream import AXIStreamSignature, keep_count
+from ..stream import AXIStreamSignature, keep_count, skid_buffer
 
-__all__ = ["ChunkSignature", "BytePacker", "ByteUnpacker", "byte_mask"]
+__all__ = ["ChunkSignature", "ChunkRegisterSlice", "BytePacker", "ByteUnpacker", "byte_mask"]
 
 
 def byte_mask(value, nbytes, count):
@@ -44,6 +44,31 @@ class ChunkSignature(wiring.Signature):
 
     def __hash__(self):
         return hash((type(self), self._data_width))
+
+
+class ChunkRegisterSlice(wiring.Component):
+    """Register slice of a chunk link: ``o`` and ``i.ready`` from flip-flops, one chunk per
+    cycle, one cycle of latency (see :class:`~hdl.stream.RegisterSlice`).
+
+    Members
+    -------
+    i : In(ChunkSignature(data_width))
+    o : Out(ChunkSignature(data_width))
+        The same chunks in the same order.
+    """
+
+    def __init__(self, data_width):
+        super().__init__({"i": In(ChunkSignature(data_width)),
+                          "o": Out(ChunkSignature(data_width))})
+
+    def elaborate(self, platform):
+        m = Module()
+        i, o = self.i, self.o
+        payload_i = Cat(i.data, i.len, i.last)
+        payload_o = Signal(len(payload_i))
+        m.d.comb += Cat(o.data, o.len, o.last).eq(payload_o)
+        skid_buffer(m, len(payload_i), i.valid, i.ready, payload_i, o.valid, o.ready, payload_o)
+        return m
 
 
 class BytePacker(wiring.Component):

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
-from .bytes import BytePacker, byte_mask
+from .bytes import BytePacker, ChunkRegisterSlice, byte_mask
 from .steps import RuntimeStep, pad_bytes, payload_bytes
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
@@ -122,8 +122,11 @@ class Serializer(wiring.Component):
         if self._reconros:
             m.d.comb += self.m_axis.tuser.eq(~packer.first & ~packer.m_axis.tlast)
 
+        # the step engine and the packer's shifter in separate clock periods
+        m.submodules.chunk_slice = chunk_slice = ChunkRegisterSlice(W)
+        wiring.connect(m, chunk_slice.o, packer.chunk)
         fv = self.fields.payload.as_value()
-        chunk = packer.chunk
+        chunk = chunk_slice.i
         ports = [getattr(self, payload_port(v, "s")) for v in plan.variables]
         counts = [fv[v.count.offset:v.count.offset + 32] for v in plan.variables]
         lengths = [payload_bytes(v, c) for c, v in zip(counts, plan.variables)]

@@ -7,10 +7,13 @@ from amaranth.lib.wiring import In, Out
 
 from .signature import check_stream_signature
 
-__all__ = ["PayloadRegisterSlice", "RegisterSlice"]
+__all__ = ["PayloadRegisterSlice", "RegisterSlice", "skid_buffer"]
 
 
-def _skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
+def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
+    """Add to ``m`` a full-throughput skid buffer between a valid/ready input and output of
+    ``width`` payload bits: ``o_valid``, ``o_payload`` and ``i_ready`` come from flip-flops
+    (``o_valid`` must be a plain signal the function may drive in ``m.d.sync``)."""
     # Payload registers need no reset: nothing reads them while the output valid is low.
     skid = Signal(width, reset_less=True)
     out = Signal(width, reset_less=True)
@@ -55,7 +58,7 @@ class RegisterSlice(wiring.Component):
         sig = self._stream
         out = Signal(sig.payload_width)
         m.d.comb += sig.unpack(self.m_axis, out)
-        _skid_buffer(m, sig.payload_width, self.s_axis.tvalid, self.s_axis.tready,
+        skid_buffer(m, sig.payload_width, self.s_axis.tvalid, self.s_axis.tready,
                      sig.pack(self.s_axis), self.m_axis.tvalid, self.m_axis.tready, out)
         return m
 
@@ -85,6 +88,6 @@ class PayloadRegisterSlice(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         width = Shape.cast(self._shape).width
-        _skid_buffer(m, width, self.i.valid, self.i.ready, self.i.payload.as_value(),
+        skid_buffer(m, width, self.i.valid, self.i.ready, self.i.payload.as_value(),
                      self.o.valid, self.o.ready, self.o.payload.as_value())
         return m
