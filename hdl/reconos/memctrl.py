@@ -43,7 +43,8 @@ class MemoryController(wiring.Component):
     m_rdata : Out(stream.Signature(rdata_layout))
     axi : Out(AXI4Signature(addr_bits, W*8, id_width=1, user_width=2))
     error : Out(len(MemStatus))
-        One-cycle :class:`MemStatus` pulses.
+        One-cycle :class:`MemStatus` pulses, a cycle after the request or response that
+        caused them.
     error_addr : Out(addr_bits)
         Address of the request that caused ``error``.
     busy : Out(1)
@@ -107,7 +108,8 @@ class MemoryController(wiring.Component):
         req_error_addr = Signal(a.addr_bits)
         r_error = Signal(len(MemStatus))
         r_error_addr = Signal(a.addr_bits)
-        m.d.comb += [
+        # registered: the validity checks of a request stay out of the status registers' path
+        m.d.sync += [
             self.error.eq(req_error | r_error),
             self.error_addr.eq(Mux(r_error.any(), r_error_addr, req_error_addr)),
         ]

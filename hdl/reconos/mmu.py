@@ -161,21 +161,29 @@ class MMU(wiring.Component):
                 return Cat(Const(0, 3), va[30:39], self.pgd[PAGE_BITS:])
             return Cat(Const(0, 2), va[20:32], self.pgd[14:])
 
+        # the lookup is registered: a request is translated in the cycle after it arrived
+        # (its payload holds still until ready); a flush in between looks it up again
+        looked = Signal()
+        hit, hit_ppn = Signal(), Signal.like(tlb.hit_ppn)
+        m.d.sync += [hit.eq(tlb.hit), hit_ppn.eq(tlb.hit_ppn)]
+
         with m.FSM():
             with m.State("IDLE"):
                 # Hit: forward now. Miss: latch and walk.
                 with m.If(out.ready):
                     m.d.sync += out.valid.eq(0)
-                with m.If(self.s_req.valid & (~out.valid | out.ready)):
-                    m.d.comb += self.s_req.ready.eq(tlb.hit | self.s_req.payload.bad)
+                m.d.sync += looked.eq(self.s_req.valid & ~self.flush)
+                with m.If(self.s_req.valid & looked & ~self.flush & (~out.valid | out.ready)):
+                    m.d.sync += looked.eq(0)
+                    m.d.comb += self.s_req.ready.eq(hit | self.s_req.payload.bad)
                     with m.If(self.s_req.payload.bad):
                         m.d.sync += [out.payload.eq(self.s_req.payload), out.valid.eq(1)]
-                    with m.Elif(tlb.hit):
+                    with m.Elif(hit):
                         m.d.comb += self.tlb_hit.eq(1)
                         m.d.sync += [
                             out.payload.eq(self.s_req.payload),
                             out.payload.addr.eq(Cat(self.s_req.payload.addr[:PAGE_BITS],
-                                                    tlb.hit_ppn)),
+                                                    hit_ppn)),
                             out.valid.eq(1),
                         ]
                     with m.Else():
