@@ -59,7 +59,7 @@ class WindowFilter(wiring.Component):
 
     Timing: a frame of ``height`` rows of ``width / P`` beats takes
     ``(height + R) * (width / P + L)`` cycles (``R`` rows drain after the last input row,
-    ``L`` beats after each row) plus 4 between frames, when neither side stalls. A stall at
+    ``L`` beats after each row) plus 5 between frames, when neither side stalls. A stall at
     ``o`` stops the whole pipeline (one ``adv`` enable). The window's pixels are registered
     after the border selection, and a subclass splits its arithmetic into
     :attr:`compute_stages` registered stages (:meth:`WindowContext.register`), so that the
@@ -131,7 +131,7 @@ class WindowFilter(wiring.Component):
 
     def cycles_per_frame(self, width, height):
         """Cycles between frames when neither side stalls (see the class docstring)."""
-        return (height + self._r) * (width // self._p + self._l) + 4
+        return (height + self._r) * (width // self._p + self._l) + 5
 
     #: registered stages inside :meth:`compute` on every path from a pixel to an output
     compute_stages = 0
@@ -184,9 +184,10 @@ class WindowFilter(wiring.Component):
         m.d.comb += [go0.eq(run & adv & (~needs_input | guard.o.tvalid)),
                      guard.o.tready.eq(run & adv & needs_input),
                      rd.addr.eq(Mux(c0 < wb, c0, 0)), rd.en.eq(adv)]
-        v1, v2, v3 = Signal(), Signal(), Signal()
-        # the size registers serve every stage: a frame starts once the last one has left them
-        with m.If(~run & ~v1 & ~v2 & ~v3 & guard.o.tvalid):
+        v1, v1b, v2, v3 = Signal(), Signal(), Signal(), Signal()
+        # the size registers serve the stages up to 3: a frame starts once the last one has
+        # left them
+        with m.If(~run & ~v1 & ~v1b & ~v2 & ~v3 & guard.o.tvalid):
             m.d.sync += [wb.eq(guard.frame_width // P), h.eq(guard.frame_height),
                          r0.eq(0), c0.eq(0), run.eq(1)]
         with m.If(go0):
@@ -207,15 +208,21 @@ class WindowFilter(wiring.Component):
                          d1.eq(guard.o.tdata)]
         m.d.comb += [wr.addr.eq(c1), wr.en.eq(adv & v1 & w1),
                      wr.data.eq(Cat(d1, rd.data[:(k - 2) * beat_bits]))]
-        sources = [d1] + [rd.data.word_select(i, beat_bits) for i in range(k - 1)]
-        rows_in = Mux(r1 < h, r1, h)            # source s holds row rows_in - s
+        # the line buffer's output registered before the vertical selection (the block RAM's
+        # output and the selection do not fit one 100 MHz period together at 4 pixels/clock)
+        r1b, c1b = Signal.like(r0), Signal.like(c0)
+        d1b, q1b = Signal(beat_bits), Signal((k - 1) * beat_bits)
+        with m.If(adv):
+            m.d.sync += [v1b.eq(v1), r1b.eq(r1), c1b.eq(c1), d1b.eq(d1), q1b.eq(rd.data)]
+        sources = [d1b] + [q1b.word_select(i, beat_bits) for i in range(k - 1)]
+        rows_in = Mux(r1b < h, r1b, h)          # source s holds row rows_in - s
         taps1 = []
         zero1 = []
         hs = Signal(signed(h.shape().width + 2))
         m.d.comb += hs.eq(h)
         for t in range(k):
             n = Signal(signed(r1.shape().width + 2), name=f"vrow{t}")
-            m.d.comb += n.eq(r1 - 2 * R + t)
+            m.d.comb += n.eq(r1b - 2 * R + t)
             if self._border == "reflect101":
                 src_row = Mux(n < 0, -n, Mux(n > hs - 1, 2 * (hs - 1) - n, n))
             elif self._border == "replicate":
@@ -235,7 +242,7 @@ class WindowFilter(wiring.Component):
         r2, c2 = Signal.like(r0), Signal.like(c0)
         taps2 = [Signal(beat_bits, name=f"taps2_{t}") for t in range(k)]
         with m.If(adv):
-            m.d.sync += [v2.eq(v1), r2.eq(r1), c2.eq(c1)]
+            m.d.sync += [v2.eq(v1b), r2.eq(r1b), c2.eq(c1b)]
             m.d.sync += [t2.eq(Mux(z, 0, t1)) for t1, t2, z in zip(taps1, taps2, zero1)]
 
         # stage 2: horizontal register of 2L + 1 beats (oldest first)
@@ -309,5 +316,5 @@ class WindowFilter(wiring.Component):
         with m.If(adv):
             m.d.sync += [o_valid.eq(valid), o_data.eq(Cat(*outputs)), o_last.eq(last),
                          o_user.eq(user)]
-        m.d.comb += self.busy.eq(run | v1 | v2 | v3 | o_valid | Cat(*stage_valids).any())
+        m.d.comb += self.busy.eq(run | v1 | v1b | v2 | v3 | o_valid | Cat(*stage_valids).any())
         return m
