@@ -13,7 +13,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
-from host.timing import DEVICE, MARGIN, SEEDS, TimingError, synthesise, time_verilog
+from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, synthesise,
+                         time_verilog)
 from tb.harness import SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -109,11 +110,25 @@ def _place(core, entry, seeds, log):
                         "full_mult18": cells.get("MULT18X18D", 0)}
             log(f"    {label}: does not fit ({why})")
             continue
-        result = time_verilog(vfile, entry["top"], clocks, folder, seeds=seeds)
+        try:
+            result = time_verilog(vfile, entry["top"], clocks, folder, seeds=seeds)
+        except TimingError as error:
+            if "did not finish" not in str(error) or k == len(entry["configs"]) - 1:
+                raise
+            # it fits, but the router gives up on it: congested, the next one is tried
+            why = f"{cells.get('MULT18X18D', 0)} MULT18 fit, but routing took over " \
+                  f"{PNR_TIMEOUT_S // 60} min"
+            if k == 0:
+                full = {"full_config": label, "full_does_not_fit": why,
+                        "full_mult18": cells.get("MULT18X18D", 0)}
+            log(f"    {label}: not routed ({why})")
+            continue
         placed = {"core": core, "label": entry["label"], "top": entry["top"],
                   "verilog": str(vfile.relative_to(SIM_BUILD.parent)), **result}
         if k:
             placed.update(full, placed_config=label)
+            if full["full_config"] != entry["configs"][k - 1][0]:
+                placed["larger_not_placed"] = f"{entry['configs'][k - 1][0]}: {why}"
         return placed
     raise TimingError(f"{core}: no configuration fits the device ({why})")
 
@@ -211,7 +226,9 @@ def markdown(results):
         note = ""
         if "placed_config" in r:
             note = (f" (placed: {r['placed_config']}; the full configuration needs "
-                    f"{r['full_does_not_fit']})")
+                    f"{r['full_does_not_fit']}"
+                    + (f"; the next smaller: {r['larger_not_placed']}"
+                       if "larger_not_placed" in r else "") + ")")
         lines.append(f"| {r['core']}{note} | {_per_clock(r['clock_mhz'], lambda v: f'{v:g}')} "
                      f"| {_per_clock(r['fmax_mhz'])} | {seeds} | {r['lut4']} | {r['ff']} | "
                      f"{r['bram']} | {r['dsp']} | {_path(r['critical_path'])} | "
