@@ -215,29 +215,35 @@ class WindowFilter(wiring.Component):
         with m.If(adv):
             m.d.sync += [v1b.eq(v1), r1b.eq(r1), c1b.eq(c1), d1b.eq(d1), q1b.eq(rd.data)]
         sources = [d1b] + [q1b.word_select(i, beat_bits) for i in range(k - 1)]
-        rows_in = Mux(r1b < h, r1b, h)          # source s holds row rows_in - s
+        # which source each window row takes is worked out in stage 1 and registered beside
+        # the data, so stage 1b is a plain multiplexer
+        rows_in = Mux(r1 < h, r1, h)            # source s holds row rows_in - s
         taps1 = []
         zero1 = []
         hs = Signal(signed(h.shape().width + 2))
         m.d.comb += hs.eq(h)
         for t in range(k):
             n = Signal(signed(r1.shape().width + 2), name=f"vrow{t}")
-            m.d.comb += n.eq(r1b - 2 * R + t)
+            m.d.comb += n.eq(r1 - 2 * R + t)
             if self._border == "reflect101":
                 src_row = Mux(n < 0, -n, Mux(n > hs - 1, 2 * (hs - 1) - n, n))
             elif self._border == "replicate":
                 src_row = Mux(n < 0, 0, Mux(n > hs - 1, hs - 1, n))
             else:
                 src_row = n
-            sel = Signal(range(k), name=f"vsel{t}")
-            m.d.comb += sel.eq(rows_in - src_row)
+            sel, sel_b = Signal(range(k), name=f"vsel{t}"), Signal(range(k), name=f"vsel_b{t}")
+            zero, zero_b = Signal(name=f"vzero{t}"), Signal(name=f"vzero_b{t}")
+            m.d.comb += [sel.eq(rows_in - src_row),
+                         zero.eq((n < 0) | (n > hs - 1) if self._border == "constant" else 0)]
+            with m.If(adv):
+                m.d.sync += [sel_b.eq(sel), zero_b.eq(zero)]
             tap = Signal(beat_bits, name=f"vtap{t}")
-            with m.Switch(sel):
+            with m.Switch(sel_b):
                 for s in range(k):
                     with m.Case(s):
                         m.d.comb += tap.eq(sources[s])
             taps1.append(tap)
-            zero1.append((n < 0) | (n > hs - 1) if self._border == "constant" else Const(0))
+            zero1.append(zero_b)
 
         r2, c2 = Signal.like(r0), Signal.like(c0)
         taps2 = [Signal(beat_bits, name=f"taps2_{t}") for t in range(k)]
