@@ -23,6 +23,16 @@ def _leading_one(m, value, name):
     return lead
 
 
+def _shift_for_rounding(value, shift):
+    """``value >> shift``, the first bit shifted out, and whether a bit below that one is
+    set: round to nearest rounds up when the first is set and (a lower bit is, or the kept
+    value is odd: ties to even)."""
+    below = (shift - 1).as_unsigned()
+    first = (shift != 0) & (value >> below)[0]
+    rest = (shift > 1) & (value & ((Const(1, len(value) + 1) << below) - 1)[:len(value)]).any()
+    return value >> shift, first, rest
+
+
 def _unregistered(value, name):
     return value
 
@@ -40,15 +50,10 @@ def round_to_float32(m, value, sticky_in, name, stage=_unregistered):
     m.d.comb += shift.eq(Mux(lead > 23, lead - 23, 0))
     value, sticky_in = stage(value, f"{name}_value"), stage(sticky_in, f"{name}_sticky")
     shift = stage(shift, f"{name}_shift_r")
-    kept = Signal(24, name=f"{name}_kept")
-    m.d.comb += kept.eq(value >> shift)
-    # the first bit shifted out decides; the bits below it (and sticky_in) break a tie
-    below = (shift - 1).as_unsigned()
-    round_bit = Signal(name=f"{name}_round_bit")
-    m.d.comb += round_bit.eq((shift != 0) & (value >> below)[0])
-    lower = Signal(name=f"{name}_lower")
-    m.d.comb += lower.eq(sticky_in | (shift > 1) &
-                         (value & ((Const(1, len(value) + 1) << below) - 1)[:len(value)]).any())
+    kept, round_bit, lower = Signal(24, name=f"{name}_kept"), Signal(name=f"{name}_round_bit"), \
+        Signal(name=f"{name}_lower")
+    shifted, first, rest = _shift_for_rounding(value, shift)
+    m.d.comb += [kept.eq(shifted), round_bit.eq(first), lower.eq(sticky_in | rest)]
     up = round_bit & (lower | kept[0])
     kept, up = stage(kept, f"{name}_kept_r"), stage(up, f"{name}_up")
     shift = stage(shift, f"{name}_shift_r2")
@@ -219,10 +224,9 @@ class EqualizeHist(wiring.Component):
             valid, addr = reg(valid, f"table_v{n + 1}"), reg(addr, f"table_j{n + 1}")
         # rint: the first fraction bit decides, the bits below it break a tie; from 25
         # fraction bits on, pm < 2**24 is below one half and rounds to 0
-        whole = reg((pm >> frac)[:24], "table_whole")
-        below = (frac - 1).as_unsigned()
-        half_bit = reg((frac != 0) & (frac <= 24) & (pm >> below)[0], "table_half_bit")
-        lower = reg((frac > 1) & (pm & ((Const(1, 25) << below) - 1)[:24]).any(), "table_lower")
+        shifted, first, rest = _shift_for_rounding(pm, frac)
+        whole = reg(shifted[:24], "table_whole")
+        half_bit, lower = reg(first, "table_half_bit"), reg(rest, "table_lower")
         value = Signal(25)
         m.d.comb += value.eq(whole + (half_bit & (lower | whole[0])))
         with m.If(valid):
