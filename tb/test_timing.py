@@ -10,7 +10,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog
-from host.timing import MARGIN, TimingError, readable_cell, time_verilog
+from host.timing import MARGIN, TimingError, readable_cell, synthesise_parts, time_verilog
 
 
 class AdderChain(wiring.Component):
@@ -122,3 +122,34 @@ def test_two_clocks_are_timed_and_judged_each(tmp_path):
     with pytest.raises(TimingError, match=r"clock\(s\) \['tx_clk'\] not found"):
         time_verilog(vfile, "two_clocks", {"clk": 100, "tx_clk": 100}, tmp_path / "three",
                      seeds=(1,), log=lambda _: None)
+
+
+class TwoChains(wiring.Component):
+    """Two :class:`AdderChain` parts, of one and of three adders, and a 7-bit register of its
+    own."""
+
+    def __init__(self):
+        super().__init__({"a": In(24), "y": Out(24)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.short = short = AdderChain(1)
+        m.submodules.long = long = AdderChain(3)
+        own = Signal(7)
+        m.d.sync += own.eq(self.a[:7] ^ own)
+        m.d.comb += [short.a.eq(self.a), long.a.eq(short.y), self.y.eq(long.y ^ own)]
+        return m
+
+
+def test_parts_are_counted_per_instance(tmp_path):
+    text, _ = export_verilog(TwoChains(), "two_chains")
+    vfile = tmp_path / "two_chains.v"
+    vfile.write_text(text)
+    parts = synthesise_parts(vfile, "two_chains", tmp_path / "parts")
+    # AdderChain(n) registers n + 1 inputs and the total, 24 bits each
+    assert parts["core.short"]["ff"] == 24 * 3
+    assert parts["core.long"]["ff"] == 24 * 5
+    assert parts[""]["ff"] == 24 * 8 + 7
+    # three adders take more carry cells than one
+    assert parts["core.long"]["lut4"] > parts["core.short"]["lut4"] > 0
+    assert parts[""]["lut4"] >= parts["core.short"]["lut4"] + parts["core.long"]["lut4"]
