@@ -11,7 +11,7 @@ import random
 import zlib
 
 import pytest
-from amaranth.hdl import ClockDomain, Elaboratable, Module, Signal
+from amaranth.hdl import ClockDomain, Elaboratable, Module, Signal, Value
 from amaranth.lib import wiring
 from scapy.utils import checksum as scapy_checksum
 
@@ -278,7 +278,7 @@ def parse_frames(frames, mac, ip):
                 if ctx.get(p.payload_valid):
                     payload.append(ctx.get(p.payload_data))
                 if ctx.get(p.done):
-                    fields = {name: ctx.get(getattr(p.fields, name))
+                    fields = {name: ctx.get(Value.cast(getattr(p.fields, name)))
                               for name in RX_FIELDS.members}
                     out.append((ctx.get(p.accept), ctx.get(p.reason), ctx.get(p.kind),
                                 fields, bytes(payload), ctx.get(p.arp_seen),

@@ -4,14 +4,17 @@ Offsets are byte offsets from the first byte of the destination MAC address (the
 the SFD). The hardware parser and builder and the Python models import them from here.
 """
 
+from amaranth.lib import data
+
 __all__ = [
-    "ETH_HEADER", "ETH_SRC_OFFSET", "ARP_SHA_OFFSET", "ARP_SPA_OFFSET", "IP_PROTO_OFFSET",
+    "ETH_HEADER_FIELDS", "ARP_HEADER_FIELDS", "IPV4_HEADER_FIELDS", "ICMP_HEADER_FIELDS",
+    "UDP_HEADER_FIELDS", "TCP_HEADER_FIELDS", "ETH_HEADER", "ETH_SRC_OFFSET", "ARP_SHA_OFFSET", "ARP_SPA_OFFSET", "IP_PROTO_OFFSET",
     "IP_CSUM_OFFSET", "IP_SRC_OFFSET", "L4_OFFSET", "UDP_CSUM_OFFSET", "TCP_CSUM_OFFSET",
     "ETHERTYPE_IPV4", "ETHERTYPE_ARP", "ETHERTYPE_IPV6", "MIN_FRAME", "MAX_FRAME", "PREAMBLE",
     "SFD", "IFG", "ARP_OFFSET", "ARP_LENGTH", "ARP_REQUEST", "ARP_REPLY", "IP_OFFSET", "IP_VERSION",
     "MIN_HEADER_WORDS", "IP_PROTO_ICMP",
     "IP_PROTO_TCP", "IP_PROTO_UDP", "IP_TTL", "ICMP_ECHO_REQUEST", "ICMP_ECHO_REPLY",
-    "TCP_FIN", "TCP_SYN", "TCP_RST", "TCP_PSH", "TCP_ACK", "TCP_OPT_MSS", "TCP_OPT_MSS_LENGTH",
+    "TCP_FLAGS", "TCP_FIN", "TCP_SYN", "TCP_RST", "TCP_PSH", "TCP_ACK", "TCP_OPT_MSS", "TCP_OPT_MSS_LENGTH",
     "TCP_MSS", "TCP_MSS_DEFAULT", "TCP_MSS_MIN", "RBCP_VERSION", "RBCP_WRITE", "RBCP_READ",
     "RBCP_REPLY",
     "RBCP_BUS_ERROR", "RBCP_HEADER", "DEFAULT_IP", "DEFAULT_MAC", "DEFAULT_TCP_PORT",
@@ -30,10 +33,31 @@ ETHERTYPE_ARP = 0x0806
 #: not handled: counted as ``not_mine`` (docs/network.md, the kernel's neighbour discovery)
 ETHERTYPE_IPV6 = 0x86DD
 
-ETH_SRC_OFFSET = 6
-ARP_OFFSET = ETH_HEADER       # htype 0, ptype 2, hlen 4, plen 5, oper 6, sha 8, spa 14, tha 18, tpa 24
-ARP_SHA_OFFSET = ARP_OFFSET + 8
-ARP_SPA_OFFSET = ARP_OFFSET + 14
+#: Header layouts: field -> (byte offset in its header, bytes), multi-byte fields big-endian.
+#: The frame parser captures its fields from these tables.
+ETH_HEADER_FIELDS = {"dst": (0, 6), "src": (6, 6), "ethertype": (12, 2)}
+#: ARP for IPv4 over Ethernet (RFC 826)
+ARP_HEADER_FIELDS = {"htype": (0, 2), "ptype": (2, 2), "hlen": (4, 1), "plen": (5, 1),
+                     "oper": (6, 2), "sha": (8, 6), "spa": (14, 4), "tha": (18, 6),
+                     "tpa": (24, 4)}
+#: IPv4 (RFC 791)
+IPV4_HEADER_FIELDS = {"version_ihl": (0, 1), "tos": (1, 1), "total_length": (2, 2),
+                      "identification": (4, 2), "flags_fragment": (6, 2), "ttl": (8, 1),
+                      "protocol": (9, 1), "checksum": (10, 2), "src": (12, 4), "dst": (16, 4)}
+#: ICMP (RFC 792)
+ICMP_HEADER_FIELDS = {"type": (0, 1), "code": (1, 1), "checksum": (2, 2)}
+#: UDP (RFC 768)
+UDP_HEADER_FIELDS = {"src_port": (0, 2), "dst_port": (2, 2), "length": (4, 2),
+                     "checksum": (6, 2)}
+#: TCP (RFC 9293 §3.1); ``data_offset`` is the byte whose high nibble holds it
+TCP_HEADER_FIELDS = {"src_port": (0, 2), "dst_port": (2, 2), "seq": (4, 4), "ack": (8, 4),
+                     "data_offset": (12, 1), "flags": (13, 1), "window": (14, 2),
+                     "checksum": (16, 2), "urgent": (18, 2)}
+
+ETH_SRC_OFFSET = ETH_HEADER_FIELDS["src"][0]
+ARP_OFFSET = ETH_HEADER
+ARP_SHA_OFFSET = ARP_OFFSET + ARP_HEADER_FIELDS["sha"][0]
+ARP_SPA_OFFSET = ARP_OFFSET + ARP_HEADER_FIELDS["spa"][0]
 #: an ARP packet for IPv4 over Ethernet, after the Ethernet header
 ARP_LENGTH = 28
 ARP_REQUEST = 1
@@ -43,12 +67,12 @@ IP_OFFSET = ETH_HEADER
 IP_VERSION = 4
 #: the smallest IPv4 IHL and TCP data offset, in 32-bit words (20-byte headers)
 MIN_HEADER_WORDS = 5
-IP_PROTO_OFFSET = IP_OFFSET + 9
-IP_CSUM_OFFSET = IP_OFFSET + 10
-IP_SRC_OFFSET = IP_OFFSET + 12
+IP_PROTO_OFFSET = IP_OFFSET + IPV4_HEADER_FIELDS["protocol"][0]
+IP_CSUM_OFFSET = IP_OFFSET + IPV4_HEADER_FIELDS["checksum"][0]
+IP_SRC_OFFSET = IP_OFFSET + IPV4_HEADER_FIELDS["src"][0]
 L4_OFFSET = IP_OFFSET + 20    # the L4 header of a frame without IP options (all we send)
-UDP_CSUM_OFFSET = L4_OFFSET + 6
-TCP_CSUM_OFFSET = L4_OFFSET + 16
+UDP_CSUM_OFFSET = L4_OFFSET + UDP_HEADER_FIELDS["checksum"][0]
+TCP_CSUM_OFFSET = L4_OFFSET + TCP_HEADER_FIELDS["checksum"][0]
 IP_PROTO_ICMP = 1
 IP_PROTO_TCP = 6
 IP_PROTO_UDP = 17
@@ -57,11 +81,11 @@ IP_TTL = 64
 ICMP_ECHO_REQUEST = 8
 ICMP_ECHO_REPLY = 0
 
-TCP_FIN = 0x01
-TCP_SYN = 0x02
-TCP_RST = 0x04
-TCP_PSH = 0x08
-TCP_ACK = 0x10
+#: The TCP header's flag byte (RFC 9293 §3.1, RFC 3168 for ECE and CWR), bit 0 first.
+TCP_FLAGS = data.StructLayout({"fin": 1, "syn": 1, "rst": 1, "psh": 1, "ack": 1, "urg": 1,
+                               "ece": 1, "cwr": 1})
+TCP_FIN, TCP_SYN, TCP_RST, TCP_PSH, TCP_ACK = (1 << TCP_FLAGS[name].offset
+                                               for name in ("fin", "syn", "rst", "psh", "ack"))
 TCP_OPT_MSS = 2
 TCP_OPT_MSS_LENGTH = 4
 TCP_MSS = 1460                # sent in SYN and SYN-ACK

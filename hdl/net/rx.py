@@ -10,7 +10,9 @@ from .frames import (
     ARP_REPLY, ARP_REQUEST, ARP_SHA_OFFSET, ARP_SPA_OFFSET, DROP_REASONS, ETH_SRC_OFFSET,
     IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_ECHO_REQUEST,
     IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_VERSION, MIN_HEADER_WORDS, TCP_OPT_MSS,
-    TCP_OPT_MSS_LENGTH,
+    TCP_OPT_MSS_LENGTH, ARP_HEADER_FIELDS, ARP_OFFSET, ETH_HEADER_FIELDS, ICMP_HEADER_FIELDS,
+    IP_OFFSET, IP_PROTO_OFFSET, IPV4_HEADER_FIELDS, TCP_FLAGS, TCP_HEADER_FIELDS,
+    UDP_HEADER_FIELDS,
 )
 from .mac import RxByteSignature
 
@@ -26,7 +28,7 @@ RX_FIELDS = data.StructLayout({
     "arp_oper": 16, "arp_tpa": 32,
     "ip_dst": 32, "ip_proto": 8, "ip_len": 16, "l4_len": 16,
     "src_port": 16, "dst_port": 16, "udp_len": 16, "udp_csum": 16,
-    "seq": 32, "ack": 32, "flags": 8, "window": 16, "doff": 4, "mss": 16, "has_mss": 1,
+    "seq": 32, "ack": 32, "flags": TCP_FLAGS, "window": 16, "doff": 4, "mss": 16, "has_mss": 1,
     "icmp_type": 8, "icmp_code": 8, "icmp_csum": 16,
     "payload_len": 16,
 })
@@ -41,6 +43,16 @@ class FrameKind(enum.Enum, shape=2):
 
 #: drop reason -> code of the ``reason`` output
 DROP_CODE = {name: code for code, name in enumerate(DROP_REASONS)}
+
+
+#: the TCP header without options: options start after it
+_TCP_FIXED_HEADER = sum(TCP_HEADER_FIELDS["urgent"])
+assert all(UDP_HEADER_FIELDS[port] == TCP_HEADER_FIELDS[port] for port in ("src_port", "dst_port"))
+
+
+def _span(table, first, last):
+    """Bytes from the start of field ``first`` to the end of field ``last`` of ``table``."""
+    return table[last][0] + table[last][1] - table[first][0]
 
 
 def _shift_in(field, byte):
@@ -172,7 +184,12 @@ class FrameParser(wiring.Component):
             with m.If(valid & (index >= offset) & (index < offset + nbytes)):
                 m.d.sync += _shift_in(field, byte)
 
-        capture(ethertype, 12, 2)
+        def capture_field(field, header, table, name, index=i, valid=v):
+            """Capture ``table[name]`` of the header that starts at byte ``header``."""
+            offset, nbytes = table[name]
+            capture(field, header + offset, nbytes, index, valid)
+
+        capture_field(ethertype, 0, ETH_HEADER_FIELDS, "ethertype")
         arp_frame = ethertype == ETHERTYPE_ARP
         def within(offset, nbytes):
             return (i >= offset) & (i < offset + nbytes)
@@ -182,29 +199,34 @@ class FrameParser(wiring.Component):
             m.d.sync += _shift_in(f.sender_mac, byte)
         with m.If(v & Mux(arp_frame, within(ARP_SPA_OFFSET, 4), within(IP_SRC_OFFSET, 4))):
             m.d.sync += _shift_in(f.sender_ip, byte)
-        # ARP (RFC 826)
-        capture(arp_fixed, 14, 6)
-        capture(f.arp_oper, 20, 2)
-        capture(f.arp_tpa, 38, 4)
+        # ARP (RFC 826): htype, ptype, hlen and plen in one register
+        capture(arp_fixed, ARP_OFFSET, _span(ARP_HEADER_FIELDS, "htype", "plen"))
+        capture_field(f.arp_oper, ARP_OFFSET, ARP_HEADER_FIELDS, "oper")
+        capture_field(f.arp_tpa, ARP_OFFSET, ARP_HEADER_FIELDS, "tpa")
         # IPv4 (RFC 791)
-        capture(ver_ihl, 14, 1)
-        capture(f.ip_len, 16, 2)
-        capture(frag, 20, 2)
-        capture(f.ip_proto, 23, 1)
-        capture(f.ip_dst, 30, 4)
+        capture_field(ver_ihl, IP_OFFSET, IPV4_HEADER_FIELDS, "version_ihl")
+        capture_field(f.ip_len, IP_OFFSET, IPV4_HEADER_FIELDS, "total_length")
+        capture_field(frag, IP_OFFSET, IPV4_HEADER_FIELDS, "flags_fragment")
+        capture_field(f.ip_proto, IP_OFFSET, IPV4_HEADER_FIELDS, "protocol")
+        capture_field(f.ip_dst, IP_OFFSET, IPV4_HEADER_FIELDS, "dst")
         # only an IPv4 header of 20 bytes or more has an L4 part: no other frame's bytes
         # become payload (the verdict drops those frames; their bytes must not reach a
         # consumer before it)
-        with m.If(v & (i == 14) & (ethertype == ETHERTYPE_IPV4) & _ipv4_version_ihl_ok(byte)):
+        with m.If(v & (i == IP_OFFSET + IPV4_HEADER_FIELDS["version_ihl"][0]) &
+                  (ethertype == ETHERTYPE_IPV4) & _ipv4_version_ihl_ok(byte)):
             m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))
         with m.If(v & (i >= 14) & (i < l4_off)):
             m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, word))
-        with m.If(v & (i >= 26) & (i < 34)):
+        # the pseudo-header (RFC 9293 §3.1): source and destination address as they pass,
+        # then the protocol and the L4 length in the two cycles after the protocol byte
+        addresses = IP_OFFSET + IPV4_HEADER_FIELDS["src"][0]
+        with m.If(v & (i >= addresses) &
+                  (i < addresses + _span(IPV4_HEADER_FIELDS, "src", "dst"))):
             m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, word))
-        with m.If(v & (i == 24)):
+        with m.If(v & (i == IP_PROTO_OFFSET + 1)):
             m.d.sync += [pseudo_acc.eq(ones_complement_add(pseudo_acc, f.ip_proto)),
                          f.l4_len.eq(f.ip_len - ihl4)]
-        with m.If(v & (i == 25)):
+        with m.If(v & (i == IP_PROTO_OFFSET + 2)):
             m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, f.l4_len))
 
         kind = self.kind
@@ -219,7 +241,7 @@ class FrameParser(wiring.Component):
                         m.d.comb += kind.eq(FrameKind.UDP)
                     with m.Default():
                         m.d.comb += kind.eq(FrameKind.TCP)
-        with m.If(v & (i == 24)):
+        with m.If(v & (i == IP_PROTO_OFFSET + 1)):
             with m.Switch(f.ip_proto):
                 with m.Case(IP_PROTO_ICMP):
                     m.d.sync += pl_start.eq(0)
@@ -230,20 +252,22 @@ class FrameParser(wiring.Component):
         lv = v & in_l4
         with m.If(lv):
             m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, word))
-        capture(f.icmp_type, 0, 1, j, lv)
-        capture(f.icmp_code, 1, 1, j, lv)
-        capture(f.icmp_csum, 2, 2, j, lv)
-        capture(f.src_port, 0, 2, j, lv)
-        capture(f.dst_port, 2, 2, j, lv)
-        capture(f.udp_len, 4, 2, j, lv)
-        capture(f.udp_csum, 6, 2, j, lv)
-        capture(f.seq, 4, 4, j, lv)
-        capture(f.ack, 8, 4, j, lv)
-        capture(f.flags, 13, 1, j, lv)
-        capture(f.window, 14, 2, j, lv)
-        capture(tcp_csum, 16, 2, j, lv)
+        for field, table, name in (
+                (f.icmp_type, ICMP_HEADER_FIELDS, "type"),
+                (f.icmp_code, ICMP_HEADER_FIELDS, "code"),
+                (f.icmp_csum, ICMP_HEADER_FIELDS, "checksum"),
+                (f.src_port, TCP_HEADER_FIELDS, "src_port"),      # UDP's are at the same place
+                (f.dst_port, TCP_HEADER_FIELDS, "dst_port"),
+                (f.udp_len, UDP_HEADER_FIELDS, "length"),
+                (f.udp_csum, UDP_HEADER_FIELDS, "checksum"),
+                (f.seq, TCP_HEADER_FIELDS, "seq"),
+                (f.ack, TCP_HEADER_FIELDS, "ack"),
+                (f.flags.as_value(), TCP_HEADER_FIELDS, "flags"),
+                (f.window, TCP_HEADER_FIELDS, "window"),
+                (tcp_csum, TCP_HEADER_FIELDS, "checksum")):
+            capture_field(field, 0, table, name, j, lv)
         is_tcp = f.ip_proto == IP_PROTO_TCP
-        with m.If(lv & (j == 12)):
+        with m.If(lv & (j == TCP_HEADER_FIELDS["data_offset"][0])):
             m.d.sync += f.doff.eq(byte[4:8])
             with m.If(is_tcp & (byte[4:8] >= MIN_HEADER_WORDS)):
                 m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
@@ -260,7 +284,7 @@ class FrameParser(wiring.Component):
             m.d.sync += opt_bad.eq(0)
         with m.FSM(name="options") as options:
             with m.State("WAIT"):
-                with m.If(lv & is_tcp & (j == 19)):
+                with m.If(lv & is_tcp & (j == _TCP_FIXED_HEADER - 1)):
                     m.next = "KIND"
             with m.State("KIND"):
                 with m.If(v & (i == 0)):

@@ -262,7 +262,7 @@ class NetStack(wiring.Component):
         # RFC 9293 §3.10.7.2: in LISTEN, a segment with neither SYN, ACK nor RST (a NULL, FIN
         # or Xmas probe) is dropped without an answer
         listen_drop = (Cat(*(s.port_listening for s in sessions)).any() & ~claimed &
-                       ~f.flags[1] & ~f.flags[2] & ~f.flags[4])
+                       ~f.flags.syn & ~f.flags.rst & ~f.flags.ack)
 
         # ---- reply slot: ARP replies, ICMP echo replies, RBCP replies, RST
         m.submodules.reply_mem = mem = Memory(shape=8, depth=2048, init=[])
@@ -368,14 +368,14 @@ class NetStack(wiring.Component):
                                              server.length.eq(f.payload_len)]
                                 m.next = "RBCP"
                         with m.Case(FrameKind.TCP):
-                            with m.If(~claimed & ~f.flags[2] & ~listen_drop):
-                                syn_fin = f.flags[1] + f.flags[0]
+                            with m.If(~claimed & ~f.flags.rst & ~listen_drop):
+                                syn_fin = f.flags.syn + f.flags.fin
                                 m.d.sync += [r_kind.eq(FrameKind.TCP), r_eth.eq(f.sender_mac),
                                              r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
                                              r_dport.eq(f.src_port), r_len.eq(0), r_sum.eq(0),
-                                             r_seq.eq(Mux(f.flags[4], f.ack, 0)),
+                                             r_seq.eq(Mux(f.flags.ack, f.ack, 0)),
                                              r_ack.eq(f.seq + f.payload_len + syn_fin),
-                                             r_flags.eq(Mux(f.flags[4], TCP_RST,
+                                             r_flags.eq(Mux(f.flags.ack, TCP_RST,
                                                             TCP_RST | TCP_ACK))]
                                 m.next = "REQUEST"
                 with m.If(verdict):

@@ -6,7 +6,7 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from ...params import check_power_of_two
-from ..frames import TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN
+from ..frames import TCP_FLAGS, TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN
 from ..rx import RX_FIELDS, FrameKind
 from .codes import MAX_BACKOFF, TcpError, TcpRequest, TcpState
 from .sequence_engine import ARRIVAL_FLAGS, SEQUENCE_INTENT
@@ -179,7 +179,7 @@ class TcpConnection(wiring.Component):
         ahead = Signal(18)
         m.d.comb += ahead.eq(self.rcv_nxt[:18] - f.seq[:18])
         m.d.comb += [self.ring_accept.eq(is_tcp & receiving & tuple_match & (ahead[16:] == 0) &
-                                         ~f.flags[2] & f.flags[4]),
+                                         ~f.flags.rst & f.flags.ack),
                      self.ring_skip.eq(ahead[:16])]
 
         # ---- which frame is due
@@ -297,7 +297,7 @@ class TcpConnection(wiring.Component):
         # compares them, then the outcome is decided (``deciding``)
         seg = self.seg_done & self.seg_accept & is_tcp
         port_listening = (state == S.LISTEN) & (f.dst_port == local_port)
-        listen_match = port_listening & f.flags[1] & ~f.flags[2] & ~f.flags[4]
+        listen_match = port_listening & f.flags.syn & ~f.flags.rst & ~f.flags.ack
         listen_hit = listen_match & ~self.listen_block
         connected = (state != S.CLOSED) & (state != S.LISTEN) & (state != S.ARP)
         conn_hit = connected & tuple_match
@@ -310,7 +310,7 @@ class TcpConnection(wiring.Component):
         with m.If(arp_from_peer & connected):
             m.d.sync += remote_mac.eq(f.sender_mac)
 
-        s_flags = Signal(8)
+        s_flags = Signal(TCP_FLAGS)
         s_window = Signal(16)
         s_plen = self.seg_len
         s_committed = self.seg_written
@@ -320,7 +320,7 @@ class TcpConnection(wiring.Component):
             m.d.sync += [self.seg_seq.eq(f.seq), self.seg_ack.eq(f.ack), s_flags.eq(f.flags),
                          s_window.eq(f.window), s_plen.eq(f.payload_len),
                          s_committed.eq(self.ring_written), s_mss.eq(self._mss(f))]
-        m.d.comb += self.seg_fin.eq(s_flags[0])
+        m.d.comb += self.seg_fin.eq(s_flags.fin)
         arriving = seg & conn_hit
         m.d.comb += self.engine_arrive.eq(arriving)
         with m.If(arriving):
@@ -358,7 +358,7 @@ class TcpConnection(wiring.Component):
         # ---- the outcome of a segment of the connection
         flag = self.flags
         intent = self.intent
-        a_fin, a_syn, a_rst, a_ack = s_flags[0], s_flags[1], s_flags[2], s_flags[4]
+        a_fin, a_syn, a_rst, a_ack = s_flags.fin, s_flags.syn, s_flags.rst, s_flags.ack
         seqlen = Signal(12)
         m.d.comb += seqlen.eq(s_plen + a_fin)
         acceptable = Mux(seqlen == 0,
@@ -454,7 +454,7 @@ class TcpConnection(wiring.Component):
                 # data and FIN
                 with m.If(s_plen != 0):
                     with m.If((s_committed == s_plen) & flag.seq_is_rcv_nxt):
-                        with m.If(ack_owed | s_flags[3]):
+                        with m.If(ack_owed | s_flags.psh):
                             m.d.sync += ack_now.eq(1)
                         with m.Else():
                             m.d.sync += [ack_owed.eq(1), delack.eq(0)]
