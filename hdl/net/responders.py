@@ -1,18 +1,20 @@
 """Responders on a :class:`~hdl.net.tx.FrameBuilder` request port: each answers one kind of
 received frame (docs/network.md)."""
 
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from .checksum import echo_reply_checksum
-from .frames import ARP_REPLY, ARP_REQUEST
+from .frames import ARP_REPLY, ARP_REQUEST, TCP_ACK, TCP_RST
+from .rbcp import RbcpBusSignature, RbcpServer
 from .rx import RX_FIELDS, FrameKind
-from .tx import TxRequestSignature
+from .tx import TX_REQUEST, TxRequestSignature
 
-__all__ = ["ParsedFrameSignature", "ArpResponder", "IcmpEchoResponder"]
+__all__ = ["ParsedFrameSignature", "ArpResponder", "IcmpEchoResponder", "RbcpResponder",
+           "TcpResetResponder"]
 
 
 class ParsedFrameSignature(wiring.Signature):
@@ -197,4 +199,136 @@ class IcmpEchoResponder(wiring.Component):
         with m.If(~fsm.ongoing("IDLE") & f.done & f.accept & (f.kind == FrameKind.ICMP)):
             m.d.comb += self.dropped.eq(1)
         m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        return m
+
+
+class RbcpResponder(wiring.Component):
+    """Answers SiTCP's register protocol: a UDP datagram to ``port`` is kept as it arrives,
+    executed by an :class:`~hdl.net.rbcp.RbcpServer` on ``bus``, and its reply (the buffer,
+    rewritten) sent back to the sender's address and port.
+
+    A datagram that arrives while a request is being executed or answered is not taken
+    (``dropped`` pulses).
+
+    Parameters
+    ----------
+    windows : list of (int, int)
+        The bus windows, as :class:`~hdl.net.rbcp.RbcpServer`'s.
+
+    Members
+    -------
+    frame : In(ParsedFrameSignature())
+    tx : Out(TxRequestSignature())
+    port : In(16)
+        The RBCP UDP port.
+    bus : Out(RbcpBusSignature())
+        The register bus.
+    busy : Out(1)
+        A request is being executed or answered.
+    dropped : Out(1)
+        Pulse with the verdict of an accepted datagram to ``port`` that is not taken.
+    """
+
+    def __init__(self, windows):
+        self._server = RbcpServer(windows)
+        super().__init__(_responder_members(0, port=In(16), bus=Out(RbcpBusSignature()),
+                                            dropped=Out(1)))
+
+    def elaborate(self, platform):
+        m = Module()
+        f, tx = self.frame, self.tx
+        req = tx.request
+        m.submodules.server = server = self._server
+        wiring.connect(m, server.bus, wiring.flipped(self.bus))
+        m.submodules.buffer = mem = Memory(shape=8, depth=2048, init=[])
+        wp = mem.write_port()
+        rp = mem.read_port(transparent_for=())
+        eth, ip, src_port, dst_port = Signal(48), Signal(32), Signal(16), Signal(16)
+        length, total = Signal(11), Signal(16)
+        claim = Signal()
+        m.d.comb += [req.kind.eq(FrameKind.UDP), req.eth_dst.eq(eth), req.ip_dst.eq(ip),
+                     req.src_port.eq(src_port), req.dst_port.eq(dst_port),
+                     req.length.eq(length), req.payload_sum.eq(total),
+                     tx.rd_data.eq(rp.data), server.buf_rdata.eq(rp.data)]
+        mine = f.accept & (f.kind == FrameKind.UDP) & (f.fields.dst_port == self.port)
+        with m.FSM() as fsm:
+            with m.State("IDLE"):
+                with m.If(f.first):
+                    m.d.sync += claim.eq(1)
+                with m.If(f.payload_valid & claim & (f.kind == FrameKind.UDP)):
+                    m.d.comb += [wp.addr.eq(f.payload_offset), wp.data.eq(f.payload_data),
+                                 wp.en.eq(1)]
+                with m.If(f.done):
+                    m.d.sync += claim.eq(0)
+                    with m.If(mine & claim):
+                        m.d.sync += [eth.eq(f.fields.sender_mac), ip.eq(f.fields.sender_ip),
+                                     src_port.eq(f.fields.dst_port),
+                                     dst_port.eq(f.fields.src_port)]
+                        m.d.comb += [server.start.eq(1), server.length.eq(f.fields.payload_len)]
+                        m.next = "EXECUTE"
+                    with m.Elif(mine):
+                        m.d.comb += self.dropped.eq(1)
+            with m.State("EXECUTE"):
+                m.d.comb += [rp.addr.eq(server.buf_addr), wp.addr.eq(server.buf_addr),
+                             wp.data.eq(server.buf_wdata), wp.en.eq(server.buf_we)]
+                with m.If(server.done):
+                    m.d.sync += [length.eq(server.reply_len), total.eq(server.reply_sum)]
+                    with m.If(server.reply):
+                        m.next = "REQUEST"
+                    with m.Else():
+                        m.next = "IDLE"
+            with m.State("REQUEST"):
+                m.d.comb += [tx.valid.eq(1), rp.addr.eq(tx.rd_addr[:11])]
+                with m.If(tx.ready):
+                    m.next = "SENDING"
+            with m.State("SENDING"):
+                m.d.comb += rp.addr.eq(tx.rd_addr[:11])
+                with m.If(tx.done):
+                    m.next = "IDLE"
+        with m.If(~fsm.ongoing("IDLE") & f.done & mine):
+            m.d.comb += self.dropped.eq(1)
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE"))
+        return m
+
+
+class TcpResetResponder(wiring.Component):
+    """Answers a TCP segment that no session takes with RST (RFC 9293 §3.10.7.1): a segment
+    with ACK gets ``<SEQ=SEG.ACK><CTL=RST>``, one without ``<SEQ=0><ACK=SEG.SEQ+SEG.LEN>
+    <CTL=RST,ACK>``. A RST is never answered, nor a segment the sessions ``claimed`` or
+    ``ignore`` (one to a listening port without SYN, ACK and RST: RFC 9293 §3.10.7.2 drops
+    it), nor one that arrives while a RST is pending.
+
+    Members
+    -------
+    frame : In(ParsedFrameSignature())
+    tx : Out(TxRequestSignature())
+    claimed, ignore : In(1)
+        At the verdict: a session takes the segment; the segment is dropped silently.
+    busy : Out(1)
+        A RST is pending.
+    """
+
+    def __init__(self):
+        super().__init__(_responder_members(0, claimed=In(1), ignore=In(1)))
+
+    def elaborate(self, platform):
+        m = Module()
+        f, tx = self.frame, self.tx
+        fields = f.fields
+        req = tx.request
+        pending = Signal()
+        answer = Signal(TX_REQUEST)
+        m.d.comb += [self.busy.eq(pending), tx.valid.eq(pending), req.eq(answer),
+                     req.kind.eq(FrameKind.TCP)]
+        with m.If(tx.ready):
+            m.d.sync += pending.eq(0)
+        with m.If(f.done & f.accept & (f.kind == FrameKind.TCP) & ~self.claimed &
+                  ~self.ignore & ~fields.flags.rst & ~pending):
+            syn_fin = fields.flags.syn + fields.flags.fin
+            m.d.sync += [pending.eq(1),
+                         answer.eth_dst.eq(fields.sender_mac), answer.ip_dst.eq(fields.sender_ip),
+                         answer.src_port.eq(fields.dst_port), answer.dst_port.eq(fields.src_port),
+                         answer.seq.eq(Mux(fields.flags.ack, fields.ack, 0)),
+                         answer.ack.eq(fields.seq + fields.payload_len + syn_fin),
+                         answer.flags.eq(Mux(fields.flags.ack, TCP_RST, TCP_RST | TCP_ACK))]
         return m

@@ -1,56 +1,34 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
 one MAC and IP address (docs/network.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Signal
 from amaranth.lib import wiring
-from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, StreamDownsizer, StreamUpsizer
-from .checksum import echo_reply_checksum
 from .counters import EventCounters
 from .frames import (
-    ARP_REPLY, ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT,
-    DROP_REASONS, TCP_ACK, TCP_RST, ip_to_int, mac_to_int,
+    ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT, DROP_REASONS,
+    ip_to_int, mac_to_int,
 )
 from .mac import GmiiRx, GmiiTx
-from .rbcp import RbcpBusSignature, RbcpServer
+from .rbcp import RbcpBusSignature
+from .registers import (
+    GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS, GlobalRegisters, global_register,
+)
+from .responders import (
+    ArpResponder, IcmpEchoResponder, ParsedFrameSignature, RbcpResponder, TcpResetResponder,
+)
 from .rx import FrameKind, FrameParser
 from .tcp import TCP_COUNTERS, TcpError, TcpSession, TcpState
 from .tx import FrameBuilder
 
 __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLOBAL_REGS",
-           "global_register",
-           "GLOBAL_OFFSETS"]
+           "global_register", "GLOBAL_OFFSETS"]
 
-#: Stack counters, in the order of their read addresses (``counter_index``, RBCP): every
-#: received frame ends in exactly one of ``delivered`` and the drop reasons;
-#: ``tcp_bad_options`` counts TCP segments that passed every check and had malformed
-#: options (processed all the same, docs/network.md).
-STACK_COUNTERS = ("frames_in", "delivered") + DROP_REASONS + ("frames_out", "tcp_bad_options")
-
-#: RBCP base of the stack's own registers (docs/network.md "global block")
-GLOBAL_BASE = 0xFFFF0000
-#: offset -> (name, bytes, writable) of the global block; multi-byte values big-endian
-GLOBAL_REGS = {
-    0x00: ("mac", 6, True),
-    0x08: ("ip", 4, True),
-    0x0C: ("rto_cycles", 4, True),
-    0x10: ("msl_cycles", 4, True),
-    0x14: ("rbcp_port", 2, True),
-    0x18: ("arp_retry_cycles", 4, True),
-    0x1C: ("tcp_port", 2, True),
-    0x40: ("counters", 4 * len(STACK_COUNTERS), False),
-}
-#: name -> offset of the global block's registers
-GLOBAL_OFFSETS = {name: offset for offset, (name, _, _) in GLOBAL_REGS.items()}
-
-
-def global_register(name):
-    """``(RBCP address, bytes)`` of the global block's register ``name``."""
-    offset = GLOBAL_OFFSETS[name]
-    return GLOBAL_BASE + offset, GLOBAL_REGS[offset][1]
+#: the stack's own requesters on the frame builder, before the sessions'
+RESPONDERS = ("arp", "icmp", "rbcp", "rst")
 
 _CLOCK_HZ = 125_000_000
 
@@ -194,26 +172,20 @@ class NetStack(wiring.Component):
         m.submodules.mac_rx = mac_rx = GmiiRx()
         m.submodules.mac_tx = mac_tx = GmiiTx()
         m.submodules.parser = parser = FrameParser()
-        m.submodules.builder = builder = FrameBuilder(1 + self._sessions)
-        m.submodules.rbcp_server = server = RbcpServer([(0, self._user_window),
-                                                       (GLOBAL_BASE, 0x10000)])
+        m.submodules.builder = builder = FrameBuilder(len(RESPONDERS) + self._sessions)
+        m.submodules.registers = registers = GlobalRegisters({
+            "mac": self._mac, "ip": self._ip, "rto_cycles": self._rto, "msl_cycles": self._msl,
+            "rbcp_port": self._rbcp_port, "arp_retry_cycles": self._arp_retry,
+            "tcp_port": self._tcp_port})
         m.d.comb += [mac_rx.gmii_rxd.eq(self.gmii_rxd), mac_rx.gmii_rx_dv.eq(self.gmii_rx_dv),
                      mac_rx.gmii_rx_er.eq(self.gmii_rx_er),
                      self.gmii_txd.eq(mac_tx.gmii_txd), self.gmii_tx_en.eq(mac_tx.gmii_tx_en),
                      self.gmii_tx_er.eq(mac_tx.gmii_tx_er)]
         wiring.connect(m, mac_rx.rx, parser.rx)
         wiring.connect(m, builder.m_axis, mac_tx.s_axis)
-
-        local_mac = Signal(48, init=self._mac)
-        local_ip = Signal(32, init=self._ip)
-        rto = Signal(32, init=self._rto)
-        msl = Signal(32, init=self._msl)
-        rbcp_port = Signal(16, init=self._rbcp_port)
-        tcp_port = Signal(16, init=self._tcp_port)
-        arp_retry = Signal(32, init=self._arp_retry)
-        m.d.comb += [self.local_mac.eq(local_mac), self.local_ip.eq(local_ip),
-                     parser.local_mac.eq(local_mac), parser.local_ip.eq(local_ip),
-                     builder.local_mac.eq(local_mac), builder.local_ip.eq(local_ip)]
+        m.d.comb += [self.local_mac.eq(registers.mac), self.local_ip.eq(registers.ip),
+                     parser.local_mac.eq(registers.mac), parser.local_ip.eq(registers.ip),
+                     builder.local_mac.eq(registers.mac), builder.local_ip.eq(registers.ip)]
         f = parser.fields
 
         # ---- TCP sessions
@@ -230,10 +202,11 @@ class NetStack(wiring.Component):
                 s.seg_payload_offset.eq(parser.payload_offset),
                 s.seg_done.eq(parser.done), s.seg_accept.eq(parser.accept),
                 s.seg_arp.eq(parser.arp_seen),
-                s.rto_cycles.eq(rto), s.msl_cycles.eq(msl),
-                s.arp_retry_cycles.eq(arp_retry), s.default_port.eq(tcp_port),
+                s.rto_cycles.eq(registers.rto_cycles), s.msl_cycles.eq(registers.msl_cycles),
+                s.arp_retry_cycles.eq(registers.arp_retry_cycles),
+                s.default_port.eq(registers.tcp_port),
             ]
-            wiring.connect(m, s.tx, getattr(builder, f"req_{k + 1}"))
+            wiring.connect(m, s.tx, getattr(builder, f"req_{len(RESPONDERS) + k}"))
             if self._user_width == 8:
                 wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
                 wiring.connect(m, s.m_axis, wiring.flipped(user.rx))
@@ -264,155 +237,36 @@ class NetStack(wiring.Component):
         listen_drop = (Cat(*(s.port_listening for s in sessions)).any() & ~claimed &
                        ~f.flags.syn & ~f.flags.rst & ~f.flags.ack)
 
-        # ---- reply slot: ARP replies, ICMP echo replies, RBCP replies, RST
-        m.submodules.reply_mem = mem = Memory(shape=8, depth=2048, init=[])
-        wp = mem.write_port()
-        rp = mem.read_port(transparent_for=())
-        port = builder.req_0
-        req = port.request
-        r_kind = Signal(FrameKind)
-        r_eth = Signal(48)
-        r_ip = Signal(32)
-        r_sport = Signal(16)
-        r_dport = Signal(16)
-        r_seq = Signal(32)
-        r_ack = Signal(32)
-        r_flags = Signal(8)
-        r_len = Signal(11)
-        r_sum = Signal(16)
-        m.d.comb += [req.kind.eq(r_kind), req.eth_dst.eq(r_eth), req.ip_dst.eq(r_ip),
-                     req.arp_oper.eq(ARP_REPLY), req.src_port.eq(r_sport),
-                     req.dst_port.eq(r_dport), req.seq.eq(r_seq), req.ack.eq(r_ack),
-                     req.flags.eq(r_flags), req.length.eq(r_len), req.payload_sum.eq(r_sum),
-                     port.rd_data.eq(rp.data)]
-        m.d.comb += [rp.addr.eq(server.buf_addr), server.buf_rdata.eq(rp.data)]
-        claim = Signal()              # the reply buffer takes this frame's payload
-        icmp_csum = Signal(16)
-
-        # global registers on the RBCP bus
-        bus = server.bus
-        in_global = bus.addr[16:] == (GLOBAL_BASE >> 16)
-        global_rd = Signal(8)
-        m.d.comb += [self.rbcp.act.eq(bus.act), self.rbcp.addr.eq(bus.addr),
-                     self.rbcp.wd.eq(bus.wd), self.rbcp.we.eq(bus.we & ~in_global),
-                     self.rbcp.re.eq(bus.re & ~in_global)]
-        global_ack = Signal()
-        m.d.sync += global_ack.eq((bus.we | bus.re) & in_global)
-        m.d.comb += [bus.ack.eq(Mux(in_global, global_ack, self.rbcp.ack)),
-                     bus.rd.eq(Mux(in_global, global_rd, self.rbcp.rd))]
+        # ---- one responder per protocol, each on its own builder port
+        m.submodules.arp = arp = ArpResponder()
+        m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048)
+        m.submodules.rbcp = rbcp = RbcpResponder([(0, self._user_window),
+                                                  (GLOBAL_BASE, 0x10000)])
+        m.submodules.rst = rst = TcpResetResponder()
+        responders = {"arp": arp, "icmp": icmp, "rbcp": rbcp, "rst": rst}
+        for k, name in enumerate(RESPONDERS):
+            ParsedFrameSignature.connect_parser(m, parser, responders[name].frame, mac_rx.rx)
+            wiring.connect(m, responders[name].tx, getattr(builder, f"req_{k}"))
+        m.d.comb += [rbcp.port.eq(registers.rbcp_port), rst.claimed.eq(claimed),
+                     rst.ignore.eq(listen_drop)]
+        wiring.connect(m, rbcp.bus, registers.bus)
+        wiring.connect(m, registers.user, wiring.flipped(self.rbcp))
 
         # counters: read port 0 for RBCP, port 1 for user logic; each counts at most one
         # event per frame, and frames end at most every other cycle
         m.submodules.counters = counters = EventCounters(STACK_COUNTERS, readers=2, spacing=2)
-        m.d.comb += [counters.rd_addr[1].eq(self.counter_index),
+        m.d.comb += [counters.rd_addr[0].eq(registers.counter_index),
+                     registers.counter_value.eq(counters.rd_data[0]),
+                     counters.rd_addr[1].eq(self.counter_index),
                      self.counter_value.eq(counters.rd_data[1])]
         m.d.comb += counters.events.frames_out.eq(
             mac_tx.s_axis.tvalid & mac_tx.s_axis.tready & mac_tx.s_axis.tlast)
 
-        global_values = {"mac": local_mac, "ip": local_ip, "rto_cycles": rto,
-                         "msl_cycles": msl, "rbcp_port": rbcp_port,
-                         "arp_retry_cycles": arp_retry, "tcp_port": tcp_port}
-        offset = bus.addr[:16]
-        # the counter index is offset bits 2..5: the block is 64-byte aligned
-        assert GLOBAL_OFFSETS["counters"] % 64 == 0 and len(STACK_COUNTERS) <= 16
-        m.d.comb += counters.rd_addr[0].eq(offset[2:6])
-        with m.Switch(offset):
-            for base, (name, size, writable) in GLOBAL_REGS.items():
-                if name == "counters":
-                    # big-endian 32-bit words, the first counter first
-                    with m.Case(*range(base, base + size)):
-                        m.d.sync += global_rd.eq(counters.rd_data[0].word_select(~offset[:2], 8))
-                    continue
-                value = global_values[name]
-                for b in range(size):
-                    with m.Case(base + b):
-                        sel = value.word_select(size - 1 - b, 8)
-                        m.d.sync += global_rd.eq(sel)
-                        if writable:
-                            with m.If(bus.we & in_global):
-                                m.d.sync += sel.eq(bus.wd)
-            with m.Default():
-                m.d.sync += global_rd.eq(0)
-
         def bump(name):
             return counters.events[name].eq(1)
 
-        verdict = parser.done
-        with m.FSM() as reply_fsm:
-            with m.State("IDLE"):
-                with m.If(mac_rx.rx.valid & (mac_rx.rx.index == 0)):
-                    m.d.sync += claim.eq(1)
-                with m.If(parser.payload_valid & claim &
-                          ((parser.kind == FrameKind.ICMP) | (parser.kind == FrameKind.UDP))):
-                    m.d.comb += [wp.addr.eq(parser.payload_offset), wp.data.eq(parser.payload_data),
-                                 wp.en.eq(1)]
-                with m.If(verdict & parser.accept):
-                    with m.Switch(parser.kind):
-                        with m.Case(FrameKind.ARP):
-                            with m.If(f.arp_oper == ARP_REQUEST):
-                                m.d.sync += [r_kind.eq(FrameKind.ARP), r_eth.eq(f.sender_mac),
-                                             r_ip.eq(f.sender_ip)]
-                                m.next = "REQUEST"
-                        with m.Case(FrameKind.ICMP):
-                            with m.If(claim):
-                                m.d.sync += [r_kind.eq(FrameKind.ICMP), r_eth.eq(f.sender_mac),
-                                             r_ip.eq(f.sender_ip), r_len.eq(f.payload_len),
-                                             icmp_csum.eq(f.icmp_csum)]
-                                m.next = "ICMP_TYPE"
-                        with m.Case(FrameKind.UDP):
-                            with m.If(claim & (f.dst_port == rbcp_port)):
-                                m.d.sync += [r_kind.eq(FrameKind.UDP), r_eth.eq(f.sender_mac),
-                                             r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
-                                             r_dport.eq(f.src_port)]
-                                m.d.comb += [server.start.eq(1),
-                                             server.length.eq(f.payload_len)]
-                                m.next = "RBCP"
-                        with m.Case(FrameKind.TCP):
-                            with m.If(~claimed & ~f.flags.rst & ~listen_drop):
-                                syn_fin = f.flags.syn + f.flags.fin
-                                m.d.sync += [r_kind.eq(FrameKind.TCP), r_eth.eq(f.sender_mac),
-                                             r_ip.eq(f.sender_ip), r_sport.eq(f.dst_port),
-                                             r_dport.eq(f.src_port), r_len.eq(0), r_sum.eq(0),
-                                             r_seq.eq(Mux(f.flags.ack, f.ack, 0)),
-                                             r_ack.eq(f.seq + f.payload_len + syn_fin),
-                                             r_flags.eq(Mux(f.flags.ack, TCP_RST,
-                                                            TCP_RST | TCP_ACK))]
-                                m.next = "REQUEST"
-                with m.If(verdict):
-                    m.d.sync += claim.eq(0)
-            with m.State("ICMP_TYPE"):
-                # echo reply: type 8 -> 0
-                m.d.comb += [wp.addr.eq(0), wp.data.eq(0), wp.en.eq(1)]
-                m.d.sync += icmp_csum.eq(echo_reply_checksum(icmp_csum))
-                m.next = "ICMP_CSUM_HI"
-            with m.State("ICMP_CSUM_HI"):
-                m.d.comb += [wp.addr.eq(2), wp.data.eq(icmp_csum[8:]), wp.en.eq(1)]
-                m.next = "ICMP_CSUM_LO"
-            with m.State("ICMP_CSUM_LO"):
-                m.d.comb += [wp.addr.eq(3), wp.data.eq(icmp_csum[:8]), wp.en.eq(1)]
-                m.next = "REQUEST"
-            with m.State("RBCP"):
-                m.d.comb += [wp.addr.eq(server.buf_addr), wp.data.eq(server.buf_wdata),
-                             wp.en.eq(server.buf_we)]
-                with m.If(server.done):
-                    m.d.sync += [r_len.eq(server.reply_len), r_sum.eq(server.reply_sum)]
-                    with m.If(server.reply):
-                        m.next = "REQUEST"
-                    with m.Else():
-                        m.next = "IDLE"
-            with m.State("REQUEST"):
-                m.d.comb += [port.valid.eq(1), rp.addr.eq(port.rd_addr[:11])]
-                with m.If(port.ready):
-                    m.next = "SENDING"
-            with m.State("SENDING"):
-                m.d.comb += rp.addr.eq(port.rd_addr[:11])
-                with m.If(port.done):
-                    m.next = "IDLE"
-
         # frame accounting: each frame ends in exactly one counter
-        busy_slot = Signal()
-        m.d.comb += busy_slot.eq(~reply_fsm.ongoing("IDLE"))
-        with m.If(verdict):
+        with m.If(parser.done):
             m.d.comb += bump("frames_in")
             with m.If(~parser.accept):
                 with m.Switch(parser.reason):
@@ -422,19 +276,19 @@ class NetStack(wiring.Component):
             with m.Else():
                 with m.Switch(parser.kind):
                     with m.Case(FrameKind.ARP):
-                        with m.If((f.arp_oper == ARP_REQUEST) & busy_slot):
+                        with m.If((f.arp_oper == ARP_REQUEST) & arp.busy):
                             m.d.comb += bump("busy")
                         with m.Else():
                             m.d.comb += bump("delivered")
                     with m.Case(FrameKind.ICMP):
-                        with m.If(busy_slot | ~claim):
+                        with m.If(icmp.dropped):
                             m.d.comb += bump("busy")
                         with m.Else():
                             m.d.comb += bump("delivered")
                     with m.Case(FrameKind.UDP):
-                        with m.If(f.dst_port != rbcp_port):
+                        with m.If(f.dst_port != registers.rbcp_port):
                             m.d.comb += bump("no_port")
-                        with m.Elif(busy_slot | ~claim):
+                        with m.Elif(rbcp.dropped):
                             m.d.comb += bump("busy")
                         with m.Else():
                             m.d.comb += bump("delivered")
