@@ -16,6 +16,14 @@ no read past frame end, no dead FSM state").
   payload is read), each request is taken once and its frame ends with one ``done`` to the
   same requester, and an offered byte stays until taken (bounded, ``abc bmc3``).
 
+* :class:`TcpRequestScheduler` with any due requests and a free builder: a request reaches
+  the builder only while pending and not held, the one chosen is the highest-priority due
+  one and stays what was chosen until it is sent or dropped, and ``sent`` pulses only for a
+  transfer (unbounded, ``abc pdr``).
+* :class:`GlobalRegisters` on a free bus: no strobe inside the global block reaches the
+  user's bus, every one inside is acknowledged the next cycle, and a register changes only
+  by a write strobe to one of its bytes (unbounded, ``abc pdr``).
+
 The environment models (:class:`GmiiRxEnvironment`, the requesters) are written from the
 interfaces' docstrings (RxByteSignature, TxRequestSignature), not from the RTL.
 """
@@ -35,7 +43,8 @@ from hdl.net.frames import (
 )
 from hdl.net.rbcp import RbcpServer
 from hdl.net.rx import FrameKind, FrameParser
-from hdl.net.stack import GLOBAL_BASE
+from hdl.net.registers import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, GlobalRegisters
+from hdl.net.tcp import TcpRequest, TcpRequestScheduler
 from hdl.net.tx import FrameBuilder
 from tb.formal import held_until_taken, run_sby
 
@@ -302,3 +311,90 @@ def test_rbcp_server_accesses(depth):
 @pytest.mark.parametrize("depth", BUILDER_DEPTHS)
 def test_frame_builder_frames(depth):
     run_sby(f"frame_builder_{depth}", FrameBuilderProperty(), depth, engine="abc bmc3")
+
+
+class TcpRequestSchedulerProperty(Elaboratable):
+    """Requests offered only while pending and not held, chosen by priority, unchanged until
+    sent or dropped."""
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = dut = TcpRequestScheduler()
+        m.d.comb += Assume(ResetSignal() == Initial())
+        names = [f"{kind.name.lower()}_due" for kind in TcpRequest]
+        for name in names + ["hold", "withdraw", "unsent", "ready", "syn_only"]:
+            m.d.comb += getattr(dut, name).eq(AnySeq(1))
+        m.d.comb += dut.choose.eq(AnySeq(1))
+        # the sequence engine chooses only when nothing is pending (its docstring)
+        with m.If(dut.choose):
+            m.d.comb += Assume(~dut.pending & dut.next_due)
+        chosen = Signal(TcpRequest)
+        with m.If(dut.choose):
+            m.d.sync += chosen.eq(dut.next_kind)
+        dues = Cat(*(getattr(dut, name) for name in names))
+        highest = Signal(TcpRequest)
+        for k in reversed(range(len(names))):
+            with m.If(dues[k]):
+                m.d.comb += highest.eq(k)
+        with m.If(~Initial() & ~ResetSignal()):
+            m.d.comb += [Assert(dut.next_due == dues.any()),
+                         Assert(~dut.valid | (dut.pending & ~dut.hold)),
+                         Assert(dut.sent == (dut.valid & dut.ready))]
+            with m.If(dut.next_due):
+                m.d.comb += Assert(dut.next_kind == highest)
+            with m.If(dut.pending):
+                m.d.comb += Assert(dut.kind == chosen)
+        return m
+
+
+class GlobalRegistersProperty(Elaboratable):
+    """No user strobe inside the block, an acknowledge the cycle after each strobe inside,
+    registers changed only by a write to one of their bytes."""
+
+    INIT = {"mac": 1, "ip": 2, "rto_cycles": 3, "msl_cycles": 4, "rbcp_port": 5,
+            "arp_retry_cycles": 6, "tcp_port": 7}
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dut = dut = GlobalRegisters(self.INIT)
+        bus = dut.bus
+        m.d.comb += Assume(ResetSignal() == Initial())
+        m.d.comb += [bus.act.eq(AnySeq(1)), bus.addr.eq(AnySeq(32)), bus.wd.eq(AnySeq(8)),
+                     bus.we.eq(AnySeq(1)), bus.re.eq(AnySeq(1)), dut.user.ack.eq(AnySeq(1)),
+                     dut.user.rd.eq(AnySeq(8)), dut.counter_value.eq(AnySeq(32))]
+        m.d.comb += Assume(~(bus.we & bus.re))
+        # the server holds the address until the acknowledge (RbcpBusSignature)
+        last_addr = Signal(32)
+        strobed = Signal()
+        m.d.sync += [last_addr.eq(bus.addr), strobed.eq(bus.we | bus.re)]
+        with m.If(strobed):
+            m.d.comb += Assume(bus.addr == last_addr)
+        inside = bus.addr[16:] == (GLOBAL_BASE >> 16)
+        was_inside_write = Signal()
+        written = Signal(16)
+        past_valid = Signal()
+        m.d.sync += [was_inside_write.eq(bus.we & inside), written.eq(bus.addr[:16]),
+                     past_valid.eq(~ResetSignal())]
+        registers = {offset: (getattr(dut, name), size)
+                     for offset, (name, size, writable) in GLOBAL_REGS.items() if writable}
+        past = {offset: Signal.like(value) for offset, (value, _) in registers.items()}
+        m.d.sync += [past[offset].eq(value) for offset, (value, _) in registers.items()]
+        with m.If(~Initial() & ~ResetSignal() & past_valid):
+            with m.If(dut.user.we | dut.user.re):
+                m.d.comb += Assert(~inside)
+            with m.If(strobed & inside):
+                m.d.comb += Assert(bus.ack)
+            for offset, (value, size) in registers.items():
+                hit = was_inside_write & (written >= offset) & (written < offset + size)
+                with m.If(~hit):
+                    m.d.comb += Assert(value == past[offset])
+        return m
+
+
+def test_tcp_request_scheduler_offers_what_it_chose():
+    run_sby("tcp_request_scheduler", TcpRequestSchedulerProperty(), 20, mode="prove",
+            engine="abc pdr")
+
+
+def test_global_registers_decode():
+    run_sby("global_registers", GlobalRegistersProperty(), 20, mode="prove", engine="abc pdr")
