@@ -183,8 +183,12 @@ ENGINE_PARTS = {
     "core.mac_rx": "GmiiRx (with its FCS check)",
     "core.mac_tx": "GmiiTx (with its FCS)",
     "core.parser": "FrameParser",
-    "core.builder": "FrameBuilder (2 requesters)",
-    "core.rbcp_server": "RbcpServer",
+    "core.builder": "FrameBuilder (4 responders + 1 session)",
+    "core.arp": "ArpResponder",
+    "core.icmp": "IcmpEchoResponder (2 KiB buffer)",
+    "core.rbcp": "RbcpResponder (RbcpServer, 2 KiB buffer)",
+    "core.rst": "TcpResetResponder",
+    "core.registers": "GlobalRegisters",
     "core.counters": "EventCounters (the stack's)",
     "core.tcp0": "TcpSession, 4 KiB buffers, 64 descriptors",
     "core.tcp0.ring": "  TcpReceiveRing",
@@ -205,10 +209,11 @@ def engine_parts(row, log=print):
     parts = synthesise_parts(SIM_BUILD.parent / row["verilog"], row["top"], folder)
     table = [{"part": path, "label": label, **parts[path]}
              for path, label in ENGINE_PARTS.items() if path in parts]
-    table.append({"part": "core", "label": "NetStack's own logic (reply slot, global "
-                  "registers, session routing)",
-                  **{k: parts["core"][k] - sum(parts[p][k] for p in ENGINE_PARTS
-                                               if p.count(".") == 1) for k in parts["core"]}})
+    direct = [p for p in parts if p.count(".") == 1]
+    table.append({"part": "core", "label": "NetStack's own logic (frame accounting, session "
+                  "routing)",
+                  **{k: parts["core"][k] - sum(parts[p][k] for p in direct)
+                     for k in parts["core"]}})
     table.append({"part": "", "label": "sum of the parts (placed flat: see the engine's row)",
                   **parts[""]})
     return table

@@ -349,8 +349,13 @@ class MemifEngine(wiring.Component):
         out, inp = self.memif_hwt2mem, self.memif_mem2hwt
 
         def chunk_len(addr, remaining):
-            room = MEMIF_CHUNK - addr[:8]
-            return Mux(remaining < room, remaining, room)
+            # ``room`` is at most MEMIF_CHUNK: compare only the bits it can have (a full
+            # word-wide comparison is a carry chain through the whole word)
+            bits = MEMIF_CHUNK.bit_length()
+            room = Signal(bits)
+            m.d.comb += room.eq(MEMIF_CHUNK - addr[:bits - 1])
+            less = (remaining[bits:] == 0) & (remaining[:bits] < room)
+            return Mux(less, remaining, room)
 
         # ---- credits: words requested but not yet popped from mem2hwt ----
         outstanding = Signal(range(self._credits + 1))
@@ -370,12 +375,16 @@ class MemifEngine(wiring.Component):
         r_addr = Signal(w)
         r_rem = Signal(w)
         r_total = Signal(w)      # words of the user read not yet delivered
+        # the next chunk's length is registered (it is a subtraction and a comparison, and
+        # the sequencer's choice depends on it): valid one cycle after the address and the
+        # remaining length change, which costs a cycle only after a new command
         r_len = Signal(w)
-        m.d.comb += r_len.eq(chunk_len(r_addr, r_rem))
+        r_len_valid = Signal()
+        m.d.sync += [r_len.eq(chunk_len(r_addr, r_rem)), r_len_valid.eq(1)]
         r_want = Signal()
         fence_want = Signal()
         fence_addr = Signal(w)
-        m.d.comb += r_want.eq(r_rem != 0)
+        m.d.comb += r_want.eq((r_rem != 0) & r_len_valid)
 
         # command addresses and lengths with their low bits ignored (W-aligned)
         r_cmd_addr, r_cmd_len, w_cmd_addr, w_cmd_len = (Signal(w) for _ in range(4))
@@ -389,7 +398,7 @@ class MemifEngine(wiring.Component):
             m.d.comb += self.read_cmd.ready.eq(1)
             with m.If(self.read_cmd.valid):
                 m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
-                             r_total.eq(r_cmd_len >> sh)]
+                             r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
 
         # ---- write buffer and issuer ----
         m.submodules.wbuf = wbuf = SyncFIFO(width=w, depth=2 * cw)
@@ -397,16 +406,17 @@ class MemifEngine(wiring.Component):
         w_addr_cur = Signal(w)
         w_rem = Signal(w)        # bytes not yet issued
         w_len = Signal(w)
-        m.d.comb += w_len.eq(chunk_len(w_addr_cur, w_rem))
+        w_len_valid = Signal()
+        m.d.sync += [w_len.eq(chunk_len(w_addr_cur, w_rem)), w_len_valid.eq(1)]
         w_ready = Signal()
-        m.d.comb += w_ready.eq((w_rem != 0) & (wbuf.r_level >= (w_len >> sh)))
+        m.d.comb += w_ready.eq((w_rem != 0) & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
         w_busy = Signal()
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
-                                 w_rem_in.eq(w_cmd_len >> sh)]
+                                 w_rem_in.eq(w_cmd_len >> sh), w_len_valid.eq(0)]
                 with m.Else():
                     m.d.comb += self.write_done.eq(1)
         m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
@@ -424,7 +434,8 @@ class MemifEngine(wiring.Component):
                 with m.If(w_ready):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
                                  seq_words.eq(w_len >> sh),
-                                 w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len)]
+                                 w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len),
+                                 w_len_valid.eq(0)]
                     if self._fence:
                         with m.If(w_rem == w_len):
                             m.d.sync += [fence_want.eq(1), fence_addr.eq(w_addr_cur)]
@@ -439,7 +450,8 @@ class MemifEngine(wiring.Component):
                                  kinds.w_data.eq(0 | ((r_len >> sh) << 1))]
                     m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | r_len),
                                  r_words[1].eq(r_addr),
-                                 r_addr.eq(r_addr + r_len), r_rem.eq(r_rem - r_len)]
+                                 r_addr.eq(r_addr + r_len), r_rem.eq(r_rem - r_len),
+                                 r_len_valid.eq(0)]
                     m.next = "R_CMD"
             with m.State("R_CMD"):
                 m.d.comb += [out.we.eq(1), out.data.eq(r_words[0])]
