@@ -322,7 +322,8 @@ class MemifEngine(wiring.Component):
     write_data : In(stream.Signature(W*8))
         ``length/W`` words to write.
     write_done : Out(1)
-        One-cycle pulse when a write command has completed (see ``fence``).
+        One-cycle pulse when a write command has completed (see ``fence``), the cycle after
+        the engine sees it.
     """
 
     def __init__(self, arch, *, fence=True, mem2hwt_depth=MEMIF_FIFO_DEPTH):
@@ -356,6 +357,11 @@ class MemifEngine(wiring.Component):
             m.d.comb += room.eq(MEMIF_CHUNK - addr[:bits - 1])
             less = (remaining[bits:] == 0) & (remaining[:bits] < room)
             return Mux(less, remaining, room)
+
+        # ``write_done`` is registered: the thread's next step waits on it, and a zero-length
+        # command would otherwise answer in the cycle it is given
+        done_now = Signal()
+        m.d.sync += self.write_done.eq(done_now)
 
         # ---- credits: words requested but not yet popped from mem2hwt ----
         outstanding = Signal(range(self._credits + 1))
@@ -418,7 +424,7 @@ class MemifEngine(wiring.Component):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
                                  w_rem_in.eq(w_cmd_len >> sh), w_len_valid.eq(0)]
                 with m.Else():
-                    m.d.comb += self.write_done.eq(1)
+                    m.d.comb += done_now.eq(1)
         m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
                      wbuf.w_en.eq(self.write_data.valid & (w_rem_in != 0)),
                      self.write_data.ready.eq(wbuf.w_rdy & (w_rem_in != 0))]
@@ -477,7 +483,7 @@ class MemifEngine(wiring.Component):
                     with m.If(seq_words == 1):
                         if not self._fence:
                             with m.If(w_rem == 0):
-                                m.d.comb += self.write_done.eq(1)
+                                m.d.comb += done_now.eq(1)
                                 m.d.sync += w_busy.eq(0)
                         m.next = "IDLE"
 
@@ -489,7 +495,7 @@ class MemifEngine(wiring.Component):
             with m.If(kind_fence):
                 m.d.comb += [inp.re.eq(1), pop.eq(~inp.empty)]
                 with m.If(~inp.empty):
-                    m.d.comb += [kinds.r_en.eq(1), self.write_done.eq(1)]
+                    m.d.comb += [kinds.r_en.eq(1), done_now.eq(1)]
                     m.d.sync += w_busy.eq(0)
             with m.Else():
                 m.d.comb += [

@@ -721,22 +721,25 @@ class SobelServerThread(HardwareThread):
                                                max_height=self.max_height)
             m.submodules.to_pixels = to_pixels = StreamRepacker(wb, 3)
             m.submodules.to_words = to_words = StreamRepacker(3, wb)
-            # a register slice cuts the ready path from the filter back through the
-            # repacker into the memory copy's control
+            # register slices on both sides of the filter: its ready reaches from its output
+            # to its input, and the memory copy's control drives both repackers
             m.submodules.pixel_slice = pixel_slice = RegisterSlice(
                 to_pixels.signature.members["m_axis"].signature)
+            m.submodules.result_slice = result_slice = RegisterSlice(
+                to_words.signature.members["s_axis"].signature.flip())
             wiring.connect(m, to_pixels.m_axis, pixel_slice.s_axis)
-            pixels = pixel_slice.m_axis
+            wiring.connect(m, result_slice.m_axis, to_words.s_axis)
+            pixels, results = pixel_slice.m_axis, result_slice.s_axis
             m.d.comb += [sobel.width.eq(width), sobel.height.eq(height),
                          sobel.i.tdata.eq(pixels.tdata),
                          sobel.i.tlast.eq(pixels.tlast),
                          sobel.i.tvalid.eq(pixels.tvalid),
                          pixels.tready.eq(sobel.i.tready),
-                         to_words.s_axis.tdata.eq(sobel.o.tdata),
-                         to_words.s_axis.tlast.eq(sobel.o.tlast),
-                         to_words.s_axis.tkeep.eq(0b111),
-                         to_words.s_axis.tvalid.eq(sobel.o.tvalid),
-                         sobel.o.tready.eq(to_words.s_axis.tready)]
+                         results.tdata.eq(sobel.o.tdata),
+                         results.tlast.eq(sobel.o.tlast),
+                         results.tkeep.eq(0b111),
+                         results.tvalid.eq(sobel.o.tvalid),
+                         sobel.o.tready.eq(results.tready)]
             ok = ((step == width + (width << 1)) & (width >= 3) & (width <= self.max_width) &
                   (height >= 3) & (height <= self.max_height))
         else:
