@@ -187,7 +187,7 @@ ENGINE_PARTS = {
     "core.arp": "ArpResponder",
     "core.icmp": "IcmpEchoResponder (2 KiB buffer)",
     "core.rbcp": "RbcpResponder (RbcpServer, 2 KiB buffer)",
-    "core.rst": "TcpResetResponder",
+    "core.tcp_reset": "TcpResetResponder",
     "core.registers": "GlobalRegisters",
     "core.counters": "EventCounters (the stack's)",
     "core.tcp0": "TcpSession, 4 KiB buffers, 64 descriptors",

@@ -242,7 +242,7 @@ class NetStack(wiring.Component):
         m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048)
         m.submodules.rbcp = rbcp = RbcpResponder([(0, self._user_window),
                                                   (GLOBAL_BASE, 0x10000)])
-        m.submodules.rst = rst = TcpResetResponder()
+        m.submodules.tcp_reset = rst = TcpResetResponder()
         responders = {"arp": arp, "icmp": icmp, "rbcp": rbcp, "rst": rst}
         for k, name in enumerate(RESPONDERS):
             ParsedFrameSignature.connect_parser(m, parser, responders[name].frame, mac_rx.rx)
