@@ -1,7 +1,7 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
 one MAC and IP address (docs/network.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Signal
+from amaranth.hdl import Cat, Const, Module
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 

@@ -8,16 +8,30 @@ from amaranth.lib.wiring import In, Out
 from ...params import check_power_of_two
 from ..frames import TCP_FLAGS, TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN
 from ..rx import RX_FIELDS, FrameKind
-from .codes import MAX_BACKOFF, TcpError, TcpRequest, TcpState
+from .codes import TcpError, TcpRequest, TcpState
 from .sequence_engine import ARRIVAL_FLAGS, SEQUENCE_INTENT
 from .timer import TimerMode
 
-__all__ = ["CONNECTION_EVENTS", "TcpConnection"]
+__all__ = ["CONNECTION_EVENTS", "TcpConnection", "user_control_members"]
 
 #: Events the connection counts (fields of the session's counters).
 CONNECTION_EVENTS = data.StructLayout({
     "bytes_rx": 11, "segments_rx": 1, "rto": 1, "fast_retransmit": 1, "dup_acks": 1,
     "rst_rx": 1, "dropped_segments": 1})
+
+
+def user_control_members():
+    """The user's controls of a connection, as :class:`~hdl.net.tcp.TcpSession` has them
+    (its docstring says what each means); the connection owns them and the session passes
+    them through."""
+    return {
+        "open_req": In(1), "active": In(1),
+        "local_port": In(16), "remote_ip": In(32), "remote_port": In(16),
+        "default_port": In(16),
+        "open_ack": Out(1), "close_req": Out(1), "close_ack": In(1), "abort": In(1),
+        "error": Out(1), "error_code": Out(TcpError), "state": Out(TcpState),
+        "peer_ip": Out(32), "peer_port": Out(16),
+    }
 
 
 class TcpConnection(wiring.Component):
@@ -88,13 +102,8 @@ class TcpConnection(wiring.Component):
             "seg_accept": In(1), "seg_arp": In(1),
             "conn_match": Out(1), "listen_match": Out(1), "port_listening": Out(1),
             "listen_block": In(1),
-            "open_req": In(1), "active": In(1),
-            "local_port": In(16), "remote_ip": In(32), "remote_port": In(16),
-            "default_port": In(16),
-            "open_ack": Out(1), "close_req": Out(1), "close_ack": In(1), "abort": In(1),
-            "error": Out(1), "error_code": Out(TcpError), "state": Out(TcpState),
-            "peer_ip": Out(32), "peer_port": Out(16), "peer_mac": Out(48),
-            "bound_port": Out(16),
+            **user_control_members(),
+            "peer_mac": Out(48), "bound_port": Out(16),
             "ring_accept": Out(1), "ring_skip": Out(16), "ring_commit": Out(1),
             "ring_rollback": Out(1), "ring_discard": Out(1),
             "ring_written": In(11), "window": In(16),

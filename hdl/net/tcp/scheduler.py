@@ -1,7 +1,7 @@
 """Which frame a TCP session asks for next, and what it says (docs/network.md "TCP
 session")."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Module, Mux
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 

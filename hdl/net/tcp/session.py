@@ -10,9 +10,9 @@ from ...stream import AXIStreamSignature
 from ..counters import EventCounters
 from ..rx import RX_FIELDS, FrameKind
 from ..tx import TxRequestSignature
-from .codes import TCP_COUNTERS, TcpError, TcpRequest, TcpState
+from .codes import TCP_COUNTERS, TcpRequest, TcpState
 from .congestion import TcpCongestionControl
-from .connection import TcpConnection
+from .connection import TcpConnection, user_control_members
 from .receive_ring import TcpReceiveRing
 from .scheduler import TcpRequestScheduler
 from .sequence_engine import TcpSequenceEngine
@@ -143,12 +143,8 @@ class TcpSession(wiring.Component):
             "tx": Out(TxRequestSignature()),
             "s_axis": In(AXIStreamSignature(8, keep=False)),
             "m_axis": Out(AXIStreamSignature(8, keep=False)),
-            "open_req": In(1), "active": In(1),
-            "local_port": In(16), "remote_ip": In(32), "remote_port": In(16),
-            "default_port": In(16),
-            "open_ack": Out(1), "close_req": Out(1), "close_ack": In(1), "abort": In(1),
-            "error": Out(1), "error_code": Out(TcpError), "state": Out(TcpState),
-            "peer_ip": Out(32), "peer_port": Out(16), "tx_fill": Out(17),
+            **user_control_members(),
+            "tx_fill": Out(17),
             "counter_index": In(range(len(TCP_COUNTERS))), "counter_value": Out(32),
             "counters_clear": In(1),
             "rto_cycles": In(32), "msl_cycles": In(32), "arp_retry_cycles": In(32),
@@ -179,12 +175,11 @@ class TcpSession(wiring.Component):
             ring.payload_offset.eq(self.seg_payload_offset),
             ring.frame_end.eq(self.seg_done),
         ]
-        for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
-                     "default_port", "close_ack", "abort"):
-            m.d.comb += getattr(conn, name).eq(getattr(self, name))
-        for name in ("open_ack", "close_req", "error", "error_code", "state", "peer_ip",
-                     "peer_port"):
-            m.d.comb += getattr(self, name).eq(getattr(conn, name))
+        for name, member in user_control_members().items():
+            if member.flow == wiring.In:
+                m.d.comb += getattr(conn, name).eq(getattr(self, name))
+            else:
+                m.d.comb += getattr(self, name).eq(getattr(conn, name))
         wiring.connect(m, ring.m_axis, wiring.flipped(self.m_axis))
         wiring.connect(m, wiring.flipped(self.s_axis), buffer.s_axis)
 

@@ -1,7 +1,7 @@
 """The one timer of a TCP session: retransmission, ARP retry, TIME-WAIT and FIN-WAIT-2
 (docs/network.md "TCP session")."""
 
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Module, Signal
 from amaranth.lib import enum, wiring
 from amaranth.lib.wiring import In, Out
 
