@@ -253,6 +253,14 @@ def _add_project_commands(commands):
                         "message) for this long in simulated time (default 10 ms)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="folder for the nodes' files (default build/<name>/sim)")
+    p.add_argument("--ros2", action="store_true",
+                   help="join a ROS 2 (Cyclone DDS) domain: the build.cfg's topics and "
+                        "services appear on it; runs until SIGINT/SIGTERM (docs/ros2.md)")
+    p.add_argument("--domain", type=int, default=None,
+                   help="DDS domain id with --ros2 (default: ROS_DOMAIN_ID, else 0)")
+    p.add_argument("--with-nodes", action="store_true",
+                   help="with --ros2, also run sim.py's nodes (by default the ROS 2 graph "
+                        "stands in for them)")
     p = add("report", "resources per core (yosys synth_xilinx) and the last simulation's "
                       "numbers", _run_report)
     p.add_argument("--sim-results", type=Path, default=None,
@@ -352,13 +360,26 @@ def _run_sim(args):
     p = _project(args)
     out = args.output or _default_out(p, "sim")
     started = time.time()
+    ros2 = None
+    if args.ros2:
+        from host.ros2.bridge import default_domain
+        domain = default_domain() if args.domain is None else args.domain
+        if not 0 <= domain <= 232:
+            console.error(f"--domain {domain}: expected a DDS domain id 0..232")
+            return 2
+        ros2 = {"domain": domain, "nodes": args.with_nodes}
+    elif args.domain is not None or args.with_nodes:
+        console.error("--domain and --with-nodes need --ros2")
+        return 2
     try:
         with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "
-                          f"{args.sim}, then simulating"):
+                          f"{args.sim}, then simulating"
+                          + (f" on DDS domain {ros2['domain']} until SIGINT/SIGTERM"
+                             if ros2 else "")):
             results = run_project_sim(
                 p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
                 thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
-                waves=args.waves, progress=console.progress,
+                waves=args.waves, progress=console.progress, ros2=ros2,
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:
         console.error(exc)
@@ -367,7 +388,9 @@ def _run_sim(args):
         console.error(f"simulation failed: {exc}")
         return 1
     module = load_sim_module(p)
-    if module is not None and hasattr(module, "summary"):
+    if ros2 is not None:
+        _print_bridge(console, results["ros2"])
+    elif module is not None and hasattr(module, "summary"):
         for line in module.summary(results, p.clock_mhz):
             console.print(line)
     else:
@@ -378,6 +401,14 @@ def _run_sim(args):
     console.done(f"{len(written)} files to {out}/ ({', '.join(written[:6])}"
                  f"{', ...' if len(written) > 6 else ''})")
     return 0
+
+
+def _print_bridge(console, summary):
+    console.print(f"DDS domain {summary['domain']}: per interface, samples received from DDS "
+                  f"/ delivered / rejected, and written to DDS")
+    for name, c in sorted(summary["counts"].items()):
+        console.print(f"  {name:<32} {c['received']:>6} {c['delivered']:>6} {c['rejected']:>6} "
+                      f"{c['sent']:>6}")
 
 
 def _run_report(args):

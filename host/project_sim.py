@@ -32,6 +32,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import signal
 import sys
 import threading
 import traceback
@@ -41,6 +42,7 @@ import cocotb
 from cocotb.triggers import ClockCycles, Event, First
 
 from .reconos import ReconosCosim, Resource
+from .ros2.cosim import serve_ros2, start_bridge
 from .simulator import SimulationFailed, export_top, run_top, top_params
 from .toolchain import cache_dir
 
@@ -49,8 +51,8 @@ __all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "mod
 
 TOP = "rosgate_system"
 #: files the simulation writes into the output folder, besides the nodes' own
-RESULTS, ERROR, PROGRESS, LOG = "sim_results.json", "sim_error.json", "sim_progress.jsonl", \
-    "sim.log"
+RESULTS, ERROR, PROGRESS, LOG, STOP = "sim_results.json", "sim_error.json", \
+    "sim_progress.jsonl", "sim.log", "sim.stop"
 
 
 class ProjectError(Exception):
@@ -125,6 +127,8 @@ class SimContext:
         Anything JSON-serialisable; ``rosgate sim`` prints and saves it.
     clock_mhz : float
         The system clock.
+    threads : dict
+        As :class:`CheckContext`'s (built on first use).
     """
 
     def __init__(self, cosim, project, args, out):
@@ -142,6 +146,14 @@ class SimContext:
         self._start = cocotb.utils.get_sim_time("ns")
         self._sleeping = 0
         self._progress = None
+        self._threads = None
+
+    @property
+    def threads(self):
+        if self._threads is None:
+            from gen.system import build_system
+            self._threads = thread_components(self.project, build_system(self.project))
+        return self._threads
 
     def now(self):
         """System clock cycles since the nodes started."""
@@ -275,7 +287,10 @@ async def run_project(dut):
             ctx._resources[slot.id] = res
             await cosim.runtime.create_thread(slot.id, res)
             created.append(slot.id)
+    ros2 = p.get("ros2")
     nodes = list(getattr(module, "NODES", [])) if module is not None else []
+    if ros2 and not ros2.get("nodes"):
+        nodes = []
     ended, failures, running = Event(), [], {}
 
     async def guarded(node):
@@ -285,28 +300,36 @@ async def run_project(dut):
             failures.append(exc)
         finally:
             running.pop(node, None)
-            if failures or not running:
+            if failures or (not running and not ros2):
                 ended.set()
 
+    bridge = None
     try:
         if module is not None and hasattr(module, "setup"):
             module.setup(ctx)
+        if ros2:
+            bridge = start_bridge(ctx, module, ros2)
         ctx._start = cocotb.utils.get_sim_time("ns")
         running.update((node, cocotb.start_soon(guarded(node))) for node in nodes)
-        if not nodes:
-            ended.set()
-        limit_cycles = round(float(p["limit_ms"]) * 1000 * ctx.clock_mhz)
-        stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
-        watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running, failures,
-                                                  ended))
-        await First(ended.wait(), ClockCycles(dut.aclk, limit_cycles))
-        watch.cancel()
-        if failures:
-            raise failures[0]
-        if running:
-            raise ProjectError(
-                f"the software nodes did not finish within {p['limit_ms']:g} ms of "
-                f"simulated time ({limit_cycles} cycles); {_stall_report(cosim, running)}")
+        if ros2:
+            await serve_ros2(cosim, ctx, bridge, ros2, failures)
+            if failures:
+                raise failures[0]
+        else:
+            if not nodes:
+                ended.set()
+            limit_cycles = round(float(p["limit_ms"]) * 1000 * ctx.clock_mhz)
+            stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
+            watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running,
+                                                      failures, ended))
+            await First(ended.wait(), ClockCycles(dut.aclk, limit_cycles))
+            watch.cancel()
+            if failures:
+                raise failures[0]
+            if running:
+                raise ProjectError(
+                    f"the software nodes did not finish within {p['limit_ms']:g} ms of "
+                    f"simulated time ({limit_cycles} cycles); {_stall_report(cosim, running)}")
     except ProjectError as exc:
         _write_error(out, str(exc))
         raise
@@ -314,6 +337,9 @@ async def run_project(dut):
         _write_error(out, _located(exc, sim_py))
         raise
     finally:
+        if bridge is not None:
+            ctx.results["ros2"] = bridge.summary()
+            bridge.close()
         ctx._progress.close()
     if cosim.runtime.errors:
         message = f"ReconOS protocol errors: {'; '.join(cosim.runtime.errors)}"
@@ -344,7 +370,7 @@ def _follow(path, show, stop):
 
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, seed=None, build_dir=None, quiet=True,
-                    waves=False, progress=None, log=None):
+                    waves=False, progress=None, log=None, ros2=None):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
     Parameters
@@ -369,6 +395,10 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         ``progress(stage, text)`` for the build's progress.
     log : callable or None
         ``log(cycle, text)`` for each line the nodes log while the simulation runs.
+    ros2 : dict or None
+        Join a DDS domain instead of running to the nodes' end (``rosgate sim --ros2``):
+        ``domain`` (int) and ``nodes`` (bool: run ``sim.py``'s nodes too). The run has no
+        simulated-time limit; SIGINT or SIGTERM to this process ends it cleanly.
 
     Raises
     ------
@@ -393,13 +423,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     # them before minutes go into the simulator build
     vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus")
     if module is not None and hasattr(module, "check"):
-        slots = sorted(project.slots, key=lambda s: s.id)
-        threads = {}
-        for s, component in zip(slots, system.threads):
-            if s.thread is not None and s.thread.name not in threads:
-                threads[s.thread.name] = component
         try:
-            module.check(CheckContext(project, args, threads))
+            module.check(CheckContext(project, args, thread_components(project, system)))
         except Exception as exc:
             raise ProjectError(_located(exc, project.dir / "sim.py")) from exc
     params = {"build_cfg": str(build_cfg), "arch": project.arch,
@@ -411,10 +436,13 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
               "args": args, "thread_params": list(thread_params), "out": str(out),
               "limit_ms": float(limit_ms),
               "stall_ms": float(stall_ms)}
+    if ros2 is not None:
+        params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
+                          "stop_file": str(out / STOP)}
     inputs = [name for name, flow in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     out.mkdir(parents=True, exist_ok=True)
-    for name in (RESULTS, ERROR, PROGRESS):
+    for name in (RESULTS, ERROR, PROGRESS, STOP):
         if (out / name).exists():
             (out / name).unlink()
     stop = threading.Event()
@@ -424,6 +452,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
                                     args=(out / PROGRESS, lambda e: log(e["cycle"], e["text"]),
                                           stop))
         follower.start()
+    handlers = _forward_stop(out / STOP) if ros2 is not None else {}
     try:
         run_top(__name__, TOP, system, sim, build_dir, params=params, seed=seed,
                 extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)},
@@ -436,10 +465,33 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
                                failed=exc.failed, total=exc.total,
                                results=exc.results) from None
     finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+        (out / STOP).unlink(missing_ok=True)
         stop.set()
         if follower is not None:
             follower.join()
     return json.loads((out / RESULTS).read_text())
+
+
+def _forward_stop(stop_file):
+    """While the simulator runs: SIGINT and SIGTERM to this process write ``stop_file``,
+    which the simulation reads to end cleanly (the simulator, in the same process group,
+    also gets a terminal's SIGINT itself). Returns the handlers to restore."""
+    def request_stop(signum, frame):
+        Path(stop_file).write_text(signal.Signals(signum).name)
+    return {signum: signal.signal(signum, request_stop)
+            for signum in (signal.SIGINT, signal.SIGTERM)}
+
+
+def thread_components(project, system):
+    """Thread name -> the Amaranth component of its first slot in ``system`` (``None`` for
+    a thread without Amaranth source)."""
+    threads = {}
+    for s, component in zip(sorted(project.slots, key=lambda s: s.id), system.threads):
+        if s.thread is not None and s.thread.name not in threads:
+            threads[s.thread.name] = component
+    return threads
 
 
 def _period_ns(freq):

@@ -65,8 +65,8 @@ def image_msg(pixels, seq):
 
 
 def _mode(project):
-    thread = next(t for t in project.threads if t.name == "Sobel")
-    return thread.params.get("mode", "opencv")
+    thread = next((t for t in project.threads if t.name == "Sobel"), None)
+    return "opencv" if thread is None else thread.params.get("mode", "opencv")
 
 
 def _paths(args):
@@ -95,7 +95,9 @@ def _read(path):
 
 def check(ctx):
     """Refuse, before anything is built, a photograph the Sobel thread cannot take."""
-    sobel = ctx.threads["Sobel"]
+    sobel = ctx.threads.get("Sobel")
+    if sobel is None:
+        return                  # the service is served elsewhere (on DDS with --ros2)
     for path in _paths(ctx.args):
         height, width = _read(path).shape[:2]
         if not sobel.accepts(width, height):
@@ -108,11 +110,33 @@ def check(ctx):
                              f"({sobel.mode} mode) takes {rule}")
 
 
+def accepts(ctx, name, value):
+    """With ``--ros2``: the reason an image arriving from DDS cannot go to the hardware (the
+    DIP node's subscription, or a call of the Sobel service), or ``None``."""
+    image = value.get("img", value) if name == "/sobelservice" else value
+    if name not in ("/image_raw", "/sobelservice"):
+        return None
+    width, height = image["width"], image["height"]
+    if image["encoding"] != "bgr8":
+        return f"encoding {image['encoding']!r}; the Sobel thread takes bgr8"
+    if image["step"] != 3 * width or len(image["data"]) != image["step"] * height:
+        return (f"{width}x{height} with step {image['step']} and {len(image['data'])} data "
+                f"bytes; bgr8 needs step {3 * width} and {3 * width * height} bytes")
+    sobel = ctx.threads.get("Sobel")
+    if sobel is not None and not sobel.accepts(width, height):
+        return (f"{width}x{height}: the Sobel thread ({sobel.mode} mode) takes "
+                f"{sobel.min_width}..{sobel.max_width} x 3..{sobel.max_height} pixels"
+                if sobel.mode == "opencv" else f"{width}x{height}: not a shape the Sobel "
+                f"thread takes in {sobel.mode} mode")
+    return None
+
+
 def setup(ctx):
     """The application's main(): the Sobel server's response is a bgr8 image."""
-    res = ctx.resource("Sobel", "filter_service_msg_res")
-    ctx.messages.write(res.ptr, SOBEL_RESPONSE,
-                       {"img": image_msg(np.zeros((0, 0, 3), np.uint8), 0)})
+    if any(t.name == "Sobel" for t in ctx.project.threads):
+        res = ctx.resource("Sobel", "filter_service_msg_res")
+        ctx.messages.write(res.ptr, SOBEL_RESPONSE,
+                           {"img": image_msg(np.zeros((0, 0, 3), np.uint8), 0)})
     ctx.filtered = ctx.broker.subscribe("/image_filtered")
     ctx.sent = Queue()
     ctx.viewed = Queue()

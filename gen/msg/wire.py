@@ -113,12 +113,13 @@ class _Codec:
             out.append(0)
 
     # decoding ---------------------------------------------------------------------------
-    def decode(self, typename, data):
+    def decode(self, typename, data, padding=0):
         self._data = memoryview(bytes(data))
         self._pos = 0
         value = self._read_struct(typename, "")
-        if self._pos != len(self._data):
-            raise WireError(f"{typename}: {len(self._data) - self._pos} bytes left over")
+        left = len(self._data) - self._pos
+        if left and (left > padding or any(self._data[self._pos:])):
+            raise WireError(f"{typename}: {left} bytes left over")
         return value
 
     def _take(self, n, path):
@@ -183,14 +184,17 @@ def encode_cdr(library, typename, value):
     return CDR_LE_HEADER + codec.encode(library[typename].name, value)
 
 
-def decode_cdr(library, typename, data):
-    """Inverse of :func:`encode_cdr`: a dict (bytes for uint8/byte/char arrays)."""
+def decode_cdr(library, typename, data, *, padded=False):
+    """Inverse of :func:`encode_cdr`: a dict (bytes for uint8/byte/char arrays).
+
+    ``padded``: accept up to 3 zero bytes after the value, as DDS samples are padded to a
+    multiple of 4 (XTypes 7.4.3.5.3; the options' low 2 bits, when set, give the count)."""
     data = bytes(data)
     if len(data) < 4 or data[:2] != CDR_LE_HEADER[:2]:
         raise WireError(f"{typename}: not a little-endian CDR encapsulation "
                         f"(header {data[:4].hex()})")
     codec = _Codec(library, aligned=True, string_nul=True, empty_byte=True)
-    return codec.decode(library[typename].name, data[4:])
+    return codec.decode(library[typename].name, data[4:], padding=3 if padded else 0)
 
 
 def encode_ros1(library, typename, value):

@@ -1,0 +1,316 @@
+"""The DDS bridge of ``rosgate sim --ros2``: the co-simulated system's topics and services on
+a Cyclone DDS domain, as a ROS 2 node built on rmw_cyclonedds_cpp would show them.
+
+:class:`Ros2Bridge` runs inside the cocotb test, in the simulator's thread: :meth:`poll`
+moves what arrived from DDS into the in-process graph (:class:`host.reconos.Broker`) and what
+the graph published onto DDS, and :meth:`wait` blocks the simulator (simulated time stands
+still) until DDS has data, when the system has nothing to do.
+
+Samples cross as bytes, never as Python objects: each one is checked by decoding it with the
+message library (:func:`gen.msg.wire.decode_cdr`) and the project's own bound check, and
+written back with :func:`gen.msg.wire.encode_cdr`, so what DDS carries is byte for byte what
+rosbags serializes. A sample that does not decode, breaks a bound of its type, or is refused
+by the hardware's limits is dropped with one log line and counted; nothing else changes.
+"""
+
+import collections
+import os
+
+from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, encode_cdr
+
+from .graph import dds_topic_name, service_topic_names
+from .types import DdsTypes, pack_request_header, unpack_request_header
+
+__all__ = ["Ros2Bridge", "BridgeQos", "LOOPBACK_CONFIG", "default_domain"]
+
+#: a Cyclone DDS configuration that keeps a domain on this machine's loopback interface
+LOOPBACK_CONFIG = (
+    '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface name="lo"/>'
+    '</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>'
+    '<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>60'
+    '</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+    '</Domain></CycloneDDS>')
+
+
+def default_domain():
+    """``ROS_DOMAIN_ID`` if set (checked), else 0."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return 0
+    if not text.isdigit() or not 0 <= int(text) <= 232:
+        raise ValueError(f"ROS_DOMAIN_ID={text!r}: expected a DDS domain id 0..232")
+    return int(text)
+
+
+class BridgeQos:
+    """ROS 2's default QoS profile for topics and services (rmw_qos_profile_default):
+    reliable, keep last ``depth``, volatile."""
+
+    def __init__(self, depth=10):
+        if not isinstance(depth, int) or depth < 1:
+            raise ValueError(f"QoS history depth {depth!r}: expected an integer >= 1")
+        self.depth = depth
+
+    def dds(self):
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
+                   Policy.History.KeepLast(self.depth), Policy.Durability.Volatile,
+                   Policy.IgnoreLocal.Participant)
+
+
+class _Endpoint:
+    """One direction of one interface on DDS: a reader or a writer and what it carries."""
+
+    def __init__(self, name, typename, entity, key):
+        self.name = name            # the ROS 2 name (for log lines and counters)
+        self.typename = typename    # the ROS 2 type of the message part
+        self.entity = entity
+        self.key = key              # the broker's name
+
+
+class Ros2Bridge:
+    """A participant on DDS domain ``domain`` for the interfaces of a project.
+
+    Parameters
+    ----------
+    interfaces : host.ros2.graph.RosInterfaces
+    library : gen.msg.MessageLibrary
+    broker : host.reconos.Broker
+    domain : int
+    log : callable
+        ``log(text)`` for the bridge's lines (joins, rejections).
+    accepts : callable or None
+        ``accepts(name, value)`` -> ``None`` or the reason the hardware cannot take a
+        message arriving from DDS on topic or service ``name``.
+    qos : BridgeQos
+    spawn : callable
+        Starts a coroutine beside the simulation (``cocotb.start_soon``), for service calls
+        into the graph.
+    """
+
+    def __init__(self, interfaces, library, broker, *, domain, log, spawn, accepts=None,
+                 qos=None):
+        if not isinstance(domain, int) or not 0 <= domain <= 232:
+            raise ValueError(f"DDS domain {domain!r}: expected an integer 0..232")
+        self.interfaces = interfaces
+        self.library = library
+        self.broker = broker
+        self.domain = domain
+        self.log = log
+        self.spawn = spawn
+        self.accepts = accepts
+        self.qos = qos or BridgeQos()
+        self.types = DdsTypes(library)
+        #: per ROS 2 name: samples taken from DDS, delivered, rejected, and written to DDS
+        self.counts = collections.defaultdict(lambda: {"received": 0, "delivered": 0,
+                                                       "rejected": 0, "sent": 0})
+        self.rejections = []
+        self._inbound = []           # (endpoint, handler)
+        self._outbound = []          # (broker queue, endpoint)
+        self._injected = set()       # ids of values this bridge published into the broker
+        self._clients = []           # (broker server queue, request writer, pending)
+        self._calls = 0              # service calls into the graph still running
+        self._guid = int.from_bytes(os.urandom(8), "little") or 1
+        self._seq = 0
+        self.participant = None
+
+    # --- set-up --------------------------------------------------------------------------
+    def start(self):
+        """Join the domain and create a reader or writer for every interface; returns the
+        names of what appears on DDS."""
+        from cyclonedds.core import WaitSet
+        from cyclonedds.domain import DomainParticipant
+        self.participant = DomainParticipant(self.domain)
+        self.waitset = WaitSet(self.participant)
+        shown = []
+        for topic in self.interfaces.topics.values():
+            if topic.subscribers:
+                ep = self._reader(dds_topic_name(topic.name), self.types.message(topic.msgtype),
+                                  topic.name, topic.msgtype, topic.key)
+                self._inbound.append((ep, self._topic_sample))
+            if topic.publishers:
+                ep = self._writer(dds_topic_name(topic.name), self.types.message(topic.msgtype),
+                                  topic.name, topic.msgtype, topic.key)
+                self._outbound.append((self.broker.subscribe(topic.key), ep))
+            shown.append(f"{topic.name} [{topic.msgtype}]")
+        for service in self.interfaces.services.values():
+            request, reply = service_topic_names(service.name)
+            req_type = self.types.service_part(service.request_type)
+            res_type = self.types.service_part(service.response_type)
+            if service.servers:
+                ep = self._reader(request, req_type, service.name, service.request_type,
+                                  service.key)
+                ep.reply = self._writer(reply, res_type, service.name, service.response_type,
+                                        service.key)
+                self._inbound.append((ep, self._service_request))
+                shown.append(f"{service.name} [{service.srvtype}] (served in hardware)")
+            elif service.key not in self.broker._services:
+                writer = self._writer(request, req_type, service.name, service.request_type,
+                                      service.key)
+                ep = self._reader(reply, res_type, service.name, service.response_type,
+                                  service.key)
+                pending = {}
+                ep.pending = pending
+                self._inbound.append((ep, self._service_reply))
+                self._clients.append((self.broker.server_queue(service.key), writer, pending))
+                shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
+        return shown
+
+    def _topic(self, name, idl):
+        from cyclonedds.topic import Topic
+        return Topic(self.participant, name, idl, qos=self.qos.dds())
+
+    def _reader(self, dds_name, idl, name, typename, key):
+        from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
+        from cyclonedds.sub import DataReader
+        reader = DataReader(self.participant, self._topic(dds_name, idl), qos=self.qos.dds())
+        condition = ReadCondition(reader, SampleState.NotRead | ViewState.Any |
+                                  InstanceState.Any)
+        self.waitset.attach(condition)
+        return _Endpoint(name, typename, reader, key)
+
+    def _writer(self, dds_name, idl, name, typename, key):
+        from cyclonedds.pub import DataWriter
+        writer = DataWriter(self.participant, self._topic(dds_name, idl), qos=self.qos.dds())
+        return _Endpoint(name, typename, writer, key)
+
+    def close(self):
+        """Leave the domain (deletes the participant and everything it made)."""
+        participant, self.participant = self.participant, None
+        if participant is not None:
+            self.waitset = None
+            participant.__del__()     # dds_delete of the participant and all it contains
+
+    def summary(self):
+        """Counts per interface and every rejection, for ``sim_results.json``."""
+        return {"domain": self.domain, "counts": {k: dict(v) for k, v in self.counts.items()},
+                "rejected": sum(v["rejected"] for v in self.counts.values()),
+                "rejections": list(self.rejections)}
+
+    # --- running -------------------------------------------------------------------------
+    @property
+    def busy(self):
+        """A service call this bridge started into the graph is still running."""
+        return self._calls > 0
+
+    def poll(self):
+        """Move everything that is waiting, both ways; return how many messages moved."""
+        from cyclonedds._clayer import ddspy_take
+        from cyclonedds.core import InstanceState, SampleState, ViewState
+        moved = 0
+        mask = SampleState.Any | ViewState.Any | InstanceState.Any
+        for ep, handler in self._inbound:
+            taken = ddspy_take(ep.entity._ref, mask, 64)
+            if isinstance(taken, int):
+                raise RuntimeError(f"DDS take on {ep.name} failed with code {taken}")
+            for data, info in taken:
+                if info.valid_data:
+                    self.counts[ep.name]["received"] += 1
+                    handler(ep, bytes(data))
+                    moved += 1
+        for queue, ep in self._outbound:
+            while (value := queue.get_nowait()) is not None:
+                if id(value) in self._injected:
+                    self._injected.discard(id(value))
+                    continue
+                self._write(ep, encode_cdr(self.library, ep.typename, value))
+                moved += 1
+        for queue, writer, pending in self._clients:
+            while (item := queue.get_nowait()) is not None:
+                request, reply_queue = item
+                self._seq += 1
+                pending[self._seq] = reply_queue
+                body = encode_cdr(self.library, writer.typename, request)
+                self._write(writer, CDR_LE_HEADER + pack_request_header(self._guid, self._seq)
+                            + body[4:])
+                moved += 1
+        return moved
+
+    def wait(self, seconds):
+        """Block until a reader has data or ``seconds`` pass."""
+        from cyclonedds.util import duration
+        self.waitset.wait(duration(seconds=seconds))
+
+    def _write(self, ep, data):
+        from cyclonedds._clayer import ddspy_write
+        # DDS samples are whole 4-byte words; the options' low bits count the padding
+        pad = -len(data) % 4
+        if pad:
+            data = data[:3] + bytes([data[3] | pad]) + data[4:] + bytes(pad)
+        result = ddspy_write(ep.entity._ref, data)
+        if result < 0:
+            raise RuntimeError(f"DDS write on {ep.name} failed with code {result}")
+        self.counts[ep.name]["sent"] += 1
+
+    def _reject(self, ep, reason):
+        self.counts[ep.name]["rejected"] += 1
+        self.rejections.append({"name": ep.name, "reason": reason})
+        self.log(f"ros2 bridge: {ep.name}: rejected a {ep.typename} from DDS: {reason}")
+
+    def _decode(self, ep, data):
+        """The sample's value, or ``None`` after rejecting it."""
+        try:
+            value = decode_cdr(self.library, ep.typename, data, padded=True)
+        except WireError as exc:
+            self._reject(ep, str(exc))
+            return None
+        reason = self.accepts(ep.name, value) if self.accepts is not None else None
+        if reason:
+            self._reject(ep, reason)
+            return None
+        return value
+
+    def _topic_sample(self, ep, data):
+        value = self._decode(ep, data)
+        if value is not None:
+            self._injected.add(id(value))
+            self.broker.publish(ep.key, value)
+            self.counts[ep.name]["delivered"] += 1
+
+    def _split(self, ep, data):
+        """(guid, seq, the message's own CDR) of a service sample, or ``None``."""
+        try:
+            guid, seq = unpack_request_header(data[4:])
+        except ValueError as exc:
+            self._reject(ep, str(exc))
+            return None
+        return guid, seq, data[:4] + data[20:]
+
+    def _service_request(self, ep, data):
+        split = self._split(ep, data)
+        if split is None:
+            return
+        guid, seq, body = split
+        value = self._decode(ep, body)
+        if value is None:
+            return
+        self.counts[ep.name]["delivered"] += 1
+        self._calls += 1
+
+        async def call():
+            try:
+                response = await self.broker.call(ep.key, value)
+                reply = encode_cdr(self.library, ep.reply.typename, response)
+                self._write(ep.reply, CDR_LE_HEADER + pack_request_header(guid, seq)
+                            + reply[4:])
+            finally:
+                self._calls -= 1
+        self.spawn(call())
+
+    def _service_reply(self, ep, data):
+        split = self._split(ep, data)
+        if split is None:
+            return
+        guid, seq, body = split
+        if guid != self._guid:
+            return                      # another client's reply
+        if seq not in ep.pending:
+            self._reject(ep, f"a reply to call {seq}, which this bridge did not make or "
+                             f"already has")
+            return
+        value = self._decode(ep, body)
+        if value is None:
+            return
+        ep.pending.pop(seq).put(value)
+        self.counts[ep.name]["delivered"] += 1

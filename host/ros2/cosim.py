@@ -1,0 +1,79 @@
+"""``rosgate sim --ros2`` inside the simulator: start the bridge, serve until told to stop.
+
+The run has no simulated-time limit. Every ``POLL_CYCLES`` the bridge moves what waits in
+either direction; once the system has done nothing for ``IDLE_CYCLES`` (no OS call, memory
+access or message) the simulator blocks on DDS for up to ``IDLE_WAIT_S`` of wall time, so an
+idle system costs no processor time. SIGINT or SIGTERM (or the stop file the ``rosgate``
+process writes when it gets them) ends the run cleanly: the participant is deleted, the
+results and files are written, the simulator exits.
+"""
+
+import signal
+from pathlib import Path
+
+from cocotb.triggers import ClockCycles
+
+from .bridge import Ros2Bridge
+from .graph import ros_interfaces
+
+__all__ = ["start_bridge", "serve_ros2", "POLL_CYCLES", "IDLE_CYCLES", "IDLE_WAIT_S"]
+
+POLL_CYCLES = 2_000
+IDLE_CYCLES = 20_000
+IDLE_WAIT_S = 0.05
+
+_stop = {"signal": None}
+
+
+def _on_signal(signum, frame):
+    _stop["signal"] = signal.Signals(signum).name
+
+
+def start_bridge(ctx, module, options):
+    """Create and start the bridge for ``ctx.project``; log what it shows on DDS.
+
+    ``options``: ``domain`` (int), ``stop_file`` (path or None). ``module`` is the project's
+    ``sim.py``: its ``accepts(ctx, name, value)``, if any, states the hardware's limits for
+    messages arriving from DDS."""
+    import cocotb
+
+    from gen.config import project_library
+    accepts = getattr(module, "accepts", None) if module is not None else None
+    bridge = Ros2Bridge(
+        ros_interfaces(ctx.project), project_library(ctx.project), ctx.broker,
+        domain=int(options["domain"]), log=ctx.log, spawn=cocotb.start_soon,
+        accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None)
+    shown = bridge.start()
+    ctx.log(f"ros2 bridge: joined DDS domain {bridge.domain} with "
+            f"{len(shown)} interfaces: {'; '.join(shown) or 'none'}")
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _on_signal)
+    return bridge
+
+
+def _stop_requested(options):
+    if _stop["signal"] is not None:
+        return _stop["signal"]
+    stop_file = options.get("stop_file")
+    if stop_file and Path(stop_file).exists():
+        return Path(stop_file).read_text().strip() or "a stop request"
+    return None
+
+
+async def serve_ros2(cosim, ctx, bridge, options, failures):
+    """Run the system and the bridge until a signal, a stop file, or a node fails."""
+    def activity():
+        return (cosim.runtime.commands, cosim.memory_accesses, cosim.broker.events)
+    last, quiet = activity(), 0
+    while not failures and (why := _stop_requested(options)) is None:
+        moved = bridge.poll()
+        await ClockCycles(cosim.dut.aclk, POLL_CYCLES)
+        now = activity()
+        if moved or now != last or ctx._sleeping:
+            last, quiet = now, 0
+            continue
+        quiet += POLL_CYCLES
+        if quiet >= IDLE_CYCLES:
+            bridge.wait(IDLE_WAIT_S)
+    if not failures:
+        ctx.log(f"ros2 bridge: stopping on {why} after {ctx.now()} cycles")

@@ -1,0 +1,183 @@
+"""An independent ROS 2 participant for the bridge's tests: Cyclone DDS with DDS types
+written here by hand from the ROS 2 interface definitions and ROS 2's DDS naming (not from
+the project's type generation), rmw_cyclonedds_cpp's service request header
+(``uint64 guid, int64 seq`` before the request's fields), and ``rosgate sim --ros2`` run as a
+user runs it, in its own process, stopped with SIGTERM."""
+
+import contextlib
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl import types as t
+from cyclonedds.idl.annotations import final
+
+from host.ros2.bridge import LOOPBACK_CONFIG
+
+ROOT = Path(__file__).resolve().parents[2]
+_domains = itertools.count()
+
+
+def unique_domain():
+    """A DDS domain id no other test process of this run uses (pid and a counter)."""
+    return 1 + (os.getpid() * 13 + next(_domains) * 7) % 230
+
+
+def loopback_environment():
+    os.environ["CYCLONEDDS_URI"] = LOOPBACK_CONFIG
+    return dict(os.environ)
+
+
+@dataclass
+@final
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: t.int32
+    nanosec: t.uint32
+
+
+@dataclass
+@final
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+@final
+class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    header: Header
+    height: t.uint32
+    width: t.uint32
+    encoding: str
+    is_bigendian: t.uint8
+    step: t.uint32
+    data: t.sequence[t.uint8]
+
+
+@dataclass
+@final
+class ImageWideFlag(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    """A wrong layout of Image, ``is_bigendian`` as uint32 (for raw bytes only)."""
+    header: Header
+    height: t.uint32
+    width: t.uint32
+    encoding: str
+    is_bigendian: t.uint32
+    step: t.uint32
+    data: t.sequence[t.uint8]
+
+
+@dataclass
+@final
+class SobelSrvRequest(IdlStruct, typename="application_msgs::srv::dds_::SobelSrv_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    img: Image
+
+
+@dataclass
+@final
+class SobelSrvResponse(IdlStruct, typename="application_msgs::srv::dds_::SobelSrv_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    img: Image
+
+
+def image(pixels, sec=0, frame_id="camera"):
+    height, width = pixels.shape[:2]
+    return Image(Header(Time(sec, 0), frame_id), height, width, "bgr8", 0, width * 3,
+                 list(pixels.tobytes()))
+
+
+class Peer:
+    """A participant on ``domain`` with reliable keep-last-10 volatile QoS (ROS 2's
+    default)."""
+
+    def __init__(self, domain):
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.util import duration
+        self.participant = DomainParticipant(domain)
+        self.qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
+                       Policy.History.KeepLast(10))
+
+    def writer(self, name, idl):
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+        return DataWriter(self.participant, Topic(self.participant, name, idl), qos=self.qos)
+
+    def reader(self, name, idl):
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+        return DataReader(self.participant, Topic(self.participant, name, idl), qos=self.qos)
+
+    @staticmethod
+    def wait_matched(entity, timeout=60):
+        status = (entity.get_publication_matched_status if hasattr(entity, "write")
+                  else entity.get_subscription_matched_status)
+        deadline = time.monotonic() + timeout
+        while status().current_count == 0:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no match on {entity.topic.name} within {timeout} s")
+            time.sleep(0.02)
+
+    @staticmethod
+    def take_raw(reader, timeout=120):
+        """The next sample's bytes as they came from DDS."""
+        from cyclonedds._clayer import ddspy_take
+        from cyclonedds.core import InstanceState, SampleState, ViewState
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            got = ddspy_take(reader._ref, SampleState.Any | ViewState.Any | InstanceState.Any,
+                             1)
+            if got and got[0][1].valid_data:
+                return bytes(got[0][0])
+            time.sleep(0.005)
+        raise TimeoutError(f"nothing on {reader.topic.name} within {timeout} s")
+
+    @staticmethod
+    def write_raw(writer, data):
+        from cyclonedds._clayer import ddspy_write
+        data = bytes(data) + bytes(-len(data) % 4)
+        assert ddspy_write(writer._ref, data) >= 0
+
+
+@contextlib.contextmanager
+def ros2_sim(build_cfg, sim, out, domain, *extra, ready_timeout=900):
+    """``rosgate sim <build_cfg> --ros2`` in its own process until the bridge has joined;
+    SIGTERM on leaving, which must end it cleanly (exit 0, results written)."""
+    env = loopback_environment()
+    command = [sys.executable, "-m", "host.cli", "sim", str(build_cfg), "--sim", sim, "--ros2",
+               "--domain", str(domain), "-o", str(out), *extra]
+    log = open(Path(out).parent / f"{Path(out).name}.console", "w")
+    process = subprocess.Popen(command, cwd=ROOT, env=env, stdout=log,
+                               stderr=subprocess.STDOUT, start_new_session=True)
+    progress = Path(out) / "sim_progress.jsonl"
+    deadline = time.monotonic() + ready_timeout
+    try:
+        while not (progress.is_file() and "joined DDS domain" in progress.read_text()):
+            if process.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"rosgate sim --ros2 did not start: "
+                                   f"{(Path(out).parent / f'{Path(out).name}.console').read_text()}")
+            time.sleep(0.2)
+        yield process
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+        try:
+            process.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            raise
+        log.close()
+
+
+def results(out):
+    return json.loads((Path(out) / "sim_results.json").read_text())

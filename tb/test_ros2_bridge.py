@@ -1,0 +1,272 @@
+"""``rosgate sim --ros2``: the co-simulated system on a Cyclone DDS domain, reached by an
+independent participant (tb/models/ros2_peer.py: hand-written DDS types, rmw_cyclonedds_cpp's
+request header) on loopback, each test on its own domain id.
+
+* DDS names and types: topic, service and type names as ROS 2 maps them; the bridge's DDS
+  types serialize byte for byte as rosbags does.
+* The Sobel/DIP demo from DDS: images published on ``rt/image_raw`` come back on
+  ``rt/image_filtered`` equal to OpenCV's Sobel edge image, their bytes equal to what rosbags
+  serializes; a call of the hardware Sobel service from a DDS client; bad samples (truncated,
+  wrong layout, oversized sequence, an image the hardware cannot take) rejected and counted,
+  the next image delivered; SIGTERM ends the run cleanly.
+* A hardware client calling a service that the test serves on DDS (the DIP node alone).
+"""
+
+import random
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from gen.msg import MessageLibrary
+from host.ros2.graph import (
+    absolute_name,
+    dds_topic_name,
+    dds_type_name,
+    ros_interfaces,
+    service_topic_names,
+)
+
+from .harness import ROOT
+from .models import ros2_peer as peer
+from .models.image import IMAGES
+
+SOBEL_DIP = ROOT / "examples" / "sobel_dip" / "build.cfg"
+
+
+def opencv_edges(pixels):
+    gx = cv2.Sobel(pixels, cv2.CV_16S, 1, 0, ksize=3)
+    gy = cv2.Sobel(pixels, cv2.CV_16S, 0, 1, ksize=3)
+    return cv2.add(cv2.convertScaleAbs(gx), cv2.convertScaleAbs(gy))
+
+
+def rosbags_cdr(sample, typename="sensor_msgs/msg/Image"):
+    """rosbags' CDR of a hand-written Image sample."""
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    T = store.types
+    msg = T[typename](
+        header=T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=sample.header.stamp.sec,
+                                                   nanosec=sample.header.stamp.nanosec),
+            frame_id=sample.header.frame_id),
+        height=sample.height, width=sample.width, encoding=sample.encoding,
+        is_bigendian=sample.is_bigendian, step=sample.step,
+        data=np.array(sample.data, np.uint8))
+    return bytes(store.serialize_cdr(msg, typename))
+
+
+def test_names_follow_ros2_mapping():
+    assert dds_topic_name("/image_raw") == "rt/image_raw"
+    assert dds_topic_name("filtered") == "rt/filtered"
+    assert dds_topic_name("/a/b") == "rt/a/b"
+    assert dds_type_name("sensor_msgs/msg/Image") == "sensor_msgs::msg::dds_::Image_"
+    assert dds_type_name("my_pkg/srv/Sort_Request") == "my_pkg::srv::dds_::Sort_Request_"
+    assert service_topic_names("srv") == ("rq/srvRequest", "rr/srvReply")
+    assert service_topic_names("/a/b") == ("rq/a/bRequest", "rr/a/bReply")
+    for bad in ("", "/", "a//b", "a/", "1abc", "a b"):
+        with pytest.raises(ValueError, match="not a valid ROS 2"):
+            absolute_name(bad, "build.cfg:3")
+    with pytest.raises(ValueError, match="pkg/msg/Type"):
+        dds_type_name("Image")
+
+
+def test_interfaces_of_the_examples():
+    from gen.config import load_project
+    graph = ros_interfaces(load_project(SOBEL_DIP))
+    assert {n: (t.msgtype, t.publishers, t.subscribers) for n, t in graph.topics.items()} == {
+        "/image_raw": ("sensor_msgs/msg/Image", [], ["DIP"]),
+        "/image_filtered": ("sensor_msgs/msg/Image", ["DIP"], [])}
+    service = graph.services["/sobelservice"]
+    assert (service.srvtype, service.servers, service.clients, service.key) == \
+        ("application_msgs/srv/SobelSrv", ["Sobel"], ["DIP"], "sobelservice")
+
+
+def test_dds_types_serialize_as_rosbags():
+    """The bridge's generated DDS types against rosbags for messages with nested types,
+    strings, bounded strings, fixed and bounded arrays and sequences of messages."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from host.ros2.types import DdsTypes
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    library = MessageLibrary([], store="ros2_humble")
+    types = DdsTypes(library)
+    rng = random.Random()
+    T = store.types
+    stamp = T["builtin_interfaces/msg/Time"](sec=rng.randrange(1 << 31), nanosec=7)
+    header = T["std_msgs/msg/Header"](stamp=stamp, frame_id="base_link")
+    cases = {
+        "sensor_msgs/msg/Image": T["sensor_msgs/msg/Image"](
+            header=header, height=2, width=3, encoding="mono8", is_bigendian=0, step=3,
+            data=np.frombuffer(rng.randbytes(6), np.uint8)),
+        "sensor_msgs/msg/JointState": T["sensor_msgs/msg/JointState"](
+            header=header, name=["a", "bc", ""], position=np.array([1.5, -2.0]),
+            velocity=np.array([], np.float64), effort=np.array([0.25])),
+        "geometry_msgs/msg/PoseWithCovariance": T["geometry_msgs/msg/PoseWithCovariance"](
+            pose=T["geometry_msgs/msg/Pose"](
+                position=T["geometry_msgs/msg/Point"](x=1.0, y=2.0, z=3.0),
+                orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)),
+            covariance=np.arange(36, dtype=np.float64)),
+        "visualization_msgs/msg/MarkerArray": T["visualization_msgs/msg/MarkerArray"](
+            markers=[]),
+        "std_msgs/msg/Empty": T["std_msgs/msg/Empty"](),
+    }
+    for typename, msg in cases.items():
+        raw = bytes(store.serialize_cdr(msg, typename))
+        idl = types.message(typename)
+        assert idl.__idl_typename__ == dds_type_name(typename)
+        assert idl.deserialize(raw).serialize() == raw, typename
+
+
+@pytest.fixture
+def photo():
+    return cv2.imread(str(IMAGES / "coffee_80x60.png"))
+
+
+def test_sobel_dip_from_dds(tmp_path, photo):
+    """A DDS participant drives the Sobel/DIP system (Verilator) as ROS 2 nodes would."""
+    rng = np.random.default_rng()
+    odd = rng.integers(0, 256, (17, 33, 3), np.uint8)
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    with peer.ros2_sim(SOBEL_DIP, "verilator", out, domain):
+        p = peer.Peer(domain)
+        raw_writer = p.writer("rt/image_raw", peer.Image)
+        filtered = p.reader("rt/image_filtered", peer.Image)
+        p.wait_matched(raw_writer)
+        p.wait_matched(filtered)
+
+        def round_trip(pixels, sec):
+            raw_writer.write(peer.image(pixels, sec))
+            data = p.take_raw(filtered)
+            sample = peer.Image.deserialize(data)
+            got = np.array(sample.data, np.uint8).reshape(pixels.shape)
+            assert (sample.height, sample.width, sample.encoding, sample.step) == \
+                (pixels.shape[0], pixels.shape[1], "bgr8", pixels.shape[1] * 3)
+            assert np.array_equal(got, opencv_edges(pixels))
+            cdr = rosbags_cdr(sample)
+            assert data[4:len(cdr)] == cdr[4:] and not any(data[len(cdr):]), \
+                "the sample's bytes differ from rosbags' CDR"
+            assert data[:3] == cdr[:3] and data[3] & 3 == -len(cdr) % 4
+
+        round_trip(photo, 1)
+        round_trip(odd, 2)
+
+        # bad samples: each rejected with a log line and counted; the next image arrives.
+        # (Cyclone itself refuses structurally broken CDR, such as a sequence count past the
+        # end, at the writer and at the reader: test_bridge_rejects_undecodable_samples.)
+        full = peer.image(photo, 4)
+        wrong_layout = peer.ImageWideFlag(full.header, full.height, full.width, full.encoding,
+                                          full.is_bigendian, full.step, full.data).serialize()
+        trailing = peer.image(photo[:20, :30], 3).serialize() + bytes(range(1, 9))
+        longer = peer.image(photo[:20, :30], 5)
+        longer.data = longer.data * 3                   # more data than 30x20 bgr8 holds
+        too_big = peer.image(np.zeros((500, 700, 3), np.uint8), 6).serialize()
+        for data in (wrong_layout, trailing, longer.serialize(), too_big):
+            p.write_raw(raw_writer, data)
+        round_trip(photo[5:50, 7:70], 6)
+
+        # the hardware Sobel service, called from DDS with rmw_cyclonedds_cpp's header
+        request_writer = p.writer("rq/sobelserviceRequest", peer.SobelSrvRequest)
+        replies = p.reader("rr/sobelserviceReply", peer.SobelSrvResponse)
+        p.wait_matched(request_writer)
+        p.wait_matched(replies)
+        crop = photo[10:40, 20:61]
+        request_writer.write(peer.SobelSrvRequest(0x1122334455667788, 41, peer.image(crop)))
+        reply = peer.SobelSrvResponse.deserialize(p.take_raw(replies))
+        assert (reply.guid, reply.seq) == (0x1122334455667788, 41)
+        assert np.array_equal(np.array(reply.img.data, np.uint8).reshape(crop.shape),
+                              opencv_edges(crop))
+    got = peer.results(out)["ros2"]
+    assert got["counts"]["/image_raw"] == {"received": 7, "delivered": 3, "rejected": 4,
+                                           "sent": 0}, got
+    assert got["counts"]["/image_filtered"]["sent"] == 3, got
+    assert got["counts"]["/sobelservice"]["delivered"] == 1, got
+    reasons = [r["reason"] for r in got["rejections"]]
+    assert "left over" in reasons[1] and "5400 data bytes" in reasons[2], reasons
+    assert "700x500" in reasons[3], reasons
+    console = (tmp_path / "out.console").read_text()
+    assert console.count("rejected a sensor_msgs/msg/Image from DDS") == 4, console
+    assert "stopping on SIGTERM" in console and "wrote" in console.splitlines()[-1], console
+    assert not (out / "sim_error.json").exists()
+
+
+class FakeBroker:
+    def __init__(self):
+        self.published = []
+
+    def publish(self, topic, value):
+        self.published.append((topic, value))
+
+
+def test_bridge_rejects_undecodable_samples():
+    """Samples Cyclone lets through only from peers that do not check CDR: truncated, a
+    sequence count past the end, non-zero padding; each rejected and counted, the broker
+    untouched; a good sample after them delivered. A Cyclone writer refuses the same bytes."""
+    from host.ros2.bridge import Ros2Bridge, _Endpoint
+    library = MessageLibrary([], store="ros2_humble")
+    lines = []
+    broker = FakeBroker()
+    bridge = Ros2Bridge(None, library, broker, domain=0, log=lines.append, spawn=None)
+    ep = _Endpoint("/image_raw", "sensor_msgs/msg/Image", None, "/image_raw")
+    pixels = np.arange(24, dtype=np.uint8).reshape(2, 4, 3)
+    good = peer.image(pixels).serialize()
+    count_at = len(good) - 24 - 4
+    bad = [good[:40], good[:count_at] + (1 << 31).to_bytes(4, "little") + good[count_at + 4:],
+           good[:-1], b"\x00\x00\x00\x00" + good[4:]]
+    for data in bad + [good]:
+        bridge._topic_sample(ep, data)
+    assert bridge.counts["/image_raw"] == {"received": 0, "delivered": 1, "rejected": 4,
+                                           "sent": 0}
+    assert len(lines) == 4 and all("rejected a sensor_msgs/msg/Image" in x for x in lines)
+    assert "big-endian" in lines[3] or "little-endian" in lines[3], lines
+    assert [v["data"] for _, v in broker.published] == [pixels.tobytes()]
+
+
+def test_hardware_client_calls_a_dds_service(tmp_path, photo):
+    """The DIP node alone (Icarus): its Sobel service is served by this test on DDS; the
+    image it publishes is what the test's server answered. A reply to a call nobody made is
+    rejected and counted."""
+    project = tmp_path / "dip_only"
+    shutil.copytree(SOBEL_DIP.parent, project)
+    text = (project / "build.cfg").read_text()
+    text = text.replace("[HwSlot@SobelDIP(0:1)]", "[HwSlot@SobelDIP(0:0)]")
+    text = text[:text.index("[ResourceGroup@ResourceGroupSobel]")] + \
+        text[text.index("[ResourceGroup@ResourceGroupDIP]"):text.index("[ReconosThread@Sobel]")] \
+        + text[text.index("[ReconosThread@DIP]"):].replace("SobelDIP(1)", "SobelDIP(0)")
+    (project / "build.cfg").write_text(text)
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    pixels = photo[:12, :16]
+    with peer.ros2_sim(project / "build.cfg", "icarus", out, domain):
+        p = peer.Peer(domain)
+        requests = p.reader("rq/sobelserviceRequest", peer.SobelSrvRequest)
+        replies = p.writer("rr/sobelserviceReply", peer.SobelSrvResponse)
+        raw_writer = p.writer("rt/image_raw", peer.Image)
+        filtered = p.reader("rt/image_filtered", peer.Image)
+        for entity in (requests, replies, raw_writer, filtered):
+            p.wait_matched(entity)
+        raw_writer.write(peer.image(pixels, 9))
+        request = peer.SobelSrvRequest.deserialize(p.take_raw(requests))
+        assert np.array_equal(np.array(request.img.data, np.uint8).reshape(pixels.shape),
+                              pixels)
+        answer = opencv_edges(pixels)[::-1].copy()       # anything the hardware cannot make
+        replies.write(peer.SobelSrvResponse(request.guid, request.seq + 100,
+                                            peer.image(answer)))
+        replies.write(peer.SobelSrvResponse(request.guid, request.seq, peer.image(answer)))
+        sample = peer.Image.deserialize(p.take_raw(filtered))
+        assert np.array_equal(np.array(sample.data, np.uint8).reshape(pixels.shape), answer)
+    got = peer.results(out)["ros2"]
+    assert got["counts"]["/sobelservice"] == {"received": 2, "delivered": 1, "rejected": 1,
+                                              "sent": 1}, got
+    assert "did not make" in got["rejections"][0]["reason"]
+
+
+def test_ros2_options_need_ros2(capsys):
+    from host.cli import main as rosgate
+    assert rosgate(["sim", str(SOBEL_DIP), "--domain", "3"]) == 2
+    assert "--domain and --with-nodes need --ros2" in capsys.readouterr().err
+    assert rosgate(["sim", str(SOBEL_DIP), "--ros2", "--domain", "300"]) == 2
+    assert "--domain 300" in capsys.readouterr().err
+
