@@ -261,6 +261,11 @@ def _add_project_commands(commands):
     p.add_argument("--with-nodes", action="store_true",
                    help="with --ros2, also run sim.py's nodes (by default the ROS 2 graph "
                         "stands in for them)")
+    p.add_argument("--record", type=Path, default=None, metavar="DIR",
+                   help="write every message on the project's topics to a rosbag2 (MCAP) in "
+                        "the new folder DIR, stamped with simulated time")
+    p.add_argument("--trace", type=Path, default=None, metavar="FILE",
+                   help="write one readable line per message (time, topic, fields) to FILE")
     p = add("report", "resources per core (yosys synth_xilinx) and the last simulation's "
                       "numbers", _run_report)
     p.add_argument("--sim-results", type=Path, default=None,
@@ -380,6 +385,7 @@ def _run_sim(args):
                 p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
                 thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
                 waves=args.waves, progress=console.progress, ros2=ros2,
+                record=args.record, trace=args.trace,
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:
         console.error(exc)
@@ -396,6 +402,9 @@ def _run_sim(args):
     else:
         import json
         console.print(json.dumps(results, indent=2))
+    for path, counts in results.get("recorded", {}).items():
+        console.print(f"recorded {sum(counts.values())} messages on {len(counts)} topics to "
+                      f"{path}")
     written = sorted(f.name for f in Path(out).iterdir()
                      if f.is_file() and f.stat().st_mtime >= started)
     console.done(f"{len(written)} files to {out}/ ({', '.join(written[:6])}"

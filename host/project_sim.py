@@ -42,7 +42,7 @@ import cocotb
 from cocotb.triggers import ClockCycles, Event, First
 
 from .reconos import ReconosCosim, Resource
-from .ros2.cosim import serve_ros2, start_bridge
+from .ros2.cosim import serve_ros2, start_bridge, start_recorders
 from .simulator import SimulationFailed, export_top, run_top, top_params
 from .toolchain import cache_dir
 
@@ -303,10 +303,11 @@ async def run_project(dut):
             if failures or (not running and not ros2):
                 ended.set()
 
-    bridge = None
+    bridge, recorders = None, []
     try:
         if module is not None and hasattr(module, "setup"):
             module.setup(ctx)
+        recorders = start_recorders(ctx, p.get("record"), p.get("trace"))
         if ros2:
             bridge = start_bridge(ctx, module, ros2)
         ctx._start = cocotb.utils.get_sim_time("ns")
@@ -340,6 +341,9 @@ async def run_project(dut):
         if bridge is not None:
             ctx.results["ros2"] = bridge.summary()
             bridge.close()
+        for recorder in recorders:
+            recorder.close()
+            ctx.results.setdefault("recorded", {})[str(recorder.path)] = recorder.counts
         ctx._progress.close()
     if cosim.runtime.errors:
         message = f"ReconOS protocol errors: {'; '.join(cosim.runtime.errors)}"
@@ -370,7 +374,8 @@ def _follow(path, show, stop):
 
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, seed=None, build_dir=None, quiet=True,
-                    waves=False, progress=None, log=None, ros2=None):
+                    waves=False, progress=None, log=None, ros2=None, record=None,
+                    trace=None):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
     Parameters
@@ -399,6 +404,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         Join a DDS domain instead of running to the nodes' end (``rosgate sim --ros2``):
         ``domain`` (int) and ``nodes`` (bool: run ``sim.py``'s nodes too). The run has no
         simulated-time limit; SIGINT or SIGTERM to this process ends it cleanly.
+    record, trace : path or None
+        Write every message on the project's topics to a rosbag2 (MCAP) at ``record`` (a new
+        folder), and one line per message to the text file ``trace``.
 
     Raises
     ------
@@ -436,6 +444,12 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
               "args": args, "thread_params": list(thread_params), "out": str(out),
               "limit_ms": float(limit_ms),
               "stall_ms": float(stall_ms)}
+    if record is not None:
+        if Path(record).exists():
+            raise ProjectError(f"--record {record}: the folder exists; rosbag2 writes a new one")
+        params["record"] = str(Path(record).resolve())
+    if trace is not None:
+        params["trace"] = str(Path(trace).resolve())
     if ros2 is not None:
         params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
                           "stop_file": str(out / STOP)}

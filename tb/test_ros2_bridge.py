@@ -130,7 +130,10 @@ def test_sobel_dip_from_dds(tmp_path, photo):
     odd = rng.integers(0, 256, (17, 33, 3), np.uint8)
     domain = peer.unique_domain()
     out = tmp_path / "out"
-    with peer.ros2_sim(SOBEL_DIP, "verilator", out, domain):
+    bag, trace = tmp_path / "bag", tmp_path / "trace.txt"
+    sent, received = [], []
+    with peer.ros2_sim(SOBEL_DIP, "verilator", out, domain, "--record", str(bag),
+                       "--trace", str(trace)):
         p = peer.Peer(domain)
         raw_writer = p.writer("rt/image_raw", peer.Image)
         filtered = p.reader("rt/image_filtered", peer.Image)
@@ -139,7 +142,9 @@ def test_sobel_dip_from_dds(tmp_path, photo):
 
         def round_trip(pixels, sec):
             raw_writer.write(peer.image(pixels, sec))
+            sent.append(pixels)
             data = p.take_raw(filtered)
+            received.append(data)
             sample = peer.Image.deserialize(data)
             got = np.array(sample.data, np.uint8).reshape(pixels.shape)
             assert (sample.height, sample.width, sample.encoding, sample.step) == \
@@ -190,6 +195,33 @@ def test_sobel_dip_from_dds(tmp_path, photo):
     assert console.count("rejected a sensor_msgs/msg/Image from DDS") == 4, console
     assert "stopping on SIGTERM" in console and "wrote" in console.splitlines()[-1], console
     assert not (out / "sim_error.json").exists()
+    check_recording(bag, trace, sent, received)
+
+
+def check_recording(bag, trace, sent, received):
+    """The bag, read back with rosbags: both topics with their type, the images sent on
+    /image_raw and the samples DDS delivered on /image_filtered, in order, at increasing
+    simulated times; the trace has one line per message."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections} == {
+            "/image_raw": "sensor_msgs/msg/Image", "/image_filtered": "sensor_msgs/msg/Image"}
+        got = {"/image_raw": [], "/image_filtered": []}
+        times = []
+        for connection, stamp, data in reader.messages():
+            got[connection.topic].append(reader.deserialize(data, connection.msgtype))
+            times.append(stamp)
+            if connection.topic == "/image_filtered":
+                out = received[len(got["/image_filtered"]) - 1]
+                assert bytes(data[4:]) == out[4:len(data)]   # DDS sets the padding count
+    assert times == sorted(times) and len(times) == 2 * len(sent)
+    assert [m.data.tobytes() for m in got["/image_raw"]] == [p.tobytes() for p in sent]
+    assert [(m.height, m.width) for m in got["/image_filtered"]] == \
+        [p.shape[:2] for p in sent]
+    lines = trace.read_text().splitlines()[1:]
+    assert len(lines) == 2 * len(sent)
+    assert all(" sensor_msgs/msg/Image " in x and "encoding='bgr8'" in x for x in lines)
 
 
 class FakeBroker:

@@ -20,6 +20,8 @@ class Broker:
         self._actions = {}
         #: publications, calls and goals so far (a measure of progress)
         self.events = 0
+        #: ``observer(topic, value)`` is called for every publication (recorders)
+        self.observers = []
 
     def subscribe(self, topic):
         q = Queue()
@@ -29,6 +31,8 @@ class Broker:
     def publish(self, topic, value):
         self.events += 1
         self.published[topic].append(value)
+        for observe in self.observers:
+            observe(topic, value)
         for q in self._subs[topic]:
             q.put(value)
 

@@ -16,7 +16,7 @@ from cocotb.triggers import ClockCycles
 from .bridge import Ros2Bridge
 from .graph import ros_interfaces
 
-__all__ = ["start_bridge", "serve_ros2", "POLL_CYCLES", "IDLE_CYCLES", "IDLE_WAIT_S"]
+__all__ = ["start_bridge", "serve_ros2", "start_recorders", "POLL_CYCLES", "IDLE_CYCLES", "IDLE_WAIT_S"]
 
 POLL_CYCLES = 2_000
 IDLE_CYCLES = 20_000
@@ -49,6 +49,40 @@ def start_bridge(ctx, module, options):
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _on_signal)
     return bridge
+
+
+def start_recorders(ctx, record, trace):
+    """A :class:`BagRecorder` at ``record`` and a :class:`TraceWriter` at ``trace`` (either
+    may be ``None``), fed by every publication on the project's topics."""
+    import cocotb
+
+    from gen.config import project_library
+    from .recorder import BagRecorder, TraceWriter
+    if record is None and trace is None:
+        return []
+    topics = ros_interfaces(ctx.project).topics
+    by_key = {t.key: t for t in topics.values()}
+    types = {t.name: t.msgtype for t in topics.values()}
+    recorders = []
+    if record is not None:
+        recorders.append(BagRecorder(record, project_library(ctx.project), types))
+    if trace is not None:
+        recorders.append(TraceWriter(trace, types))
+    unknown = set()
+
+    def observe(key, value):
+        topic = by_key.get(key)
+        if topic is None:
+            if key not in unknown:
+                unknown.add(key)
+                ctx.log(f"recorder: {key!r} is not a topic of the build.cfg; not recorded")
+            return
+        now = cocotb.utils.get_sim_time("ns")
+        for recorder in recorders:
+            recorder.write(topic.name, value, now)
+    ctx.broker.observers.append(observe)
+    ctx.log("recording " + ", ".join(f"{len(types)} topics to {r.path}" for r in recorders))
+    return recorders
 
 
 def _stop_requested(options):
