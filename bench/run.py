@@ -12,7 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import finemb, hmt, kernels, msg, net, reconos, reconos_apps, timing  # noqa: E402
+from bench import finemb, hmt, kernels, msg, net, reconos, reconos_apps, ros2, timing  # noqa: E402
 from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -28,6 +28,7 @@ BENCHES = [
      "kinematics)", kernels),
     ("network engine and TCPROS (goodput, seed paper's image transfers, resources)", net),
     ("FinEmbP lines of 1 to 16 PID nodes, the Python master through TAP, resources", finemb),
+    ("ROS 2 bridge: overhead per message against a Cyclone loopback round trip", ros2),
     ("timing: every core placed and routed on ECP5 (LFE5UM5G-85F-8), 3 seeds", timing),
 ]
 

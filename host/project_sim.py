@@ -313,7 +313,7 @@ async def run_project(dut):
         ctx._start = cocotb.utils.get_sim_time("ns")
         running.update((node, cocotb.start_soon(guarded(node))) for node in nodes)
         if ros2:
-            await serve_ros2(cosim, ctx, bridge, ros2, failures)
+            await serve_ros2(cosim, ctx, bridge, ros2, failures, created)
             if failures:
                 raise failures[0]
         else:

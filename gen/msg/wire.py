@@ -95,7 +95,8 @@ class _Codec:
             element = type_.element
             if isinstance(element, Primitive) and element.name in BYTE_ELEMENTS \
                     and len(items):
-                out.extend(bytes(bytearray(int(x) for x in items)))
+                out.extend(items if isinstance(items, (bytes, bytearray))
+                           else bytes(bytearray(int(x) for x in items)))
             else:
                 for i, x in enumerate(items):
                     self._value(out, element, x, f"{path}[{i}]")

@@ -15,7 +15,6 @@ class Broker:
 
     def __init__(self):
         self._subs = collections.defaultdict(list)
-        self.published = collections.defaultdict(list)   # topic -> values, in order
         self._services = {}
         self._actions = {}
         #: publications, calls and goals so far (a measure of progress)
@@ -30,7 +29,6 @@ class Broker:
 
     def publish(self, topic, value):
         self.events += 1
-        self.published[topic].append(value)
         for observe in self.observers:
             observe(topic, value)
         for q in self._subs[topic]:

@@ -162,15 +162,19 @@ class ReconosRuntime:
         self.errors = []
         #: OS calls read so far, and the call each slot's delegate is serving now
         self.commands = 0
+        #: register reads and writes on the AXI-Lite buses (a measure of progress)
+        self.bus_accesses = 0
         self.pending = {}
         self._threads = {}
 
     # ---- registers ----
     async def _read(self, bus, offset):
+        self.bus_accesses += 1
         resp = await bus.read(offset, self.arch.word_bytes)
         return int.from_bytes(resp.data, "little")
 
     async def _write(self, bus, offset, value):
+        self.bus_accesses += 1
         await bus.write(offset, (value & ((1 << self.w) - 1)).to_bytes(self.arch.word_bytes,
                                                                       "little"))
 

@@ -15,6 +15,7 @@ by the hardware's limits is dropped with one log line and counted; nothing else 
 
 import collections
 import os
+import time
 
 from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, encode_cdr
 
@@ -114,6 +115,13 @@ class Ros2Bridge:
         self._guid = int.from_bytes(os.urandom(8), "little") or 1
         self._seq = 0
         self.participant = None
+        #: the last TIMELINE messages across the bridge with wall-clock times
+        #: (``time.monotonic_ns``): ``in`` when handed to the system, ``out`` when the
+        #: system published it and when it was written to DDS
+        self.timeline = collections.deque(maxlen=self.TIMELINE)
+        self._published = {}
+
+    TIMELINE = 1000
 
     # --- set-up --------------------------------------------------------------------------
     def start(self):
@@ -124,6 +132,8 @@ class Ros2Bridge:
         self.participant = DomainParticipant(self.domain)
         self.waitset = WaitSet(self.participant)
         shown = []
+        self._published_keys = set()
+        self.broker.observers.append(self._observe)
         for topic in self.interfaces.topics.values():
             if topic.subscribers:
                 ep = self._reader(dds_topic_name(topic.name), self.types.message(topic.msgtype),
@@ -133,6 +143,7 @@ class Ros2Bridge:
                 ep = self._writer(dds_topic_name(topic.name), self.types.message(topic.msgtype),
                                   topic.name, topic.msgtype, topic.key)
                 self._outbound.append((self.broker.subscribe(topic.key), ep))
+                self._published_keys.add(topic.key)
             shown.append(f"{topic.name} [{topic.msgtype}]")
         for service in self.interfaces.services.values():
             request, reply = service_topic_names(service.name)
@@ -156,6 +167,10 @@ class Ros2Bridge:
                 self._clients.append((self.broker.server_queue(service.key), writer, pending))
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
         return shown
+
+    def _observe(self, key, value):
+        if key in self._published_keys:
+            self._published[id(value)] = time.monotonic_ns()
 
     def _topic(self, name, idl):
         from cyclonedds.topic import Topic
@@ -186,7 +201,7 @@ class Ros2Bridge:
         """Counts per interface and every rejection, for ``sim_results.json``."""
         return {"domain": self.domain, "counts": {k: dict(v) for k, v in self.counts.items()},
                 "rejected": sum(v["rejected"] for v in self.counts.values()),
-                "rejections": list(self.rejections)}
+                "rejections": list(self.rejections), "timeline": list(self.timeline)}
 
     # --- running -------------------------------------------------------------------------
     @property
@@ -211,10 +226,15 @@ class Ros2Bridge:
                     moved += 1
         for queue, ep in self._outbound:
             while (value := queue.get_nowait()) is not None:
+                published = self._published.pop(id(value), None)
                 if id(value) in self._injected:
                     self._injected.discard(id(value))
                     continue
-                self._write(ep, encode_cdr(self.library, ep.typename, value))
+                data = encode_cdr(self.library, ep.typename, value)
+                self._write(ep, data)
+                self.timeline.append({"direction": "out", "name": ep.name, "bytes": len(data),
+                                      "published_ns": published,
+                                      "written_ns": time.monotonic_ns()})
                 moved += 1
         for queue, writer, pending in self._clients:
             while (item := queue.get_nowait()) is not None:
@@ -265,6 +285,8 @@ class Ros2Bridge:
         value = self._decode(ep, data)
         if value is not None:
             self._injected.add(id(value))
+            self.timeline.append({"direction": "in", "name": ep.name, "bytes": len(data),
+                                  "ingress_ns": time.monotonic_ns()})
             self.broker.publish(ep.key, value)
             self.counts[ep.name]["delivered"] += 1
 

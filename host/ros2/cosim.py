@@ -1,25 +1,28 @@
 """``rosgate sim --ros2`` inside the simulator: start the bridge, serve until told to stop.
 
 The run has no simulated-time limit. Every ``POLL_CYCLES`` the bridge moves what waits in
-either direction; once the system has done nothing for ``IDLE_CYCLES`` (no OS call, memory
-access or message) the simulator blocks on DDS for up to ``IDLE_WAIT_S`` of wall time, so an
-idle system costs no processor time. SIGINT or SIGTERM (or the stop file the ``rosgate``
-process writes when it gets them) ends the run cleanly: the participant is deleted, the
-results and files are written, the simulator exits.
+either direction. Once every hardware thread waits in an OS call and nothing has happened (no
+OS call, register access, memory access or message) for ``IDLE_POLLS`` polls, the system
+cannot move by itself: the simulator blocks on DDS for up to ``IDLE_WAIT_S`` of wall time, so
+an idle system costs no processor time. A thread that computes without OS calls keeps the
+simulation running. SIGINT or SIGTERM (or the stop file the ``rosgate`` process writes when
+it gets them) ends the run cleanly: the participant is deleted, the results and files are
+written, the simulator exits.
 """
 
 import signal
 from pathlib import Path
 
-from cocotb.triggers import ClockCycles
+from cocotb.triggers import Timer
 
 from .bridge import Ros2Bridge
 from .graph import ros_interfaces
 
-__all__ = ["start_bridge", "serve_ros2", "start_recorders", "POLL_CYCLES", "IDLE_CYCLES", "IDLE_WAIT_S"]
+__all__ = ["start_bridge", "serve_ros2", "start_recorders", "POLL_CYCLES", "IDLE_POLLS",
+           "IDLE_WAIT_S"]
 
-POLL_CYCLES = 2_000
-IDLE_CYCLES = 20_000
+POLL_CYCLES = 200
+IDLE_POLLS = 1
 IDLE_WAIT_S = 0.05
 
 _stop = {"signal": None}
@@ -94,20 +97,24 @@ def _stop_requested(options):
     return None
 
 
-async def serve_ros2(cosim, ctx, bridge, options, failures):
-    """Run the system and the bridge until a signal, a stop file, or a node fails."""
+async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
+    """Run the system and the bridge until a signal, a stop file, or a node fails.
+    ``slots``: the slots that run a thread."""
     def activity():
-        return (cosim.runtime.commands, cosim.memory_accesses, cosim.broker.events)
+        return (cosim.runtime.commands, cosim.runtime.bus_accesses, cosim.memory_accesses,
+                cosim.broker.events)
     last, quiet = activity(), 0
+    # one timer, not ClockCycles: cocotb would run Python at every one of the clock edges
+    poll = Timer(round(POLL_CYCLES * 1000 / ctx.clock_mhz), "ns")
     while not failures and (why := _stop_requested(options)) is None:
         moved = bridge.poll()
-        await ClockCycles(cosim.dut.aclk, POLL_CYCLES)
+        await poll
         now = activity()
         if moved or now != last or ctx._sleeping:
             last, quiet = now, 0
             continue
-        quiet += POLL_CYCLES
-        if quiet >= IDLE_CYCLES:
+        quiet += 1
+        if quiet >= IDLE_POLLS and all(s in cosim.runtime.pending for s in slots):
             bridge.wait(IDLE_WAIT_S)
     if not failures:
         ctx.log(f"ros2 bridge: stopping on {why} after {ctx.now()} cycles")

@@ -107,6 +107,7 @@ class Peer:
         self.participant = DomainParticipant(domain)
         self.qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
                        Policy.History.KeepLast(10))
+        self._waitsets = {}
 
     def writer(self, name, idl):
         from cyclonedds.pub import DataWriter
@@ -128,18 +129,22 @@ class Peer:
                 raise TimeoutError(f"no match on {entity.topic.name} within {timeout} s")
             time.sleep(0.02)
 
-    @staticmethod
-    def take_raw(reader, timeout=120):
-        """The next sample's bytes as they came from DDS."""
+    def take_raw(self, reader, timeout=120):
+        """The next sample's bytes as they came from DDS (waits on a WaitSet)."""
         from cyclonedds._clayer import ddspy_take
-        from cyclonedds.core import InstanceState, SampleState, ViewState
+        from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+        from cyclonedds.util import duration
+        mask = SampleState.Any | ViewState.Any | InstanceState.Any
+        if id(reader) not in self._waitsets:
+            waitset = WaitSet(self.participant)
+            waitset.attach(ReadCondition(reader, mask))
+            self._waitsets[id(reader)] = waitset
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            got = ddspy_take(reader._ref, SampleState.Any | ViewState.Any | InstanceState.Any,
-                             1)
+            got = ddspy_take(reader._ref, mask, 1)
             if got and got[0][1].valid_data:
                 return bytes(got[0][0])
-            time.sleep(0.005)
+            self._waitsets[id(reader)].wait(duration(milliseconds=100))
         raise TimeoutError(f"nothing on {reader.topic.name} within {timeout} s")
 
     @staticmethod
@@ -156,7 +161,8 @@ def ros2_sim(build_cfg, sim, out, domain, *extra, ready_timeout=900):
     env = loopback_environment()
     command = [sys.executable, "-m", "host.cli", "sim", str(build_cfg), "--sim", sim, "--ros2",
                "--domain", str(domain), "-o", str(out), *extra]
-    log = open(Path(out).parent / f"{Path(out).name}.console", "w")
+    console = Path(out).parent / f"{Path(out).name}.console"
+    log = open(console, "w")
     process = subprocess.Popen(command, cwd=ROOT, env=env, stdout=log,
                                stderr=subprocess.STDOUT, start_new_session=True)
     progress = Path(out) / "sim_progress.jsonl"
@@ -164,8 +170,7 @@ def ros2_sim(build_cfg, sim, out, domain, *extra, ready_timeout=900):
     try:
         while not (progress.is_file() and "joined DDS domain" in progress.read_text()):
             if process.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"rosgate sim --ros2 did not start: "
-                                   f"{(Path(out).parent / f'{Path(out).name}.console').read_text()}")
+                raise RuntimeError(f"rosgate sim --ros2 did not start: {console.read_text()}")
             time.sleep(0.2)
         yield process
     finally:
