@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from bench.report import write_report
+from host.ros2.cosim import POLL_CYCLES
 from tb.harness import ROOT, SIM_BUILD
 from tb.models import ros2_peer as peer
 
@@ -156,7 +157,8 @@ def markdown(results):
                      f"{r['ingress_per_rtt']:.2f} | {r['egress_per_rtt']:.2f} |")
     lines += ["", "Wall times of a Python bridge in the simulator's process: they include "
               "decoding and checking each sample (ingress), encoding it (egress) and the wait "
-              "for the bridge's next poll (every 2,000 simulated cycles); they say nothing "
+              f"for the bridge's next poll (every {POLL_CYCLES:,} simulated cycles); they say "
+              "nothing "
               "about the hardware, whose timing is in simulated cycles.", ""]
     return "\n".join(lines)
 
