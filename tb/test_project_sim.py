@@ -181,3 +181,17 @@ def test_sort_service_two_slots(sim, tmp_path):
                               limit_ms=20)
     assert results["slots_running"] == [0, 1]
     assert len(results["calls"]) == 6 and results["all_sorted"], results
+
+
+def test_sort_action_example(tmp_path):
+    """examples/sort_action on Icarus: goals of the block size are accepted, sorted, with
+    feedback rising to 100 %; a larger goal is rejected."""
+    results = run_project_sim(ROOT / "examples/sort_action/build.cfg", "icarus",
+                              out=tmp_path / "a", args={"goals": "2", "size": "256"},
+                              limit_ms=5)
+    assert [g["accepted"] for g in results["goals"]] == [True, True]
+    assert all(g["sorted"] and g["feedback"][-1] == 100.0 for g in results["goals"]), results
+    results = run_project_sim(ROOT / "examples/sort_action/build.cfg", "icarus",
+                              out=tmp_path / "b", args={"goals": "1", "size": "257"},
+                              limit_ms=5)
+    assert results["goals"] == [{"goal": 0, "size": 257, "accepted": False}]

@@ -302,3 +302,67 @@ def test_ros2_options_need_ros2(capsys):
     assert rosgate(["sim", str(SOBEL_DIP), "--ros2", "--domain", "300"]) == 2
     assert "--domain 300" in capsys.readouterr().err
 
+
+
+SORT_ACTION = ROOT / "examples" / "sort_action" / "build.cfg"
+
+
+def test_hardware_action_from_dds(tmp_path):
+    """The hardware sort action server (Icarus) used by a DDS action client the way
+    rcl_action does: send_goal, feedback, get_result, status; a goal larger than the server's
+    block size refused; cancels of a finished and of an unknown goal answered with their
+    error codes; a result request for an unknown goal answered STATUS_UNKNOWN."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    with peer.ros2_sim(SORT_ACTION, "icarus", out, domain):
+        p = peer.Peer(domain)
+        base = "sort/_action/"
+        send = p.writer(f"rq/{base}send_goalRequest", peer.SortSendGoalRequest)
+        sent = p.reader(f"rr/{base}send_goalReply", peer.SortSendGoalResponse)
+        ask = p.writer(f"rq/{base}get_resultRequest", peer.SortGetResultRequest)
+        results = p.reader(f"rr/{base}get_resultReply", peer.SortGetResultResponse)
+        cancel = p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest)
+        cancelled = p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse)
+        feedback = p.reader(f"rt/{base}feedback", peer.SortFeedbackMessage)
+        status = p.status_reader(f"rt/{base}status", peer.GoalStatusArray)
+        for entity in (send, sent, ask, results, cancel, cancelled, feedback, status):
+            p.wait_matched(entity)
+        guid = rng.randrange(1, 1 << 63)
+        uuid = peer.UUID(list(rng.randbytes(16)))
+        values = [rng.randrange(1 << 32) for _ in range(rng.randrange(100, 257))]
+        send.write(peer.SortSendGoalRequest(guid, 1, uuid, peer.SortGoal(values)))
+        reply = peer.SortSendGoalResponse.deserialize(p.take_raw(sent))
+        assert (reply.guid, reply.seq, reply.accepted) == (guid, 1, True)
+        ask.write(peer.SortGetResultRequest(guid, 2, uuid))
+        result = peer.SortGetResultResponse.deserialize(p.take_raw(results))
+        assert (result.seq, result.status, list(result.result.sorted)) == \
+            (2, 4, sorted(values))
+        percents = []
+        while not percents or percents[-1] < 100:
+            message = peer.SortFeedbackMessage.deserialize(p.take_raw(feedback))
+            assert list(message.goal_id.uuid) == list(uuid.uuid)
+            percents.append(message.feedback.percent)
+        assert percents == sorted(percents) and len(percents) >= 2
+        latest = peer.GoalStatusArray.deserialize(p.take_raw(status))
+        while latest.status_list[-1].status != 4:
+            latest = peer.GoalStatusArray.deserialize(p.take_raw(status))
+        assert list(latest.status_list[-1].goal_info.goal_id.uuid) == list(uuid.uuid)
+
+        too_many = [1] * 300
+        send.write(peer.SortSendGoalRequest(guid, 3, peer.UUID(list(rng.randbytes(16))),
+                                            peer.SortGoal(too_many)))
+        reply = peer.SortSendGoalResponse.deserialize(p.take_raw(sent))
+        assert (reply.seq, reply.accepted) == (3, False)
+        stranger = peer.UUID(list(rng.randbytes(16)))
+        for seq, goal_id, code in ((4, uuid, 3), (5, stranger, 2)):
+            cancel.write(peer.CancelGoalRequest(guid, seq, peer.GoalInfo(goal_id,
+                                                                         peer.Time(0, 0))))
+            answer = peer.CancelGoalResponse.deserialize(p.take_raw(cancelled))
+            assert (answer.seq, answer.return_code) == (seq, code)
+        ask.write(peer.SortGetResultRequest(guid, 6, stranger))
+        result = peer.SortGetResultResponse.deserialize(p.take_raw(results))
+        assert (result.seq, result.status, list(result.result.sorted)) == (6, 0, [])
+    got = peer.results(out)["ros2"]
+    assert got["counts"]["/sort/_action/cancel_goal"]["rejected"] == 1, got
+    assert got["counts"]["/sort/_action/get_result"]["rejected"] == 1, got

@@ -14,7 +14,7 @@ import struct
 from .model import Array, Named, Primitive
 
 __all__ = ["STRUCT_FORMAT", "WireError", "encode_cdr", "decode_cdr", "encode_ros1", "decode_ros1",
-           "CDR_LE_HEADER", "BYTE_ELEMENTS"]
+           "CDR_LE_HEADER", "BYTE_ELEMENTS", "default_value"]
 
 CDR_LE_HEADER = b"\x00\x01\x00\x00"
 
@@ -177,6 +177,26 @@ class _Codec:
         if isinstance(element, Primitive) and element.name in BYTE_ELEMENTS:
             return bytes(self._take(count, path))
         return [self._read(element, f"{path}[{i}]") for i in range(count)]
+
+
+def default_value(library, typename):
+    """The value a message of ``typename`` has when nothing is set: numbers 0, ``False``,
+    empty strings and sequences, fixed arrays of default elements (bytes for byte arrays)."""
+    def of(type_):
+        if isinstance(type_, Primitive):
+            if type_.is_string:
+                return ""
+            return False if type_.name == "bool" else \
+                0.0 if type_.name.startswith("float") else 0
+        if isinstance(type_, Named):
+            return default_value(library, type_.typename)
+        byte_elements = isinstance(type_.element, Primitive) and \
+            type_.element.name in BYTE_ELEMENTS
+        if isinstance(type_, Array):
+            return bytes(type_.length) if byte_elements else \
+                [of(type_.element) for _ in range(type_.length)]
+        return b"" if byte_elements else []
+    return {f.name: of(f.type) for f in library[typename].fields}
 
 
 def encode_cdr(library, typename, value):

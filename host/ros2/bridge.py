@@ -17,7 +17,8 @@ import collections
 import os
 import time
 
-from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, encode_cdr
+from gen.msg.parser import parse_srv
+from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, default_value, encode_cdr
 
 from .graph import dds_topic_name, service_topic_names
 from .types import DdsTypes, pack_request_header, unpack_request_header
@@ -43,6 +44,23 @@ def default_domain():
     return int(text)
 
 
+#: action_msgs/srv/CancelGoal (ROS 2's action_msgs; rosbags' type stores lack services)
+CANCEL_GOAL_SRV = """\
+action_msgs/GoalInfo goal_info
+---
+int8 ERROR_NONE=0
+int8 ERROR_REJECTED=1
+int8 ERROR_UNKNOWN_GOAL_ID=2
+int8 ERROR_GOAL_TERMINATED=3
+int8 return_code
+action_msgs/GoalInfo[] goals_canceling
+"""
+CANCEL_GOAL = "action_msgs/srv/CancelGoal"
+#: action_msgs/msg/GoalStatus
+STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
+CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
+
+
 class BridgeQos:
     """ROS 2's default QoS profile for topics and services (rmw_qos_profile_default):
     reliable, keep last ``depth``, volatile."""
@@ -52,11 +70,14 @@ class BridgeQos:
             raise ValueError(f"QoS history depth {depth!r}: expected an integer >= 1")
         self.depth = depth
 
-    def dds(self):
+    def dds(self, status=False):
+        """The profile; ``status``: an action's status topic (transient local, keep last 1,
+        as rcl_action's status profile)."""
         from cyclonedds.core import Policy, Qos
         from cyclonedds.util import duration
         return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
-                   Policy.History.KeepLast(self.depth), Policy.Durability.Volatile,
+                   Policy.History.KeepLast(1 if status else self.depth),
+                   Policy.Durability.TransientLocal if status else Policy.Durability.Volatile,
                    Policy.IgnoreLocal.Participant)
 
 
@@ -68,6 +89,18 @@ class _Endpoint:
         self.typename = typename    # the ROS 2 type of the message part
         self.entity = entity
         self.key = key              # the broker's name
+
+
+class _GoalRecord:
+    """A goal a DDS client sent to a hardware action server."""
+
+    def __init__(self, goal, stamp):
+        from cocotb.triggers import Event
+        self.goal = goal
+        self.stamp = stamp
+        self.status = STATUS_EXECUTING
+        self.result = None
+        self.done = Event()
 
 
 class Ros2Bridge:
@@ -88,10 +121,12 @@ class Ros2Bridge:
     spawn : callable
         Starts a coroutine beside the simulation (``cocotb.start_soon``), for service calls
         into the graph.
+    now_ns : callable
+        Simulated time in ns, for the stamps of action goals.
     """
 
     def __init__(self, interfaces, library, broker, *, domain, log, spawn, accepts=None,
-                 qos=None):
+                 qos=None, now_ns=time.monotonic_ns):
         if not isinstance(domain, int) or not 0 <= domain <= 232:
             raise ValueError(f"DDS domain {domain!r}: expected an integer 0..232")
         self.interfaces = interfaces
@@ -101,6 +136,7 @@ class Ros2Bridge:
         self.log = log
         self.spawn = spawn
         self.accepts = accepts
+        self.now_ns = now_ns
         self.qos = qos or BridgeQos()
         self.types = DdsTypes(library)
         #: per ROS 2 name: samples taken from DDS, delivered, rejected, and written to DDS
@@ -166,15 +202,48 @@ class Ros2Bridge:
                 self._inbound.append((ep, self._service_reply))
                 self._clients.append((self.broker.server_queue(service.key), writer, pending))
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
+        for action in self.interfaces.actions.values():
+            if action.servers:
+                self._serve_action(action)
+                shown.append(f"{action.name} [{action.actiontype}] (action served in hardware)")
         return shown
+
+    def _serve_action(self, action):
+        """An action served in hardware, as rcl_action shows it: the services send_goal,
+        get_result and cancel_goal and the topics feedback and status under
+        ``<action>/_action/``."""
+        if CANCEL_GOAL + "_Request" not in self.library:
+            for definition in parse_srv(CANCEL_GOAL_SRV, CANCEL_GOAL, "<action_msgs>"):
+                self.library.add(definition)
+        base, a = f"{action.name}/_action/", action.actiontype
+        goals = {}
+        for service, srvtype, handler in (("send_goal", f"{a}_SendGoal", self._send_goal),
+                                          ("get_result", f"{a}_GetResult", self._get_result),
+                                          ("cancel_goal", CANCEL_GOAL, self._cancel_goal)):
+            request, reply = service_topic_names(base + service)
+            ep = self._reader(request, self.types.service_part(srvtype + "_Request"),
+                              base + service, srvtype + "_Request", action.key)
+            ep.reply = self._writer(reply, self.types.service_part(srvtype + "_Response"),
+                                    base + service, srvtype + "_Response", action.key)
+            ep.goals = goals
+            self._inbound.append((ep, handler))
+        feedback = self._writer(dds_topic_name(base + "feedback"),
+                                self.types.message(f"{a}_FeedbackMessage"), base + "feedback",
+                                f"{a}_FeedbackMessage", action.key)
+        status = self._writer(dds_topic_name(base + "status"),
+                              self.types.message("action_msgs/msg/GoalStatusArray"),
+                              base + "status", "action_msgs/msg/GoalStatusArray", action.key,
+                              status=True)
+        for ep, _ in self._inbound[-3:]:
+            ep.feedback, ep.status = feedback, status
 
     def _observe(self, key, value):
         if key in self._published_keys:
             self._published[id(value)] = time.monotonic_ns()
 
-    def _topic(self, name, idl):
+    def _topic(self, name, idl, status=False):
         from cyclonedds.topic import Topic
-        return Topic(self.participant, name, idl, qos=self.qos.dds())
+        return Topic(self.participant, name, idl, qos=self.qos.dds(status))
 
     def _reader(self, dds_name, idl, name, typename, key):
         from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
@@ -185,9 +254,10 @@ class Ros2Bridge:
         self.waitset.attach(condition)
         return _Endpoint(name, typename, reader, key)
 
-    def _writer(self, dds_name, idl, name, typename, key):
+    def _writer(self, dds_name, idl, name, typename, key, status=False):
         from cyclonedds.pub import DataWriter
-        writer = DataWriter(self.participant, self._topic(dds_name, idl), qos=self.qos.dds())
+        writer = DataWriter(self.participant, self._topic(dds_name, idl, status),
+                            qos=self.qos.dds(status))
         return _Endpoint(name, typename, writer, key)
 
     def close(self):
@@ -336,3 +406,110 @@ class Ros2Bridge:
             return
         ep.pending.pop(seq).put(value)
         self.counts[ep.name]["delivered"] += 1
+
+    # --- actions served in hardware ------------------------------------------------------
+    def _stamp(self):
+        ns = int(self.now_ns())
+        return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+    def _reply(self, ep, guid, seq, value):
+        body = encode_cdr(self.library, ep.reply.typename, value)
+        self._write(ep.reply, CDR_LE_HEADER + pack_request_header(guid, seq) + body[4:])
+
+    def _publish_status(self, ep):
+        status_list = [{"goal_info": {"goal_id": {"uuid": uuid}, "stamp": r.stamp},
+                        "status": r.status} for uuid, r in ep.goals.items()]
+        self._write(ep.status, encode_cdr(self.library, ep.status.typename,
+                                          {"status_list": status_list}))
+
+    def _request(self, ep, data):
+        """(guid, seq, value) of a request, or ``None`` after rejecting it."""
+        split = self._split(ep, data)
+        if split is None:
+            return None
+        guid, seq, body = split
+        value = self._decode(ep, body)
+        return None if value is None else (guid, seq, value)
+
+    def _send_goal(self, ep, data):
+        request = self._request(ep, data)
+        if request is None:
+            return
+        guid, seq, value = request
+        uuid = bytes(value["goal_id"]["uuid"])
+        self.counts[ep.name]["delivered"] += 1
+        if uuid in ep.goals:
+            self._reject(ep, f"goal id {uuid.hex()} is already in use; refused")
+            self._reply(ep, guid, seq, {"accepted": False, "stamp": self._stamp()})
+            return
+        goal = self.broker.send_goal(ep.key, value["goal"], uuid)
+        self._calls += 1
+
+        async def decide():
+            try:
+                accepted = await goal.accepted.get()
+                stamp = self._stamp()
+                if accepted:
+                    record = ep.goals[uuid] = _GoalRecord(goal, stamp)
+                    self.spawn(self._goal_feedback(ep, goal))
+                    self.spawn(self._goal_result(ep, record))
+                    self._publish_status(ep)
+                self._reply(ep, guid, seq, {"accepted": accepted, "stamp": stamp})
+            finally:
+                self._calls -= 1
+        self.spawn(decide())
+
+    async def _goal_feedback(self, ep, goal):
+        while True:
+            value = await goal.feedback.get()
+            self._write(ep.feedback, encode_cdr(self.library, ep.feedback.typename, value))
+
+    async def _goal_result(self, ep, record):
+        response = await record.goal.result.get()
+        # ReconROS' ACTIONS_RESULT_SEND is rclc_action_send_result with GOAL_STATE_SUCCEEDED
+        record.result = {**response, "status": response.get("status") or STATUS_SUCCEEDED}
+        record.status = record.result["status"]
+        record.done.set()
+        self._publish_status(ep)
+
+    def _get_result(self, ep, data):
+        request = self._request(ep, data)
+        if request is None:
+            return
+        guid, seq, value = request
+        uuid = bytes(value["goal_id"]["uuid"])
+        record = ep.goals.get(uuid)
+        if record is None:
+            self._reject(ep, f"result of unknown goal {uuid.hex()}; answered STATUS_UNKNOWN")
+            self._reply(ep, guid, seq, default_value(self.library, ep.reply.typename))
+            return
+        self.counts[ep.name]["delivered"] += 1
+        record.goal.request_result()
+        self._calls += 1
+
+        async def answer():
+            try:
+                await record.done.wait()
+                self._reply(ep, guid, seq, record.result)
+            finally:
+                self._calls -= 1
+        self.spawn(answer())
+
+    def _cancel_goal(self, ep, data):
+        request = self._request(ep, data)
+        if request is None:
+            return
+        guid, seq, value = request
+        uuid = bytes(value["goal_info"]["goal_id"]["uuid"])
+        record = ep.goals.get(uuid)
+        if record is None and any(uuid):
+            self._reject(ep, f"cancel of unknown goal {uuid.hex()}; answered "
+                             f"ERROR_UNKNOWN_GOAL_ID")
+            code = CANCEL_UNKNOWN_GOAL_ID
+        else:
+            # rosgate's hardware action servers cannot be cancelled (ReconROS' ACTIONS_CANCEL
+            # calls are not modelled): a running goal's cancel is rejected
+            self.counts[ep.name]["delivered"] += 1
+            code = CANCEL_GOAL_TERMINATED if record is not None and record.result is not None \
+                else CANCEL_REJECTED
+        self._reply(ep, guid, seq, {"return_code": code, "goals_canceling": []})

@@ -45,6 +45,7 @@ def start_bridge(ctx, module, options):
     bridge = Ros2Bridge(
         ros_interfaces(ctx.project), project_library(ctx.project), ctx.broker,
         domain=int(options["domain"]), log=ctx.log, spawn=cocotb.start_soon,
+        now_ns=lambda: cocotb.utils.get_sim_time("ns"),
         accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None)
     shown = bridge.start()
     ctx.log(f"ros2 bridge: joined DDS domain {bridge.domain} with "

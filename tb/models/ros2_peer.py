@@ -90,6 +90,117 @@ class SobelSrvResponse(IdlStruct, typename="application_msgs::srv::dds_::SobelSr
     img: Image
 
 
+# sorter_msgs/action/Sort as rcl_action puts it on DDS (goal, result and feedback parts;
+# the send_goal and get_result services; action_msgs' status and cancel)
+
+@dataclass
+@final
+class UUID(IdlStruct, typename="unique_identifier_msgs::msg::dds_::UUID_"):
+    uuid: t.array[t.uint8, 16]
+
+
+@dataclass
+@final
+class SortGoal(IdlStruct, typename="sorter_msgs::action::dds_::Sort_Goal_"):
+    unsorted: t.sequence[t.uint32]
+
+
+@dataclass
+@final
+class SortResult(IdlStruct, typename="sorter_msgs::action::dds_::Sort_Result_"):
+    sorted: t.sequence[t.uint32]
+
+
+@dataclass
+@final
+class SortFeedback(IdlStruct, typename="sorter_msgs::action::dds_::Sort_Feedback_"):
+    percent: t.float32
+
+
+@dataclass
+@final
+class SortSendGoalRequest(IdlStruct,
+                          typename="sorter_msgs::action::dds_::Sort_SendGoal_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    goal_id: UUID
+    goal: SortGoal
+
+
+@dataclass
+@final
+class SortSendGoalResponse(IdlStruct,
+                           typename="sorter_msgs::action::dds_::Sort_SendGoal_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    accepted: bool
+    stamp: Time
+
+
+@dataclass
+@final
+class SortGetResultRequest(IdlStruct,
+                           typename="sorter_msgs::action::dds_::Sort_GetResult_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    goal_id: UUID
+
+
+@dataclass
+@final
+class SortGetResultResponse(IdlStruct,
+                            typename="sorter_msgs::action::dds_::Sort_GetResult_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    status: t.int8
+    result: SortResult
+
+
+@dataclass
+@final
+class SortFeedbackMessage(IdlStruct,
+                          typename="sorter_msgs::action::dds_::Sort_FeedbackMessage_"):
+    goal_id: UUID
+    feedback: SortFeedback
+
+
+@dataclass
+@final
+class GoalInfo(IdlStruct, typename="action_msgs::msg::dds_::GoalInfo_"):
+    goal_id: UUID
+    stamp: Time
+
+
+@dataclass
+@final
+class GoalStatus(IdlStruct, typename="action_msgs::msg::dds_::GoalStatus_"):
+    goal_info: GoalInfo
+    status: t.int8
+
+
+@dataclass
+@final
+class GoalStatusArray(IdlStruct, typename="action_msgs::msg::dds_::GoalStatusArray_"):
+    status_list: t.sequence[GoalStatus]
+
+
+@dataclass
+@final
+class CancelGoalRequest(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    goal_info: GoalInfo
+
+
+@dataclass
+@final
+class CancelGoalResponse(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    return_code: t.int8
+    goals_canceling: t.sequence[GoalInfo]
+
+
 def image(pixels, sec=0, frame_id="camera"):
     height, width = pixels.shape[:2]
     return Image(Header(Time(sec, 0), frame_id), height, width, "bgr8", 0, width * 3,
@@ -114,10 +225,19 @@ class Peer:
         from cyclonedds.topic import Topic
         return DataWriter(self.participant, Topic(self.participant, name, idl), qos=self.qos)
 
-    def reader(self, name, idl):
+    def reader(self, name, idl, qos=None):
         from cyclonedds.sub import DataReader
         from cyclonedds.topic import Topic
-        return DataReader(self.participant, Topic(self.participant, name, idl), qos=self.qos)
+        return DataReader(self.participant, Topic(self.participant, name, idl),
+                          qos=qos or self.qos)
+
+    def status_reader(self, name, idl):
+        """A reader with rcl_action's status profile (transient local, keep last 1)."""
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+        return self.reader(name, idl, Qos(Policy.Reliability.Reliable(duration(seconds=1)),
+                                          Policy.History.KeepLast(1),
+                                          Policy.Durability.TransientLocal))
 
     @staticmethod
     def wait_matched(entity, timeout=60):
