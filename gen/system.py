@@ -26,17 +26,15 @@ from amaranth.hdl import Module
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from hdl.dds import Topic
+from hdl.dds import HW_TOPIC_STREAM, Topic
 from hdl.reconos import ReconosSystem, ThreadSignature
-from hdl.stream import AXIStreamSignature, StreamFIFO
+from hdl.stream import StreamFIFO
 
 from .config import ConfigError, Location, project_library
 
 __all__ = ["HW_TOPIC_STREAM", "ThreadContext", "SystemTop", "thread_module_path",
-           "build_thread", "build_system", "thread_sources"]
+           "build_thread", "build_system", "thread_sources", "message_memory_layout"]
 
-#: a hardware topic's stream: 64-bit beats with TKEEP and a 1-bit TUSER (docs/topics.md)
-HW_TOPIC_STREAM = AXIStreamSignature(64, user_width=1)
 
 
 class ThreadContext:
@@ -78,12 +76,67 @@ class ThreadContext:
         layout = CLayout(self._library, "arm64" if self.arch == "r64" else "arm32")
         return {m.name: m.offset for m in layout.struct(type_name).members}
 
+    def memory_layout(self, type_name):
+        """Where the stream plan's parts of ``type_name`` are in its rosidl C struct (a
+        :class:`hdl.reconos.gateway.MemoryLayout` for the target)."""
+        return message_memory_layout(self._library, type_name, self.arch)
+
+    def topic_gateway(self, msgtype, *, to_hw=None, from_hw=None, **options):
+        """A :class:`hdl.reconos.TopicGatewayThread` for this thread's hardware topic of
+        ``msgtype``: ``to_hw=(sub, msg)`` takes messages from the software subscription
+        ``sub`` (into message ``msg``) and publishes them on the hardware topic;
+        ``from_hw=(pub, msg)`` publishes what the hardware topic carries on ``pub``. Resource
+        names as in the build.cfg."""
+        from gen.msg.plan import stream_plan
+        from hdl.reconos.gateway import TopicGatewayThread
+        typename = self._library[msgtype].name
+        ports = {ep.direction: ep.port for ep in self.endpoints
+                 if self._library[ep.msgtype].name == typename}
+        for wanted, direction in ((to_hw, "pub"), (from_hw, "sub")):
+            if wanted is not None and direction not in ports:
+                raise ConfigError(self.thread.where, f"thread {self.thread.name}: no hardware "
+                                                     f"topic {direction} of {typename}")
+        return TopicGatewayThread(
+            self.arch, plan=stream_plan(self._library, typename, "reconros"),
+            layout=self.memory_layout(typename), publisher_id=self.thread.id,
+            to_hw=tuple(map(self.handle, to_hw)) if to_hw else None,
+            from_hw=tuple(map(self.handle, from_hw)) if from_hw else None,
+            out_port=ports.get("pub", "topic_out"), in_port=ports.get("sub", "topic_in"),
+            **options)
+
     def thread_signature(self):
         """The slot ports plus the topic ports this thread must have."""
         members = dict(ThreadSignature(self.arch).members)
         for ep in self.endpoints:
             members[ep.port] = (In if ep.direction == "sub" else Out)(HW_TOPIC_STREAM)
         return wiring.Signature(members)
+
+
+def message_memory_layout(library, typename, arch):
+    """The :class:`hdl.reconos.gateway.MemoryLayout` of ``typename``: byte offset of each
+    fixed leaf and each string or sequence of its ``reconros`` stream plan in the rosidl C
+    struct of ``arch`` (``r32``/``r64``)."""
+    from gen.msg.layout import CLayout
+    from gen.msg.plan import stream_plan
+    from hdl.reconos.gateway import MemoryLayout
+    layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
+    name = library[typename].name
+    plan = stream_plan(library, name, "reconros")
+
+    def offset(path):
+        at, struct = 0, layout.struct(name)
+        for part in path.split("."):
+            member = next((mb for mb in struct.members if mb.name == part), None)
+            if member is None:
+                raise ValueError(f"{name}: no member {path!r} in its C layout")
+            at += member.offset
+            if hasattr(member.type, "typename"):
+                struct = layout.struct(member.type.typename)
+        return at
+    leaves = {leaf.path: offset(leaf.path) for leaf in plan.leaves
+              if leaf.type not in ("count", "publisher")}
+    return MemoryLayout(layout.struct(name).size, leaves,
+                        {v.path: offset(v.path) for v in plan.variables})
 
 
 def thread_module_path(project, thread):
@@ -111,9 +164,12 @@ def build_thread(project, thread, slot, library=None):
     """The component of ``thread`` for ``slot`` or ``None`` when the project has no Amaranth
     implementation of it (see the module documentation)."""
     path = thread_module_path(project, thread)
+    ctx = ThreadContext(project, thread, slot, library or project_library(project))
+    if thread.gateway is not None and not path.is_file():
+        return ctx.topic_gateway(thread.gateway["msgtype"], to_hw=("sub", "msg_in"),
+                                 from_hw=("pub", "msg_out"))
     if not path.is_file():
         return None
-    ctx = ThreadContext(project, thread, slot, library or project_library(project))
     try:
         component = _load(path, thread).build(ctx)
     except ValueError as exc:
@@ -234,7 +290,7 @@ def thread_sources(project):
         if path.is_file():
             out[thread.name] = f"amaranth ({path.relative_to(project.dir)})"
         elif thread.gateway is not None:
-            out[thread.name] = "ROS gateway: external core (rosgate has no gateway thread yet)"
+            out[thread.name] = "ROS gateway: rosgate's TopicGatewayThread"
         else:
             out[thread.name] = (f"{thread.hwsource or 'no HwSource'}: external core (no "
                                 f"{path.relative_to(project.dir)})")

@@ -83,6 +83,8 @@ def model_resources(thread):
         else:
             args = tuple(a)
         out.append(Resource(r.type, *args, name=r.name))
+        if thread.gateway is not None and r.type in ("rossub", "rospub"):
+            out[-1].origin = thread.name
     return out
 
 
@@ -280,7 +282,7 @@ async def run_project(dut):
     ctx._progress = open(out / PROGRESS, "a")
     created = []
     for thread in project.threads:
-        if not thread_module_path(project, thread).is_file():
+        if not thread_module_path(project, thread).is_file() and thread.gateway is None:
             continue
         for slot in thread.slots:
             res = model_resources(thread)

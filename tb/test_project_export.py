@@ -143,10 +143,16 @@ def test_manifest_agrees_with_build_cfg(exported, name):
         assert entry["topology"] == project.topics[topic].topology
 
 
-def test_external_slots_and_topic_ports(exported):
-    """The gateway demo: no thread has an Amaranth version, so every slot's FIFO ports and
-    every topic port is a port of the system top and an external pin of the block design."""
-    project, folder, manifest = exported["hwtopic_gateway"]
+def test_external_slots_and_topic_ports(tmp_path):
+    """The gateway demo without its thread sources and with its gateway as a plain thread:
+    no thread has an Amaranth version, so every slot's FIFO ports and every topic port is a
+    port of the system top and an external pin of the block design."""
+    from .test_project_topics import external_threads_project
+    (tmp_path / "project").mkdir()
+    cfg = external_threads_project(tmp_path / "project")
+    folder = tmp_path / "out"
+    assert rosgate(["export-hw", str(cfg), "-o", str(folder)]) == 0
+    manifest = json.loads((folder / "manifest.json").read_text())
     assert [s["implementation"] for s in manifest["slots"]] == ["external"] * 3
     ports = verilog_ports(folder / "hdl" / "rosgate_system.v", "rosgate_system")
     for port in ("slot0_nicehwtopic_tdata", "slot1_nicehwtopic_tready",
@@ -155,6 +161,15 @@ def test_external_slots_and_topic_ports(exported):
         assert port in ports
     text = (folder / "bd" / "design_1.tcl").read_text()
     assert "make_bd_intf_pins_external [get_bd_intf_pins rosgate_system/slot0_nicehwtopic]" in text
+
+
+def test_gateway_demo_threads_are_inside(exported):
+    """The gateway demo as written: Threada, Threadb and the ROS gateway are Amaranth threads
+    (the gateway generated from its section), so the hardware topic is inside the system."""
+    project, folder, manifest = exported["hwtopic_gateway"]
+    assert [s["implementation"] for s in manifest["slots"]] == ["amaranth"] * 3
+    ports = verilog_ports(folder / "hdl" / "rosgate_system.v", "rosgate_system")
+    assert not [p for p in ports if "nicehwtopic" in p]
 
 
 def _fusesoc_env():

@@ -1,9 +1,11 @@
 """The hardware topic of ReconROS' gateway demo as rosgate assembles it (docs/topics.md):
 ``nicehwtopic`` with publishers Threadb (slot 1) and Gateway1 (slot 2, ``_out``) and
-subscribers Threada (slot 0, 64-beat FIFO) and Gateway1 (``_in``): N:M. No slot has an
-Amaranth thread, so the topic ports are ports of the system top; this bench drives them with
-random idle and back-pressure and checks that both subscribers get every message of both
-publishers whole, each publisher's messages in order, nothing lost, duplicated or corrupted."""
+subscribers Threada (slot 0, 64-beat FIFO) and Gateway1 (``_in``): N:M. The bench uses the
+demo's build.cfg without its thread sources and with the gateway as a thread of the same
+endpoints, so that no slot has an Amaranth thread and the topic ports are ports of the system
+top; it drives them with random idle and back-pressure and checks that both subscribers get
+every message of both publishers whole, each publisher's messages in order, nothing lost,
+duplicated or corrupted. (The demo with its threads runs in tb/test_project_sim.py.)"""
 
 import random
 
@@ -98,12 +100,40 @@ async def topic_under_idle_and_backpressure(dut):
         await run_traffic(tb, 12, idle, bp)
 
 
+#: the demo's gateway section, and a thread with the same endpoints that rosgate leaves external
+GATEWAY_SECTION = """[ROSGateway@Gateway1]
+Slot = Gateways(0)
+HWTopic = "nicehwtopic"
+SWTopic = "/topic/gateway"
+MsgType = sensor_msgs/Image
+"""
+EXTERNAL_GATEWAY = """[ResourceGroup@RGateway]
+node_1 = rosnode, "gateway"
+HwSub = rossub, node_1, sensor_msgs/Image, "nicehwtopic", hw
+HwPub = rospub, node_1, sensor_msgs/Image, "nicehwtopic", hw
+
+[ReconosThread@Gateway1]
+Slot = Gateways(0)
+HwSource = hls
+ResourceGroup = RGateway
+"""
+
+
+def external_threads_project(folder):
+    """The demo's build.cfg in ``folder`` (without the demo's thread sources), its gateway as
+    an external thread."""
+    text = PROJECT.read_text()
+    assert GATEWAY_SECTION in text
+    (folder / "build.cfg").write_text(text.replace(GATEWAY_SECTION, EXTERNAL_GATEWAY))
+    return folder / "build.cfg"
+
+
 @pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
-def test_project_topic(sim):
+def test_project_topic(sim, tmp_path):
     from gen.config import load_project
     from gen.system import build_system
     from host.project_sim import top_ports
-    system = build_system(load_project(PROJECT))
+    system = build_system(load_project(external_threads_project(tmp_path)))
     idle = [n for n, flow in top_ports(system).items()
             if flow == "in" and n.startswith("slot") and "nicehwtopic" not in n]
     run_bench(__name__, "rosgate_system", "hwtopic_gateway", {"idle_inputs": idle, "seed": 5},

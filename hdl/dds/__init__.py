@@ -5,7 +5,7 @@ Spec: docs/topics.md.
 
 from .arbiter import TopicArbiter
 from .broadcast import TopicBroadcast
-from .topic import Topic, TopicMonitorSignature, QOS_POLICIES, MAX_ENDPOINTS
+from .topic import HW_TOPIC_STREAM, Topic, TopicMonitorSignature, QOS_POLICIES, MAX_ENDPOINTS
 
 __all__ = ["TopicArbiter", "TopicBroadcast", "Topic", "TopicMonitorSignature", "QOS_POLICIES",
-           "MAX_ENDPOINTS"]
+           "MAX_ENDPOINTS", "HW_TOPIC_STREAM"]

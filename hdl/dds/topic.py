@@ -10,7 +10,12 @@ from ..stream import (AXIStreamSignature, MessageFIFO, RegisterSlice, StreamFIFO
 from .arbiter import TopicArbiter
 from .broadcast import TopicBroadcast
 
-__all__ = ["Topic", "TopicMonitorSignature", "QOS_POLICIES", "MAX_ENDPOINTS", "MAX_FIFO_DEPTH"]
+__all__ = ["Topic", "TopicMonitorSignature", "QOS_POLICIES", "MAX_ENDPOINTS", "MAX_FIFO_DEPTH",
+           "HW_TOPIC_STREAM"]
+
+#: a project's hardware topic stream: 64-bit beats with TKEEP and a 1-bit TUSER, as ReconROS'
+#: hardware topics (docs/topics.md)
+HW_TOPIC_STREAM = AXIStreamSignature(64, user_width=1)
 
 #: Subscriber QoS: DDS history/reliability combinations a topic implements.
 QOS_POLICIES = ("keep_all", "keep_last", "best_effort")

@@ -63,6 +63,9 @@ class Deserializer(wiring.Component):
     error : Out(ErrorSignature())
         A pulse with a :class:`DeserializerError` code per bad message; the rest of the message
         is dropped up to ``tlast`` and the next one is read normally.
+    done : Out(1)
+        A pulse when a message has been read to its ``tlast`` without error: with ``error``,
+        exactly one verdict per message, in order.
     """
 
     def __init__(self, plan, data_width=64, *, max_count=1 << 24):
@@ -76,6 +79,7 @@ class Deserializer(wiring.Component):
         for v in plan.variables:
             members[payload_port(v, "m")] = Out(AXIStreamSignature(data_width, user_width=1))
         members["error"] = Out(ErrorSignature())
+        members["done"] = Out(1)
         super().__init__(members)
 
     @property
@@ -219,7 +223,7 @@ class Deserializer(wiring.Component):
                 if plan.framing == "ros1":
                     ok = ok & (pos - 4 == length_prefix)
                 with m.If(ok):
-                    m.d.comb += unpacker.flush.eq(1)
+                    m.d.comb += [unpacker.flush.eq(1), self.done.eq(1)]
                     m.d.sync += op.eq(WAIT)
                     if last_writer < 0:
                         m.d.sync += offered.eq(1)

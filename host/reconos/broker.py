@@ -22,17 +22,21 @@ class Broker:
         #: ``observer(topic, value)`` is called for every publication (recorders)
         self.observers = []
 
-    def subscribe(self, topic):
+    def subscribe(self, topic, origin=None):
+        """A queue of the values published on ``topic``; with an ``origin``, not those
+        published with the same origin (ROS 2's ``ignore_local_publications``)."""
         q = Queue()
+        q.origin = origin
         self._subs[topic].append(q)
         return q
 
-    def publish(self, topic, value):
+    def publish(self, topic, value, origin=None):
         self.events += 1
         for observe in self.observers:
             observe(topic, value)
         for q in self._subs[topic]:
-            q.put(value)
+            if origin is None or q.origin != origin:
+                q.put(value)
 
     def serve(self, service, server):
         """Register a server: a :class:`Queue` of ``(request, reply_queue)`` pairs."""

@@ -58,6 +58,9 @@ class Resource:
         self.name = name or kind
         self.ptr = 0          # resources[h].ptr (GETOBJADDR)
         self.state = None
+        #: a subscriber does not get what a publisher of the same origin publishes (None:
+        #: gets everything); the ROS gateway's node ignores its own publications
+        self.origin = None
 
     def __repr__(self):
         return f"Resource({self.kind}, {', '.join(map(repr, self.args))})"
@@ -319,7 +322,7 @@ class ReconosRuntime:
         elif k in ("rosmsg", "rossrvmsgreq", "rossrvmsgres"):
             r.ptr = self.msgs.create(r.args[0])
         elif k == "rossub":
-            r.state = self.broker.subscribe(r.args[0])
+            r.state = self.broker.subscribe(r.args[0], r.origin)
         elif k == "rossrvs":
             r.state = {"queue": self.broker.server_queue(r.args[0]), "pending": None}
         elif k == "rossrvc":
@@ -456,7 +459,7 @@ class ReconosRuntime:
     async def do_ros_publish(self, slot, hp, hm):
         pub = self._resource(slot, hp, "rospub")
         msg = self._resource(slot, hm, "rosmsg")
-        self.broker.publish(pub.args[0], self.msgs.read(msg.ptr, msg.args[0]))
+        self.broker.publish(pub.args[0], self.msgs.read(msg.ptr, msg.args[0]), pub.origin)
         return [0]
 
     async def do_ros_take(self, slot, hs, hm):
