@@ -2,7 +2,7 @@
 
 from .harness import ROOT
 
-__all__ = ["EXAMPLES", "example_cfg"]
+__all__ = ["EXAMPLES", "example_cfg", "external_threads_project"]
 
 #: every folder of examples/ with a build.cfg
 EXAMPLES = sorted(p.parent.name for p in (ROOT / "examples").glob("*/build.cfg"))
@@ -11,3 +11,31 @@ EXAMPLES = sorted(p.parent.name for p in (ROOT / "examples").glob("*/build.cfg")
 def example_cfg(name):
     """The build.cfg of example project ``name``."""
     return ROOT / "examples" / name / "build.cfg"
+
+
+#: the demo's gateway section, and a thread with the same endpoints that rosgate leaves external
+GATEWAY_SECTION = """[ROSGateway@Gateway1]
+Slot = Gateways(0)
+HWTopic = "nicehwtopic"
+SWTopic = "/topic/gateway"
+MsgType = sensor_msgs/Image
+"""
+EXTERNAL_GATEWAY = """[ResourceGroup@RGateway]
+node_1 = rosnode, "gateway"
+HwSub = rossub, node_1, sensor_msgs/Image, "nicehwtopic", hw
+HwPub = rospub, node_1, sensor_msgs/Image, "nicehwtopic", hw
+
+[ReconosThread@Gateway1]
+Slot = Gateways(0)
+HwSource = hls
+ResourceGroup = RGateway
+"""
+
+
+def external_threads_project(folder):
+    """The demo's build.cfg in ``folder`` (without the demo's thread sources), its gateway as
+    an external thread."""
+    text = example_cfg("hwtopic_gateway").read_text()
+    assert GATEWAY_SECTION in text
+    (folder / "build.cfg").write_text(text.replace(GATEWAY_SECTION, EXTERNAL_GATEWAY))
+    return folder / "build.cfg"

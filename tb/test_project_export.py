@@ -19,7 +19,7 @@ from host.cli import main as rosgate
 from host.lint import lint_verilog
 
 from .harness import ROOT
-from .projects import EXAMPLES
+from .projects import EXAMPLES, external_threads_project
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,6 @@ def test_external_slots_and_topic_ports(tmp_path):
     """The gateway demo without its thread sources and with its gateway as a plain thread:
     no thread has an Amaranth version, so every slot's FIFO ports and every topic port is a
     port of the system top and an external pin of the block design."""
-    from .test_project_topics import external_threads_project
     (tmp_path / "project").mkdir()
     cfg = external_threads_project(tmp_path / "project")
     folder = tmp_path / "out"

@@ -15,10 +15,10 @@ from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, Combine, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
-from .harness import ROOT, bench_params, run_bench
+from .harness import bench_params, run_bench
+from .projects import external_threads_project
 from .streams import random_pauses
 
-PROJECT = ROOT / "examples" / "hwtopic_gateway" / "build.cfg"
 PUBS = {"Threadb": "slot1_nicehwtopic", "Gateway1": "slot2_nicehwtopic_out"}
 SUBS = {"Threada": "slot0_nicehwtopic", "Gateway1": "slot2_nicehwtopic_in"}
 
@@ -98,34 +98,6 @@ async def topic_under_idle_and_backpressure(dut):
     await tb.reset()
     for idle, bp in ((0.0, 0.0), (0.3, 0.0), (0.0, 0.5), (0.4, 0.4)):
         await run_traffic(tb, 12, idle, bp)
-
-
-#: the demo's gateway section, and a thread with the same endpoints that rosgate leaves external
-GATEWAY_SECTION = """[ROSGateway@Gateway1]
-Slot = Gateways(0)
-HWTopic = "nicehwtopic"
-SWTopic = "/topic/gateway"
-MsgType = sensor_msgs/Image
-"""
-EXTERNAL_GATEWAY = """[ResourceGroup@RGateway]
-node_1 = rosnode, "gateway"
-HwSub = rossub, node_1, sensor_msgs/Image, "nicehwtopic", hw
-HwPub = rospub, node_1, sensor_msgs/Image, "nicehwtopic", hw
-
-[ReconosThread@Gateway1]
-Slot = Gateways(0)
-HwSource = hls
-ResourceGroup = RGateway
-"""
-
-
-def external_threads_project(folder):
-    """The demo's build.cfg in ``folder`` (without the demo's thread sources), its gateway as
-    an external thread."""
-    text = PROJECT.read_text()
-    assert GATEWAY_SECTION in text
-    (folder / "build.cfg").write_text(text.replace(GATEWAY_SECTION, EXTERNAL_GATEWAY))
-    return folder / "build.cfg"
 
 
 @pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
