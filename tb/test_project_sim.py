@@ -84,6 +84,7 @@ def test_sobel_dip_equals_opencv(sim, tmp_path):
         assert r["cycles"] > r["width"] * r["height"], r
 
 
+@pytest.mark.full      # make test: the paper's filter in the Sobel server, tb/test_reconos_apps.py
 def test_sobel_dip_paper_mode(tmp_path):
     """``--param Sobel.mode=reconros``: the paper's per-byte-lane filter, checked against the
     spec's model (ReconROS' written region and rosgate's native border)."""

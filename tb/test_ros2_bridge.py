@@ -366,3 +366,41 @@ def test_hardware_action_from_dds(tmp_path):
     got = peer.results(out)["ros2"]
     assert got["counts"]["/sort/_action/cancel_goal"]["rejected"] == 1, got
     assert got["counts"]["/sort/_action/get_result"]["rejected"] == 1, got
+
+
+GATEWAY_DEMO = ROOT / "examples" / "hwtopic_gateway" / "build.cfg"
+
+
+def test_gateway_demo_from_dds(tmp_path):
+    """examples/hwtopic_gateway (Icarus) from DDS: images a participant publishes on
+    /inputtopic come back on /outputtopic (Threadb -> hardware topic -> Threada) and on
+    /topic/gateway (the generated gateway), unchanged; the bag holds the hardware topic's
+    traffic as it appeared on /topic/gateway."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    bag = tmp_path / "bag"
+    rng = np.random.default_rng()
+    with peer.ros2_sim(GATEWAY_DEMO, "icarus", out, domain, "--record", str(bag)):
+        p = peer.Peer(domain)
+        writer = p.writer("rt/inputtopic", peer.Image)
+        outputs = p.reader("rt/outputtopic", peer.Image)
+        gateway = p.reader("rt/topic/gateway", peer.Image)
+        for entity in (writer, outputs, gateway):
+            p.wait_matched(entity)
+        sent = []
+        for k in range(3):
+            height, width = (int(x) for x in rng.integers(1, 20, 2))
+            sample = peer.image(rng.integers(0, 256, (height, width, 3), np.uint8), k,
+                                frame_id="f" * int(rng.integers(0, 12)))
+            writer.write(sample)
+            sent.append(sample)
+            for reader in (outputs, gateway):
+                assert peer.Image.deserialize(p.take_raw(reader)) == sample
+    got = peer.results(out)["ros2"]["counts"]
+    assert got["/inputtopic"]["delivered"] == 3 and got["/outputtopic"]["sent"] == 3, got
+    assert got["/topic/gateway"]["sent"] == 3, got
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts == {"/inputtopic": 3, "/outputtopic": 3, "/topic/gateway": 3}, counts
