@@ -404,3 +404,32 @@ def test_gateway_demo_from_dds(tmp_path):
     with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts == {"/inputtopic": 3, "/outputtopic": 3, "/topic/gateway": 3}, counts
+
+
+SORT_SERVICE = ROOT / "examples" / "sort_service" / "build.cfg"
+
+
+def test_sort_service_from_dds(tmp_path):
+    """examples/sort_service (two hardware servers of "srv" in slots on their own 120 MHz
+    clock, Icarus) called from a DDS client: concurrent calls with their own sequence
+    numbers come back sorted, each with its own header."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    with peer.ros2_sim(SORT_SERVICE, "icarus", out, domain):
+        p = peer.Peer(domain)
+        requests = p.writer("rq/srvRequest", peer.SortRequest)
+        replies = p.reader("rr/srvReply", peer.SortResponse)
+        p.wait_matched(requests)
+        p.wait_matched(replies)
+        guid = rng.randrange(1, 1 << 63)
+        calls = {seq: [rng.randrange(1 << 32) for _ in range(rng.randrange(1, 80))]
+                 for seq in (7, 8, 9)}
+        for seq, values in calls.items():
+            requests.write(peer.SortRequest(guid, seq, values))
+        got = {}
+        for _ in calls:
+            reply = peer.SortResponse.deserialize(p.take_raw(replies))
+            assert reply.guid == guid
+            got[reply.seq] = list(reply.sorted)
+    assert got == {seq: sorted(values) for seq, values in calls.items()}

@@ -201,6 +201,22 @@ class CancelGoalResponse(IdlStruct, typename="action_msgs::srv::dds_::CancelGoal
     goals_canceling: t.sequence[GoalInfo]
 
 
+@dataclass
+@final
+class SortRequest(IdlStruct, typename="my_reconros_services::srv::dds_::Sort_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    unsorted: t.sequence[t.uint32]
+
+
+@dataclass
+@final
+class SortResponse(IdlStruct, typename="my_reconros_services::srv::dds_::Sort_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    sorted: t.sequence[t.uint32]
+
+
 def image(pixels, sec=0, frame_id="camera"):
     height, width = pixels.shape[:2]
     return Image(Header(Time(sec, 0), frame_id), height, width, "bgr8", 0, width * 3,
