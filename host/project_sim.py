@@ -42,6 +42,7 @@ import cocotb
 from cocotb.triggers import ClockCycles, Event, First
 
 from .reconos import ReconosCosim, Resource
+from .ros2.bridge import BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
 from .simulator import SimulationFailed, export_top, run_top, top_params
 from .toolchain import cache_dir
@@ -276,6 +277,11 @@ async def run_project(dut):
     for name in os.environ.get("ROSGATE_EXTERNAL_INPUTS", "").split():
         getattr(dut, name).value = 0     # ports of slots without a thread: idle
     await cosim.reset()
+    ros2 = p.get("ros2")
+    if ros2:
+        # a ROS 2 graph does not pace itself to the hardware: subscriptions keep the last
+        # messages, as ROS 2's default QoS does
+        cosim.broker.history = BridgeQos().depth
     await cosim.start_runtime(project_library(project))
     ctx = SimContext(cosim, project, p.get("args", {}), out)
     out.mkdir(parents=True, exist_ok=True)
@@ -289,7 +295,6 @@ async def run_project(dut):
             ctx._resources[slot.id] = res
             await cosim.runtime.create_thread(slot.id, res)
             created.append(slot.id)
-    ros2 = p.get("ros2")
     nodes = list(getattr(module, "NODES", [])) if module is not None else []
     if ros2 and not ros2.get("nodes"):
         nodes = []

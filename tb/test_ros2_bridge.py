@@ -172,6 +172,20 @@ def test_sobel_dip_from_dds(tmp_path, photo):
             p.write_raw(raw_writer, data)
         round_trip(photo[5:50, 7:70], 6)
 
+        # a burst faster than the hardware: DDS and the hardware's subscription keep the last
+        # 10 images (ROS 2's default history); every image the bridge delivered is filtered
+        # or counted as dropped, and the last one arrives
+        burst = [rng.integers(0, 256, (6, 8, 3), np.uint8) for _ in range(25)]
+        for k, pixels in enumerate(burst):
+            raw_writer.write(peer.image(pixels, 100 + k))
+        filtered_burst = {}
+        while 124 not in filtered_burst:
+            sample = peer.Image.deserialize(p.take_raw(filtered))
+            filtered_burst[sample.header.stamp.sec] = sample
+        for sec, sample in filtered_burst.items():
+            assert np.array_equal(np.array(sample.data, np.uint8).reshape(6, 8, 3),
+                                  opencv_edges(burst[sec - 100]))
+
         # the hardware Sobel service, called from DDS with rmw_cyclonedds_cpp's header
         request_writer = p.writer("rq/sobelserviceRequest", peer.SobelSrvRequest)
         replies = p.reader("rr/sobelserviceReply", peer.SobelSrvResponse)
@@ -184,9 +198,13 @@ def test_sobel_dip_from_dds(tmp_path, photo):
         assert np.array_equal(np.array(reply.img.data, np.uint8).reshape(crop.shape),
                               opencv_edges(crop))
     got = peer.results(out)["ros2"]
-    assert got["counts"]["/image_raw"] == {"received": 7, "delivered": 3, "rejected": 4,
-                                           "sent": 0}, got
-    assert got["counts"]["/image_filtered"]["sent"] == 3, got
+    raw = got["counts"]["/image_raw"]
+    burst_delivered = raw["delivered"] - 3
+    assert raw["received"] == raw["delivered"] + 4 and raw["rejected"] == 4, got
+    assert len(filtered_burst) <= burst_delivered <= len(burst), got
+    assert got["counts"]["/image_filtered"]["sent"] == 3 + len(filtered_burst), got
+    assert got["dropped_by_history"]["/image_raw"] == burst_delivered - len(filtered_burst), \
+        got
     assert got["counts"]["/sobelservice"]["delivered"] == 1, got
     reasons = [r["reason"] for r in got["rejections"]]
     assert "left over" in reasons[1] and "5400 data bytes" in reasons[2], reasons
@@ -195,13 +213,14 @@ def test_sobel_dip_from_dds(tmp_path, photo):
     assert console.count("rejected a sensor_msgs/msg/Image from DDS") == 4, console
     assert "stopping on SIGTERM" in console and "wrote" in console.splitlines()[-1], console
     assert not (out / "sim_error.json").exists()
-    check_recording(bag, trace, sent, received)
+    check_recording(bag, trace, sent, received, burst_delivered, len(filtered_burst))
 
 
-def check_recording(bag, trace, sent, received):
+def check_recording(bag, trace, sent, received, burst, burst_filtered):
     """The bag, read back with rosbags: both topics with their type, the images sent on
     /image_raw and the samples DDS delivered on /image_filtered, in order, at increasing
-    simulated times; the trace has one line per message."""
+    simulated times (after them the burst: every image published, the filtered ones); the
+    trace has one line per message."""
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
     with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
@@ -212,15 +231,18 @@ def check_recording(bag, trace, sent, received):
         for connection, stamp, data in reader.messages():
             got[connection.topic].append(reader.deserialize(data, connection.msgtype))
             times.append(stamp)
-            if connection.topic == "/image_filtered":
+            if connection.topic == "/image_filtered" and \
+                    len(got["/image_filtered"]) <= len(received):
                 out = received[len(got["/image_filtered"]) - 1]
                 assert bytes(data[4:]) == out[4:len(data)]   # DDS sets the padding count
-    assert times == sorted(times) and len(times) == 2 * len(sent)
-    assert [m.data.tobytes() for m in got["/image_raw"]] == [p.tobytes() for p in sent]
-    assert [(m.height, m.width) for m in got["/image_filtered"]] == \
+    total = 2 * len(sent) + burst + burst_filtered
+    assert times == sorted(times) and len(times) == total
+    assert [m.data.tobytes() for m in got["/image_raw"][:len(sent)]] == \
+        [p.tobytes() for p in sent]
+    assert [(m.height, m.width) for m in got["/image_filtered"][:len(sent)]] == \
         [p.shape[:2] for p in sent]
     lines = trace.read_text().splitlines()[1:]
-    assert len(lines) == 2 * len(sent)
+    assert len(lines) == total
     assert all(" sensor_msgs/msg/Image " in x and "encoding='bgr8'" in x for x in lines)
 
 

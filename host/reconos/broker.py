@@ -21,11 +21,15 @@ class Broker:
         self.events = 0
         #: ``observer(topic, value)`` is called for every publication (recorders)
         self.observers = []
+        #: a subscription keeps at most this many messages, dropping the oldest (ROS 2's
+        #: keep-last history); ``None``: every message (the default of an in-process graph,
+        #: whose nodes pace themselves)
+        self.history = None
 
     def subscribe(self, topic, origin=None):
         """A queue of the values published on ``topic``; with an ``origin``, not those
         published with the same origin (ROS 2's ``ignore_local_publications``)."""
-        q = Queue()
+        q = Queue(history=self.history)
         q.origin = origin
         self._subs[topic].append(q)
         return q
@@ -97,11 +101,15 @@ class ActionGoal:
 
 
 class Queue:
-    """An unbounded FIFO for coroutines."""
+    """A FIFO for coroutines: unbounded, or bounded by ``maxsize`` (``put_wait`` waits,
+    ``put_nowait`` refuses), or keeping the last ``history`` items (``put`` drops the oldest,
+    counted in ``dropped``)."""
 
-    def __init__(self, maxsize=0):
+    def __init__(self, maxsize=0, history=None):
         self.items = collections.deque()
         self.maxsize = maxsize
+        self.history = history
+        self.dropped = 0
         self._event = Event()
         self._space = Event()
 
@@ -112,6 +120,9 @@ class Queue:
         return True
 
     def put(self, item):
+        if self.history is not None and len(self.items) >= self.history:
+            self.items.popleft()
+            self.dropped += 1
         self.items.append(item)
         self._event.set()
 

@@ -269,7 +269,10 @@ class Ros2Bridge:
 
     def summary(self):
         """Counts per interface and every rejection, for ``sim_results.json``."""
+        dropped = {t.name: sum(q.dropped for q in self.broker._subs.get(t.key, ()))
+                   for t in self.interfaces.topics.values() if t.subscribers}
         return {"domain": self.domain, "counts": {k: dict(v) for k, v in self.counts.items()},
+                "dropped_by_history": dropped,
                 "rejected": sum(v["rejected"] for v in self.counts.values()),
                 "rejections": list(self.rejections), "timeline": list(self.timeline)}
 
