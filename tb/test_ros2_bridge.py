@@ -14,6 +14,7 @@ request header) on loopback, each test on its own domain id.
 
 import random
 import shutil
+import time
 
 import cv2
 import numpy as np
@@ -455,3 +456,120 @@ def test_sort_service_from_dds(tmp_path):
             assert reply.guid == guid
             got[reply.seq] = list(reply.sorted)
     assert got == {seq: sorted(values) for seq, values in calls.items()}
+
+
+ACTION_CLIENT_CFG = """[General]
+Name = SortClient
+TargetBoard = zcu104,0
+TargetPart = xczu7ev-ffvc1156-2-e
+CPUArchitecture = arm64
+ROS2Distribution = humble
+ReferenceDesign = timer
+TargetOS = linux64
+TargetXil = vivado,2021.2
+TargetHls = vivado,2021.2
+SystemClock = System
+
+[Clock@System]
+ClockSource = static
+ClockFreq = 100000000
+
+[HwSlot@Client(0:0)]
+Id = 0
+Clock = System
+
+[ResourceGroup@ClientGroup]
+report = mbox, 16
+node = rosnode, "sort_client"
+sort_msg = rosactionmsg, sorter_msgs, action, Sort
+client = rosactionc, node, sort_msg, "sort", 10000
+
+[ReconosThread@Client]
+Slot = Client(0)
+HwSource = hls
+ResourceGroup = ClientGroup
+"""
+
+ACTION_CLIENT_THREAD = '''
+from hdl.reconos.threads import CallSequenceThread
+
+
+def build(ctx):
+    ac, goal = ctx.handle("client"), ctx.handle("sort_msg_goal_req")
+    res, fb = ctx.handle("sort_msg_result_res"), ctx.handle("sort_msg_feedback")
+    return CallSequenceThread(ctx.arch, h_report=ctx.handle("report"), program=[
+        ("ros_actionc_goal_send", [ac, goal]), ("ros_actionc_goal_take", [ac]),
+        ("ros_actionc_result_send", [ac]), ("ros_actionc_feedback_take", [ac, fb]),
+        ("ros_actionc_result_take", [ac, res])])
+'''
+
+ACTION_CLIENT_SIM = '''
+GOAL = "sorter_msgs/action/Sort_SendGoal_Request"
+
+
+def setup(ctx):
+    goal = ctx.resource("Client", "sort_msg_goal_req")
+    ctx.messages.write(goal.ptr, GOAL, {"goal_id": {"uuid": bytes(range(40, 56))},
+                                        "goal": {"unsorted": [9, 4, 7, 1]}})
+
+
+async def watch(ctx):
+    await ctx.runtime.exited[0].wait()
+    read = ctx.messages.read
+    ctx.results["calls"] = [[m, list(r)] for m, _, r in ctx.runtime.log[0]]
+    ctx.results["result"] = read(ctx.resource("Client", "sort_msg_result_res").ptr,
+                                 "sorter_msgs/action/Sort_GetResult_Response")
+    feedback = read(ctx.resource("Client", "sort_msg_feedback").ptr,
+                    "sorter_msgs/action/Sort_FeedbackMessage")
+    feedback["goal_id"]["uuid"] = list(feedback["goal_id"]["uuid"])
+    ctx.results["feedback"] = feedback
+    ctx.log("client: the hardware action client has exited")
+
+
+NODES = [watch]
+'''
+
+
+def test_hardware_action_client_uses_a_dds_action(tmp_path):
+    """A hardware action client (Icarus) whose action nobody in the build.cfg serves: the
+    bridge calls it on DDS, where this test serves it as rcl_action would; the hardware gets
+    the acceptance, the feedback of its own goal (not another goal's) and the result."""
+    project = tmp_path / "project"
+    (project / "src" / "rt_client" / "amaranth").mkdir(parents=True)
+    shutil.copytree(ROOT / "examples" / "sort_action" / "msg", project / "msg")
+    (project / "build.cfg").write_text(ACTION_CLIENT_CFG)
+    (project / "src" / "rt_client" / "amaranth" / "thread.py").write_text(ACTION_CLIENT_THREAD)
+    (project / "sim.py").write_text(ACTION_CLIENT_SIM)
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    with peer.ros2_sim(project / "build.cfg", "icarus", out, domain, "--with-nodes"):
+        p = peer.Peer(domain)
+        base = "sort/_action/"
+        goals = p.reader(f"rq/{base}send_goalRequest", peer.SortSendGoalRequest)
+        accept = p.writer(f"rr/{base}send_goalReply", peer.SortSendGoalResponse)
+        asks = p.reader(f"rq/{base}get_resultRequest", peer.SortGetResultRequest)
+        answer = p.writer(f"rr/{base}get_resultReply", peer.SortGetResultResponse)
+        feedback = p.writer(f"rt/{base}feedback", peer.SortFeedbackMessage)
+        for entity in (goals, accept, asks, answer, feedback):
+            p.wait_matched(entity)
+        goal = peer.SortSendGoalRequest.deserialize(p.take_raw(goals))
+        assert list(goal.goal_id.uuid) == list(range(40, 56))
+        assert list(goal.goal.unsorted) == [9, 4, 7, 1]
+        accept.write(peer.SortSendGoalResponse(goal.guid, goal.seq, True, peer.Time(1, 2)))
+        ask = peer.SortGetResultRequest.deserialize(p.take_raw(asks))
+        assert (ask.guid, list(ask.goal_id.uuid)) == (goal.guid, list(range(40, 56)))
+        feedback.write(peer.SortFeedbackMessage(peer.UUID([0] * 16), peer.SortFeedback(7.0)))
+        feedback.write(peer.SortFeedbackMessage(goal.goal_id, peer.SortFeedback(42.5)))
+        answer.write(peer.SortGetResultResponse(ask.guid, ask.seq, 4,
+                                                peer.SortResult([1, 4, 7, 9])))
+        progress = out / "sim_progress.jsonl"
+        deadline = time.monotonic() + 120
+        while "has exited" not in progress.read_text():
+            assert time.monotonic() < deadline, progress.read_text()
+            time.sleep(0.1)
+    got = peer.results(out)
+    calls = dict((m, r) for m, r in got["calls"])
+    assert calls["ros_actionc_goal_take"][0] == 1          # accepted
+    assert got["result"] == {"status": 4, "result": {"sorted": [1, 4, 7, 9]}}
+    assert got["feedback"]["feedback"]["percent"] == 42.5
+    assert got["feedback"]["goal_id"]["uuid"] == list(range(40, 56))

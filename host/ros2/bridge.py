@@ -147,6 +147,7 @@ class Ros2Bridge:
         self._outbound = []          # (broker queue, endpoint)
         self._injected = set()       # ids of values this bridge published into the broker
         self._clients = []           # (broker server queue, request writer, pending)
+        self._action_clients = []    # state of each action the hardware uses on DDS
         self._calls = 0              # service calls into the graph still running
         self._guid = int.from_bytes(os.urandom(8), "little") or 1
         self._seq = 0
@@ -206,7 +207,109 @@ class Ros2Bridge:
             if action.servers:
                 self._serve_action(action)
                 shown.append(f"{action.name} [{action.actiontype}] (action served in hardware)")
+            elif action.key not in self.broker._actions:
+                self._call_action(action)
+                shown.append(f"{action.name} [{action.actiontype}] (action used from hardware)")
         return shown
+
+    def _action_endpoints(self, action, client):
+        """The action's three services (request and reply sides swapped for a client) and
+        its feedback topic, as (service endpoints by name, feedback endpoint)."""
+        if CANCEL_GOAL + "_Request" not in self.library:
+            for definition in parse_srv(CANCEL_GOAL_SRV, CANCEL_GOAL, "<action_msgs>"):
+                self.library.add(definition)
+        base, a = f"{action.name}/_action/", action.actiontype
+        services = {}
+        for service, srvtype in (("send_goal", f"{a}_SendGoal"),
+                                 ("get_result", f"{a}_GetResult"),
+                                 ("cancel_goal", CANCEL_GOAL)):
+            request, reply = service_topic_names(base + service)
+            parts = [(request, srvtype + "_Request"), (reply, srvtype + "_Response")]
+            incoming, outgoing = parts[::-1] if client else parts
+            ep = self._reader(incoming[0], self.types.service_part(incoming[1]),
+                              base + service, incoming[1], action.key)
+            ep.reply = self._writer(outgoing[0], self.types.service_part(outgoing[1]),
+                                    base + service, outgoing[1], action.key)
+            services[service] = ep
+        feedback_type = f"{a}_FeedbackMessage"
+        make = self._reader if client else self._writer
+        feedback = make(dds_topic_name(base + "feedback"), self.types.message(feedback_type),
+                        base + "feedback", feedback_type, action.key)
+        return services, feedback
+
+    def _call_action(self, action):
+        """An action the hardware uses and nobody in the build.cfg serves: the bridge is
+        its server in the graph and a client of it on DDS, as rcl_action's client."""
+        services, feedback = self._action_endpoints(action, client=True)
+        state = {"goals": self.broker.action_server_queue(action.key), "sent": {},
+                 "by_uuid": {}, "results": {}, "services": services}
+        for name in ("send_goal", "get_result"):
+            services[name].state = state
+        # feedback before results: feedback a server sent before the result is delivered
+        # even when both arrive in one poll
+        self._inbound += [(services["send_goal"], self._goal_reply),
+                          (feedback, self._goal_feedback_in),
+                          (services["get_result"], self._result_reply)]
+        feedback.state = state
+        self._action_clients.append(state)
+
+    def _serve_action(self, action):
+        """An action served in hardware, as rcl_action shows it: the services send_goal,
+        get_result and cancel_goal and the topics feedback and status under
+        ``<action>/_action/``."""
+        services, feedback = self._action_endpoints(action, client=False)
+        status = self._writer(dds_topic_name(f"{action.name}/_action/status"),
+                              self.types.message("action_msgs/msg/GoalStatusArray"),
+                              f"{action.name}/_action/status",
+                              "action_msgs/msg/GoalStatusArray", action.key, status=True)
+        goals = {}
+        for name, handler in (("send_goal", self._send_goal),
+                              ("get_result", self._get_result),
+                              ("cancel_goal", self._cancel_goal)):
+            ep = services[name]
+            ep.goals, ep.feedback, ep.status = goals, feedback, status
+            self._inbound.append((ep, handler))
+
+    def _action_endpoints(self, action, client):
+        """The action's three services (request and reply sides swapped for a client) and
+        its feedback topic, as (service endpoints by name, feedback endpoint)."""
+        if CANCEL_GOAL + "_Request" not in self.library:
+            for definition in parse_srv(CANCEL_GOAL_SRV, CANCEL_GOAL, "<action_msgs>"):
+                self.library.add(definition)
+        base, a = f"{action.name}/_action/", action.actiontype
+        services = {}
+        for service, srvtype in (("send_goal", f"{a}_SendGoal"),
+                                 ("get_result", f"{a}_GetResult"),
+                                 ("cancel_goal", CANCEL_GOAL)):
+            request, reply = service_topic_names(base + service)
+            parts = [(request, srvtype + "_Request"), (reply, srvtype + "_Response")]
+            incoming, outgoing = parts[::-1] if client else parts
+            ep = self._reader(incoming[0], self.types.service_part(incoming[1]),
+                              base + service, incoming[1], action.key)
+            ep.reply = self._writer(outgoing[0], self.types.service_part(outgoing[1]),
+                                    base + service, outgoing[1], action.key)
+            services[service] = ep
+        feedback_type = f"{a}_FeedbackMessage"
+        make = self._reader if client else self._writer
+        feedback = make(dds_topic_name(base + "feedback"), self.types.message(feedback_type),
+                        base + "feedback", feedback_type, action.key)
+        return services, feedback
+
+    def _call_action(self, action):
+        """An action the hardware uses and nobody in the build.cfg serves: the bridge is
+        its server in the graph and a client of it on DDS, as rcl_action's client."""
+        services, feedback = self._action_endpoints(action, client=True)
+        state = {"goals": self.broker.action_server_queue(action.key), "sent": {},
+                 "by_uuid": {}, "results": {}, "services": services}
+        for name in ("send_goal", "get_result"):
+            services[name].state = state
+        # feedback before results: feedback a server sent before the result is delivered
+        # even when both arrive in one poll
+        self._inbound += [(services["send_goal"], self._goal_reply),
+                          (feedback, self._goal_feedback_in),
+                          (services["get_result"], self._result_reply)]
+        feedback.state = state
+        self._action_clients.append(state)
 
     def _serve_action(self, action):
         """An action served in hardware, as rcl_action shows it: the services send_goal,
@@ -309,8 +412,13 @@ class Ros2Bridge:
                                       "published_ns": published,
                                       "written_ns": time.monotonic_ns()})
                 moved += 1
+        for state in self._action_clients:
+            moved += self._poll_action_client(state)
         for queue, writer, pending in self._clients:
-            while (item := queue.get_nowait()) is not None:
+            # a request waits until a server is there (rclcpp's wait_for_service): a volatile
+            # request written before the match would be lost
+            while len(queue) and self._matched(writer) and \
+                    (item := queue.get_nowait()) is not None:
                 request, reply_queue = item
                 self._seq += 1
                 pending[self._seq] = reply_queue
@@ -319,6 +427,10 @@ class Ros2Bridge:
                             + body[4:])
                 moved += 1
         return moved
+
+    @staticmethod
+    def _matched(ep):
+        return ep.entity.get_publication_matched_status().current_count > 0
 
     def wait(self, seconds):
         """Block until a reader has data or ``seconds`` pass."""
@@ -516,3 +628,72 @@ class Ros2Bridge:
             code = CANCEL_GOAL_TERMINATED if record is not None and record.result is not None \
                 else CANCEL_REJECTED
         self._reply(ep, guid, seq, {"return_code": code, "goals_canceling": []})
+
+    # --- actions used from hardware ------------------------------------------------------
+    def _call(self, ep, value):
+        """Send a request on ``ep`` (a client side); return its sequence number."""
+        self._seq += 1
+        body = encode_cdr(self.library, ep.reply.typename, value)
+        self._write(ep.reply, CDR_LE_HEADER + pack_request_header(self._guid, self._seq)
+                    + body[4:])
+        return self._seq
+
+    def _poll_action_client(self, state):
+        moved = 0
+        send, get = state["services"]["send_goal"], state["services"]["get_result"]
+        # goals wait until a server is there (rcl_action's wait_for_action_server)
+        while len(state["goals"]) and self._matched(send.reply) and \
+                (goal := state["goals"].get_nowait()) is not None:
+            seq = self._call(send, goal.request)
+            state["sent"][seq] = goal
+            moved += 1
+        for uuid, goal in list(state["by_uuid"].items()):
+            if goal.result_requested.is_set() and uuid not in state["results"]:
+                state["results"][uuid] = self._call(get, {"goal_id": {"uuid": uuid}})
+                moved += 1
+        return moved
+
+    def _client_reply(self, ep, data, table):
+        """(the waiting item, value) of a reply to one of this bridge's calls, or None."""
+        split = self._split(ep, data)
+        if split is None:
+            return None
+        guid, seq, body = split
+        if guid != self._guid:
+            return None                     # another client's reply
+        if seq not in table:
+            self._reject(ep, f"a reply to call {seq}, which this bridge did not make or "
+                             f"already has")
+            return None
+        value = self._decode(ep, body)
+        if value is None:
+            return None
+        self.counts[ep.name]["delivered"] += 1
+        return table.pop(seq), value
+
+    def _goal_reply(self, ep, data):
+        got = self._client_reply(ep, data, ep.state["sent"])
+        if got is not None:
+            goal, value = got
+            if value["accepted"]:
+                ep.state["by_uuid"][goal.goal_id] = goal
+            goal.accepted.put(bool(value["accepted"]))
+
+    def _result_reply(self, ep, data):
+        state = ep.state
+        pending = {seq: uuid for uuid, seq in state["results"].items()
+                   if uuid in state["by_uuid"]}
+        got = self._client_reply(ep, data, pending)
+        if got is not None:
+            uuid, value = got
+            state["by_uuid"].pop(uuid).result.put(value)
+
+    def _goal_feedback_in(self, ep, data):
+        value = self._decode(ep, data)
+        if value is None:
+            return
+        goal = ep.state["by_uuid"].get(bytes(value["goal_id"]["uuid"]))
+        if goal is None:
+            return                          # another client's goal
+        goal.feedback.put(value)
+        self.counts[ep.name]["delivered"] += 1
