@@ -82,6 +82,11 @@ def test_interfaces_of_the_examples():
     service = graph.services["/sobelservice"]
     assert (service.srvtype, service.servers, service.clients, service.key) == \
         ("application_msgs/srv/SobelSrv", ["Sobel"], ["DIP"], "sobelservice")
+    graph = ros_interfaces(load_project(ROOT / "examples" / "hwtopic_gateway" / "build.cfg"))
+    assert {n: (t.publishers, t.subscribers, t.hardware_topic)
+            for n, t in graph.topics.items()} == {
+        "/outputtopic": (["Threada"], [], None), "/inputtopic": ([], ["Threadb"], None),
+        "/topic/gateway": (["Gateway1"], ["Gateway1"], "nicehwtopic")}
 
 
 def test_dds_types_serialize_as_rosbags():

@@ -70,13 +70,15 @@ class BridgeQos:
             raise ValueError(f"QoS history depth {depth!r}: expected an integer >= 1")
         self.depth = depth
 
-    def dds(self, status=False):
+    def dds(self, status=False, keep_all=False):
         """The profile; ``status``: an action's status topic (transient local, keep last 1,
-        as rcl_action's status profile)."""
+        as rcl_action's status profile); ``keep_all``: a gateway's topic, whose hardware topic
+        keeps every message."""
         from cyclonedds.core import Policy, Qos
         from cyclonedds.util import duration
-        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
-                   Policy.History.KeepLast(1 if status else self.depth),
+        history = Policy.History.KeepAll if keep_all else \
+            Policy.History.KeepLast(1 if status else self.depth)
+        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), history,
                    Policy.Durability.TransientLocal if status else Policy.Durability.Volatile,
                    Policy.IgnoreLocal.Participant)
 
@@ -172,13 +174,14 @@ class Ros2Bridge:
         self._published_keys = set()
         self.broker.observers.append(self._observe)
         for topic in self.interfaces.topics.values():
+            keep_all = topic.hardware_topic is not None
             if topic.subscribers:
                 ep = self._reader(dds_topic_name(topic.name), self.types.message(topic.msgtype),
-                                  topic.name, topic.msgtype, topic.key)
+                                  topic.name, topic.msgtype, topic.key, keep_all=keep_all)
                 self._inbound.append((ep, self._topic_sample))
             if topic.publishers:
                 ep = self._writer(dds_topic_name(topic.name), self.types.message(topic.msgtype),
-                                  topic.name, topic.msgtype, topic.key)
+                                  topic.name, topic.msgtype, topic.key, keep_all=keep_all)
                 self._outbound.append((self.broker.subscribe(topic.key), ep))
                 self._published_keys.add(topic.key)
             shown.append(f"{topic.name} [{topic.msgtype}]")
@@ -344,23 +347,24 @@ class Ros2Bridge:
         if key in self._published_keys:
             self._published[id(value)] = time.monotonic_ns()
 
-    def _topic(self, name, idl, status=False):
+    def _topic(self, name, idl, status=False, keep_all=False):
         from cyclonedds.topic import Topic
-        return Topic(self.participant, name, idl, qos=self.qos.dds(status))
+        return Topic(self.participant, name, idl, qos=self.qos.dds(status, keep_all))
 
-    def _reader(self, dds_name, idl, name, typename, key):
+    def _reader(self, dds_name, idl, name, typename, key, keep_all=False):
         from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
         from cyclonedds.sub import DataReader
-        reader = DataReader(self.participant, self._topic(dds_name, idl), qos=self.qos.dds())
+        reader = DataReader(self.participant, self._topic(dds_name, idl, keep_all=keep_all),
+                            qos=self.qos.dds(keep_all=keep_all))
         condition = ReadCondition(reader, SampleState.NotRead | ViewState.Any |
                                   InstanceState.Any)
         self.waitset.attach(condition)
         return _Endpoint(name, typename, reader, key)
 
-    def _writer(self, dds_name, idl, name, typename, key, status=False):
+    def _writer(self, dds_name, idl, name, typename, key, status=False, keep_all=False):
         from cyclonedds.pub import DataWriter
-        writer = DataWriter(self.participant, self._topic(dds_name, idl, status),
-                            qos=self.qos.dds(status))
+        writer = DataWriter(self.participant, self._topic(dds_name, idl, status, keep_all),
+                            qos=self.qos.dds(status, keep_all))
         return _Endpoint(name, typename, writer, key)
 
     def close(self):

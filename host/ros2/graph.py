@@ -58,6 +58,8 @@ class TopicInterface:
     publishers: list = field(default_factory=list)
     subscribers: list = field(default_factory=list)
     where: object = None
+    #: the hardware topic a ROS gateway connects this topic to (its QoS applies on DDS)
+    hardware_topic: str = None
     #: the name as the build.cfg writes it (the software runtime's key)
     key: str = None
 
@@ -145,13 +147,17 @@ def ros_interfaces(project):
             raise ConfigError(where, f"{kind} {name!r} carries {getattr(entry, type_attr)} "
                                      f"elsewhere in the build.cfg, not {typename}")
         getattr(entry, role).append(thread.name)
+        return name
 
     for thread in project.threads:
+        gateway = thread.gateway
         for r in thread.resources:
             if r.type in ("rossub", "rospub"):
-                add(topics, unquote(r.args[2]), "topic", _interface_type(thread, r, ""), thread,
-                    "subscribers" if r.type == "rossub" else "publishers", r.where,
-                    TopicInterface)
+                name = add(topics, unquote(r.args[2]), "topic", _interface_type(thread, r, ""),
+                           thread, "subscribers" if r.type == "rossub" else "publishers",
+                           r.where, TopicInterface)
+                if gateway is not None:
+                    topics[name].hardware_topic = gateway["hw_topic"]
             elif r.type in ("rossrvs", "rossrvc"):
                 raw = unquote(r.args[2]) if len(r.args) > 2 else r.name
                 srvtype = _interface_type(thread, r, "_req").removesuffix("_Request")
