@@ -63,72 +63,85 @@ class MessageMemory:
         return struct.calcsize("<" + _FMT[name])
 
     def write(self, va, type_name, value):
-        from gen.msg.model import Array, Named, Primitive, Sequence
+        """Store ``value`` in the struct at ``va``: strings and sequences get new buffers
+        (``malloc``), as rosidl's ``__init`` and ``__assign`` functions give them."""
         for m in self.layout.struct(type_name).members:
             if m.name == "structure_needs_at_least_one_member":
                 continue
-            v = value[m.name]
-            at = va + m.offset
-            t = m.type
-            if isinstance(t, Named):
-                self.write(at, t.typename, v)
-            elif isinstance(t, Primitive) and t.is_string:
-                raw = v.encode() + b"\0"
-                buf = self.mem.malloc(len(raw))
-                self.mem.write(buf, raw)
-                self._ptr(at, buf)
-                self._ptr(at + self.p, len(raw) - 1)
-                self._ptr(at + 2 * self.p, len(raw))
-            elif isinstance(t, Primitive):
-                self.mem.write(at, struct.pack("<" + _FMT[t.name], v))
-            elif isinstance(t, (Sequence, Array)):
-                raw = self._pack_elements(t.element, v)
-                if isinstance(t, Array):
-                    self.mem.write(at, raw)
-                else:
-                    n = len(v)
-                    buf = self.mem.malloc(max(len(raw), 1)) if n else 0
-                    if n:
-                        self.mem.write(buf, raw)
-                    self._ptr(at, buf)
-                    self._ptr(at + self.p, n)
-                    self._ptr(at + 2 * self.p, n)
+            self._write_value(va + m.offset, m.type, value[m.name])
+
+    def _write_value(self, at, t, v):
+        from gen.msg.model import Array, Named, Primitive
+        if isinstance(t, Named):
+            self.write(at, t.typename, v)
+        elif isinstance(t, Primitive) and t.is_string:
+            if t.name == "wstring":
+                raise TypeError("the co-simulation model does not store wstring")
+            raw = v.encode() + b"\0"
+            buf = self.mem.malloc(len(raw))
+            self.mem.write(buf, raw)
+            self._ptr(at, buf)
+            self._ptr(at + self.p, len(raw) - 1)
+            self._ptr(at + 2 * self.p, len(raw))
+        elif isinstance(t, Primitive):
+            self.mem.write(at, struct.pack("<" + _FMT[t.name], v))
+        elif isinstance(t.element, Primitive) and not t.element.is_string:
+            raw = self._pack_elements(t.element, v)
+            if isinstance(t, Array):
+                self.mem.write(at, raw)
             else:
-                raise TypeError(f"cannot store field {m.name} of {type_name}")
+                n = len(v)
+                buf = self.mem.malloc(max(len(raw), 1)) if n else 0
+                if n:
+                    self.mem.write(buf, raw)
+                self._ptr(at, buf)
+                self._ptr(at + self.p, n)
+                self._ptr(at + 2 * self.p, n)
+        else:
+            # strings or messages: each element is a String or a struct of the element size
+            size, _ = self.layout.size_align(t.element)
+            base = at
+            if not isinstance(t, Array):
+                base = self.mem.malloc(size * len(v)) if len(v) else 0
+                self._ptr(at, base)
+                self._ptr(at + self.p, len(v))
+                self._ptr(at + 2 * self.p, len(v))
+            for i, item in enumerate(v):
+                self._write_value(base + i * size, t.element, item)
 
     def _pack_elements(self, element, v):
-        from gen.msg.model import Primitive
-        if not isinstance(element, Primitive) or element.is_string:
-            raise TypeError("the co-simulation model stores sequences of primitives only")
         if isinstance(v, (bytes, bytearray)):
             return bytes(v)
         return struct.pack(f"<{len(v)}{_FMT[element.name]}", *v)
 
     def read(self, va, type_name):
-        from gen.msg.model import Array, Named, Primitive
+        """The value of the struct at ``va`` (the inverse of :meth:`write`)."""
         out = {}
         for m in self.layout.struct(type_name).members:
             if m.name == "structure_needs_at_least_one_member":
                 continue
-            at = va + m.offset
-            t = m.type
-            if isinstance(t, Named):
-                out[m.name] = self.read(at, t.typename)
-            elif isinstance(t, Primitive) and t.is_string:
-                ptr, n = self._ptr(at), self._ptr(at + self.p)
-                out[m.name] = self.mem.read(ptr, n).decode() if n else ""
-            elif isinstance(t, Primitive):
-                raw = self.mem.read(at, self._primitive_size(t.name))
-                out[m.name] = struct.unpack("<" + _FMT[t.name], raw)[0]
-            else:
-                esz = self._primitive_size(t.element.name)
-                if isinstance(t, Array):
-                    ptr, n = at, t.length
-                else:
-                    ptr, n = self._ptr(at), self._ptr(at + self.p)
-                raw = self.mem.read(ptr, n * esz) if n else b""
-                if t.element.name in BYTE_ELEMENTS:
-                    out[m.name] = raw
-                else:
-                    out[m.name] = list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
+            out[m.name] = self._read_value(va + m.offset, m.type)
         return out
+
+    def _read_value(self, at, t):
+        from gen.msg.model import Array, Named, Primitive
+        if isinstance(t, Named):
+            return self.read(at, t.typename)
+        if isinstance(t, Primitive) and t.is_string:
+            ptr, n = self._ptr(at), self._ptr(at + self.p)
+            return self.mem.read(ptr, n).decode() if n else ""
+        if isinstance(t, Primitive):
+            raw = self.mem.read(at, self._primitive_size(t.name))
+            return struct.unpack("<" + _FMT[t.name], raw)[0]
+        if isinstance(t, Array):
+            ptr, n = at, t.length
+        else:
+            ptr, n = self._ptr(at), self._ptr(at + self.p)
+        if isinstance(t.element, Primitive) and not t.element.is_string:
+            esz = self._primitive_size(t.element.name)
+            raw = self.mem.read(ptr, n * esz) if n else b""
+            if t.element.name in BYTE_ELEMENTS:
+                return raw
+            return list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
+        size, _ = self.layout.size_align(t.element)
+        return [self._read_value(ptr + i * size, t.element) for i in range(n)]
