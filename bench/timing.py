@@ -25,6 +25,7 @@ FOLDER = SIM_BUILD / "timing"
 DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
 #: the engine (TCP and RBCP as well) may be this multiple of LiteEth's 8-bit UDP core
 ENGINE_GOAL = 1.6
+GATEWAY_CFG = Path(__file__).resolve().parents[1] / "examples" / "hwtopic_gateway" / "build.cfg"
 SYSTEM_CFG = Path(__file__).resolve().parents[1] / "examples" / "sobel_dip" / "build.cfg"
 
 
@@ -87,6 +88,15 @@ def catalog():
         return build_system(load_project(SYSTEM_CFG))
     add("system_sobel_dip", "system top of examples/sobel_dip (ReconOS r64, Sobel thread)",
         system, "rosgate_system", reconos.CLOCK_MHZ)
+
+    def gateway():
+        from gen.config import load_project
+        from gen.system import build_thread
+        project = load_project(GATEWAY_CFG)
+        slot = next(s for s in project.slots if s.thread and s.thread.gateway)
+        return build_thread(project, slot.thread, slot)
+    add("gateway_image", "ROS gateway of examples/hwtopic_gateway (sensor_msgs/Image, both "
+        "directions, r64)", gateway, "rt_gateway1", reconos.CLOCK_MHZ)
     return cores
 
 
