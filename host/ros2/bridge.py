@@ -356,6 +356,7 @@ class Ros2Bridge:
         from cyclonedds.sub import DataReader
         reader = DataReader(self.participant, self._topic(dds_name, idl, keep_all=keep_all),
                             qos=self.qos.dds(keep_all=keep_all))
+        self.counts.setdefault(name, self.counts.default_factory())   # listed even if idle
         condition = ReadCondition(reader, SampleState.NotRead | ViewState.Any |
                                   InstanceState.Any)
         self.waitset.attach(condition)
@@ -365,6 +366,7 @@ class Ros2Bridge:
         from cyclonedds.pub import DataWriter
         writer = DataWriter(self.participant, self._topic(dds_name, idl, status, keep_all),
                             qos=self.qos.dds(status, keep_all))
+        self.counts.setdefault(name, self.counts.default_factory())
         return _Endpoint(name, typename, writer, key)
 
     def close(self):
