@@ -63,6 +63,23 @@ def _sample(shape, encoding, sec):
                       step, list(pixels.tobytes())).serialize()
 
 
+def _round_trips(domain, out_topic, back_topic, samples):
+    """(write_ns, receive_ns) of each sample written raw on ``out_topic`` and taken back on
+    ``back_topic``; each echo must equal the sample."""
+    p = peer.Peer(domain)
+    writer = p.writer(out_topic, peer.Image)
+    reader = p.reader(back_topic, peer.Image)
+    p.wait_matched(writer, reader)
+    trips = []
+    for data in samples:
+        start = time.monotonic_ns()
+        p.write_raw(writer, data)
+        got = p.take_raw(reader)
+        trips.append((start, time.monotonic_ns()))
+        assert got[4:len(data)] == data[4:], f"the echo on {back_topic} differs from the sample"
+    return trips
+
+
 def _loopback_rtt(domain, samples):
     """Median round trip (ns) of each sample through an echo participant in another
     process."""
@@ -71,18 +88,8 @@ def _loopback_rtt(domain, samples):
                             stdout=subprocess.PIPE, text=True)
     try:
         assert echo.stdout.readline().strip() == "ready"
-        p = peer.Peer(domain)
-        writer = p.writer("rt/loop_out", peer.Image)
-        reader = p.reader("rt/loop_back", peer.Image)
-        p.wait_matched(writer)
-        p.wait_matched(reader)
-        trips = []
-        for data in samples:
-            start = time.monotonic_ns()
-            p.write_raw(writer, data)
-            p.take_raw(reader)
-            trips.append(time.monotonic_ns() - start)
-        return statistics.median(trips)
+        trips = _round_trips(domain, "rt/loop_out", "rt/loop_back", samples)
+        return statistics.median(end - start for start, end in trips)
     finally:
         echo.kill()
         echo.wait()
@@ -92,18 +99,7 @@ def _bridge_trips(domain, samples, out):
     """(write_ns, receive_ns) per sample through the bridge and the echo thread, and the
     bridge's timeline."""
     with peer.ros2_sim(ECHO, "verilator", out, domain) as process:
-        p = peer.Peer(domain)
-        writer = p.writer("rt/image_in", peer.Image)
-        reader = p.reader("rt/image_out", peer.Image)
-        p.wait_matched(writer)
-        p.wait_matched(reader)
-        trips = []
-        for data in samples:
-            start = time.monotonic_ns()
-            p.write_raw(writer, data)
-            got = p.take_raw(reader)
-            trips.append((start, time.monotonic_ns()))
-            assert got[4:len(data)] == data[4:], "the echo differs from what was sent"
+        trips = _round_trips(domain, "rt/image_in", "rt/image_out", samples)
     assert process.returncode == 0
     return trips, peer.results(out)["ros2"]["timeline"]
 

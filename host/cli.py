@@ -367,10 +367,10 @@ def _run_sim(args):
     started = time.time()
     ros2 = None
     if args.ros2:
-        from host.ros2.bridge import default_domain
+        from host.ros2.bridge import DOMAIN_IDS, default_domain
         domain = default_domain() if args.domain is None else args.domain
-        if not 0 <= domain <= 232:
-            console.error(f"--domain {domain}: expected a DDS domain id 0..232")
+        if domain not in DOMAIN_IDS:
+            console.error(f"--domain {domain}: expected a DDS domain id 0..{DOMAIN_IDS[-1]}")
             return 2
         ros2 = {"domain": domain, "nodes": args.with_nodes}
     elif args.domain is not None or args.with_nodes:

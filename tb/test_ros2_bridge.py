@@ -143,8 +143,7 @@ def test_sobel_dip_from_dds(tmp_path, photo):
         p = peer.Peer(domain)
         raw_writer = p.writer("rt/image_raw", peer.Image)
         filtered = p.reader("rt/image_filtered", peer.Image)
-        p.wait_matched(raw_writer)
-        p.wait_matched(filtered)
+        p.wait_matched(raw_writer, filtered)
 
         def round_trip(pixels, sec):
             raw_writer.write(peer.image(pixels, sec))
@@ -195,8 +194,7 @@ def test_sobel_dip_from_dds(tmp_path, photo):
         # the hardware Sobel service, called from DDS with rmw_cyclonedds_cpp's header
         request_writer = p.writer("rq/sobelserviceRequest", peer.SobelSrvRequest)
         replies = p.reader("rr/sobelserviceReply", peer.SobelSrvResponse)
-        p.wait_matched(request_writer)
-        p.wait_matched(replies)
+        p.wait_matched(request_writer, replies)
         crop = photo[10:40, 20:61]
         request_writer.write(peer.SobelSrvRequest(0x1122334455667788, 41, peer.image(crop)))
         reply = peer.SobelSrvResponse.deserialize(p.take_raw(replies))
@@ -305,8 +303,7 @@ def test_hardware_client_calls_a_dds_service(tmp_path, photo):
         replies = p.writer("rr/sobelserviceReply", peer.SobelSrvResponse)
         raw_writer = p.writer("rt/image_raw", peer.Image)
         filtered = p.reader("rt/image_filtered", peer.Image)
-        for entity in (requests, replies, raw_writer, filtered):
-            p.wait_matched(entity)
+        p.wait_matched(requests, replies, raw_writer, filtered)
         raw_writer.write(peer.image(pixels, 9))
         request = peer.SobelSrvRequest.deserialize(p.take_raw(requests))
         assert np.array_equal(np.array(request.img.data, np.uint8).reshape(pixels.shape),
@@ -354,8 +351,7 @@ def test_hardware_action_from_dds(tmp_path):
         cancelled = p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse)
         feedback = p.reader(f"rt/{base}feedback", peer.SortFeedbackMessage)
         status = p.status_reader(f"rt/{base}status", peer.GoalStatusArray)
-        for entity in (send, sent, ask, results, cancel, cancelled, feedback, status):
-            p.wait_matched(entity)
+        p.wait_matched(send, sent, ask, results, cancel, cancelled, feedback, status)
         guid = rng.randrange(1, 1 << 63)
         uuid = peer.UUID(list(rng.randbytes(16)))
         values = [rng.randrange(1 << 32) for _ in range(rng.randrange(100, 257))]
@@ -413,8 +409,7 @@ def test_gateway_demo_from_dds(tmp_path):
         writer = p.writer("rt/inputtopic", peer.Image)
         outputs = p.reader("rt/outputtopic", peer.Image)
         gateway = p.reader("rt/topic/gateway", peer.Image)
-        for entity in (writer, outputs, gateway):
-            p.wait_matched(entity)
+        p.wait_matched(writer, outputs, gateway)
         sent = []
         for k in range(3):
             height, width = (int(x) for x in rng.integers(1, 20, 2))
@@ -448,8 +443,7 @@ def test_sort_service_from_dds(tmp_path):
         p = peer.Peer(domain)
         requests = p.writer("rq/srvRequest", peer.SortRequest)
         replies = p.reader("rr/srvReply", peer.SortResponse)
-        p.wait_matched(requests)
-        p.wait_matched(replies)
+        p.wait_matched(requests, replies)
         guid = rng.randrange(1, 1 << 63)
         calls = {seq: [rng.randrange(1 << 32) for _ in range(rng.randrange(1, 80))]
                  for seq in (7, 8, 9)}
@@ -555,8 +549,7 @@ def test_hardware_action_client_uses_a_dds_action(tmp_path):
         asks = p.reader(f"rq/{base}get_resultRequest", peer.SortGetResultRequest)
         answer = p.writer(f"rr/{base}get_resultReply", peer.SortGetResultResponse)
         feedback = p.writer(f"rt/{base}feedback", peer.SortFeedbackMessage)
-        for entity in (goals, accept, asks, answer, feedback):
-            p.wait_matched(entity)
+        p.wait_matched(goals, accept, asks, answer, feedback)
         goal = peer.SortSendGoalRequest.deserialize(p.take_raw(goals))
         assert list(goal.goal_id.uuid) == list(range(40, 56))
         assert list(goal.goal.unsorted) == [9, 4, 7, 1]
@@ -578,3 +571,4 @@ def test_hardware_action_client_uses_a_dds_action(tmp_path):
     assert got["result"] == {"status": 4, "result": {"sorted": [1, 4, 7, 9]}}
     assert got["feedback"]["feedback"]["percent"] == 42.5
     assert got["feedback"]["goal_id"]["uuid"] == list(range(40, 56))
+

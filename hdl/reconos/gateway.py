@@ -4,7 +4,6 @@ ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publ
 subscribing a hardware topic needs."""
 
 from amaranth import Cat, Const, Module, Mux, Signal
-from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM

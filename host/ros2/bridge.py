@@ -23,7 +23,10 @@ from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, default_value, en
 from .graph import dds_topic_name, service_topic_names
 from .types import DdsTypes, pack_request_header, unpack_request_header
 
-__all__ = ["Ros2Bridge", "BridgeQos", "LOOPBACK_CONFIG", "default_domain"]
+__all__ = ["Ros2Bridge", "BridgeQos", "LOOPBACK_CONFIG", "DOMAIN_IDS", "default_domain"]
+
+#: the domain ids a DDS participant can join (the RTPS port mapping ends at 232)
+DOMAIN_IDS = range(233)
 
 #: a Cyclone DDS configuration that keeps a domain on this machine's loopback interface
 LOOPBACK_CONFIG = (
@@ -39,8 +42,8 @@ def default_domain():
     text = os.environ.get("ROS_DOMAIN_ID", "").strip()
     if not text:
         return 0
-    if not text.isdigit() or not 0 <= int(text) <= 232:
-        raise ValueError(f"ROS_DOMAIN_ID={text!r}: expected a DDS domain id 0..232")
+    if not text.isdigit() or int(text) not in DOMAIN_IDS:
+        raise ValueError(f"ROS_DOMAIN_ID={text!r}: expected a DDS domain id 0..{DOMAIN_IDS[-1]}")
     return int(text)
 
 
@@ -129,8 +132,8 @@ class Ros2Bridge:
 
     def __init__(self, interfaces, library, broker, *, domain, log, spawn, accepts=None,
                  qos=None, now_ns=time.monotonic_ns):
-        if not isinstance(domain, int) or not 0 <= domain <= 232:
-            raise ValueError(f"DDS domain {domain!r}: expected an integer 0..232")
+        if not isinstance(domain, int) or domain not in DOMAIN_IDS:
+            raise ValueError(f"DDS domain {domain!r}: expected an integer 0..{DOMAIN_IDS[-1]}")
         self.interfaces = interfaces
         self.library = library
         self.broker = broker
@@ -148,7 +151,7 @@ class Ros2Bridge:
         self._inbound = []           # (endpoint, handler)
         self._outbound = []          # (broker queue, endpoint)
         self._injected = set()       # ids of values this bridge published into the broker
-        self._clients = []           # (broker server queue, request writer, pending)
+        self._clients = []           # (broker server queue, reply endpoint) per called service
         self._action_clients = []    # state of each action the hardware uses on DDS
         self._calls = 0              # service calls into the graph still running
         self._guid = int.from_bytes(os.urandom(8), "little") or 1
@@ -159,6 +162,7 @@ class Ros2Bridge:
         #: system published it and when it was written to DDS
         self.timeline = collections.deque(maxlen=self.TIMELINE)
         self._published = {}
+        self._published_keys = set()   # broker names of the topics written to DDS
 
     TIMELINE = 1000
 
@@ -171,7 +175,6 @@ class Ros2Bridge:
         self.participant = DomainParticipant(self.domain)
         self.waitset = WaitSet(self.participant)
         shown = []
-        self._published_keys = set()
         self.broker.observers.append(self._observe)
         for topic in self.interfaces.topics.values():
             keep_all = topic.hardware_topic is not None
@@ -197,14 +200,13 @@ class Ros2Bridge:
                 self._inbound.append((ep, self._service_request))
                 shown.append(f"{service.name} [{service.srvtype}] (served in hardware)")
             elif service.key not in self.broker._services:
-                writer = self._writer(request, req_type, service.name, service.request_type,
-                                      service.key)
                 ep = self._reader(reply, res_type, service.name, service.response_type,
                                   service.key)
-                pending = {}
-                ep.pending = pending
+                ep.reply = self._writer(request, req_type, service.name,
+                                        service.request_type, service.key)
+                ep.pending = {}
                 self._inbound.append((ep, self._service_reply))
-                self._clients.append((self.broker.server_queue(service.key), writer, pending))
+                self._clients.append((self.broker.server_queue(service.key), ep))
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
         for action in self.interfaces.actions.values():
             if action.servers:
@@ -272,76 +274,6 @@ class Ros2Bridge:
             ep = services[name]
             ep.goals, ep.feedback, ep.status = goals, feedback, status
             self._inbound.append((ep, handler))
-
-    def _action_endpoints(self, action, client):
-        """The action's three services (request and reply sides swapped for a client) and
-        its feedback topic, as (service endpoints by name, feedback endpoint)."""
-        if CANCEL_GOAL + "_Request" not in self.library:
-            for definition in parse_srv(CANCEL_GOAL_SRV, CANCEL_GOAL, "<action_msgs>"):
-                self.library.add(definition)
-        base, a = f"{action.name}/_action/", action.actiontype
-        services = {}
-        for service, srvtype in (("send_goal", f"{a}_SendGoal"),
-                                 ("get_result", f"{a}_GetResult"),
-                                 ("cancel_goal", CANCEL_GOAL)):
-            request, reply = service_topic_names(base + service)
-            parts = [(request, srvtype + "_Request"), (reply, srvtype + "_Response")]
-            incoming, outgoing = parts[::-1] if client else parts
-            ep = self._reader(incoming[0], self.types.service_part(incoming[1]),
-                              base + service, incoming[1], action.key)
-            ep.reply = self._writer(outgoing[0], self.types.service_part(outgoing[1]),
-                                    base + service, outgoing[1], action.key)
-            services[service] = ep
-        feedback_type = f"{a}_FeedbackMessage"
-        make = self._reader if client else self._writer
-        feedback = make(dds_topic_name(base + "feedback"), self.types.message(feedback_type),
-                        base + "feedback", feedback_type, action.key)
-        return services, feedback
-
-    def _call_action(self, action):
-        """An action the hardware uses and nobody in the build.cfg serves: the bridge is
-        its server in the graph and a client of it on DDS, as rcl_action's client."""
-        services, feedback = self._action_endpoints(action, client=True)
-        state = {"goals": self.broker.action_server_queue(action.key), "sent": {},
-                 "by_uuid": {}, "results": {}, "services": services}
-        for name in ("send_goal", "get_result"):
-            services[name].state = state
-        # feedback before results: feedback a server sent before the result is delivered
-        # even when both arrive in one poll
-        self._inbound += [(services["send_goal"], self._goal_reply),
-                          (feedback, self._goal_feedback_in),
-                          (services["get_result"], self._result_reply)]
-        feedback.state = state
-        self._action_clients.append(state)
-
-    def _serve_action(self, action):
-        """An action served in hardware, as rcl_action shows it: the services send_goal,
-        get_result and cancel_goal and the topics feedback and status under
-        ``<action>/_action/``."""
-        if CANCEL_GOAL + "_Request" not in self.library:
-            for definition in parse_srv(CANCEL_GOAL_SRV, CANCEL_GOAL, "<action_msgs>"):
-                self.library.add(definition)
-        base, a = f"{action.name}/_action/", action.actiontype
-        goals = {}
-        for service, srvtype, handler in (("send_goal", f"{a}_SendGoal", self._send_goal),
-                                          ("get_result", f"{a}_GetResult", self._get_result),
-                                          ("cancel_goal", CANCEL_GOAL, self._cancel_goal)):
-            request, reply = service_topic_names(base + service)
-            ep = self._reader(request, self.types.service_part(srvtype + "_Request"),
-                              base + service, srvtype + "_Request", action.key)
-            ep.reply = self._writer(reply, self.types.service_part(srvtype + "_Response"),
-                                    base + service, srvtype + "_Response", action.key)
-            ep.goals = goals
-            self._inbound.append((ep, handler))
-        feedback = self._writer(dds_topic_name(base + "feedback"),
-                                self.types.message(f"{a}_FeedbackMessage"), base + "feedback",
-                                f"{a}_FeedbackMessage", action.key)
-        status = self._writer(dds_topic_name(base + "status"),
-                              self.types.message("action_msgs/msg/GoalStatusArray"),
-                              base + "status", "action_msgs/msg/GoalStatusArray", action.key,
-                              status=True)
-        for ep, _ in self._inbound[-3:]:
-            ep.feedback, ep.status = feedback, status
 
     def _observe(self, key, value):
         if key in self._published_keys:
@@ -420,17 +352,13 @@ class Ros2Bridge:
                 moved += 1
         for state in self._action_clients:
             moved += self._poll_action_client(state)
-        for queue, writer, pending in self._clients:
+        for queue, ep in self._clients:
             # a request waits until a server is there (rclcpp's wait_for_service): a volatile
             # request written before the match would be lost
-            while len(queue) and self._matched(writer) and \
+            while len(queue) and self._matched(ep.reply) and \
                     (item := queue.get_nowait()) is not None:
                 request, reply_queue = item
-                self._seq += 1
-                pending[self._seq] = reply_queue
-                body = encode_cdr(self.library, writer.typename, request)
-                self._write(writer, CDR_LE_HEADER + pack_request_header(self._guid, self._seq)
-                            + body[4:])
+                ep.pending[self._call(ep, request)] = reply_queue
                 moved += 1
         return moved
 
@@ -491,57 +419,40 @@ class Ros2Bridge:
         return guid, seq, data[:4] + data[20:]
 
     def _service_request(self, ep, data):
-        split = self._split(ep, data)
-        if split is None:
+        request = self._request(ep, data)
+        if request is None:
             return
-        guid, seq, body = split
-        value = self._decode(ep, body)
-        if value is None:
-            return
+        guid, seq, value = request
         self.counts[ep.name]["delivered"] += 1
         self._calls += 1
 
         async def call():
             try:
-                response = await self.broker.call(ep.key, value)
-                reply = encode_cdr(self.library, ep.reply.typename, response)
-                self._write(ep.reply, CDR_LE_HEADER + pack_request_header(guid, seq)
-                            + reply[4:])
+                self._reply(ep, guid, seq, await self.broker.call(ep.key, value))
             finally:
                 self._calls -= 1
         self.spawn(call())
 
     def _service_reply(self, ep, data):
-        split = self._split(ep, data)
-        if split is None:
-            return
-        guid, seq, body = split
-        if guid != self._guid:
-            return                      # another client's reply
-        if seq not in ep.pending:
-            self._reject(ep, f"a reply to call {seq}, which this bridge did not make or "
-                             f"already has")
-            return
-        value = self._decode(ep, body)
-        if value is None:
-            return
-        ep.pending.pop(seq).put(value)
-        self.counts[ep.name]["delivered"] += 1
+        got = self._client_reply(ep, data, ep.pending)
+        if got is not None:
+            reply_queue, value = got
+            reply_queue.put(value)
 
-    # --- actions served in hardware ------------------------------------------------------
-    def _stamp(self):
-        ns = int(self.now_ns())
-        return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+    def _send(self, writer, guid, seq, value):
+        """``value`` with rmw_cyclonedds_cpp's request header on ``writer``."""
+        body = encode_cdr(self.library, writer.typename, value)
+        self._write(writer, CDR_LE_HEADER + pack_request_header(guid, seq) + body[4:])
 
     def _reply(self, ep, guid, seq, value):
-        body = encode_cdr(self.library, ep.reply.typename, value)
-        self._write(ep.reply, CDR_LE_HEADER + pack_request_header(guid, seq) + body[4:])
+        """Answer the request ``(guid, seq)`` that came in on ``ep``."""
+        self._send(ep.reply, guid, seq, value)
 
-    def _publish_status(self, ep):
-        status_list = [{"goal_info": {"goal_id": {"uuid": uuid}, "stamp": r.stamp},
-                        "status": r.status} for uuid, r in ep.goals.items()]
-        self._write(ep.status, encode_cdr(self.library, ep.status.typename,
-                                          {"status_list": status_list}))
+    def _call(self, ep, value):
+        """Send a request on ``ep.reply`` (a client side); return its sequence number."""
+        self._seq += 1
+        self._send(ep.reply, self._guid, self._seq, value)
+        return self._seq
 
     def _request(self, ep, data):
         """(guid, seq, value) of a request, or ``None`` after rejecting it."""
@@ -551,6 +462,35 @@ class Ros2Bridge:
         guid, seq, body = split
         value = self._decode(ep, body)
         return None if value is None else (guid, seq, value)
+
+    def _client_reply(self, ep, data, table):
+        """(the waiting item, value) of a reply to one of this bridge's calls, or None."""
+        split = self._split(ep, data)
+        if split is None:
+            return None
+        guid, seq, body = split
+        if guid != self._guid:
+            return None                     # another client's reply
+        if seq not in table:
+            self._reject(ep, f"a reply to call {seq}, which this bridge did not make or "
+                             f"already has")
+            return None
+        value = self._decode(ep, body)
+        if value is None:
+            return None
+        self.counts[ep.name]["delivered"] += 1
+        return table.pop(seq), value
+
+    # --- actions served in hardware ------------------------------------------------------
+    def _stamp(self):
+        ns = int(self.now_ns())
+        return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+    def _publish_status(self, ep):
+        status_list = [{"goal_info": {"goal_id": {"uuid": uuid}, "stamp": r.stamp},
+                        "status": r.status} for uuid, r in ep.goals.items()]
+        self._write(ep.status, encode_cdr(self.library, ep.status.typename,
+                                          {"status_list": status_list}))
 
     def _send_goal(self, ep, data):
         request = self._request(ep, data)
@@ -636,14 +576,6 @@ class Ros2Bridge:
         self._reply(ep, guid, seq, {"return_code": code, "goals_canceling": []})
 
     # --- actions used from hardware ------------------------------------------------------
-    def _call(self, ep, value):
-        """Send a request on ``ep`` (a client side); return its sequence number."""
-        self._seq += 1
-        body = encode_cdr(self.library, ep.reply.typename, value)
-        self._write(ep.reply, CDR_LE_HEADER + pack_request_header(self._guid, self._seq)
-                    + body[4:])
-        return self._seq
-
     def _poll_action_client(self, state):
         moved = 0
         send, get = state["services"]["send_goal"], state["services"]["get_result"]
@@ -658,24 +590,6 @@ class Ros2Bridge:
                 state["results"][uuid] = self._call(get, {"goal_id": {"uuid": uuid}})
                 moved += 1
         return moved
-
-    def _client_reply(self, ep, data, table):
-        """(the waiting item, value) of a reply to one of this bridge's calls, or None."""
-        split = self._split(ep, data)
-        if split is None:
-            return None
-        guid, seq, body = split
-        if guid != self._guid:
-            return None                     # another client's reply
-        if seq not in table:
-            self._reject(ep, f"a reply to call {seq}, which this bridge did not make or "
-                             f"already has")
-            return None
-        value = self._decode(ep, body)
-        if value is None:
-            return None
-        self.counts[ep.name]["delivered"] += 1
-        return table.pop(seq), value
 
     def _goal_reply(self, ep, data):
         got = self._client_reply(ep, data, ep.state["sent"])

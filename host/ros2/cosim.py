@@ -118,4 +118,6 @@ async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
         if quiet >= IDLE_POLLS and all(s in cosim.runtime.pending for s in slots):
             bridge.wait(IDLE_WAIT_S)
     if not failures:
-        ctx.log(f"ros2 bridge: stopping on {why} after {ctx.now()} cycles")
+        waiting = ", ".join(f"slot {s} in {m.upper()}" for s, (m, _) in
+                            sorted(cosim.runtime.pending.items())) or "no slot in an OS call"
+        ctx.log(f"ros2 bridge: stopping on {why} after {ctx.now()} cycles ({waiting})")

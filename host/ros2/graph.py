@@ -8,12 +8,7 @@ from dataclasses import dataclass, field
 
 __all__ = ["TopicInterface", "ServiceInterface", "ActionInterface", "RosInterfaces",
            "ros_interfaces", "absolute_name", "dds_topic_name", "dds_type_name",
-           "service_topic_names", "ACTION_SERVICES", "ACTION_TOPICS"]
-
-#: an action's services and topics under ``<action>/_action/`` (rcl_action), with the
-#: suffix of their interface type
-ACTION_SERVICES = {"send_goal": "SendGoal", "get_result": "GetResult"}
-ACTION_TOPICS = {"feedback": "FeedbackMessage"}
+           "service_topic_names"]
 
 
 def absolute_name(name, where=None):
@@ -101,17 +96,6 @@ class RosInterfaces:
     topics: dict
     services: dict
     actions: dict
-
-    def message_types(self):
-        """Every ROS 2 type the interfaces carry (services and actions as their parts)."""
-        out = {t.msgtype for t in self.topics.values()}
-        for s in self.services.values():
-            out |= {s.request_type, s.response_type}
-        for a in self.actions.values():
-            out |= {f"{a.actiontype}_{part}" for part in
-                    ("SendGoal_Request", "SendGoal_Response", "GetResult_Request",
-                     "GetResult_Response", "FeedbackMessage")}
-        return out
 
 
 def _interface_type(thread, resource, suffix):

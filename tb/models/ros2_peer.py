@@ -256,14 +256,16 @@ class Peer:
                                           Policy.Durability.TransientLocal))
 
     @staticmethod
-    def wait_matched(entity, timeout=60):
-        status = (entity.get_publication_matched_status if hasattr(entity, "write")
-                  else entity.get_subscription_matched_status)
+    def wait_matched(*entities, timeout=60):
+        """Wait until every reader and writer has matched a peer."""
         deadline = time.monotonic() + timeout
-        while status().current_count == 0:
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"no match on {entity.topic.name} within {timeout} s")
-            time.sleep(0.02)
+        for entity in entities:
+            status = (entity.get_publication_matched_status if hasattr(entity, "write")
+                      else entity.get_subscription_matched_status)
+            while status().current_count == 0:
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"no match on {entity.topic.name} within {timeout} s")
+                time.sleep(0.02)
 
     def take_raw(self, reader, timeout=120):
         """The next sample's bytes as they came from DDS (waits on a WaitSet)."""
