@@ -150,7 +150,9 @@ class Ros2Bridge:
         self.rejections = []
         self._inbound = []           # (endpoint, handler)
         self._outbound = []          # (broker queue, endpoint)
-        self._injected = set()       # ids of values this bridge published into the broker
+        #: values this bridge published on a topic it also writes to DDS, by id, held until
+        #: its own subscription sees them (a held value's id cannot be reused)
+        self._injected = {}
         self._clients = []           # (broker server queue, reply endpoint) per called service
         self._action_clients = []    # state of each action the hardware uses on DDS
         self._calls = 0              # service calls into the graph still running
@@ -277,7 +279,7 @@ class Ros2Bridge:
 
     def _observe(self, key, value):
         if key in self._published_keys:
-            self._published[id(value)] = time.monotonic_ns()
+            self._published[id(value)] = (value, time.monotonic_ns())
 
     def _topic(self, name, idl, status=False, keep_all=False):
         from cyclonedds.topic import Topic
@@ -340,9 +342,9 @@ class Ros2Bridge:
                     moved += 1
         for queue, ep in self._outbound:
             while (value := queue.get_nowait()) is not None:
-                published = self._published.pop(id(value), None)
-                if id(value) in self._injected:
-                    self._injected.discard(id(value))
+                held, published = self._published.pop(id(value), (None, None))
+                published = published if held is value else None
+                if self._injected.pop(id(value), None) is value:
                     continue
                 data = encode_cdr(self.library, ep.typename, value)
                 self._write(ep, data)
@@ -403,7 +405,8 @@ class Ros2Bridge:
     def _topic_sample(self, ep, data):
         value = self._decode(ep, data)
         if value is not None:
-            self._injected.add(id(value))
+            if ep.key in self._published_keys:
+                self._injected[id(value)] = value
             self.timeline.append({"direction": "in", "name": ep.name, "bytes": len(data),
                                   "ingress_ns": time.monotonic_ns()})
             self.broker.publish(ep.key, value)
