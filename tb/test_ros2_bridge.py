@@ -254,7 +254,7 @@ class FakeBroker:
     def __init__(self):
         self.published = []
 
-    def publish(self, topic, value):
+    def publish(self, topic, value, origin=None):
         self.published.append((topic, value))
 
 

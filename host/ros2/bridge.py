@@ -59,6 +59,8 @@ int8 return_code
 action_msgs/GoalInfo[] goals_canceling
 """
 CANCEL_GOAL = "action_msgs/srv/CancelGoal"
+#: the bridge's origin in the in-process graph (host.reconos.Broker)
+ORIGIN = "ros2 bridge"
 #: action_msgs/msg/GoalStatus
 STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
 CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
@@ -150,9 +152,6 @@ class Ros2Bridge:
         self.rejections = []
         self._inbound = []           # (endpoint, handler)
         self._outbound = []          # (broker queue, endpoint)
-        #: values this bridge published on a topic it also writes to DDS, by id, held until
-        #: its own subscription sees them (a held value's id cannot be reused)
-        self._injected = {}
         self._clients = []           # (broker server queue, reply endpoint) per called service
         self._action_clients = []    # state of each action the hardware uses on DDS
         self._calls = 0              # service calls into the graph still running
@@ -187,7 +186,9 @@ class Ros2Bridge:
             if topic.publishers:
                 ep = self._writer(dds_topic_name(topic.name), self.types.message(topic.msgtype),
                                   topic.name, topic.msgtype, topic.key, keep_all=keep_all)
-                self._outbound.append((self.broker.subscribe(topic.key), ep))
+                # what the bridge itself publishes does not come back to it (the broker's
+                # origin rule): DDS samples are not echoed onto DDS
+                self._outbound.append((self.broker.subscribe(topic.key, ORIGIN), ep))
                 self._published_keys.add(topic.key)
             shown.append(f"{topic.name} [{topic.msgtype}]")
         for service in self.interfaces.services.values():
@@ -344,8 +345,6 @@ class Ros2Bridge:
             while (value := queue.get_nowait()) is not None:
                 held, published = self._published.pop(id(value), (None, None))
                 published = published if held is value else None
-                if self._injected.pop(id(value), None) is value:
-                    continue
                 data = encode_cdr(self.library, ep.typename, value)
                 self._write(ep, data)
                 self.timeline.append({"direction": "out", "name": ep.name, "bytes": len(data),
@@ -405,11 +404,10 @@ class Ros2Bridge:
     def _topic_sample(self, ep, data):
         value = self._decode(ep, data)
         if value is not None:
-            if ep.key in self._published_keys:
-                self._injected[id(value)] = value
             self.timeline.append({"direction": "in", "name": ep.name, "bytes": len(data),
                                   "ingress_ns": time.monotonic_ns()})
-            self.broker.publish(ep.key, value)
+            self.broker.publish(ep.key, value, ORIGIN)
+            self._published.pop(id(value), None)     # it will not come back to the bridge
             self.counts[ep.name]["delivered"] += 1
 
     def _split(self, ep, data):
