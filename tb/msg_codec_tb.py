@@ -25,7 +25,7 @@ from tb.models.msgstream import (
 )
 from tb.streams import HandshakeSink, HandshakeSource, PacketSink, bursty_pauses, random_pauses
 
-__all__ = ["CLOCK_NS", "TEST_MSGS", "IMAGE", "STREAMABLE", "config", "PARAMS", "PUBLISHER",
+__all__ = ["CLOCK_NS", "TEST_MSGS", "IMAGE", "STREAMABLE", "ELEMENTS", "POINTS", "config", "PARAMS", "PUBLISHER",
            "MsgCodecTB"]
 
 
@@ -39,6 +39,14 @@ IMAGE = "sensor_msgs/msg/Image"
 
 
 STREAMABLE = "rosgate_test_msgs/msg/Streamable"
+
+
+#: sequences of messages and strings (packed element streams)
+ELEMENTS = "rosgate_test_msgs/msg/Elements"
+
+
+#: a sequence of fixed-size messages, which the ros1 serializer takes too
+POINTS = "rosgate_test_msgs/msg/Points"
 
 
 def config(type_, framing, width, msg_dir=TEST_MSGS, **extra):
@@ -80,14 +88,14 @@ class MsgCodecTB:
             return port
 
         self.ser_fields = HandshakeSource(dut, "ser_fields", clock)
-        self.ser_payloads = [source(f"ser_{payload_port(v, 's')}") for v in self.plan.variables]
+        self.ser_payloads = [source(f"ser_{payload_port(v, 's')}") for v in self.plan.streams]
         self.ser_out = AxiStreamSink(AxiStreamBus.from_prefix(dut, "ser_m_axis"), clock,
                                      dut.aresetn, reset_active_level=False)
         self.ser_out.log.setLevel(logging.WARNING)
         self.des_in = source("des_s_axis")
         self.des_fields = HandshakeSink(dut, "des_fields", clock)
         self.des_payloads = [PacketSink(dut, f"des_{payload_port(v, 'm')}", clock)
-                             for v in self.plan.variables]
+                             for v in self.plan.streams]
         self.errors = {"ser": [], "des": []}
         self.cycle = 0
         cocotb.start_soon(self._watch_errors())
@@ -124,8 +132,8 @@ class MsgCodecTB:
     def random_message(self, big=0):
         """A random value; with ``big``, unbounded sequences get up to ``big`` elements."""
         value = random_value(self.library, self.typename, self.rng, max_len=6)
-        for v in self.plan.variables:
-            if v.string or v.bound or not big:
+        for v in self.plan.streams:
+            if v.string or v.bound or v.elements or not big:
                 continue
             n = self.rng.randint(big // 2, big)
             set_at(value, v.path, random_sequence(v.element, n, self.rng))
@@ -133,9 +141,22 @@ class MsgCodecTB:
 
     def empty_fields(self, value):
         """``value`` with every variable-length field empty."""
-        for v in self.plan.variables:
+        for v in self.plan.streams:
             set_at(value, v.path, "" if v.string else [])
         return value
+
+    def packed(self, element, item):
+        """One element of a sequence of messages or strings, packed: rosbags' ROS 1
+        serialization of the element (docs/messages.md)."""
+        if element == "string":
+            raw = item.encode()
+            return len(raw).to_bytes(4, "little") + raw
+        message = to_rosbags(self.golden, self.library, element, item)
+        return bytes(self.golden.serialize_ros1(message, element))
+
+    def stream_bytes(self, value):
+        """What every stream port carries for ``value`` (``plan.streams`` order)."""
+        return variable_bytes(self.plan, value, self.packed)
 
     def wire_bytes(self, value):
         """Golden bytes of ``value`` in the framing (rosbags or the ReconROS model)."""
@@ -154,7 +175,7 @@ class MsgCodecTB:
     # serializer ------------------------------------------------------------------------
     async def serialize(self, value, payload_override=None):
         """Offer ``value`` to the serializer (fields and every payload stream)."""
-        payloads = payload_override or variable_bytes(self.plan, value)
+        payloads = payload_override or self.stream_bytes(value)
         for port, data in zip(self.ser_payloads, payloads):
             await port.send(self.frame(data or b"\x00"))   # an empty field: one ignored byte
         await self.ser_fields.send(fixed_part(self.plan, value, PUBLISHER))
@@ -193,8 +214,7 @@ class MsgCodecTB:
         want = expected_fields(self.plan, value, PUBLISHER)
         bad = {k: (got[k].hex(), want[k].hex()) for k in want if got[k] != want[k]}
         assert not bad, f"message {n}: fields (got, want) {bad}"
-        for v, packet, data in zip(self.plan.variables, packets,
-                                   variable_bytes(self.plan, value)):
+        for v, packet, data in zip(self.plan.streams, packets, self.stream_bytes(value)):
             assert bytes(packet.data) == data, \
                 f"message {n}: {v.path}: got {bytes(packet.data).hex()} want {data.hex()}"
             B = self.bytes_per_beat
@@ -220,6 +240,19 @@ class MsgCodecTB:
                                     [p.packets[s + n] for p, s in zip(self.des_payloads, start)],
                                     n)
         assert not self.errors["des"], f"unexpected deserializer errors {self.errors['des']}"
+
+    async def wait_quiet(self, cycles=64, timeout_cycles=100_000):
+        """Wait until no deserializer output has been valid for ``cycles`` cycles in a row
+        (a packet an error closes may wait behind backpressure)."""
+        ports = [self.dut.des_fields_valid] + [
+            getattr(self.dut, f"des_{payload_port(v, 'm')}_tvalid") for v in self.plan.streams]
+        quiet = 0
+        for _ in range(timeout_cycles):
+            await RisingEdge(self.dut.aclk)
+            quiet = 0 if any(p.value == 1 for p in ports) else quiet + 1
+            if quiet >= cycles:
+                return
+        raise AssertionError(f"deserializer outputs still busy after {timeout_cycles} cycles")
 
     async def wait_for(self, condition, timeout_cycles):
         for _ in range(timeout_cycles):

@@ -162,10 +162,17 @@ def test_msg_plan_per_framing():
         result.stdout
 
 
-def test_msg_plan_rejects_unstreamable_type():
+def test_msg_plan_streams_sequences_of_messages_packed():
     result = run_cli("msg", "plan", "sensor_msgs/PointCloud2")
+    assert result.returncode == 0, result.stderr
+    assert "stream fields: sequence<sensor_msgs/msg/PointField> packed" in result.stdout
+    assert "loop over the elements of fields" in result.stdout
+
+
+def test_msg_plan_rejects_unstreamable_type():
+    result = run_cli("msg", "plan", "sensor_msgs/PointCloud2", "--framing", "reconros")
     assert result.returncode == 2
-    assert "fields is sensor_msgs/msg/PointField[]" in result.stderr
+    assert "no encoding for fields, sensor_msgs/msg/PointField[]" in result.stderr
 
 
 @pytest.mark.parametrize("app", ["page", "pid"])

@@ -13,13 +13,13 @@ import cocotb
 import pytest
 from cocotb.triggers import ClockCycles, with_timeout
 
-from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT, WireError, decode_cdr
+from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT, WireError, decode_cdr, default_value
 from hdl.msg import DeserializerError, SerializerError
 from tb.harness import cocotb_bench
 from tb.models.messages import random_sequence
-from tb.models.msgstream import set_at, value_at, variable_bytes
+from tb.models.msgstream import set_at, value_at
 
-from .msg_codec_tb import IMAGE, STREAMABLE, MsgCodecTB, config
+from .msg_codec_tb import ELEMENTS, IMAGE, PARAMS, POINTS, STREAMABLE, MsgCodecTB, config
 
 CONFIGS = {
     "image_cdr_w8": config(IMAGE, "cdr", 8, max_count=8192),
@@ -28,6 +28,13 @@ CONFIGS = {
     "streamable_cdr_w64": config(STREAMABLE, "cdr", 64, max_count=4096),
     "streamable_ros1_w8": config(STREAMABLE, "ros1", 8, max_count=4096),
     "streamable_reconros_w64": config(STREAMABLE, "reconros", 64, max_count=4096),
+    "elements_cdr_w64": config(ELEMENTS, "cdr", 64, max_count=4096),
+    "elements_cdr_w8": pytest.param(config(ELEMENTS, "cdr", 8, max_count=4096),
+                                    marks=pytest.mark.full),
+    "elements_cdr_w512": pytest.param(config(ELEMENTS, "cdr", 512, max_count=4096),
+                                      marks=pytest.mark.full),
+    "points_ros1_w16": pytest.param(config(POINTS, "ros1", 16, max_count=4096),
+                                    marks=pytest.mark.full),
     "image_cdr_w64": pytest.param(config(IMAGE, "cdr", 64, max_count=8192),
                                   marks=pytest.mark.full),
     "image_reconros_w64": pytest.param(config(IMAGE, "reconros", 64, max_count=8192),
@@ -89,15 +96,14 @@ async def round_trip_full_rate(dut):
     B = tb.bytes_per_beat
     big = max(4096, 64 * B)
     value = tb.random_message()
-    target = max((v for v in tb.plan.variables if not v.string and not v.bound),
-                 key=lambda v: v.element_bytes)
+    target = max(primitive_sequences(tb.plan), key=lambda v: v.element_bytes)
     n = big // target.element_bytes
     set_at(value, target.path, random_sequence(target.element, n, tb.rng))
     await tb.serialize(value)
     frame = await with_timeout(tb.ser_out.recv(compact=False), 2_000_000, "ns")
     tb.check_serialized(frame, value, 0)
     await tb.run_deserializer([value])
-    packet = tb.des_payloads[target.index].packets[-1]
+    packet = tb.des_payloads[tb.plan.streams.index(target)].packets[-1]
     cycles = packet.cycles[-1] - packet.cycles[0] + 1
     rate = len(packet.data) / cycles
     tb.log.info("deserializer payload %s: %d bytes in %d cycles = %.3f B/cycle (W/8 = %d)",
@@ -116,9 +122,7 @@ async def sequences_at_max_count(dut):
     tb.set_idle(0.1)
     tb.set_backpressure(0.1)
     value = tb.random_message()
-    for v in tb.plan.variables:
-        if v.string or v.bound:
-            continue
+    for v in primitive_sequences(tb.plan):
         set_at(value, v.path, random_sequence(v.element, tb.max_count, tb.rng))
     await tb.run_serializer([value])
     assert not tb.errors["ser"], tb.errors
@@ -140,14 +144,14 @@ async def deserializer_bad_input_recovers(dut):
         start = [len(p.packets) for p in tb.des_payloads]
         await tb.deserialize(data)
         await tb.wait_for(lambda: tb.errors["des"], 200_000)
-        # fields offered before the error stay offered until taken (random backpressure)
-        await tb.wait_for(lambda: dut.des_fields_valid.value == 0, 10_000)
-        await ClockCycles(dut.aclk, 20)
+        # fields offered before the error stay offered until taken, and packets it closed
+        # wait behind random backpressure
+        await tb.wait_quiet()
         assert tb.errors["des"] == [int(code)], f"{name}: errors {tb.errors['des']}, want {code!r}"
-        declared = variable_bytes(tb.plan, value)
-        for v, p, s in zip(tb.plan.variables, tb.des_payloads, start):
+        declared = tb.stream_bytes(value)
+        for v, p, s, field in zip(tb.plan.streams, tb.des_payloads, start, declared):
             for packet in p.packets[s:]:
-                assert declared[v.index].startswith(bytes(packet.data)), \
+                assert field.startswith(bytes(packet.data)), \
                     f"{name}: {v.path} emitted bytes that are not the field's"
             assert p.current.beats == [], f"{name}: {v.path} packet left open"
         tb.errors["des"].clear()
@@ -162,13 +166,13 @@ def bad_messages(tb):
     rng, plan, B = tb.rng, tb.plan, tb.bytes_per_beat
     cases = []
     value = tb.random_message()
-    for v in plan.variables:   # give every field some bytes so truncation lands inside one
+    for v in plan.streams:   # give every field some bytes so truncation lands inside one
         if v.string:
             set_at(value, v.path, "abcdefghijk"[:v.bound or 11])
     good = tb.wire_bytes(value)
     cases.append(("ends early in a fixed field", good[:6], DeserializerError.EARLY_END, value))
     big = tb.random_message()
-    seq = [v for v in plan.variables if not v.string and not v.bound][-1]
+    seq = primitive_sequences(plan)[-1]
     n = 64
     set_at(big, seq.path, random_sequence(seq.element, n, rng))
     big_bytes = tb.wire_bytes(big)
@@ -199,7 +203,7 @@ def bad_messages(tb):
             data = bytearray(good)
             data[pad[0]] = 0x5a
             cases.append(("non-zero padding", bytes(data), DeserializerError.PADDING, value))
-        strings = [v for v in plan.variables if v.string]
+        strings = [v for v in plan.streams if v.string]
         if strings:
             nul = count_offset(tb, value, strings[0]) + 4 + len(
                 value_at(value, strings[0].path).encode())
@@ -262,22 +266,22 @@ async def serializer_bad_payload_recovers(dut):
     await tb.reset()
     tb.set_idle(0.2)
     tb.set_backpressure(0.2)
-    seq = [v for v in tb.plan.variables if not v.string and not v.bound][-1]
+    seq = primitive_sequences(tb.plan)[-1]
     for name, delta, code in (("short", -3, SerializerError.PAYLOAD_SHORT),
                               ("long", +2 * tb.bytes_per_beat + 1,
                                SerializerError.PAYLOAD_LONG)):
         value = tb.random_message()
         n = 40
         set_at(value, seq.path, random_sequence(seq.element, n, tb.rng))
-        payloads = variable_bytes(tb.plan, value)
-        declared = payloads[seq.index]
+        payloads = tb.stream_bytes(value)
+        declared = payloads[tb.plan.streams.index(seq)]
         if delta < 0:
             sent = declared[:len(declared) // 2 + 1]
             expected_field = sent + bytes(len(declared) - len(sent))
         else:
             sent = declared + bytes(range(1, delta + 1))
             expected_field = declared
-        payloads[seq.index] = sent
+        payloads[tb.plan.streams.index(seq)] = sent
         tb.errors["ser"].clear()
         await tb.serialize(value, payloads)
         frame = await with_timeout(tb.ser_out.recv(compact=False), 2_000_000, "ns")
@@ -294,6 +298,136 @@ async def serializer_bad_payload_recovers(dut):
         assert not tb.errors["ser"]
 
 
+def primitive_sequences(plan):
+    """The unbounded sequences of primitives that have a stream of their own."""
+    return [v for v in plan.streams if not v.string and not v.bound and not v.elements]
+
+
 def decode_elements(variable, raw):
     fmt = STRUCT_FORMAT[variable.element]
     return list(struct.unpack(f"<{len(raw) // variable.element_bytes}{fmt}", raw))
+
+
+def elements_value(tb):
+    """An ``Elements`` value whose strings and sequences inside elements all hold something."""
+    value = tb.random_message()
+    value["short_names"] = ["ab", "cdef"]
+    value["names"] = ["first", "second name"]
+    value["items"] = [
+        {"label": "lab", "weight": 1.5, "samples": [1, 2, 3],
+         "corners": [{"x": 1.0, "y": 2.0, "z": 3.0}, {"x": -1.0, "y": 0.5, "z": 0.0}],
+         "values": [{"key": "k1", "value": "one"}, {"key": "key2", "value": "two2"}]},
+        {"label": "second", "weight": -2.0, "samples": [],
+         "corners": [{"x": 0.0, "y": 0.0, "z": 0.0}] * 2,
+         "values": [{"key": "x", "value": "y"}]}]
+    return value
+
+
+def first_difference(tb, a, b):
+    x, y = tb.wire_bytes(a), tb.wire_bytes(b)
+    return next(i for i in range(min(len(x), len(y))) if x[i] != y[i])
+
+
+def element_bad_messages(tb):
+    """(name, bytes, code, value) of malformed messages inside packed elements (CDR)."""
+    value = elements_value(tb)
+    good = tb.wire_bytes(value)
+    cases = []
+
+    def changed(edit):
+        other = _copy(value)
+        edit(other)
+        return other
+
+    # the count of short_names[0] ("ab", bound 6): the first byte that changes with its length
+    at = first_difference(tb, value, changed(lambda v: v["short_names"].__setitem__(0, "abc")))
+    at -= at % 4
+    data = bytearray(good)
+    data[at:at + 4] = (7 + 1).to_bytes(4, "little")       # 7 characters + NUL > bound 6
+    cases.append(("inner string above its bound", bytes(data), DeserializerError.LENGTH, value))
+    data[at:at + 4] = bytes(4)
+    cases.append(("inner CDR string count 0", bytes(data), DeserializerError.FORMAT, value))
+    # items holds 2 of at most 4: a count of 5
+    at = first_difference(tb, value, changed(lambda v: v["items"].append(v["items"][1])))
+    at -= at % 4
+    data = bytearray(good)
+    data[at:at + 4] = (5).to_bytes(4, "little")
+    cases.append(("sequence of messages above its bound", bytes(data),
+                  DeserializerError.LENGTH, value))
+    # the NUL of items[0].values[1].key
+    at = first_difference(tb, value, changed(
+        lambda v: v["items"][0]["values"][1].__setitem__("key", "key2+")))
+    at += -at % 4 + 4 + len("key2")      # past the count (the first difference) and the key
+    data = bytearray(good)
+    data[at] = ord("!")
+    cases.append(("inner string without NUL", bytes(data), DeserializerError.FORMAT, value))
+    # cut inside items[0].values[1].value
+    cases.append(("ends early in a nested element", good[:at + 6], DeserializerError.EARLY_END,
+                  value))
+    return cases
+
+
+@cocotb.test(skip=PARAMS.get("type") != ELEMENTS)
+async def elements_bad_input_recovers(dut):
+    """Malformed counts and strings inside packed elements, and a message cut inside a nested
+    element: the error code, only bytes of the field on the element stream, every packet
+    closed, and the next message intact."""
+    tb = MsgCodecTB(dut)
+    await tb.reset()
+    tb.set_idle(0.2)
+    tb.set_backpressure(0.2)
+    cases = element_bad_messages(tb)
+    for name, data, code, value in cases:
+        tb.errors["des"].clear()
+        start = [len(p.packets) for p in tb.des_payloads]
+        await tb.deserialize(data)
+        await tb.wait_for(lambda: tb.errors["des"], 200_000)
+        await tb.wait_quiet()
+        assert tb.errors["des"] == [int(code)], f"{name}: errors {tb.errors['des']}, want {code!r}"
+        for v, p, s, field in zip(tb.plan.streams, tb.des_payloads, start,
+                                  tb.stream_bytes(value)):
+            for packet in p.packets[s:]:
+                assert field.startswith(bytes(packet.data)), \
+                    f"{name}: {v.path} emitted {bytes(packet.data).hex()}, not from {field.hex()}"
+            assert p.current.beats == [], f"{name}: {v.path} packet left open"
+        tb.errors["des"].clear()
+        await tb.run_deserializer([elements_value(tb), tb.random_message()])
+        tb.log.info("bad input %s -> error %s, next messages intact", name, code.name)
+    assert int(dut.des_error_count.value) == len(cases)
+
+
+@cocotb.test(skip=PARAMS.get("type") != ELEMENTS)
+async def serializer_bad_elements_recover(dut):
+    """A packed elements stream one element short is completed with a zero (default) element,
+    one that goes on is cut and drained, and an inner count above its bound is written as 0:
+    each reported once with its code, and the next message is exact."""
+    tb = MsgCodecTB(dut)
+    await tb.reset()
+    tb.set_idle(0.2)
+    tb.set_backpressure(0.2)
+    items = tb.plan.streams.index(next(v for v in tb.plan.streams if v.path == "items"))
+    shorts = tb.plan.streams.index(next(v for v in tb.plan.streams if v.path == "short_names"))
+    for name, code in (("short", SerializerError.PAYLOAD_SHORT),
+                       ("long", SerializerError.PAYLOAD_LONG),
+                       ("inner count", SerializerError.LENGTH)):
+        value = elements_value(tb)
+        payloads = tb.stream_bytes(value)
+        expected = _copy(value)
+        if name == "short":
+            payloads[items] = tb.packed(tb.plan.streams[items].element, value["items"][0])
+            expected["items"][1] = default_value(tb.library, tb.plan.streams[items].element)
+        elif name == "long":
+            payloads[items] += bytes(range(1, 20))
+        else:       # "ab" declared as 7 characters (bound 6): written as "", the rest dropped
+            value["short_names"] = expected["short_names"] = ["ab"]
+            payloads[shorts] = (7).to_bytes(4, "little") + b"ab"
+            expected["short_names"] = [""]
+        tb.errors["ser"].clear()
+        await tb.serialize(value, payloads)
+        frame = await with_timeout(tb.ser_out.recv(compact=False), 2_000_000, "ns")
+        tb.check_serialized(frame, expected, 0)
+        await ClockCycles(dut.aclk, 10)
+        assert tb.errors["ser"] == [int(code)], f"{name}: errors {tb.errors['ser']}"
+        tb.errors["ser"].clear()
+        await tb.run_serializer([tb.random_message(), elements_value(tb)])
+        assert not tb.errors["ser"]

@@ -17,6 +17,11 @@ TYPES = ["sensor_msgs/msg/Image", "rosgate_test_msgs/msg/Streamable",
          "rosgate_test_msgs/msg/Primitives", "sorter_msgs/srv/Sort_Request",
          "sorter_msgs/msg/Sortdata", "geometry_msgs/msg/PoseWithCovariance",
          "rosgate_test_msgs/msg/Empty"]
+#: sequences of messages and strings (packed element streams): no ReconROS encoding
+ELEMENT_TYPES = ["rosgate_test_msgs/msg/Elements", "rosgate_test_msgs/msg/Points",
+                 "rosgate_test_msgs/msg/Mixed", "sensor_msgs/msg/JointState",
+                 "sensor_msgs/msg/PointCloud2", "diagnostic_msgs/msg/DiagnosticArray",
+                 "geometry_msgs/msg/PoseArray"]
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +36,7 @@ def ros1():
     return MessageLibrary(folders, store="ros1_noetic"), golden_store("ros1_noetic", folders)
 
 
-@pytest.mark.parametrize("typename", TYPES)
+@pytest.mark.parametrize("typename", TYPES + ELEMENT_TYPES)
 def test_cdr_plan_gives_rosbags_bytes(ros2, typename):
     library, ts = ros2
     plan = stream_plan(library, typename, "cdr")
@@ -43,7 +48,7 @@ def test_cdr_plan_gives_rosbags_bytes(ros2, typename):
         assert plan_encode(plan, value) == want
 
 
-@pytest.mark.parametrize("typename", [t for t in TYPES if "sorter" not in t])
+@pytest.mark.parametrize("typename", [t for t in TYPES + ELEMENT_TYPES if "sorter" not in t])
 def test_ros1_plan_gives_rosbags_bytes(ros1, typename):
     library, ts = ros1
     plan = stream_plan(library, typename, "ros1")
@@ -137,15 +142,60 @@ def test_reconros_defects_fixed(ros2):
     assert plan_encode(plan, value, 0) == b"".join(d.to_bytes(8, "little") for d in data)
 
 
+@pytest.mark.parametrize("store", ["ros2_humble", "ros1_noetic"])
+def test_every_type_of_the_store_streams(store):
+    """Every message type rosbags ships for the distribution has a plan whose bytes are
+    rosbags' (CDR for ROS 2, ROS 1 for noetic), for random values."""
+    framing = "cdr" if store == "ros2_humble" else "ros1"
+    library, ts = MessageLibrary([], store=store), golden_store(store, [])
+    names = sorted(n for n in ts.types if "/msg/" in n)
+    assert len(names) > 100
+    for typename in names:
+        plan = stream_plan(library, typename, framing)
+        rng = random.Random(typename)
+        for _ in range(5):
+            value = random_value(library, typename, rng, max_len=3)
+            message = to_rosbags(ts, library, typename, value)
+            want = bytes(ts.serialize_cdr(message, typename) if framing == "cdr"
+                         else ts.serialize_ros1(message, typename))
+            got = plan_encode(plan, value)
+            assert (got if framing == "cdr" else got[4:]) == want, typename
+
+
+def test_element_plan_loops(ros2):
+    """A sequence of messages holding a sequence of messages: nested loops whose targets
+    point at each other, inner counts as ``count`` steps, no fixed-part leaf inside."""
+    library, _ = ros2
+    plan = stream_plan(library, "diagnostic_msgs/msg/DiagnosticArray", "cdr")
+    loops = [(i, s) for i, s in enumerate(plan.steps) if s.kind in ("loop", "next")]
+    assert [s.kind for _, s in loops] == ["loop", "loop", "next", "next"]
+    (a, outer), (b, inner), (c, inner_next), (d, outer_next) = loops
+    assert (outer.target, inner.target, inner_next.target, outer_next.target) == (d, c, b, a)
+    assert [v.path for v in plan.streams] == ["header.frame_id", "status"]
+    assert plan.variables[inner.var].path == "status[].values"
+    assert plan.variables[inner.var].into == outer.var
+    assert all(not leaf.path.startswith("status[]") for leaf in plan.leaves)
+    counts = [plan.variables[s.var].path for s in plan.steps if s.kind == "count"]
+    assert counts == ["status[].name", "status[].message", "status[].hardware_id",
+                      "status[].values", "status[].values[].key", "status[].values[].value"]
+    points = stream_plan(library, "geometry_msgs/msg/PoseArray", "cdr").streams[-1]
+    assert (points.elements, points.element_bytes) == (True, 56)
+
+
 @pytest.mark.parametrize("typename,field", [
     ("sensor_msgs/msg/PointCloud2", "fields"),
     ("rosgate_test_msgs/msg/Mixed", "points"),
-    ("rosgate_test_msgs/msg/AllPrimitives", "ws"),
+    ("sensor_msgs/msg/JointState", "name"),
 ])
-def test_unstreamable_types_name_the_field(ros2, typename, field):
+def test_reconros_framing_refuses_sequences_of_elements(ros2, typename, field):
     library, _ = ros2
-    with pytest.raises(ParameterError, match=field):
-        stream_plan(library, typename, "cdr")
+    with pytest.raises(ParameterError, match=f"no encoding for {field}"):
+        stream_plan(library, typename, "reconros")
+
+
+def test_wstring_is_refused_naming_the_field(ros2):
+    with pytest.raises(ParameterError, match="ws is a wstring"):
+        stream_plan(ros2[0], "rosgate_test_msgs/msg/AllPrimitives", "cdr")
 
 
 def test_unknown_framing(ros2):

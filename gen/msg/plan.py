@@ -2,11 +2,19 @@
 framing.
 
 A plan splits a message into the *fixed part* (every primitive and fixed-size array, plus the
-element count of every variable-length field) and the *variable-length fields* (strings and
-sequences of primitives). The fixed part is an Amaranth :class:`~amaranth.lib.data.StructLayout`
-that mirrors the message (nested messages are nested structs, ``T[N]`` is an array, a
-variable-length field holds its element count as ``unsigned(32)``); each variable-length field
-travels on its own byte stream.
+element count of every variable-length field) and the *variable-length fields* (strings,
+sequences of primitives, and sequences of messages or strings). The fixed part is an Amaranth
+:class:`~amaranth.lib.data.StructLayout` that mirrors the message (nested messages are nested
+structs, ``T[N]`` is an array, a variable-length field holds its element count as
+``unsigned(32)``); each variable-length field travels on its own byte stream
+(:attr:`StreamPlan.streams`).
+
+A sequence of messages or of strings streams its elements *packed*, one after the other: every
+primitive little endian and unaligned in declaration order, fixed arrays without a count,
+strings and sequences as a ``uint32`` element count (no NUL) followed by their elements. This is
+the ROS 1 encoding of each element, the same in every framing. The strings and sequences inside
+the elements are *inner* variables (:attr:`Variable.into`): they have a count register but no
+stream of their own.
 
 The plan is a list of :class:`Step`:
 
@@ -16,7 +24,13 @@ The plan is a list of :class:`Step`:
 ``pad``
     zero bytes up to a runtime alignment (CDR after a variable-length field);
 ``payload``
-    the bytes of one variable-length field (its count times the element size).
+    the bytes of one string or sequence of primitives (its count times the element size);
+``loop`` / ``next``
+    the elements of a sequence of messages or strings: the steps between them (the *body*) run
+    once per element; ``loop`` jumps past its ``next`` (``target``) when the count is zero,
+    ``next`` back to the step after its ``loop`` (``target``) until the count is done;
+``count``
+    the count of an inner variable: four bytes on the wire, four in the packed element.
 
 Framings (``FRAMINGS``):
 
@@ -36,7 +50,7 @@ Framings (``FRAMINGS``):
     previous one.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from amaranth.hdl import signed, unsigned
 from amaranth.lib import data
@@ -81,15 +95,18 @@ class Leaf:
 
 @dataclass(frozen=True)
 class Variable:
-    """A variable-length field: a string or a sequence of primitives."""
+    """A variable-length field: a string, a sequence of primitives, or a sequence of messages or
+    strings (``elements``)."""
     index: int
     path: str
-    element: str          #: ROS element type; ``char`` for strings
-    element_bytes: int
+    element: str          #: ROS element type; ``char`` for strings, ``string`` or a message type
+    element_bytes: int    #: bytes per element (``elements``: packed, 0 if the size varies)
     string: bool
     bound: int            #: declared bound (0: unbounded)
-    count: Leaf           #: where the fixed part holds its element count
+    count: Leaf           #: where the fixed part holds its element count (``None`` if inner)
     nul: bool = False     #: the count on the wire includes a terminating NUL (CDR strings)
+    elements: bool = False  #: a sequence of messages or strings, streamed packed
+    into: int = None      #: inner: the variable whose stream carries it (``None``: its own)
 
     @property
     def port_name(self):
@@ -101,7 +118,9 @@ class Variable:
 class Part:
     """A static-length piece of a ``run`` step.
 
-    kind: ``const`` (``value``; a reader checks the bytes selected by ``mask``), ``zero``
+    kind: ``const`` (``value``; a reader checks the bytes selected by ``mask``), ``element``
+    (bytes of a primitive inside an element: copied between the wire and the packed stream
+    of variable ``var``), ``zero``
     (padding that must be zero), ``nul`` (a string's terminator, must be zero), ``reserved``
     (written as zero, not checked), ``field`` (``leaf``'s bytes), ``extend`` (``leaf``
     sign/zero-extended to ``nbytes``), ``count`` (element count of variable ``var``, plus one
@@ -126,18 +145,23 @@ class Part:
             return f"{self.kind} {self.leaf.path} {what} {self.nbytes} B"
         if self.kind in ("count", "capacity"):
             return f"{self.kind} of {self.path} {self.nbytes} B"
+        if self.kind == "element":
+            return f"element {self.path} {self.nbytes} B"
         return f"{self.kind} {self.nbytes} B" + (f" {self.path}" if self.path else "")
 
 
 @dataclass(frozen=True)
 class Step:
     """``run`` (``parts``), ``pad`` (to ``align``; only when variable ``var``'s count is not
-    zero if ``var`` is set; ``check``: the reader requires zeros) or ``payload`` (``var``)."""
+    zero if ``var`` is set; ``check``: the reader requires zeros), ``payload`` (``var``),
+    ``count`` (of inner variable ``var``), ``loop`` and ``next`` (of variable ``var``; ``target``
+    is the index of the other one)."""
     kind: str
     parts: tuple = ()
     align: int = 0
     var: int = None
     check: bool = True
+    target: int = None
 
     @property
     def nbytes(self):
@@ -169,16 +193,35 @@ class StreamPlan:
         """Beat width the framing is defined for (``None``: any)."""
         return 64 if self.framing == "reconros" else None
 
+    @property
+    def streams(self):
+        """The variables with a stream port of their own (all but the inner ones)."""
+        return [v for v in self.variables if v.into is None]
+
+    def stream_of(self, var):
+        """The variable whose stream carries variable ``var``'s bytes."""
+        v = self.variables[var]
+        return v if v.into is None else self.variables[v.into]
+
+    def loop_depth(self, index):
+        """How many loops step ``index`` is inside."""
+        depth = 0
+        for s in self.steps[:index]:
+            depth += {"loop": 1, "next": -1}.get(s.kind, 0)
+        return depth
+
     def static_bytes(self):
-        """Bytes of all ``run`` steps."""
-        return sum(s.nbytes for s in self.steps if s.kind == "run")
+        """Bytes of all ``run`` steps outside loops."""
+        return sum(s.nbytes for i, s in enumerate(self.steps)
+                   if s.kind == "run" and not self.loop_depth(i))
 
     def describe(self):
         lines = [f"{self.typename} framing {self.framing}: {len(self.steps)} steps, "
                  f"fixed part {self.layout.size} bits, {len(self.variables)} variable-length "
-                 f"field(s)"]
-        for v in self.variables:
-            kind = "string" if v.string else f"sequence<{v.element}>"
+                 f"field(s) on {len(self.streams)} stream(s)"]
+        for v in self.streams:
+            kind = "string" if v.string else f"sequence<{v.element}>" + (
+                " packed" if v.elements else "")
             lines.append(f"  stream {v.port_name}: {kind}"
                          + (f" bound {v.bound}" if v.bound else ""))
         for i, s in enumerate(self.steps):
@@ -190,20 +233,45 @@ class StreamPlan:
                     else ""
                 lines.append(f"  {i:3d} pad to {s.align}{cond}"
                              + ("" if s.check else " (not checked)"))
-            else:
+            elif s.kind == "payload":
                 v = self.variables[s.var]
                 lines.append(f"  {i:3d} payload {v.path}: count x {v.element_bytes} B")
+            elif s.kind == "count":
+                lines.append(f"  {i:3d} count of {self.variables[s.var].path} 4 B")
+            elif s.kind == "loop":
+                lines.append(f"  {i:3d} loop over the elements of {self.variables[s.var].path}"
+                             f" (empty: to {s.target + 1})")
+            else:
+                lines.append(f"  {i:3d} next element of {self.variables[s.var].path}"
+                             f" (back to {s.target + 1})")
         return "\n".join(lines)
 
 
 class _Node:
-    """Message tree: ``prim`` (leaf), ``var`` (variable), ``struct`` (a nested message:
-    children), ``array`` (``T[N]`` of messages or strings: one child per element), ``empty``."""
+    """Message tree: ``prim`` (leaf), ``var`` (string or sequence of primitives), ``loop`` (a
+    sequence of messages or strings: one child, the element), ``struct`` (a nested message:
+    children), ``array`` (``T[N]`` of messages or strings: one child per element), ``empty``.
+    ``in_loop``: inside a loop's elements (a ``prim``'s leaf is not in the fixed part)."""
 
-    def __init__(self, kind, path, leaf=None, var=None, children=(), prim_bytes=0):
+    def __init__(self, kind, path, leaf=None, var=None, children=(), prim_bytes=0, nbytes=0,
+                 in_loop=False):
         self.kind, self.path, self.leaf, self.var = kind, path, leaf, var
+        self.in_loop = in_loop
         self.children = list(children)
         self.prim_bytes = prim_bytes
+        self.nbytes = nbytes
+
+
+def _packed_bytes(node):
+    """Packed size of an element (``None`` if it holds strings or sequences)."""
+    if node.kind == "prim":
+        return node.nbytes
+    if node.kind == "empty":
+        return 0
+    if node.kind in ("struct", "array"):
+        sizes = [_packed_bytes(c) for c in node.children]
+        return None if None in sizes else sum(sizes)
+    return None
 
 
 class _Builder:
@@ -213,10 +281,17 @@ class _Builder:
         self.framing = framing
         self.leaves = []
         self.variables = []
+        self._into = None     # inside the elements of this variable's stream
 
     def _primitive_shape(self, name):
         size = PRIMITIVES[name]
         return signed(size * 8) if name in _SIGNED else unsigned(size * 8)
+
+    def _leaf(self, leaf):
+        """``leaf``, a member of the fixed part unless inside a loop's elements."""
+        if self._into is None:
+            self.leaves.append(leaf)
+        return leaf
 
     def struct(self, typename, prefix, offset):
         definition = self.library[typename]
@@ -234,9 +309,9 @@ class _Builder:
     def member(self, type_, path, offset):
         if isinstance(type_, Primitive) and not type_.is_string:
             shape = self._primitive_shape(type_.name)
-            leaf = Leaf(path, offset, shape.width, type_.name)
-            self.leaves.append(leaf)
-            return shape, _Node("prim", path, leaf=leaf, prim_bytes=PRIMITIVES[type_.name])
+            leaf = self._leaf(Leaf(path, offset, shape.width, type_.name))
+            return shape, _Node("prim", path, leaf=leaf, prim_bytes=PRIMITIVES[type_.name],
+                                nbytes=PRIMITIVES[type_.name], in_loop=self._into is not None)
         if isinstance(type_, Primitive) or isinstance(type_, Sequence):
             return unsigned(32), self._variable(type_, path, offset)
         if isinstance(type_, Named):
@@ -246,10 +321,12 @@ class _Builder:
         element = type_.element
         if isinstance(element, Primitive) and not element.is_string:
             shape = self._primitive_shape(element.name)
-            leaf = Leaf(path, offset, shape.width * type_.length, element.name, type_.length)
-            self.leaves.append(leaf)
+            leaf = self._leaf(Leaf(path, offset, shape.width * type_.length, element.name,
+                                   type_.length))
             return (data.ArrayLayout(shape, type_.length),
-                    _Node("prim", path, leaf=leaf, prim_bytes=PRIMITIVES[element.name]))
+                    _Node("prim", path, leaf=leaf, prim_bytes=PRIMITIVES[element.name],
+                          nbytes=PRIMITIVES[element.name] * type_.length,
+                          in_loop=self._into is not None))
         shapes, children, size = [], [], 0
         for i in range(type_.length):
             shape, node = self.member(element, f"{path}[{i}]", offset + size)
@@ -260,27 +337,45 @@ class _Builder:
         return data.ArrayLayout(shapes[0], type_.length), _Node("array", path,
                                                                 children=children)
 
+    def _refuse_wstring(self, type_, path):
+        if isinstance(type_, Primitive) and type_.name == "wstring":
+            raise ParameterError("typename", self.typename,
+                                 f"a type without wstring fields ({path} is a wstring: its "
+                                 "wire format differs between ROS 2 middlewares)")
+
     def _variable(self, type_, path, offset):
+        self._refuse_wstring(type_, path)
+        element_type = None
         if isinstance(type_, Primitive):
-            if type_.name == "wstring":
-                raise ParameterError("typename", self.typename,
-                                     f"a type without wstring fields ({path} is a wstring)")
             element, nbytes, string, bound = "char", 1, True, type_.bound
+        elif isinstance(type_.element, Primitive) and not type_.element.is_string:
+            element, nbytes, string, bound = (type_.element.name, PRIMITIVES[type_.element.name],
+                                              False, type_.bound)
         else:
-            element_type = type_.element
-            if not isinstance(element_type, Primitive) or element_type.is_string:
+            self._refuse_wstring(type_.element, path + "[]")
+            if self.framing == "reconros":
                 raise ParameterError(
                     "typename", self.typename,
-                    "a type whose variable-length fields are strings or sequences of "
-                    f"primitives ({path} is {type_})")
-            element, nbytes, string, bound = (element_type.name, PRIMITIVES[element_type.name],
-                                              False, type_.bound)
-        leaf = Leaf(path, offset, 32, "count")
-        self.leaves.append(leaf)
+                    "a type for the reconros framing without sequences of messages or strings "
+                    f"(ReconROS' hardware framing has no encoding for {path}, {type_})")
+            element_type = type_.element
+            element = element_type.typename if isinstance(element_type, Named) else "string"
+            nbytes, string, bound = None, False, type_.bound
+        leaf = self._leaf(Leaf(path, offset, 32, "count"))
         var = Variable(len(self.variables), path, element, nbytes, string, bound, leaf,
-                       nul=string and self.framing == "cdr")
+                       nul=string and self.framing == "cdr", elements=element_type is not None,
+                       into=self._into)
         self.variables.append(var)
-        return _Node("var", path, var=var)
+        if element_type is None:
+            return _Node("var", path, var=var)
+        outer = self._into
+        self._into = var.index if outer is None else outer
+        _, body = self.member(element_type, path + "[]", 0)
+        self._into = outer
+        size = _packed_bytes(body)
+        if size is not None:
+            var = self.variables[var.index] = replace(var, element_bytes=size)
+        return _Node("loop", path, var=var, children=[body])
 
 
 class _Runs:
@@ -303,6 +398,21 @@ class _Runs:
             self.parts = []
 
 
+def _count(runs, var):
+    """The count of ``var``: a part of the fixed part, or a ``count`` step inside a loop."""
+    if var.into is None:
+        runs.part(Part("count", 4, var=var.index, path=var.path))
+    else:
+        runs.step(Step("count", var=var.index))
+
+
+def _primitive(node):
+    """The part of a primitive: a fixed-part field, or element bytes inside a loop."""
+    if node.in_loop:
+        return Part("element", node.nbytes, leaf=node.leaf, path=node.path)
+    return Part("field", node.nbytes, leaf=node.leaf)
+
+
 def _cdr(nodes):
     runs = _Runs()
     runs.part(Part("const", 4, value=CDR_HEADER, mask=CDR_HEADER_MASK, path="encapsulation"))
@@ -320,6 +430,9 @@ def _cdr(nodes):
             runs.step(Step("pad", align=a))
             state["align"], state["offset"] = a, 0
 
+    def unknown():
+        state["align"], state["offset"] = 1, 0
+
     def walk(node):
         if node.kind in ("struct", "array"):
             for child in node.children:
@@ -329,12 +442,21 @@ def _cdr(nodes):
             advance(1)
         elif node.kind == "prim":
             align(min(node.prim_bytes, 8))
-            runs.part(Part("field", node.leaf.width // 8, leaf=node.leaf))
-            advance(node.leaf.width // 8)
+            runs.part(_primitive(node))
+            advance(node.nbytes)
+        elif node.kind == "loop":
+            align(4)
+            _count(runs, node.var)
+            advance(4)
+            runs.step(Step("loop", var=node.var.index))
+            unknown()        # each element starts where the previous one ended
+            walk(node.children[0])
+            runs.step(Step("next", var=node.var.index))
+            unknown()
         else:
             v = node.var
             align(4)
-            runs.part(Part("count", 4, var=v.index, path=v.path))
+            _count(runs, v)
             advance(4)
             if v.element_bytes == 8:
                 runs.step(Step("pad", align=8, var=v.index))
@@ -360,15 +482,33 @@ def _ros1(nodes):
             for child in node.children:
                 walk(child)
         elif node.kind == "prim":
-            runs.part(Part("field", node.leaf.width // 8, leaf=node.leaf))
+            runs.part(_primitive(node))
+        elif node.kind == "loop":
+            _count(runs, node.var)
+            runs.step(Step("loop", var=node.var.index))
+            walk(node.children[0])
+            runs.step(Step("next", var=node.var.index))
         elif node.kind == "var":
-            runs.part(Part("count", 4, var=node.var.index, path=node.var.path))
+            _count(runs, node.var)
             runs.step(Step("payload", var=node.var.index))
 
     for node in nodes:
         walk(node)
     runs.flush()
     return runs.steps
+
+
+def _link_loops(steps):
+    """Set ``target`` of every ``loop`` and ``next`` step to the index of the other."""
+    steps, open_loops = list(steps), []
+    for i, s in enumerate(steps):
+        if s.kind == "loop":
+            open_loops.append(i)
+        elif s.kind == "next":
+            start = open_loops.pop()
+            steps[start] = replace(steps[start], target=i)
+            steps[i] = replace(s, target=start)
+    return steps
 
 
 def reconros_order(nodes):
@@ -427,8 +567,8 @@ def stream_plan(library, typename, framing="cdr"):
 
     Use a ROS 1 library (``store="ros1_noetic"``) for ``ros1``: its ``std_msgs/Header`` has
     ``seq``. Raises :class:`~hdl.params.ParameterError` for a framing not in
-    :data:`FRAMINGS` or a type with a field hardware cannot stream (wstring, a sequence of
-    strings or of messages).
+    :data:`FRAMINGS` or a type with a field hardware cannot stream (wstring; in the reconros
+    framing, a sequence of messages or strings).
     """
     check_choice("framing", framing, FRAMINGS)
     builder = _Builder(library, typename, framing)
@@ -441,7 +581,7 @@ def stream_plan(library, typename, framing="cdr"):
                                     **{name: m.shape for name, m in inner}})
     else:
         layout, nodes = builder.struct(builder.typename, "", 0)
-    steps = {"cdr": lambda: _cdr(nodes), "ros1": lambda: _ros1(nodes),
-             "reconros": lambda: _reconros(nodes, publisher)}[framing]()
+    steps = _link_loops({"cdr": lambda: _cdr(nodes), "ros1": lambda: _ros1(nodes),
+                         "reconros": lambda: _reconros(nodes, publisher)}[framing]())
     return StreamPlan(builder.typename, framing, layout, builder.leaves, builder.variables,
                       steps)

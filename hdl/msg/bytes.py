@@ -77,8 +77,8 @@ class BytePacker(wiring.Component):
     Takes one chunk per cycle and gives one beat per cycle in steady state, whatever the chunk
     sizes (a message may end with an empty chunk); a full beat leaves once the next byte or the
     end of the message is known, so latency is one to two cycles. ``first`` marks the first beat
-    of a
-    message (ReconROS' ``TUSER`` is its complement except on the last beat).
+    of a message (ReconROS' ``TUSER`` is its complement except on the last beat). A message of
+    no bytes (only empty chunks) is one beat with ``tkeep`` 0 and ``tlast``.
 
     Members
     -------
@@ -107,7 +107,7 @@ class BytePacker(wiring.Component):
         m.d.comb += [
             # A full beat waits for one more byte (or the end of the message): the message's
             # last chunk may be empty, and tlast must still land on its last byte.
-            out.tvalid.eq((count > B) | (final & (count != 0))),
+            out.tvalid.eq((count > B) | (final & ((count != 0) | first))),
             out.tdata.eq(buf[:W]),
             out.tlast.eq(final & (count <= B)),
             out.tkeep.eq(Mux(count >= B, (1 << B) - 1,

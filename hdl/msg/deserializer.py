@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
 from ..stream import AXIStreamSignature
-from .bytes import ByteUnpacker, byte_mask
+from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, payload_port
 from .steps import RuntimeStep, pad_bytes, payload_bytes
 
@@ -55,11 +55,13 @@ class Deserializer(wiring.Component):
         read (a message that fails before that offers nothing) and held until ``ready``; the
         next message is not read before. Counts are element counts (strings without NUL).
     m_<field>_axis : Out(AXIStreamSignature(data_width, user_width=1))
-        One per variable-length field, in stream order: exactly one packet per message with the
-        field's bytes, never more than its count, full beats but the last, ``tuser`` set on the
-        first beat; an empty field is one beat with ``tkeep`` 0 and ``tlast``. If the message
-        ends early inside the field, the packet ends there; fields after an error get no
-        packet.
+        One per variable-length field with a stream (``plan.streams``), in stream order:
+        exactly one packet per message with the field's bytes, never more than its count, full
+        beats but the last, ``tuser`` set on the first beat; an empty field is one beat with
+        ``tkeep`` 0 and ``tlast``. A sequence of messages or strings carries its elements
+        packed (``gen.msg.plan``), each inner count as an element count (no NUL). If the
+        message ends early or fails inside the field, the packet ends there; fields after an
+        error get no packet.
     error : Out(ErrorSignature())
         A pulse with a :class:`DeserializerError` code per bad message; the rest of the message
         is dropped up to ``tlast`` and the next one is read normally.
@@ -76,7 +78,7 @@ class Deserializer(wiring.Component):
         self._max_count = max_count
         members = {"s_axis": In(AXIStreamSignature(data_width)),
                    "fields": Out(stream.Signature(plan.layout))}
-        for v in plan.variables:
+        for v in plan.streams:
             members[payload_port(v, "m")] = Out(AXIStreamSignature(data_width, user_width=1))
         members["error"] = Out(ErrorSignature())
         members["done"] = Out(1)
@@ -101,7 +103,7 @@ class Deserializer(wiring.Component):
         fields = Signal(plan.layout.size)
         shown = Signal(plan.layout.size)
         m.d.comb += shown.eq(fields)
-        for v in plan.variables:
+        for v in plan.streams:
             if v.nul:
                 leaf = v.count
                 m.d.comb += shown[leaf.offset:leaf.offset + 32].eq(
@@ -111,12 +113,31 @@ class Deserializer(wiring.Component):
         m.d.comb += self.fields.payload.eq(shown)
         count_width = 64 if reconros else 32
         counts = [Signal(count_width, name=f"count{v.index}") for v in plan.variables]
-        ports = [getattr(self, payload_port(v, "m")) for v in plan.variables]
+        ports = {v.index: getattr(self, payload_port(v, "m")) for v in plan.streams}
         length_prefix = Signal(32)
+
+        # a sequence of messages or strings: its packed elements go through a packer
+        chunks, opened = {}, {}
+        for v in plan.streams:
+            if not v.elements:
+                continue
+            packer = m.submodules[f"packer{v.index}"] = BytePacker(W)
+            cut = m.submodules[f"chunk_slice{v.index}"] = ChunkRegisterSlice(W)
+            wiring.connect(m, cut.o, packer.chunk)
+            port = ports[v.index]
+            m.d.comb += [port.tdata.eq(packer.m_axis.tdata), port.tkeep.eq(packer.m_axis.tkeep),
+                         port.tlast.eq(packer.m_axis.tlast), port.tvalid.eq(packer.m_axis.tvalid),
+                         port.tuser.eq(packer.first), packer.m_axis.tready.eq(port.tready)]
+            chunks[v.index] = cut.i
+            opened[v.index] = Signal(name=f"opened{v.index}")
+        elements_left = {v.index: Signal(count_width, name=f"elements_left{v.index}")
+                         for v in plan.variables if v.elements}
 
         op = Signal(range(len(steps) + 2))
         END, WAIT = len(steps), len(steps) + 1
-        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [1])
+        count_cycles = 2 * -(-4 // B)       # an inner count: read, then written packed
+        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"]
+                        + [count_cycles, 1])
         step = Signal(range(max_steps + 1))
         remaining = Signal(count_width + 3)
         pos = Signal(32)
@@ -159,12 +180,60 @@ class Deserializer(wiring.Component):
             return ((counts[var] == 0) | (element_count > bound),
                     Mux(counts[var] == 0, DeserializerError.FORMAT, DeserializerError.LENGTH))
 
+        def close(var, then):
+            """End the packet of elements stream ``var`` (an empty last chunk), then
+            ``then()``."""
+            chunk = chunks[var]
+            m.d.comb += [chunk.valid.eq(1), chunk.len.eq(0), chunk.last.eq(1)]
+            with m.If(chunk.ready):
+                m.d.sync += opened[var].eq(0)
+                then()
+
+        stream_at, loops = [], []      # per step: the stream its loop body writes to
+        for s in steps:
+            if s.kind == "next":
+                loops.pop()
+            stream_at.append(plan.stream_of(loops[0]).index if loops else None)
+            if s.kind == "loop":
+                loops.append(s.var)
+
         with m.Switch(op):
             for i, s in enumerate(steps):
                 with m.Case(i):
+                    chunk = chunks.get(stream_at[i])
                     if s.kind == "run":
                         self._run(m, s, i, window, avail, ended, fields, counts, length_prefix,
-                                  step, take, fail, next_op)
+                                  step, take, fail, next_op, chunk)
+                        continue
+                    if s.kind == "count":
+                        self._count(m, s, i, window, avail, ended, counts, step, take, fail,
+                                    next_op, chunk, count_error)
+                        continue
+                    if s.kind == "loop":
+                        top = plan.variables[s.var].into is None
+                        bad_count, bad_code = count_error(s.var)
+                        with m.If(bad_count):
+                            fail(bad_code)
+                        with m.Elif(counts[s.var] == 0):
+                            if top:
+                                close(s.var, lambda s=s: next_op(s.target))
+                            else:
+                                next_op(s.target)
+                        with m.Else():
+                            m.d.sync += elements_left[s.var].eq(counts[s.var])
+                            if top:
+                                m.d.sync += opened[s.var].eq(1)
+                            next_op(i)
+                        continue
+                    if s.kind == "next":
+                        with m.If(elements_left[s.var] == 1):
+                            if plan.variables[s.var].into is None:
+                                close(s.var, lambda i=i: next_op(i))
+                            else:
+                                next_op(i)
+                        with m.Else():
+                            m.d.sync += [elements_left[s.var].eq(elements_left[s.var] - 1),
+                                         op.eq(s.target + 1), step.eq(0)]
                         continue
                     if s.kind == "pad":
                         length = pad_bytes(plan, s, pos, counts)
@@ -199,20 +268,26 @@ class Deserializer(wiring.Component):
                             fail(Mux(bad_count, bad_code, DeserializerError.EARLY_END)
                                  if s.var is not None else DeserializerError.EARLY_END)
                         continue
-                    port = ports[s.var]
                     bad_count, bad_code = count_error(s.var)
                     with m.If((step == 0) & bad_count):
                         fail(bad_code)
                     with m.Else():
                         n = Mux(short, avail, k)
-                        m.d.comb += [
-                            port.tdata.eq(byte_mask(window, B, n)),
-                            port.tkeep.eq(Cat(*(n > j for j in range(B)))),
-                            port.tlast.eq(final | short),
-                            port.tuser.eq(step == 0),
-                            port.tvalid.eq(have | ended),
-                        ]
-                        with m.If(port.tvalid & port.tready):
+                        if chunk is not None:      # inside the elements of a stream
+                            valid, ready = chunk.valid, chunk.ready
+                            m.d.comb += [chunk.data.eq(byte_mask(window, B, n)),
+                                         chunk.len.eq(n), chunk.last.eq(0)]
+                        else:
+                            port = ports[s.var]
+                            valid, ready = port.tvalid, port.tready
+                            m.d.comb += [
+                                port.tdata.eq(byte_mask(window, B, n)),
+                                port.tkeep.eq(Cat(*(n > j for j in range(B)))),
+                                port.tlast.eq(final | short),
+                                port.tuser.eq(step == 0),
+                            ]
+                        m.d.comb += valid.eq(have | ended)
+                        with m.If(valid & ready):
                             take(n)
                             with m.If(short):
                                 fail(DeserializerError.EARLY_END)
@@ -232,13 +307,52 @@ class Deserializer(wiring.Component):
                 with m.Else():
                     fail(DeserializerError.LATE_END)
             with m.Case(WAIT):
-                with m.If(~unpacker.dropping & (~offered | self.fields.ready)):
+                for var in chunks:      # a packet cut by an error ends here
+                    with m.If(opened[var]):
+                        close(var, lambda: None)
+                with m.If(~unpacker.dropping & (~offered | self.fields.ready)
+                          & ~Cat(Const(0, 1), *opened.values()).any()):
                     m.d.sync += [op.eq(0), step.eq(0), pos.eq(0)]
         return m
 
+    def _count(self, m, s, i, window, avail, ended, counts, step, take, fail, next_op, chunk,
+               count_error):
+        """The count of an inner variable: read into its register, checked, then written to
+        the stream as an element count."""
+        B = self._width // 8
+        v = self.plan.variables[s.var]
+        nread = -(-4 // B)
+        value = (counts[s.var][:32] - int(v.nul))[:32]
+        bad_count, bad_code = count_error(s.var)
+        with m.Switch(step):
+            for j in range(nread):
+                k = min(B, 4 - j * B)
+                with m.Case(j):
+                    with m.If(avail >= k):
+                        m.d.sync += [counts[s.var].word_select(j * B + x, 8)
+                                     .eq(window.word_select(x, 8)) for x in range(k)]
+                        m.d.sync += step.eq(j + 1)
+                        take(k)
+                    with m.Elif(ended):
+                        fail(DeserializerError.EARLY_END)
+            for j in range(nread):
+                k = min(B, 4 - j * B)
+                with m.Case(nread + j):
+                    with m.If(bad_count if j == 0 else Const(0)):
+                        fail(bad_code)
+                    with m.Else():
+                        m.d.comb += [chunk.valid.eq(1), chunk.len.eq(k), chunk.last.eq(0),
+                                     chunk.data.eq(value[j * 8 * B:j * 8 * B + 8 * k])]
+                        with m.If(chunk.ready):
+                            if j == nread - 1:
+                                next_op(i)
+                            else:
+                                m.d.sync += step.eq(nread + j + 1)
+
     def _run(self, m, s, i, window, avail, ended, fields, counts, length_prefix, step, take,
-             fail, next_op):
-        """One ``run`` step: static byte ranges land in fixed registers, checks per byte."""
+             fail, next_op, chunk=None):
+        """One ``run`` step: static byte ranges land in fixed registers, checks per byte;
+        inside a loop, element bytes go to the stream's ``chunk``."""
         B = self._width // 8
         nsteps = -(-s.nbytes // B)
         with m.Switch(step):
@@ -246,14 +360,16 @@ class Deserializer(wiring.Component):
                 k = min(B, s.nbytes - j * B)
                 with m.Case(j):
                     bad_padding, bad_format = [], []
-                    writes = []
+                    writes, emitted = [], []
                     start = 0
                     for part in s.parts:
                         lo, hi = max(start, j * B), min(start + part.nbytes, j * B + k)
                         for x in range(lo, hi):
                             byte = window.word_select(x - j * B, 8)
                             index = x - start
-                            if part.kind in ("field", "extend", "publisher"):
+                            if part.kind == "element":
+                                emitted.append(byte)
+                            elif part.kind in ("field", "extend", "publisher"):
                                 if index < part.leaf.width // 8:
                                     writes.append(fields.word_select(
                                         part.leaf.offset // 8 + index, 8).eq(byte))
@@ -279,11 +395,15 @@ class Deserializer(wiring.Component):
                         with m.Elif(Cat(*bad_padding, Const(0, 1)).any()):
                             fail(DeserializerError.PADDING)
                         with m.Else():
-                            m.d.sync += writes
-                            take(k)
-                            if j == nsteps - 1:
-                                next_op(i)
-                            else:
-                                m.d.sync += step.eq(j + 1)
+                            if emitted:
+                                m.d.comb += [chunk.valid.eq(1), chunk.data.eq(Cat(*emitted)),
+                                             chunk.len.eq(len(emitted)), chunk.last.eq(0)]
+                            with m.If(chunk.ready if emitted else Const(1)):
+                                m.d.sync += writes
+                                take(k)
+                                if j == nsteps - 1:
+                                    next_op(i)
+                                else:
+                                    m.d.sync += step.eq(j + 1)
                     with m.Elif(ended):
                         fail(DeserializerError.EARLY_END)

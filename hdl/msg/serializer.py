@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
-from .bytes import BytePacker, ChunkRegisterSlice, byte_mask
+from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .steps import RuntimeStep, pad_bytes, payload_bytes
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
@@ -20,6 +20,9 @@ class SerializerError(enum.IntEnum):
     PAYLOAD_SHORT = 1
     #: a payload stream went on after its count of bytes: the excess is dropped up to ``tlast``
     PAYLOAD_LONG = 2
+    #: a count inside packed elements above its bound or ``max_count``: written as 0 (one
+    #: report per stream and message: what follows in that stream is not reported again)
+    LENGTH = 3
 
 
 class ErrorSignature(wiring.Signature):
@@ -68,6 +71,13 @@ class Serializer(wiring.Component):
         What goes on the stream, in order (type, framing, fixed-part layout, variable fields).
     data_width : int
         Width of every stream in bits: a multiple of 8 in 8..512 (``reconros``: 64).
+    max_count : int
+        Largest accepted count inside packed elements of an unbounded string or sequence (a
+        bounded one uses its bound). Default 2**24.
+
+    Raises :class:`~hdl.params.ParameterError` for the ``ros1`` framing of a type with a
+    sequence of elements whose size varies (messages holding strings or sequences, strings):
+    ROS 1 writes the message length first, before those elements have been read.
 
     Members
     -------
@@ -77,25 +87,35 @@ class Serializer(wiring.Component):
         until ``ready``, which is asserted in the cycle the message's last byte is handed to the
         output stage.
     s_<field>_axis : In(AXIStreamSignature(data_width))
-        One per variable-length field (``plan.variables``), read when the message reaches the
-        field: exactly one packet per message with the field's bytes (count times element size,
-        little endian; strings without NUL) in full beats, ``tlast`` on the last. An empty field
-        is one beat with ``tlast`` (its data is ignored). ``tkeep`` counts on the last beat
-        only. A packet that ends early is completed with zero bytes, one that goes on is cut
-        and drained up to its ``tlast``; both are reported on ``error``.
+        One per variable-length field with a stream (``plan.streams``), read when the message
+        reaches the field: exactly one packet per message with the field's bytes (count times
+        element size, little endian; strings without NUL; a sequence of messages or strings:
+        the elements packed, see ``gen.msg.plan``) in full beats, ``tlast`` on the last. An
+        empty field is one beat with ``tlast`` (its data is ignored). ``tkeep`` counts on the
+        last beat only. A packet that ends early is completed with zero bytes, one that goes on
+        is cut and drained up to its ``tlast``; both are reported on ``error``.
     m_axis : Out(AXIStreamSignature(data_width[, user_width=1]))
         The messages, one packet each, ``tkeep`` all ones but on the last beat. ReconROS
         framing: ``tuser`` is 0 on the first and the last beat and 1 between (docs/topics.md).
     error : Out(ErrorSignature())
     """
 
-    def __init__(self, plan, data_width=64):
+    def __init__(self, plan, data_width=64, *, max_count=1 << 24):
         check_plan_width(plan, data_width)
+        check_int("max_count", max_count, 1, (1 << 32) - 2)
+        if plan.framing == "ros1":
+            varying = [v.path for v in plan.variables if v.elements and v.element_bytes is None]
+            if varying:
+                raise ParameterError(
+                    "plan", plan.typename,
+                    "a type whose sequences of elements have a fixed size for the ros1 "
+                    f"serializer ({varying[0]}: the message length comes first)")
         self.plan = plan
         self._width = data_width
+        self._max_count = max_count
         self._reconros = plan.framing == "reconros"
         members = {"fields": In(stream.Signature(plan.layout))}
-        for v in plan.variables:
+        for v in plan.streams:
             members[payload_port(v, "s")] = In(AXIStreamSignature(data_width))
         members["m_axis"] = Out(AXIStreamSignature(data_width,
                                                    user_width=1 if self._reconros else 0))
@@ -105,7 +125,7 @@ class Serializer(wiring.Component):
     @property
     def parameters(self):
         return {"type": self.plan.typename, "framing": self.plan.framing,
-                "data_width": self._width}
+                "data_width": self._width, "max_count": self._max_count}
 
     def elaborate(self, platform):
         m = Module()
@@ -127,12 +147,32 @@ class Serializer(wiring.Component):
         wiring.connect(m, chunk_slice.o, packer.chunk)
         fv = self.fields.payload.as_value()
         chunk = chunk_slice.i
-        ports = [getattr(self, payload_port(v, "s")) for v in plan.variables]
-        counts = [fv[v.count.offset:v.count.offset + 32] for v in plan.variables]
-        lengths = [payload_bytes(v, c) for c, v in zip(counts, plan.variables)]
+        ports = {v.index: getattr(self, payload_port(v, "s")) for v in plan.streams}
+        counts = {v.index: (fv[v.count.offset:v.count.offset + 32] if v.into is None
+                            else Signal(32, name=f"count{v.index}")) for v in plan.variables}
+        lengths = {v.index: payload_bytes(v, counts[v.index]) for v in plan.variables
+                   if not v.elements}
+        # a sequence of messages or strings: its packed elements are read through a window
+        unpackers, reported = {}, {}
+        for v in plan.streams:
+            if v.elements:
+                unpacker = m.submodules[f"unpacker{v.index}"] = ByteUnpacker(W)
+                wiring.connect(m, wiring.flipped(ports[v.index]), unpacker.s_axis)
+                unpackers[v.index] = unpacker
+                reported[v.index] = Signal(name=f"reported{v.index}")
+        elements_left = {v.index: Signal(32, name=f"elements_left{v.index}")
+                         for v in plan.variables if v.elements}
+        stream_at, loops = [], []      # per step: the stream its loop body reads from
+        for s in steps:
+            if s.kind == "next":
+                loops.pop()
+            stream_at.append(plan.stream_of(loops[0]).index if loops else None)
+            if s.kind == "loop":
+                loops.append(s.var)
 
         op = Signal(range(max(len(steps), 2)))
-        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [1])
+        nread = -(-4 // B)       # cycles of an inner count, read and then written
+        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [2 * nread, 1])
         step = Signal(range(max_steps + 1))
         remaining = Signal(32)
         pos = Signal(32)
@@ -163,8 +203,9 @@ class Serializer(wiring.Component):
                     (Cat(recent, byte_mask(chunk.data, B, chunk.len)) >> (chunk.len * 8))[:64])
 
         body = Const(plan.static_bytes() - 4, 32)
-        for length in lengths:
-            body = body + length
+        for v in plan.streams if plan.framing == "ros1" else ():
+            body = body + (counts[v.index] * v.element_bytes if v.elements
+                           else lengths[v.index])
         body = body[:32]
 
         def part_value(part, run_bits):
@@ -191,12 +232,105 @@ class Serializer(wiring.Component):
                 return recent
             raise AssertionError(part.kind)
 
+        def read(unpacker, need, stream):
+            """``need`` bytes of a packed elements stream, zeros past its end (reported once):
+            (ok to go on, data, ``take()`` to call in the cycle they are used)."""
+            have = unpacker.avail >= need
+            data = byte_mask(unpacker.window, B, unpacker.avail)
+
+            def take():
+                m.d.comb += unpacker.take.eq(Mux(have, need, unpacker.avail))
+                with m.If(~have):
+                    with m.If(~reported[stream]):
+                        report(SerializerError.PAYLOAD_SHORT)
+                    m.d.sync += reported[stream].eq(1)
+            return have | unpacker.ended, data, take
+
+        def end_of_stream(stream, empty, last, then):
+            """The packet of elements stream ``stream`` must end here (``empty``: the field is
+            empty, its one beat is ignored); ``last``: the message ends too."""
+            unpacker = unpackers[stream]
+            extra = unpacker.avail != 0
+            done = Signal(name=f"stream_done{stream}_{len(steps)}")
+            m.d.comb += done.eq(unpacker.ended | extra)
+            if last:
+                m.d.comb += [chunk.valid.eq(done), chunk.len.eq(0), chunk.last.eq(1)]
+                done = done & chunk.ready
+            with m.If(done):
+                if not empty:
+                    with m.If(extra & ~reported[stream]):
+                        report(SerializerError.PAYLOAD_LONG)
+                m.d.comb += unpacker.flush.eq(1)
+                m.d.sync += reported[stream].eq(0)
+                then()
+
         # The fields stay valid until the cycle the message's last chunk is taken.
         with m.If(self.fields.valid):
             with m.Switch(op):
                 for i, s in enumerate(steps):
                     last_op = i == len(steps) - 1
+                    stream = stream_at[i]
                     with m.Case(i):
+                        if s.kind == "run" and stream is not None:
+                            self._element_run(m, s, i, chunk, step, read, unpackers[stream],
+                                              stream, next_op)
+                            continue
+                        if s.kind == "count":
+                            v = plan.variables[s.var]
+                            count = counts[s.var]
+                            with m.Switch(step):
+                                for j in range(nread):
+                                    k = min(B, 4 - j * B)
+                                    ok, data, take = read(unpackers[stream], k, stream)
+                                    with m.Case(j):
+                                        with m.If(ok):
+                                            take()
+                                            m.d.sync += [count.word_select(j * B + x, 8)
+                                                         .eq(data.word_select(x, 8))
+                                                         for x in range(k)]
+                                            m.d.sync += step.eq(j + 1)
+                                wire = (count + int(v.nul))[:32]
+                                for j in range(nread):
+                                    k = min(B, 4 - j * B)
+                                    with m.Case(nread + j):
+                                        with m.If(count > (v.bound or self._max_count)
+                                                  if j == 0 else Const(0)):
+                                            with m.If(~reported[stream]):
+                                                report(SerializerError.LENGTH)
+                                            m.d.sync += [count.eq(0), reported[stream].eq(1)]
+                                        with m.Else():
+                                            m.d.comb += [
+                                                chunk.valid.eq(1), chunk.len.eq(k),
+                                                chunk.data.eq(wire[j * 8 * B:j * 8 * B + 8 * k])]
+                                            with m.If(chunk.ready):
+                                                if j == nread - 1:
+                                                    next_op(i)
+                                                else:
+                                                    m.d.sync += step.eq(nread + j + 1)
+                            continue
+                        if s.kind == "loop":
+                            top = plan.variables[s.var].into is None
+                            exit_last = s.target == len(steps) - 1
+                            with m.If(counts[s.var] == 0):
+                                if top:
+                                    end_of_stream(s.var, True, exit_last,
+                                                  lambda s=s: next_op(s.target))
+                                else:
+                                    next_op(s.target)
+                            with m.Else():
+                                m.d.sync += elements_left[s.var].eq(counts[s.var])
+                                next_op(i)
+                            continue
+                        if s.kind == "next":
+                            with m.If(elements_left[s.var] == 1):
+                                if plan.variables[s.var].into is None:
+                                    end_of_stream(s.var, False, last_op, lambda i=i: next_op(i))
+                                else:
+                                    next_op(i)
+                            with m.Else():
+                                m.d.sync += [elements_left[s.var].eq(elements_left[s.var] - 1),
+                                             op.eq(s.target + 1), step.eq(0)]
+                            continue
                         if s.kind == "run":
                             bits = []
                             for part in s.parts:
@@ -226,6 +360,13 @@ class Serializer(wiring.Component):
                         if s.kind == "pad":
                             m.d.comb += [chunk.valid.eq(1), chunk.last.eq(last_op & final)]
                             with m.If(chunk.ready):
+                                advance()
+                            continue
+                        if stream is not None:     # a string or sequence inside elements
+                            ok, data, take = read(unpackers[stream], k, stream)
+                            m.d.comb += [chunk.valid.eq(ok), chunk.data.eq(data)]
+                            with m.If(ok & chunk.ready):
+                                take()
                                 advance()
                             continue
                         port = ports[s.var]
@@ -258,6 +399,31 @@ class Serializer(wiring.Component):
                                 with m.Else():
                                     advance()
         return m
+
+
+    def _element_run(self, m, s, i, chunk, step, read, unpacker, stream, next_op):
+        """A ``run`` inside elements: element bytes come from the packed stream, padding and
+        NULs are zeros."""
+        B = self._width // 8
+        nsteps = -(-s.nbytes // B)
+        kinds = [p.kind == "element" for p in s.parts for _ in range(p.nbytes)]
+        with m.Switch(step):
+            for j in range(nsteps):
+                k = min(B, s.nbytes - j * B)
+                need = sum(kinds[j * B:j * B + k])
+                ok, data, take = read(unpacker, need, stream)
+                out, used = [], 0
+                for element in kinds[j * B:j * B + k]:
+                    out.append(data.word_select(used, 8) if element else Const(0, 8))
+                    used += element
+                with m.Case(j):
+                    m.d.comb += [chunk.valid.eq(ok), chunk.len.eq(k), chunk.data.eq(Cat(*out))]
+                    with m.If(ok & chunk.ready):
+                        take()
+                        if j == nsteps - 1:
+                            next_op(i)
+                        else:
+                            m.d.sync += step.eq(j + 1)
 
 
 def _extend(value, width):

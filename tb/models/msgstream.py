@@ -48,12 +48,17 @@ def _raw(value):
     return value.encode() if isinstance(value, str) else bytes(value)
 
 
-def variable_bytes(plan, value):
-    """The bytes of every variable-length field, in ``plan.variables`` order."""
+def variable_bytes(plan, value, packed=None):
+    """The bytes of every stream, in ``plan.streams`` order. A sequence of messages or strings
+    is its elements packed: ``packed(element type, element)`` gives one element's bytes (the
+    bench uses rosbags' ROS 1 serializer; a string is its uint32 length and bytes)."""
     out = []
-    for v in plan.variables:
+    for v in plan.streams:
         item = value_at(value, v.path)
-        out.append(_raw(item) if v.string else _element_bytes(v.element, item))
+        if v.elements:
+            out.append(b"".join(packed(v.element, x) for x in item))
+        else:
+            out.append(_raw(item) if v.string else _element_bytes(v.element, item))
     return out
 
 
@@ -146,21 +151,65 @@ def reconros_beats(library, typename, value, publisher):
 def plan_encode(plan, value, publisher=0):
     """Execute ``plan`` in Python: the bytes a serializer following it emits for ``value``.
 
-    Lets the plans themselves be checked against rosbags, apart from the hardware."""
+    Lets the plans themselves be checked against rosbags, apart from the hardware. Loops run
+    once per element; a path with ``[]`` names the element of the loop over that prefix."""
     bits = fixed_part(plan, value, publisher)
-    payloads = variable_bytes(plan, value)
-    counts = [len(p) // v.element_bytes for p, v in zip(payloads, plan.variables)]
-    body = plan.static_bytes() - 4 + sum(map(len, payloads))
+    at = {}                                        # loop variable path -> element index
+
+    def item(path):
+        *outer, last = path.split("[]")
+        prefix, current = "", value
+        for piece in outer:
+            prefix += piece
+            current = value_at(current, piece.lstrip(".")) if piece.lstrip(".") else current
+            current = current[at[prefix]]
+            prefix += "[]"
+        return value_at(current, last.lstrip(".")) if last.lstrip(".") else current
+
+    def raw(v):
+        x = item(v.path)
+        return _raw(x) if v.string else _element_bytes(v.element, x)
+
+    top_counts = {v.index: len(_raw(x) if v.string else x)
+                  for v in plan.streams for x in [value_at(value, v.path)]}
+    counts = {}
+    left = {}
     out = bytearray()
-    for step in plan.steps:
+    i = 0
+    while i < len(plan.steps):
+        step = plan.steps[i]
+        v = plan.variables[step.var] if step.var is not None else None
+        if step.kind in ("payload", "count", "loop") and v.path not in counts:
+            x = item(v.path)
+            counts[v.path] = len(_raw(x) if v.string else x)
         if step.kind == "payload":
-            out += payloads[step.var]
+            out += raw(v)
+            del counts[v.path]
+        elif step.kind == "count":
+            out += (counts[v.path] + v.nul).to_bytes(4, "little")
+        elif step.kind == "loop":
+            left[v.path] = counts.pop(v.path)
+            at[v.path] = 0
+            if not left[v.path]:
+                i = step.target
+        elif step.kind == "next":
+            left[v.path] -= 1
+            at[v.path] += 1
+            if left[v.path]:
+                i = step.target
         elif step.kind == "pad":
-            if step.var is None or counts[step.var]:
+            if step.var is None or counts.get(v.path, len(raw(v))):
                 out += bytes(-(len(out) - plan.origin) % step.align)
         else:
             for part in step.parts:
-                out += _part_bytes(plan, part, bits, counts, body, publisher, out)
+                if part.kind == "element":
+                    x = item(part.path)
+                    out += _element_bytes(part.leaf.type, x if part.leaf.length > 1 else [x])
+                else:
+                    out += _part_bytes(plan, part, bits, top_counts, 0, publisher, out)
+        i += 1
+    if plan.framing == "ros1":
+        out[:4] = (len(out) - 4).to_bytes(4, "little")
     return bytes(out)
 
 
