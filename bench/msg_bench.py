@@ -7,7 +7,8 @@ import os
 import cocotb
 from cocotb.triggers import RisingEdge, with_timeout
 
-from tb.models.messages import random_primitive
+from gen.msg.model import Named, Sequence
+from tb.models.messages import random_primitive, random_value
 from tb.models.msgstream import set_at
 from tb.msg_codec_tb import MsgCodecTB
 
@@ -35,6 +36,17 @@ class EdgeWatch:
                 self.last = self.tb.cycle
 
 
+def element_value(tb, typename, values=None):
+    """A random element; ``values``: every sequence of messages in it gets that many."""
+    value = random_value(tb.library, typename, tb.rng, max_len=6)
+    for f in tb.library[typename].fields:
+        if values is not None and isinstance(f.type, Sequence) and \
+                isinstance(f.type.element, Named):
+            value[f.name] = [random_value(tb.library, f.type.element.typename, tb.rng)
+                             for _ in range(values)]
+    return value
+
+
 @cocotb.test()
 async def measure(dut):
     tb = MsgCodecTB(dut, seed=1)
@@ -42,10 +54,15 @@ async def measure(dut):
     case = json.loads(os.environ["ROSGATE_BENCH_CASE"])
     value = tb.random_message()
     for path, item in case["set"].items():
-        if isinstance(item, dict):      # {"bytes": n} or {"elements": n}
+        if isinstance(item, dict):      # {"bytes": n} or {"elements": n[, "values": k]}
             v = next(v for v in tb.plan.variables if v.path == path)
-            item = (bytes(i * 7 % 251 for i in range(item["bytes"])) if "bytes" in item else
-                    [random_primitive(v.element, tb.rng) for _ in range(item["elements"])])
+            if "bytes" in item:
+                item = bytes(i * 7 % 251 for i in range(item["bytes"]))
+            elif v.elements:
+                item = [element_value(tb, v.element, item.get("values"))
+                        for _ in range(item["elements"])]
+            else:
+                item = [random_primitive(v.element, tb.rng) for _ in range(item["elements"])]
         set_at(value, path, item)
     start = EdgeWatch(tb, "ser_fields", first_on_valid=True)
     out = EdgeWatch(tb, "ser_m_axis")

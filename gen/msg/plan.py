@@ -203,17 +203,22 @@ class StreamPlan:
         v = self.variables[var]
         return v if v.into is None else self.variables[v.into]
 
-    def loop_depth(self, index):
-        """How many loops step ``index`` is inside."""
-        depth = 0
-        for s in self.steps[:index]:
-            depth += {"loop": 1, "next": -1}.get(s.kind, 0)
-        return depth
+    def step_streams(self):
+        """Per step, the index of the stream whose elements it is inside (``None`` outside
+        loops; ``loop`` and ``next`` steps are outside their own loop)."""
+        out, loops = [], []
+        for s in self.steps:
+            if s.kind == "next":
+                loops.pop()
+            out.append(self.stream_of(loops[0]).index if loops else None)
+            if s.kind == "loop":
+                loops.append(s.var)
+        return out
 
     def static_bytes(self):
         """Bytes of all ``run`` steps outside loops."""
-        return sum(s.nbytes for i, s in enumerate(self.steps)
-                   if s.kind == "run" and not self.loop_depth(i))
+        return sum(s.nbytes for s, stream in zip(self.steps, self.step_streams())
+                   if s.kind == "run" and stream is None)
 
     def describe(self):
         lines = [f"{self.typename} framing {self.framing}: {len(self.steps)} steps, "
@@ -413,6 +418,35 @@ def _primitive(node):
     return Part("field", node.nbytes, leaf=node.leaf)
 
 
+def _cdr_alignment(element):
+    """The CDR alignment of a fixed-size ``element`` whose first primitive has the largest
+    alignment in it and whose size is a multiple of that: the first element is aligned to it
+    and every following one starts aligned. ``None`` for any other element."""
+    prims, empty = [], [False]
+
+    def collect(node):
+        if node.kind in ("struct", "array"):
+            for child in node.children:
+                collect(child)
+        elif node.kind == "prim":
+            prims.append(node)
+        elif node.kind == "empty":
+            empty[0] = True
+        else:
+            raise LookupError
+    try:
+        collect(element)
+    except LookupError:
+        return None
+    a = max([min(p.prim_bytes, 8) for p in prims] + [1])
+    offset = 0
+    for p in prims:
+        offset += -offset % min(p.prim_bytes, 8) + p.nbytes
+    if empty[0] or not prims or min(prims[0].prim_bytes, 8) != a or offset % a:
+        return None
+    return a
+
+
 def _cdr(nodes):
     runs = _Runs()
     runs.part(Part("const", 4, value=CDR_HEADER, mask=CDR_HEADER_MASK, path="encapsulation"))
@@ -448,11 +482,25 @@ def _cdr(nodes):
             align(4)
             _count(runs, node.var)
             advance(4)
+            element = node.children[0]
+            a = _cdr_alignment(element)
+            if a is None:
+                runs.step(Step("loop", var=node.var.index))
+                unknown()        # each element starts where the previous one ended
+                walk(element)
+                runs.step(Step("next", var=node.var.index))
+                unknown()
+                return
+            # fixed-size elements that end aligned as they start: one padding before the
+            # first (none for an empty sequence), none between them
+            if a > state["align"] or -state["offset"] % a:
+                runs.step(Step("pad", align=a, var=node.var.index))
             runs.step(Step("loop", var=node.var.index))
-            unknown()        # each element starts where the previous one ended
-            walk(node.children[0])
+            state["align"], state["offset"] = a, 0
+            walk(element)
+            assert state["offset"] == 0, node.path
             runs.step(Step("next", var=node.var.index))
-            unknown()
+            state["align"], state["offset"] = min(a, 4), 0
         else:
             v = node.var
             align(4)

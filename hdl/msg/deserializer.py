@@ -189,13 +189,7 @@ class Deserializer(wiring.Component):
                 m.d.sync += opened[var].eq(0)
                 then()
 
-        stream_at, loops = [], []      # per step: the stream its loop body writes to
-        for s in steps:
-            if s.kind == "next":
-                loops.pop()
-            stream_at.append(plan.stream_of(loops[0]).index if loops else None)
-            if s.kind == "loop":
-                loops.append(s.var)
+        stream_at = plan.step_streams()
 
         with m.Switch(op):
             for i, s in enumerate(steps):

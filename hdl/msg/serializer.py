@@ -162,13 +162,7 @@ class Serializer(wiring.Component):
                 reported[v.index] = Signal(name=f"reported{v.index}")
         elements_left = {v.index: Signal(32, name=f"elements_left{v.index}")
                          for v in plan.variables if v.elements}
-        stream_at, loops = [], []      # per step: the stream its loop body reads from
-        for s in steps:
-            if s.kind == "next":
-                loops.pop()
-            stream_at.append(plan.stream_of(loops[0]).index if loops else None)
-            if s.kind == "loop":
-                loops.append(s.var)
+        stream_at = plan.step_streams()
 
         op = Signal(range(max(len(steps), 2)))
         nread = -(-4 // B)       # cycles of an inner count, read and then written

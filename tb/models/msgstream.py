@@ -179,7 +179,8 @@ def plan_encode(plan, value, publisher=0):
     while i < len(plan.steps):
         step = plan.steps[i]
         v = plan.variables[step.var] if step.var is not None else None
-        if step.kind in ("payload", "count", "loop") and v.path not in counts:
+        if step.kind in ("payload", "count", "loop", "pad") and v is not None \
+                and v.path not in counts:
             x = item(v.path)
             counts[v.path] = len(_raw(x) if v.string else x)
         if step.kind == "payload":
@@ -198,7 +199,7 @@ def plan_encode(plan, value, publisher=0):
             if left[v.path]:
                 i = step.target
         elif step.kind == "pad":
-            if step.var is None or counts.get(v.path, len(raw(v))):
+            if step.var is None or counts[v.path]:
                 out += bytes(-(len(out) - plan.origin) % step.align)
         else:
             for part in step.parts:
