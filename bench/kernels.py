@@ -46,6 +46,9 @@ CONTROL = {
             ("FINROC PID on Nios II at 25 kHz", 0.04), 0.00001),
     "ik": (dict(kind="inverse_kinematics", lanes=16), "inverse kinematics (per solution)",
            ("ReconROS inverse kinematics raw HW", 0.19), 0.002),
+    "ball": (dict(kind="ball_control"),
+             "ball-on-plate Kalman + PD, touch sample to the 6th leg word (per sample)",
+             ("ReconROS ball-on-plate sampling period", 20.0), 0.02),
 }
 MNIST = {
     "mnist": (dict(kind="mnist", pixels_per_beat=4),

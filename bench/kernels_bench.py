@@ -13,6 +13,7 @@ from tb.kernels_control_tb import ControlTB, int16, pid_word
 from tb.kernels_image_tb import KernelsTB
 from tb.models import image as golden
 from tb.models import inverse_kinematics as ik_model
+from tb.models.ball_control import BallControlModel, leg_words
 from tb.models.pid import AvrPid
 
 
@@ -60,6 +61,18 @@ async def measure_kernels(dut):
         assert ik.words() == [ik_model.solve(w) for w in words]
         ends = [c for p in ik.sink.packets for c in p.cycles]
         records["ik"] = {"cycles": ends[-1] - ends[0], "items": len(words) - 1}
+
+        samples = [(rng.randrange(-2048, 2048), rng.randrange(-2048, 2048)) for _ in range(50)]
+        ball = tb.ports["ball"]
+        start = tb.cycle
+        for raw in samples:
+            word = (raw[0] & 0xFFF) | ((raw[1] & 0xFFF) << 16)
+            await ball.source.send(AxiStreamFrame(word.to_bytes(4, "little")))
+        await tb.wait_words("ball", 6 * len(samples), 400 * len(samples))
+        model = BallControlModel()
+        assert ball.words() == [w for raw in samples for w in leg_words(*model.update(*raw))]
+        records["ball"] = {"cycles": ball.sink.packets[-1].cycles[-1] - start,
+                           "items": len(samples)}
     else:
         tb = KernelsTB(dut, seed=1)
         await tb.reset()

@@ -64,6 +64,8 @@ def catalog():
                      for k, v in kernels.TIMING_FALLBACKS.get(name, ())]
         add(f"kernel_{name}", label, _kernel(spec), f"kernel_{name}", kernels.CLOCK_MHZ,
             fallbacks)
+    add("kernel_servo", "servo PWM, six channels, 50 Hz", _kernel(dict(kind="servo_pwm")),
+        "kernel_servo", kernels.CLOCK_MHZ)
     for name, label, build in net.resource_blocks():
         if name in net.TIMING_BLOCKS:
             add(f"net_{name}" if name != "engine" else "engine", label, build, f"net_{name}",

@@ -78,7 +78,8 @@ def _kernel_classes():
     return {"sobel": k.Sobel, "gaussian": k.GaussianBlur, "gray": k.BgrToGray,
             "hsv": k.BgrToHsv, "inrange": k.InRange, "traffic_light": k.TrafficLightDetector,
             "equalize": k.EqualizeHist, "sort": k.MergeSorter, "pid": k.PidController,
-            "inverse_kinematics": k.InverseKinematics, "mnist": _mnist_cnn}
+            "inverse_kinematics": k.InverseKinematics, "ball_control": k.BallControl,
+            "servo_pwm": k.ServoPwm, "mnist": _mnist_cnn}
 
 
 def _mnist_cnn(weights=None, **params):

@@ -25,7 +25,8 @@ class ControlTB:
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
         self.ports = {name: StreamPort(dut, name, random.Random(self.rng.random()))
-                      for name in self.params["kernels"]}
+                      for name, spec in self.params["kernels"].items()
+                      if spec["kind"] != "servo_pwm"}     # PWM pins, no output stream
         self.cycle = 0
         cocotb.start_soon(self._count_cycles())
         self.errors = {"leg": 0, "short": 0, "long": 0}

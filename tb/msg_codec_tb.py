@@ -25,8 +25,8 @@ from tb.models.msgstream import (
 )
 from tb.streams import HandshakeSink, HandshakeSource, PacketSink, bursty_pauses, random_pauses
 
-__all__ = ["CLOCK_NS", "TEST_MSGS", "IMAGE", "STREAMABLE", "ELEMENTS", "POINTS", "config", "PARAMS", "PUBLISHER",
-           "MsgCodecTB"]
+__all__ = ["CLOCK_NS", "TEST_MSGS", "IMAGE", "STREAMABLE", "ELEMENTS", "POINTS", "config",
+           "PARAMS", "PUBLISHER", "MsgCodecTB"]
 
 
 CLOCK_NS = 10

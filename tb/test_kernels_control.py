@@ -1,5 +1,6 @@
 """Bench of the non-image kernels in one ``kernels`` top: MergeSorter (docs/reconos.md),
-PidController (docs/kernels.md), InverseKinematics (docs/reconos.md).
+PidController (docs/kernels.md), InverseKinematics (docs/reconos.md), BallControl
+(docs/kernels.md).
 
 Golden models: Python's ``sorted``; the AVR221 model of tb/models/pid.py (checked against the
 spec's test vectors in tb/test_kernels_models.py); the ap_fixed model of
@@ -12,12 +13,15 @@ inverse-kinematics solution.
 import os
 
 import cocotb
-from cocotb.triggers import ClockCycles, with_timeout
+from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
 from tb.harness import cocotb_bench
 from tb.models import inverse_kinematics as ik_model
+from tb.models.ball_control import (BallControlModel, RollingBall, leg_words, servo_pulse,
+                                    tilt_radians, word_tilts)
 from tb.models.pid import AvrPid, FirstOrderPlant
+from tb.streams import count_pulses, random_pauses
 
 from .kernels_control_tb import CLOCK_NS, ControlTB, int16, pid_word, run_ik, run_pid, run_sort
 
@@ -25,6 +29,9 @@ KERNELS = {
     "sort": dict(kind="sort", block_size=2048),
     "pid": dict(kind="pid"),
     "ik": dict(kind="inverse_kinematics", lanes=16),
+    "ball": dict(kind="ball_control"),
+    # a 1 MHz clock keeps a 20 ms period at 20,000 cycles
+    "servo": dict(kind="servo_pwm", clock_hz=1_000_000),
 }
 
 CONFIGS = {"control": dict(kernels=KERNELS)}
@@ -164,3 +171,103 @@ async def pid_closed_loop_first_order_plant(dut):
     for sp, target_end in ((2000, 249), (-500, 399)):
         y = trace[target_end][1]
         assert abs(y - sp) <= abs(sp) * 0.02, f"plant at {y} for set point {sp}"
+
+
+async def ball_update(tb, raw_x, raw_y):
+    """One touch sample through BallControl: its six words."""
+    port = tb.ports["ball"]
+    before = len(port.words())
+    word = (raw_x & 0xFFF) | ((raw_y & 0xFFF) << 16)
+    await port.source.send(AxiStreamFrame(word.to_bytes(4, "little")))
+    await tb.wait_words("ball", before + 6, 2000)
+    return port.words()[before:before + 6]
+
+
+@cocotb.test()
+async def ball_control_closed_loop(dut):
+    """BallControl balances a ball dropped 90 mm and 60 mm off centre on the rolling-ball
+    plant (tb/models/ball_control.py), 30 % idle and backpressure: every sample's six words
+    equal the fixed-point model's, one packet per sample, and the ball is within 3 mm of the
+    centre after 300 samples (9 s at 30 ms); the panel's extremes and a jump of the touch
+    reading are taken the same way."""
+    tb = ControlTB(dut)
+    await tb.reset()
+    tb.set_pauses(0.3, 0.3)
+    model = BallControlModel()
+    ball = RollingBall(90.0, -60.0)
+    for n in range(300):
+        raw = ball.touch()
+        words = await ball_update(tb, *raw)
+        assert words == leg_words(*model.update(*raw)), f"sample {n}: {[hex(w) for w in words]}"
+        alpha, beta = (tilt_radians(t) for t in word_tilts(words[0]))
+        ball.step(alpha, beta, 0.03)
+    radius = (ball.x ** 2 + ball.y ** 2) ** 0.5
+    dut._log.info("ball at (%.2f, %.2f) mm after 300 samples", ball.x, ball.y)
+    assert radius < 3.0, f"ball {radius:.1f} mm from the centre after 9 s"
+    for raw in ((-2048, 2047), (2047, -2048), (0, 0), (1500, -1500)):
+        words = await ball_update(tb, *raw)
+        assert words == leg_words(*model.update(*raw))
+    packets = tb.ports["ball"].sink.packets
+    assert len(packets) == 304 and all(len(p.beats) == 6 for p in packets)
+
+
+async def pwm_pulses(dut, periods):
+    """High time in cycles of each channel's pulse in each of the next ``periods`` periods,
+    from one ``period_start`` on."""
+    while dut.servo_period_start.value != 1:
+        await RisingEdge(dut.aclk)
+    widths = []
+    for _ in range(periods):
+        high = [0] * 6
+        while True:
+            await RisingEdge(dut.aclk)
+            if dut.servo_period_start.value == 1:
+                break
+            bits = int(dut.servo_pwm.value)
+            for n in range(6):
+                high[n] += bits >> n & 1
+        widths.append(high)
+    return widths
+
+
+@cocotb.test()
+async def servo_pwm_pulse_widths(dut):
+    """Leg angles from the inverse kinematics' words set each channel's pulse to the model's
+    width (0.5 to 2.5 ms over 0 to 180 degrees) from the next period on; a pulse is never cut
+    while a new angle arrives mid-period; an angle above 180 degrees is held at 2.5 ms with
+    ``err_range``, a word for leg 7 is dropped with ``err_leg``; unset legs stay low."""
+    from cocotbext.axi import AxiStreamBus, AxiStreamSource
+    tb = ControlTB(dut)
+    await tb.reset()
+    errors = {"leg": 0, "range": 0}
+    cocotb.start_soon(count_pulses(dut.servo_err_leg, errors, "leg"))
+    cocotb.start_soon(count_pulses(dut.servo_err_range, errors, "range"))
+    source = AxiStreamSource(AxiStreamBus.from_prefix(dut, "servo_i"), dut.aclk, dut.aresetn,
+                             reset_active_level=False)
+    source.set_pause_generator(random_pauses(tb.rng, 0.3))
+
+    async def send(index, leg):
+        await source.send(AxiStreamFrame(((index << 21) | (leg << 18)).to_bytes(4, "little")))
+        await source.wait()
+
+    assert (await pwm_pulses(dut, 1))[0] == [0] * 6, "a leg without an angle pulsed"
+    angles = [0, 900, 1800, 450, 1234, 2047]          # the last one is above 180 degrees
+    for leg, index in enumerate(angles[:5]):
+        await send(index, leg)
+    await send(333, 7)
+    await send(angles[5], 5)
+    first, second = await pwm_pulses(dut, 2)
+    want = [servo_pulse(i, clock_hz=1_000_000) for i in angles]
+    assert want[:3] == [500, 1500, 2500]
+    assert first == want and second == want, (first, second, want)
+    assert errors == {"leg": 1, "range": 1}, errors
+    # a new angle for leg 0 300 cycles into a period: that pulse keeps its width, the next
+    # one has the new width
+    await RisingEdge(dut.aclk)
+    while dut.servo_period_start.value != 1:
+        await RisingEdge(dut.aclk)
+    measure = cocotb.start_soon(pwm_pulses(dut, 2))     # from this period start on
+    await ClockCycles(dut.aclk, 300)
+    await send(1800, 0)
+    during, after = await measure
+    assert during == want and after == [2500] + want[1:], (during, after)

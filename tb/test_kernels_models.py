@@ -85,3 +85,59 @@ def test_bad_parameters_name_the_value():
         EqualizeHist(max_width=4096, max_height=4096)
     with pytest.raises(ParameterError, match="lanes must be one of 8, 16, 32, not 12"):
         InverseKinematics(lanes=12)
+
+
+def test_ball_control_covariance_is_a_p_a_transpose_plus_q():
+    """Defect 18 fixed: the model's predicted covariance equals A P A^T + q I (A = [1 Ta;
+    0 1]) to within the rounding of its four assignments, for random covariances."""
+    import random
+    from fractions import Fraction
+
+    from tb.models.ball_control import BallControlModel, fixed
+    rng = random.Random(18)
+    m = BallControlModel()
+    ta = Fraction(m.c["ta"], 4096)
+    for _ in range(200):
+        raw = [rng.randrange(-40000, 40000) for _ in range(4)]
+        raw[2] = raw[1]
+        P = [Fraction(v, 4096) for v in raw]
+        exact = [P[0] + ta * (P[1] + P[2]) + ta * ta * P[3] + 4, P[1] + ta * P[3],
+                 P[2] + ta * P[3], P[3] + 4]
+        s = m._set
+        a = s(raw[0], (m.c["ta"], raw[2]))
+        b = s(raw[1], (m.c["ta"], raw[3]))
+        got = [s(a, (m.c["ta"], b), m.c["q"]), b, s(raw[2], (m.c["ta"], raw[3])),
+               s(raw[3], m.c["q"])]
+        assert all(abs(g - fixed(e)) <= 2 for g, e in zip(got, exact)), (raw, got)
+
+
+def test_ball_control_tilts_are_q6_8_degrees_for_inverse_kinematics():
+    """Defect 19 fixed: a clamped tilt (0.19199 rad = 11.0 degrees) leaves as Q6.8 and the
+    inverse-kinematics decoding reads 11 degrees; ReconROS' shift by 6 reads a quarter."""
+    from tb.models.ball_control import BallControlModel
+    for scale_bits, degrees in ((8, 11.0), (6, 2.75)):
+        m = BallControlModel(scale_bits=scale_bits)
+        alpha, beta = m.update(2000, 2000)           # far off centre: both tilts clamp
+        assert (alpha, beta) == (round(11.0 * (1 << scale_bits)),
+                                 -round(11.0 * (1 << scale_bits))), (alpha, beta)
+        assert abs(alpha / 256 - degrees) < 0.01
+
+
+def test_ball_control_settles_a_dropped_ball():
+    """The model balances balls dropped up to 150 mm off centre within 3 mm in 300 samples."""
+    from tb.models.ball_control import BallControlModel, RollingBall, tilt_radians
+    for x, y in ((150.0, 0.0), (-100.0, 100.0), (20.0, -140.0)):
+        m, ball = BallControlModel(), RollingBall(x, y)
+        for _ in range(300):
+            alpha, beta = m.update(*ball.touch())
+            ball.step(tilt_radians(alpha & 0x3FFF), tilt_radians(beta & 0x3FFF), 0.03)
+        assert (ball.x ** 2 + ball.y ** 2) ** 0.5 < 3.0, (x, y, ball.x, ball.y)
+
+
+@pytest.mark.parametrize("kwargs,name", [({"scale_bits": 7}, "scale_bits"),
+                                         ({"period": "0"}, "period"),
+                                         ({"period": "fast"}, "period")])
+def test_ball_control_parameters_are_checked(kwargs, name):
+    from hdl.kernels import BallControl
+    with pytest.raises(ParameterError, match=name):
+        BallControl(**kwargs)

@@ -1,6 +1,7 @@
 """Streaming compute kernels for hardware nodes (docs/kernels.md, docs/reconos.md,
 docs/kernels.md)."""
 
+from .ball_control import BallControl
 from .colour import BgrToGray, BgrToHsv, InRange, PixelKernel, TrafficLightDetector
 from .equalize import EqualizeHist
 from .gaussian import GaussianBlur
@@ -8,10 +9,12 @@ from .image import FrameGuard
 from .inverse_kinematics import InverseKinematics
 from .mnist import MnistCnn
 from .pid import PidController
+from .servo_pwm import ServoPwm
 from .sobel import Sobel, SobelByteLanes
 from .sort import MergeSorter
 from .window import WindowFilter
 
-__all__ = ["BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur", "InRange",
-           "InverseKinematics", "MergeSorter", "MnistCnn", "PidController", "PixelKernel", "Sobel",
-           "SobelByteLanes", "TrafficLightDetector", "WindowFilter"]
+__all__ = ["BallControl", "BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur",
+           "InRange", "InverseKinematics", "MergeSorter", "MnistCnn", "PidController",
+           "PixelKernel", "ServoPwm", "Sobel", "SobelByteLanes", "TrafficLightDetector",
+           "WindowFilter"]
