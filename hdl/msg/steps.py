@@ -38,6 +38,7 @@ class RuntimeStep:
         assert B & (B - 1) == 0, "bytes per beat is a power of two"
         self._m, self._B = m, B
         self._step, self._remaining, self._next = step, remaining, next_step
+        self._length = length
         self.index = index
         self.left = Signal(len(remaining), name=f"left{index}")
         self.k = Signal(range(B + 1), name=f"k{index}")
@@ -54,4 +55,8 @@ class RuntimeStep:
         with m.If(self.final):
             self._next(self.index)
         with m.Else():
-            m.d.sync += [self._remaining.eq(self.left - self._B), self._step.eq(1)]
+            # both differences straight from their sources, the choice after them: the
+            # subtraction is not behind the step decode
+            m.d.sync += [self._remaining.eq(Mux(self._step != 0, self._remaining - self._B,
+                                                self._length - self._B)),
+                         self._step.eq(1)]
