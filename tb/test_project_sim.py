@@ -20,6 +20,7 @@ import pytest
 
 from host.cli import main as rosgate
 from host.project_sim import run_project_sim
+from tb.models import inverse_kinematics as ik_model
 
 from .harness import ROOT
 from .models.image import IMAGES
@@ -196,3 +197,18 @@ def test_sort_action_example(tmp_path):
                               out=tmp_path / "b", args={"goals": "1", "size": "257"},
                               limit_ms=5)
     assert results["goals"] == [{"goal": 0, "size": 257, "accepted": False}]
+
+
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
+def test_inverse_kinematics_node(sim, tmp_path):
+    """examples/inverse_kinematics: ReconROS' test client's words through the hardware node;
+    every answer equals the ap_fixed model (tb/models/inverse_kinematics.py), the words for
+    leg 6 are dropped by the kernel and the node serves the next request."""
+    results = run_project_sim(ROOT / "examples/inverse_kinematics/build.cfg", sim,
+                              out=tmp_path / "out", args={"requests": "60"}, limit_ms=5)
+    requests = results["requests"]
+    assert len(requests) == 60 and results["answered"] == 52
+    for r in requests:
+        assert r["word"] == ik_model.client_word(r["i"])
+        want = None if r["i"] % 7 == 6 else ik_model.solve(r["word"])
+        assert r["answer"] == want, r

@@ -9,7 +9,7 @@ from .protocol import CALLS
 
 __all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX",
            "SortSteps", "SortServiceThread", "SortActionThread", "MailboxSortThread",
-           "SharedCounterThread", "SobelServerThread", "DipThread"]
+           "SharedCounterThread", "SobelServerThread", "DipThread", "WordKernelNode"]
 
 
 class EchoThread(HardwareThread):
@@ -853,4 +853,80 @@ class DipThread(HardwareThread):
             mem.copy_bytes_states("FROM_RESPONSE", rsrc, src, size, then="PUBLISH")
             with m.State("PUBLISH"):
                 os.ros_publish(h_pub, h_img, then="TAKE")
+        return m
+
+
+class WordKernelNode(HardwareThread):
+    """A ROS node around a kernel of 32-bit words: take a message whose first member is a
+    32-bit value (``std_msgs/UInt32``, ``Int32``, ``Float32``), give the value to the kernel,
+    and publish every word the kernel answers with, up to the one with ``tlast``, in the
+    output message's first member; repeat.
+
+    ReconROS' single-word nodes (``rt_inverse``: ``/angle`` to ``legangle``) and the
+    ball-on-plate chain are of this shape. The output message is written by
+    read-modify-write of its first memory word, so its other bytes keep their values.
+
+    Parameters
+    ----------
+    arch : str
+    kernel : wiring.Component
+        With ``i`` and ``o`` streams of 32-bit words (``tdata``, ``tlast`` on ``o``), for
+        example :class:`~hdl.kernels.InverseKinematics` or :class:`~hdl.kernels.BallControl`.
+    dropped : str or None
+        The kernel's one-cycle error output that says it dropped the word without an answer
+        (``"err_leg"`` of the inverse kinematics): the node then takes the next message.
+    h_sub, h_pub, h_msg_in, h_msg_out : int
+        Handles.
+    """
+
+    def __init__(self, arch, kernel, *, h_sub, h_pub, h_msg_in, h_msg_out, dropped=None):
+        if dropped is not None and not hasattr(kernel, dropped):
+            raise ValueError(f"dropped={dropped!r}: the kernel has no such member")
+        self.kernel = kernel
+        self.dropped = dropped
+        self.handles = (h_sub, h_pub, h_msg_in, h_msg_out)
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.kernel = kernel = self.kernel
+        h_sub, h_pub, h_in, h_out = self.handles
+        w = self.arch.word_bits
+        in_ptr, out_ptr, word, out_word = (Signal(w, name=n) for n in
+                                           ("in_ptr", "out_ptr", "word", "out_word"))
+        answer = Signal(32)
+        last = Signal()
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="OUT_ADDR")
+            with m.State("OUT_ADDR"):
+                os.memory_getobjaddr(h_out, ptr=out_ptr, then="OUT_READ")
+            with m.State("OUT_READ"):
+                mem.read_word(out_ptr, out_word, then="TAKE")
+            with m.State("TAKE"):
+                os.ros_take(h_sub, h_in, ptr=in_ptr, then="READ")
+            with m.State("READ"):
+                mem.read_word(in_ptr, word, then="FEED")
+            with m.State("FEED"):
+                m.d.comb += [kernel.i.tvalid.eq(1), kernel.i.tdata.eq(word[:32])]
+                with m.If(kernel.i.tready):
+                    m.next = "ANSWER"
+            with m.State("ANSWER"):
+                m.d.comb += kernel.o.tready.eq(1)
+                with m.If(kernel.o.tvalid):
+                    m.d.sync += [answer.eq(kernel.o.tdata), last.eq(kernel.o.tlast)]
+                    m.next = "WRITE"
+                if self.dropped is not None:
+                    with m.Elif(getattr(kernel, self.dropped)):
+                        m.next = "TAKE"
+            with m.State("WRITE"):
+                mem.write_word(out_ptr, Cat(answer, out_word[32:]), then="PUBLISH")
+            with m.State("PUBLISH"):
+                os.ros_publish(h_pub, h_out, then="NEXT")
+            with m.State("NEXT"):
+                with m.If(last):
+                    m.next = "TAKE"
+                with m.Else():
+                    m.next = "ANSWER"
         return m
