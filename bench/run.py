@@ -12,7 +12,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import finemb, hmt, kernels, msg, net, reconos, reconos_apps, ros2, timing  # noqa: E402
+from bench import (ball_on_plate, finemb, hmt, kernels, msg, net, reconos,  # noqa: E402
+                   reconos_apps, ros2, timing)
 from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -29,6 +30,8 @@ BENCHES = [
     ("network engine and TCPROS (goodput, seed paper's image transfers, resources)", net),
     ("FinEmbP lines of 1 to 16 PID nodes, the Python master through TAP, resources", finemb),
     ("ROS 2 bridge: overhead per message against a Cyclone loopback round trip", ros2),
+    ("ball-on-plate control loop: four hardware threads closed through a plant model",
+     ball_on_plate),
     ("timing: every core placed and routed on ECP5 (LFE5UM5G-85F-8), 3 seeds", timing),
 ]
 

@@ -21,6 +21,7 @@ import pytest
 from host.cli import main as rosgate
 from host.project_sim import run_project_sim
 from tb.models import inverse_kinematics as ik_model
+from tb.models.ball_control import BallControlModel, leg_words, servo_pulse
 
 from .harness import ROOT
 from .models.image import IMAGES
@@ -212,3 +213,68 @@ def test_inverse_kinematics_node(sim, tmp_path):
         assert r["word"] == ik_model.client_word(r["i"])
         want = None if r["i"] % 7 == 6 else ik_model.solve(r["word"])
         assert r["answer"] == want, r
+
+
+BALL = ROOT / "examples" / "ball_on_plate"
+
+
+def _ball_plant():
+    """examples/ball_on_plate/sim.py as a module (its plant, replayed by the replica)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("ball_on_plate_sim", BALL / "sim.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def ball_loop_replica(periods, x, y, clock_hz):
+    """The loop with the golden models in place of the hardware (BallControl's fixed-point
+    model, the ap_fixed inverse kinematics, the PWM widths), the same plant, and the
+    hardware's timing: a touch sample's widths drive the period after the one it is taken
+    in. Returns (touch words, widths per period)."""
+    plant = _ball_plant()
+    control = BallControlModel(period="0.02")
+    ball = plant.Ball(x, y)
+    touches, widths_per_period, pending = [ball.touch_word()], [], []
+    tilt = (0.0, 0.0)
+
+    def chain(word):
+        def raw(v):
+            return v - 4096 if v & 0x800 else v
+        alpha, beta = control.update(raw(word & 0xFFF), raw(word >> 16 & 0xFFF))
+        return [servo_pulse(ik_model.solve(w) >> 21, clock_hz=clock_hz)
+                for w in leg_words(alpha, beta)]
+
+    for n in range(periods):
+        pending.append(chain(touches[-1]))
+        widths = pending[n - 1] if n else [0] * 6
+        widths_per_period.append(widths)
+        if all(widths):
+            tilt = plant.plate_tilt([plant.arm_angle(w, clock_hz) for w in widths], tilt)
+        ball.roll(tilt[0], tilt[1], plant.PERIOD_S)
+        touches.append(ball.touch_word())
+    return touches, widths_per_period
+
+
+def test_ball_on_plate_loop_equals_the_models(tmp_path):
+    """examples/ball_on_plate on Icarus, 30 servo periods (the PWM counting at 250 kHz, 5,000
+    cycles a period): every touch sample and every period's six measured pulse widths equal
+    the replica built from the golden models; the chain answers a sample in under a
+    period."""
+    periods, clock_hz = 30, 250_000
+    results = run_project_sim(BALL / "build.cfg", "icarus", out=tmp_path / "out",
+                              args={"periods": str(periods)},
+                              thread_params=[f"Servo.pwm_clock_hz={clock_hz}"], limit_ms=5)
+    touches, widths = ball_loop_replica(periods, 90.0, -60.0, clock_hz)
+    assert results["touches"] == touches[:periods + 1]
+    assert [p["widths"] for p in results["periods"]] == widths
+    assert max(results["latencies"]) < 20_000 * clock_hz // 1_000_000   # one period
+
+
+@pytest.mark.full
+def test_ball_on_plate_settles(tmp_path):
+    """The full example (Verilator, PWM at 1 MHz, 300 periods = 6 s): the ball dropped
+    108 mm off centre ends within 3 mm of it."""
+    results = run_project_sim(BALL / "build.cfg", "verilator", out=tmp_path / "out",
+                              args={"periods": "300"}, limit_ms=100)
+    assert results["final_radius_mm"] < 3.0, results["final_radius_mm"]

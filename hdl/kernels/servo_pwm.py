@@ -64,7 +64,7 @@ class ServoPwm(wiring.Component):
 
     def __init__(self, *, clock_hz=100_000_000, period_us=20_000, min_us=500, max_us=2500,
                  full_scale_deg=180):
-        check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000)
+        check_int("clock_hz", clock_hz, 100_000, 1_000_000_000)
         check_int("period_us", period_us, 1000, 1_000_000)
         check_int("min_us", min_us, 1, period_us)
         check_int("max_us", max_us, min_us + 1, period_us)

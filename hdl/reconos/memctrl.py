@@ -108,6 +108,9 @@ class MemoryController(wiring.Component):
         req_error_addr = Signal(a.addr_bits)
         r_error = Signal(len(MemStatus))
         r_error_addr = Signal(a.addr_bits)
+        # the addresses do not wait for the checks: each is the address an error of its kind
+        # would name, and the register is only read with an error
+        m.d.comb += [req_error_addr.eq(req.addr), r_error_addr.eq(head.addr)]
         # registered: the validity checks of a request stay out of the status registers' path
         m.d.sync += [
             self.error.eq(req_error | r_error),
@@ -129,13 +132,11 @@ class MemoryController(wiring.Component):
                                 m.d.sync += [axi.araddr.eq(req.addr),
                                              axi.arlen.eq(words - 1), axi.arvalid.eq(1)]
                             with m.Elif(words != 0):
-                                m.d.comb += [req_error.eq(MemStatus.BAD_REQUEST),
-                                             req_error_addr.eq(req.addr)]
+                                m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
                             with m.Else():
                                 # length 0: nothing to answer
                                 m.d.comb += [track.w_en.eq(0),
-                                             req_error.eq(MemStatus.BAD_REQUEST),
-                                             req_error_addr.eq(req.addr)]
+                                             req_error.eq(MemStatus.BAD_REQUEST)]
                     with m.Elif(~track.r_rdy & ~axi.arvalid):
                         # A write waits until every read before it has completed.
                         m.d.comb += self.s_req.ready.eq(1)
@@ -145,8 +146,7 @@ class MemoryController(wiring.Component):
                                          axi.awvalid.eq(1), aw_done.eq(0)]
                             m.next = "WRITE"
                         with m.Else():
-                            m.d.comb += [req_error.eq(MemStatus.BAD_REQUEST),
-                                         req_error_addr.eq(req.addr)]
+                            m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
                             with m.If(words != 0):
                                 m.next = "DRAIN"
             with m.State("WRITE"):
@@ -164,14 +164,12 @@ class MemoryController(wiring.Component):
                     with m.If(remaining == 1):
                         m.next = "WRITE_RESP"
             with m.State("WRITE_RESP"):
-                m.d.comb += axi.bready.eq(1)
+                m.d.comb += [axi.bready.eq(1), req_error_addr.eq(w_addr)]
                 with m.If(axi.bvalid):
                     with m.If(axi.bresp == AXIResp.SLVERR):
-                        m.d.comb += [req_error.eq(MemStatus.AXI_SLVERR),
-                                     req_error_addr.eq(w_addr)]
+                        m.d.comb += req_error.eq(MemStatus.AXI_SLVERR)
                     with m.Elif(axi.bresp == AXIResp.DECERR):
-                        m.d.comb += [req_error.eq(MemStatus.AXI_DECERR),
-                                     req_error_addr.eq(w_addr)]
+                        m.d.comb += req_error.eq(MemStatus.AXI_DECERR)
                     m.next = "IDLE"
             with m.State("DRAIN"):
                 m.d.comb += self.s_wdata.ready.eq(1)
@@ -197,11 +195,9 @@ class MemoryController(wiring.Component):
             with m.If(self.m_rdata.valid & self.m_rdata.ready):
                 m.d.sync += count.eq(count + 1)
                 with m.If(~head.bad & (axi.rresp == AXIResp.SLVERR)):
-                    m.d.comb += [r_error.eq(MemStatus.AXI_SLVERR),
-                                 r_error_addr.eq(head.addr)]
+                    m.d.comb += r_error.eq(MemStatus.AXI_SLVERR)
                 with m.If(~head.bad & (axi.rresp == AXIResp.DECERR)):
-                    m.d.comb += [r_error.eq(MemStatus.AXI_DECERR),
-                                 r_error_addr.eq(head.addr)]
+                    m.d.comb += r_error.eq(MemStatus.AXI_DECERR)
                 with m.If(last_word):
                     m.d.sync += count.eq(0)
                     m.d.comb += track.r_en.eq(1)

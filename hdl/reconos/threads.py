@@ -1,7 +1,7 @@
 """Example hardware threads: the ReconROS ping-pong nodes and an OS-call sequencer used by the
 compatibility tests. They are written with the thread API only (no word counting)."""
 
-from amaranth.hdl import Cat, Module, Mux, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 
 from .hwt import HardwareThread
@@ -9,7 +9,8 @@ from .protocol import CALLS
 
 __all__ = ["EchoThread", "CopyThread", "CallSequenceThread", "MemoryTestThread", "REPORT_MBOX",
            "SortSteps", "SortServiceThread", "SortActionThread", "MailboxSortThread",
-           "SharedCounterThread", "SobelServerThread", "DipThread", "WordKernelNode"]
+           "SharedCounterThread", "SobelServerThread", "DipThread", "WordKernelNode",
+           "MailboxPublisher", "ServoNode"]
 
 
 class EchoThread(HardwareThread):
@@ -929,4 +930,124 @@ class WordKernelNode(HardwareThread):
                     m.next = "TAKE"
                 with m.Else():
                     m.next = "ANSWER"
+        return m
+
+
+class MailboxPublisher(HardwareThread):
+    """Publish every mailbox word as a message whose first member is a 32-bit value (a
+    sensor's samples arriving through a mailbox: the ball-on-plate touch panel).
+
+    Parameters
+    ----------
+    arch : str
+    h_mbox, h_pub, h_msg : int
+        Handles of the mailbox, the publisher and its message object.
+    """
+
+    def __init__(self, arch, *, h_mbox, h_pub, h_msg):
+        self.handles = (h_mbox, h_pub, h_msg)
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        h_mbox, h_pub, h_msg = self.handles
+        w = self.arch.word_bits
+        ptr, kept, sample = (Signal(w, name=n) for n in ("ptr", "kept", "sample"))
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="ADDR")
+            with m.State("ADDR"):
+                os.memory_getobjaddr(h_msg, ptr=ptr, then="KEEP")
+            with m.State("KEEP"):
+                mem.read_word(ptr, kept, then="GET")
+            with m.State("GET"):
+                os.mbox_get(h_mbox, data=sample, then="WRITE")
+            with m.State("WRITE"):
+                mem.write_word(ptr, Cat(sample[:32], kept[32:]), then="PUBLISH")
+            with m.State("PUBLISH"):
+                os.ros_publish(h_pub, h_msg, then="GET")
+        return m
+
+
+class ServoNode(HardwareThread):
+    """Drives a :class:`~hdl.kernels.ServoPwm` from the leg angles of a topic and reports what
+    the servos were given: the high time of every channel, measured on the PWM outputs over
+    each whole period, goes to a mailbox as six words ``(leg << 24) | cycles`` (legs 0..5)
+    after the period ends.
+
+    The node polls the topic (``ROS_TRYTAKE``) between the reports, so a report never waits
+    for a message. (On a board the PWM outputs would leave the slot as pins; the slot
+    interface has none, so the report is how the co-simulated plant sees them.)
+
+    Parameters
+    ----------
+    arch : str
+    pwm : ServoPwm
+    h_sub, h_msg, h_mbox : int
+        Handles of the leg-angle subscription, its message object and the report mailbox.
+    """
+
+    def __init__(self, arch, pwm, *, h_sub, h_msg, h_mbox):
+        self.pwm = pwm
+        self.handles = (h_sub, h_msg, h_mbox)
+        super().__init__(arch)
+
+    def elaborate(self, platform):
+        m = Module()
+        os, mem = self.os_and_memory(m)
+        m.submodules.pwm = pwm = self.pwm
+        h_sub, h_msg, h_mbox = self.handles
+        w = self.arch.word_bits
+        ptr, word, ret = (Signal(w, name=n) for n in ("ptr", "word", "ret"))
+        high = [Signal(32, name=f"high{n}") for n in range(6)]
+        report = [Signal(32, name=f"report{n}") for n in range(6)]
+        fresh = Signal()           # a whole period's widths wait in ``report``
+        started = Signal()         # a period start has been seen (counting whole periods)
+        leg = Signal(range(6))
+        taken = Signal()
+        with m.If(pwm.period_start):
+            m.d.sync += [started.eq(1), fresh.eq(started)]
+            m.d.sync += [r.eq(h) for r, h in zip(report, high)]
+            m.d.sync += [h.eq(0) for h in high]
+        with m.Else():
+            m.d.sync += [h.eq(h + pwm.pwm[n]) for n, h in enumerate(high)]
+        with m.If(taken):
+            m.d.sync += fresh.eq(0)
+        with m.FSM():
+            with m.State("INIT"):
+                os.thread_init(then="POLL")
+            with m.State("POLL"):
+                with m.If(fresh):
+                    m.d.comb += taken.eq(1)
+                    m.d.sync += leg.eq(0)
+                    m.next = "REPORT"
+                with m.Else():
+                    m.next = "TRY"
+            with m.State("TRY"):
+                os.ros_trytake(h_sub, h_msg, ptr=ptr, ret=ret, then="TRIED")
+            with m.State("TRIED"):
+                with m.If(ret == 0):
+                    m.next = "READ"
+                with m.Else():
+                    m.next = "POLL"
+            with m.State("READ"):
+                mem.read_word(ptr, word, then="FEED")
+            with m.State("FEED"):
+                m.d.comb += [pwm.i.tvalid.eq(1), pwm.i.tdata.eq(word[:32])]
+                with m.If(pwm.i.tready):
+                    m.next = "POLL"
+            with m.State("REPORT"):
+                value = Signal(32)
+                with m.Switch(leg):
+                    for n in range(6):
+                        with m.Case(n):
+                            m.d.comb += value.eq(Cat(report[n][:24], Const(n, 8)))
+                os.mbox_put(h_mbox, value, then="REPORTED")
+            with m.State("REPORTED"):
+                with m.If(leg == 5):
+                    m.next = "POLL"
+                with m.Else():
+                    m.d.sync += leg.eq(leg + 1)
+                    m.next = "REPORT"
         return m
