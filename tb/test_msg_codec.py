@@ -52,7 +52,8 @@ CONFIGS = {
 #: these run in test-full only (make test keeps both simulators on the other configurations)
 LONG = [("streamable_ros1_w8", "verilator"), ("streamable_ros1_w8", "icarus"),
         ("image_cdr_w512", "verilator"), ("streamable_cdr_w64", "verilator"),
-        ("image_cdr_w8", "verilator"), ("streamable_reconros_w64", "verilator")]
+        ("image_cdr_w8", "verilator"), ("streamable_reconros_w64", "verilator"),
+        ("elements_cdr_w64", "verilator")]
 
 test_msg_codec = cocotb_bench("msg_codec", CONFIGS, long=LONG)
 

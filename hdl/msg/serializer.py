@@ -172,6 +172,8 @@ class Serializer(wiring.Component):
         pos = Signal(32)
         fill = Signal()
         drain = Signal()
+        shortfall = Signal(range(B + 1))        # bytes a short payload beat supplied
+        shortfall_pending = Signal()
         recent = Signal(64)
 
         error_code = Signal(3)     # the last reported code
@@ -370,9 +372,13 @@ class Serializer(wiring.Component):
                                 m.d.sync += drain.eq(0)
                                 next_op(i)
                         with m.Elif(fill):
-                            m.d.comb += [chunk.valid.eq(1), chunk.last.eq(last_op & final)]
-                            with m.If(chunk.ready):
-                                advance()
+                            with m.If(shortfall_pending):
+                                m.d.sync += [remaining.eq(remaining - shortfall),
+                                             shortfall_pending.eq(0)]
+                            with m.Else():
+                                m.d.comb += [chunk.valid.eq(1), chunk.last.eq(last_op & final)]
+                                with m.If(chunk.ready):
+                                    advance()
                         with m.Else():
                             supplied = Signal(range(B + 1), name=f"supplied{i}")
                             m.d.comb += supplied.eq(Mux(port.tlast, keep_count(port.tkeep), B))
@@ -387,9 +393,11 @@ class Serializer(wiring.Component):
                                     m.d.sync += drain.eq(1)
                                 with m.Elif(short):
                                     report(SerializerError.PAYLOAD_SHORT)
-                                    m.d.sync += [fill.eq(1), step.eq(1),
-                                                 remaining.eq(left - Mux(supplied < k, supplied,
-                                                                         k))]
+                                    # what is left is counted in the next cycle (an
+                                    # error path: no subtraction behind the port's tkeep)
+                                    m.d.sync += [fill.eq(1), step.eq(1), remaining.eq(left),
+                                                 shortfall.eq(Mux(supplied < k, supplied, k)),
+                                                 shortfall_pending.eq(1)]
                                 with m.Else():
                                     advance()
         return m
