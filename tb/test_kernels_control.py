@@ -30,8 +30,8 @@ KERNELS = {
     "pid": dict(kind="pid"),
     "ik": dict(kind="inverse_kinematics", lanes=16),
     "ball": dict(kind="ball_control"),
-    # a 1 MHz clock keeps a 20 ms period at 20,000 cycles
-    "servo": dict(kind="servo_pwm", clock_hz=1_000_000),
+    # a 250 kHz kernel clock keeps a 20 ms period at 5,000 cycles
+    "servo": dict(kind="servo_pwm", clock_hz=250_000),
 }
 
 CONFIGS = {"control": dict(kernels=KERNELS)}
@@ -188,27 +188,27 @@ async def ball_control_closed_loop(dut):
     """BallControl balances a ball dropped 90 mm and 60 mm off centre on the rolling-ball
     plant (tb/models/ball_control.py), 30 % idle and backpressure: every sample's six words
     equal the fixed-point model's, one packet per sample, and the ball is within 3 mm of the
-    centre after 300 samples (9 s at 30 ms); the panel's extremes and a jump of the touch
+    centre after 200 samples (6 s at 30 ms); the panel's extremes and a jump of the touch
     reading are taken the same way."""
     tb = ControlTB(dut)
     await tb.reset()
     tb.set_pauses(0.3, 0.3)
     model = BallControlModel()
     ball = RollingBall(90.0, -60.0)
-    for n in range(300):
+    for n in range(200):
         raw = ball.touch()
         words = await ball_update(tb, *raw)
         assert words == leg_words(*model.update(*raw)), f"sample {n}: {[hex(w) for w in words]}"
         alpha, beta = (tilt_radians(t) for t in word_tilts(words[0]))
         ball.step(alpha, beta, 0.03)
     radius = (ball.x ** 2 + ball.y ** 2) ** 0.5
-    dut._log.info("ball at (%.2f, %.2f) mm after 300 samples", ball.x, ball.y)
-    assert radius < 3.0, f"ball {radius:.1f} mm from the centre after 9 s"
+    dut._log.info("ball at (%.2f, %.2f) mm after 200 samples", ball.x, ball.y)
+    assert radius < 3.0, f"ball {radius:.1f} mm from the centre after 6 s"
     for raw in ((-2048, 2047), (2047, -2048), (0, 0), (1500, -1500)):
         words = await ball_update(tb, *raw)
         assert words == leg_words(*model.update(*raw))
     packets = tb.ports["ball"].sink.packets
-    assert len(packets) == 304 and all(len(p.beats) == 6 for p in packets)
+    assert len(packets) == 204 and all(len(p.beats) == 6 for p in packets)
 
 
 async def pwm_pulses(dut, periods):
@@ -233,7 +233,8 @@ async def pwm_pulses(dut, periods):
 @cocotb.test()
 async def servo_pwm_pulse_widths(dut):
     """Leg angles from the inverse kinematics' words set each channel's pulse to the model's
-    width (0.5 to 2.5 ms over 0 to 180 degrees) from the next period on; a pulse is never cut
+    width (0.5 to 2.5 ms over 0 to 180 degrees, a 250 kHz kernel clock) from the next period
+    on; a pulse is never cut
     while a new angle arrives mid-period; an angle above 180 degrees is held at 2.5 ms with
     ``err_range``, a word for leg 7 is dropped with ``err_leg``; unset legs stay low."""
     from cocotbext.axi import AxiStreamBus, AxiStreamSource
@@ -257,8 +258,8 @@ async def servo_pwm_pulse_widths(dut):
     await send(333, 7)
     await send(angles[5], 5)
     first, second = await pwm_pulses(dut, 2)
-    want = [servo_pulse(i, clock_hz=1_000_000) for i in angles]
-    assert want[:3] == [500, 1500, 2500]
+    want = [servo_pulse(i, clock_hz=250_000) for i in angles]
+    assert want[:3] == [125, 375, 625]
     assert first == want and second == want, (first, second, want)
     assert errors == {"leg": 1, "range": 1}, errors
     # a new angle for leg 0 300 cycles into a period: that pulse keeps its width, the next
@@ -270,4 +271,4 @@ async def servo_pwm_pulse_widths(dut):
     await ClockCycles(dut.aclk, 300)
     await send(1800, 0)
     during, after = await measure
-    assert during == want and after == [2500] + want[1:], (during, after)
+    assert during == want and after == [625] + want[1:], (during, after)
