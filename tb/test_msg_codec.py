@@ -57,6 +57,11 @@ LONG = [("streamable_ros1_w8", "verilator"), ("streamable_ros1_w8", "icarus"),
 
 test_msg_codec = cocotb_bench("msg_codec", CONFIGS, long=LONG)
 
+#: the element tests skip every configuration but Elements: only its type has packed element
+#: streams, and their cases name its fields (the other configurations' streams are covered
+#: by the tests above)
+NOT_ELEMENTS = PARAMS.get("type") != ELEMENTS
+
 
 @cocotb.test()
 async def serializer_random_messages(dut):
@@ -140,6 +145,12 @@ async def deserializer_bad_input_recovers(dut):
     tb.set_backpressure(0.2)
     cases = bad_messages(tb)
     assert len(cases) >= 4
+    await run_bad_input(tb, cases, lambda: [tb.random_message()])
+
+
+async def run_bad_input(tb, cases, next_values):
+    """Deserialize each malformed case: exactly its error code, no packet with bytes that are
+    not its field's, no packet left open, then ``next_values()`` intact."""
     for name, data, code, value in cases:
         tb.errors["des"].clear()
         start = [len(p.packets) for p in tb.des_payloads]
@@ -149,17 +160,16 @@ async def deserializer_bad_input_recovers(dut):
         # wait behind random backpressure
         await tb.wait_quiet()
         assert tb.errors["des"] == [int(code)], f"{name}: errors {tb.errors['des']}, want {code!r}"
-        declared = tb.stream_bytes(value)
-        for v, p, s, field in zip(tb.plan.streams, tb.des_payloads, start, declared):
+        for v, p, s, field in zip(tb.plan.streams, tb.des_payloads, start,
+                                  tb.stream_bytes(value)):
             for packet in p.packets[s:]:
                 assert field.startswith(bytes(packet.data)), \
-                    f"{name}: {v.path} emitted bytes that are not the field's"
+                    f"{name}: {v.path} emitted {bytes(packet.data).hex()}, not from {field.hex()}"
             assert p.current.beats == [], f"{name}: {v.path} packet left open"
         tb.errors["des"].clear()
-        good = tb.random_message()
-        await tb.run_deserializer([good])
+        await tb.run_deserializer(next_values())
         tb.log.info("bad input %s -> error %s, next message intact", name, code.name)
-    assert int(dut.des_error_count.value) == len(cases)
+    assert int(tb.dut.des_error_count.value) == len(cases)
 
 
 def bad_messages(tb):
@@ -368,7 +378,7 @@ def element_bad_messages(tb):
     return cases
 
 
-@cocotb.test(skip=PARAMS.get("type") != ELEMENTS)
+@cocotb.test(skip=NOT_ELEMENTS)
 async def elements_bad_input_recovers(dut):
     """Malformed counts and strings inside packed elements, and a message cut inside a nested
     element: the error code, only bytes of the field on the element stream, every packet
@@ -377,27 +387,11 @@ async def elements_bad_input_recovers(dut):
     await tb.reset()
     tb.set_idle(0.2)
     tb.set_backpressure(0.2)
-    cases = element_bad_messages(tb)
-    for name, data, code, value in cases:
-        tb.errors["des"].clear()
-        start = [len(p.packets) for p in tb.des_payloads]
-        await tb.deserialize(data)
-        await tb.wait_for(lambda: tb.errors["des"], 200_000)
-        await tb.wait_quiet()
-        assert tb.errors["des"] == [int(code)], f"{name}: errors {tb.errors['des']}, want {code!r}"
-        for v, p, s, field in zip(tb.plan.streams, tb.des_payloads, start,
-                                  tb.stream_bytes(value)):
-            for packet in p.packets[s:]:
-                assert field.startswith(bytes(packet.data)), \
-                    f"{name}: {v.path} emitted {bytes(packet.data).hex()}, not from {field.hex()}"
-            assert p.current.beats == [], f"{name}: {v.path} packet left open"
-        tb.errors["des"].clear()
-        await tb.run_deserializer([elements_value(tb), tb.random_message()])
-        tb.log.info("bad input %s -> error %s, next messages intact", name, code.name)
-    assert int(dut.des_error_count.value) == len(cases)
+    await run_bad_input(tb, element_bad_messages(tb),
+                        lambda: [elements_value(tb), tb.random_message()])
 
 
-@cocotb.test(skip=PARAMS.get("type") != ELEMENTS)
+@cocotb.test(skip=NOT_ELEMENTS)
 async def serializer_bad_elements_recover(dut):
     """A packed elements stream one element short is completed with a zero (default) element,
     one that goes on is cut and drained, and an inner count above its bound is written as 0:

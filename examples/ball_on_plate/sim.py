@@ -12,35 +12,30 @@ hold (the platform's inverse kinematics solved backwards), rolls the ball for on
 
 import math
 
-PERIOD_S = 0.02
-MIN_US, MAX_US, FULL_SCALE_DEG = 500, 2500, 180
-COUNT_MM = 0.11667
-G_ROLL = 5 / 7 * 9810.0            # mm/s^2 per rad of tilt, a rolling ball
+from hdl.kernels.ball_control import ROLLING_MM_S2, TOUCH_COUNT_MM
+from hdl.kernels.inverse_kinematics import PLATFORM
+from hdl.kernels.servo_pwm import SERVO_FULL_SCALE_DEG, SERVO_MAX_US, SERVO_MIN_US
 
-# the platform (ReconROS rt_inverse): joints, leg rotations, signs, offsets, arm, leg length
-JOINT_X = (51, -51, -64, -13, 13, 64)
-JOINT_Y = (44, 44, 22, -66, -66, 22)
-ROT_SIN = (0.0, 0.0, -0.8660254, -0.8660254, 0.8660254, 0.8660254)
-ROT_COS = (1.0, 1.0, -0.5, -0.5, -0.5, -0.5)
-SIGN_X = (-1, 1, -1, 1, -1, 1)
-SIGN_Z = (1, -1, 1, -1, 1, -1)
-Z_OFFSET, TRANS_X, TRANS_Y, ARM, LEG_SQUARED = 105, 33, -69, 20, 13225
-TOP = math.radians(204.7)
+PERIOD_S = 0.02
+COUNT_MM = float(TOUCH_COUNT_MM)
+G_ROLL = float(ROLLING_MM_S2)      # mm/s^2 per rad of tilt, a rolling ball
 
 
 def arm_roots(alpha, beta):
     """Per leg, the arm angles (radians, 0..2 pi) that hold the plate at (alpha, beta)."""
     sa, ca, sb, cb = math.sin(alpha), math.cos(alpha), math.sin(beta), math.cos(beta)
+    p, (tx, ty), arm = PLATFORM, PLATFORM.translation, PLATFORM.arm
     out = []
     for leg in range(6):
-        px, py, rs, rc = JOINT_X[leg], JOINT_Y[leg], ROT_SIN[leg], ROT_COS[leg]
+        px, py = p.joint_x[leg], p.joint_y[leg]
+        rs, rc = float(p.rot_sin[leg]), float(p.rot_cos[leg])
         pbx = cb * px
         pby = sa * sb * px + ca * py
-        pbz = -ca * sb * px + sa * py + Z_OFFSET
-        psx = SIGN_X[leg] * (rc * pbx - rs * pby) + TRANS_X
-        psy = rs * pbx + rc * pby + TRANS_Y
-        psz = SIGN_Z[leg] * pbz
-        k = (psx * psx + psy * psy + psz * psz + ARM * ARM - LEG_SQUARED) / (2 * ARM)
+        pbz = -ca * sb * px + sa * py + p.z_offset
+        psx = p.sign_x[leg] * (rc * pbx - rs * pby) + tx
+        psy = rs * pbx + rc * pby + ty
+        psz = p.sign_z[leg] * pbz
+        k = (psx * psx + psy * psy + psz * psz + arm * arm - p.leg_squared) / (2 * arm)
         s = math.asin(max(-1.0, min(1.0, k / math.hypot(psx, psz))))
         phi = math.atan2(psz, psx)
         out.append([(t % (2 * math.pi)) for t in (s - phi, math.pi - s - phi)])
@@ -86,7 +81,8 @@ def pwm_clock_hz(project):
 def arm_angle(cycles, clock_hz):
     """The arm angle (radians) a servo takes for a pulse of ``cycles`` PWM clocks."""
     us = cycles * 1e6 / clock_hz
-    return math.radians((us - MIN_US) * FULL_SCALE_DEG / (MAX_US - MIN_US))
+    return math.radians((us - SERVO_MIN_US) * SERVO_FULL_SCALE_DEG
+                        / (SERVO_MAX_US - SERVO_MIN_US))
 
 
 class Ball:

@@ -11,14 +11,19 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_choice
 from ..stream import AXIStreamSignature
 
-__all__ = ["BallControl", "BALL_CONTROL_FRAC", "ball_control_program"]
+__all__ = ["BallControl", "BALL_CONTROL_FRAC", "TOUCH_COUNT_MM", "ROLLING_MM_S2",
+           "ball_control_program"]
+
+#: the touch panel's resolution: millimetres per count (a decimal string, as ReconROS' constant)
+TOUCH_COUNT_MM = "0.11667"
 
 #: fraction bits of the fixed-point type
 BALL_CONTROL_FRAC = 12
 _WIDTH = 24
 _MAX = (1 << (_WIDTH - 1)) - 1
 _COMMAND_MAX = (1 << 13) - 1
-_ROLLING = Fraction(5, 7) * 9810          # mm/s^2 of a rolling ball per rad of tilt
+#: acceleration of a ball rolling on the plate per radian of tilt: 5/7 g, in mm/s^2
+ROLLING_MM_S2 = Fraction(5, 7) * 9810
 
 
 def _to_fixed(value):
@@ -32,9 +37,9 @@ def _to_fixed(value):
 
 def _constants(period, scale_bits):
     period = Fraction(period)
-    values = {"ta": period, "b_gain": _ROLLING * period, "q": 4, "sigma_inv": Fraction("0.1"),
+    values = {"ta": period, "b_gain": ROLLING_MM_S2 * period, "q": 4, "sigma_inv": Fraction("0.1"),
               "kp": Fraction("-0.002"), "kd": Fraction("-0.002"), "inv_dt": 1 / period,
-              "count_mm": Fraction("0.11667"), "clamp": Fraction("0.19199"),
+              "count_mm": Fraction(TOUCH_COUNT_MM), "clamp": Fraction("0.19199"),
               "rad_to_deg": Fraction("57.324840764"), "one": 1}
     raw = {name: _to_fixed(v) for name, v in values.items()}
     raw["scale"] = 1 << scale_bits           # deg * scale, rounded at 12 bits: Q(scale) deg

@@ -2,6 +2,7 @@
 bit-exact with the HLS fixed-point algorithm, defect 15 fixed."""
 
 import math
+from dataclasses import dataclass
 from fractions import Fraction
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
@@ -12,14 +13,31 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_choice
 from ..stream import AXIStreamSignature
 
-__all__ = ["InverseKinematics"]
+__all__ = ["InverseKinematics", "StewartPlatform", "PLATFORM"]
 
-_JOINT_X = (51, -51, -64, -13, 13, 64)
-_JOINT_Y = (44, 44, 22, -66, -66, 22)
-_ROT_SIN = ("0", "0", "-0.8660254", "-0.8660254", "0.8660254", "0.8660254")
-_ROT_COS = ("1", "1", "-0.5", "-0.5", "-0.5", "-0.5")
-_SIGN_X = (-1, 1, -1, 1, -1, 1)
-_SIGN_Z = (1, -1, 1, -1, 1, -1)
+
+
+@dataclass(frozen=True)
+class StewartPlatform:
+    """The ReconROS ball-on-plate Stewart platform (docs/reconos.md, ``rt_inverse``): per leg
+    its plate joint (mm), the rotation of its base (sin, cos, as decimal strings: the HLS
+    constants), the signs of x and z; then the plate height, the base translation, the arm
+    length and the squared leg length (mm)."""
+    joint_x: tuple = (51, -51, -64, -13, 13, 64)
+    joint_y: tuple = (44, 44, 22, -66, -66, 22)
+    rot_sin: tuple = ("0", "0", "-0.8660254", "-0.8660254", "0.8660254", "0.8660254")
+    rot_cos: tuple = ("1", "1", "-0.5", "-0.5", "-0.5", "-0.5")
+    sign_x: tuple = (-1, 1, -1, 1, -1, 1)
+    sign_z: tuple = (1, -1, 1, -1, 1, -1)
+    z_offset: int = 105
+    translation: tuple = (33, -69)
+    arm: int = 20
+    leg_squared: int = 13225
+
+
+#: the platform :class:`InverseKinematics` solves for
+PLATFORM = StewartPlatform()
+
 _LUT_SIZE = 2048
 _MAX_ANGLE_INDEX = (8192 * 10) >> 8      # |Q6.8 angle| * 10 >> 8 for the 14-bit field
 
@@ -138,12 +156,13 @@ class InverseKinematics(wiring.Component):
                         m.d.comb += sig.eq(v)
             return sig
 
-        px = per_leg(_JOINT_X, signed(8))
-        py = per_leg(_JOINT_Y, signed(8))
-        rs = per_leg([_floor_scaled(v, 8) for v in _ROT_SIN], signed(10))
-        rc = per_leg([_floor_scaled(v, 8) for v in _ROT_COS], signed(10))
-        sx = per_leg([v < 0 for v in _SIGN_X], 1)
-        sz = per_leg([v < 0 for v in _SIGN_Z], 1)
+        tx, ty = PLATFORM.translation
+        px = per_leg(PLATFORM.joint_x, signed(8))
+        py = per_leg(PLATFORM.joint_y, signed(8))
+        rs = per_leg([_floor_scaled(v, 8) for v in PLATFORM.rot_sin], signed(10))
+        rc = per_leg([_floor_scaled(v, 8) for v in PLATFORM.rot_cos], signed(10))
+        sx = per_leg([v < 0 for v in PLATFORM.sign_x], 1)
+        sz = per_leg([v < 0 for v in PLATFORM.sign_z], 1)
 
         pbx, pby, pbz = (Signal(signed(22), name=n) for n in ("pbx", "pby", "pbz"))
         psx, psy, psz = (Signal(signed(22), name=n) for n in ("psx", "psy", "psz"))
@@ -171,13 +190,13 @@ class InverseKinematics(wiring.Component):
                         pbx.eq(_wrap((cb * px) >> 8, 22)),
                         pby.eq(_wrap((sa * sb * px + ((ca * py) << 20)) >> 28, 22)),
                         pbz.eq(_wrap((-(ca * sb * px) + ((sa * py) << 20) +
-                                      Const(105 << 40, signed(49))) >> 28, 22)),
+                                      Const(PLATFORM.z_offset << 40, signed(49))) >> 28, 22)),
                         phase.eq(1)]
                 with m.Case(1):
                     x = rc * pbx - rs * pby
                     m.d.sync += [
-                        psx.eq(_wrap((Mux(sx, -x, x) + (33 << 20)) >> 8, 22)),
-                        psy.eq(_wrap((rs * pbx + rc * pby - (69 << 20)) >> 8, 22)),
+                        psx.eq(_wrap((Mux(sx, -x, x) + (tx << 20)) >> 8, 22)),
+                        psy.eq(_wrap((rs * pbx + rc * pby + (ty << 20)) >> 8, 22)),
                         psz.eq(_wrap(Mux(sz, -pbz, pbz), 22)),
                         t.eq(0), phase.eq(2)]
                     m.d.sync += [b.eq(524287 << 12) for b in best]
@@ -193,11 +212,12 @@ class InverseKinematics(wiring.Component):
                             c = port.data[22:].as_signed()
                             a = Signal(signed(34), name=f"a{j}")
                             cc = Signal(signed(34), name=f"c{j}")
-                            m.d.comb += [a.eq((psx << 8) - 20 * s), cc.eq((psz << 8) - 20 * c)]
+                            m.d.comb += [a.eq((psx << 8) - PLATFORM.arm * s),
+                                         cc.eq((psz << 8) - PLATFORM.arm * c)]
                             length = Signal(signed(32), name=f"len{j}")
                             m.d.comb += length.eq(_wrap((a * a + cc * cc + psy2) >> 28, 32))
                             diff = Signal(signed(34), name=f"diff{j}")
-                            m.d.comb += diff.eq(length - (13225 << 12))
+                            m.d.comb += diff.eq(length - (PLATFORM.leg_squared << 12))
                             d = Signal(33, name=f"d{j}")
                             m.d.comb += d.eq(Mux(diff < 0, -diff, diff))
                             with m.If(d < best[j]):

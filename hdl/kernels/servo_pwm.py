@@ -10,7 +10,12 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 
-__all__ = ["ServoPwm", "servo_pulse_cycles"]
+__all__ = ["ServoPwm", "servo_pulse_cycles", "SERVO_MIN_US", "SERVO_MAX_US",
+           "SERVO_FULL_SCALE_DEG"]
+
+#: a hobby servo's default pulse range: SERVO_MIN_US at 0 degrees, SERVO_MAX_US at
+#: SERVO_FULL_SCALE_DEG
+SERVO_MIN_US, SERVO_MAX_US, SERVO_FULL_SCALE_DEG = 500, 2500, 180
 
 _LEGS = 6
 _ANGLE_STEPS = 2048           # the inverse kinematics' angle index, 0.1 degree per step
@@ -62,8 +67,8 @@ class ServoPwm(wiring.Component):
         A pulse: an angle above ``full_scale_deg``; the pulse is held at ``max_us``.
     """
 
-    def __init__(self, *, clock_hz=100_000_000, period_us=20_000, min_us=500, max_us=2500,
-                 full_scale_deg=180):
+    def __init__(self, *, clock_hz=100_000_000, period_us=20_000, min_us=SERVO_MIN_US,
+                 max_us=SERVO_MAX_US, full_scale_deg=SERVO_FULL_SCALE_DEG):
         check_int("clock_hz", clock_hz, 100_000, 1_000_000_000)
         check_int("period_us", period_us, 1000, 1_000_000)
         check_int("min_us", min_us, 1, period_us)

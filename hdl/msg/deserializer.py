@@ -10,7 +10,8 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, payload_port
-from .steps import RuntimeStep, pad_bytes, payload_bytes
+from .steps import (RuntimeStep, count_chunks, count_step, next_element, pad_bytes,
+                    payload_bytes, send_count_chunk)
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -135,9 +136,9 @@ class Deserializer(wiring.Component):
 
         op = Signal(range(len(steps) + 2))
         END, WAIT = len(steps), len(steps) + 1
-        count_cycles = 2 * -(-4 // B)       # an inner count: read, then written packed
+        # an inner count is read, then written packed
         max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"]
-                        + [count_cycles, 1])
+                        + [2 * count_chunks(B), 1])
         step = Signal(range(max_steps + 1))
         remaining = Signal(count_width + 3)
         pos = Signal(32)
@@ -220,14 +221,13 @@ class Deserializer(wiring.Component):
                             next_op(i)
                         continue
                     if s.kind == "next":
-                        with m.If(elements_left[s.var] == 1):
-                            if plan.variables[s.var].into is None:
-                                close(s.var, lambda i=i: next_op(i))
-                            else:
+                        if plan.variables[s.var].into is None:
+                            def done(s=s, i=i):
+                                close(s.var, lambda: next_op(i))
+                        else:
+                            def done(i=i):
                                 next_op(i)
-                        with m.Else():
-                            m.d.sync += [elements_left[s.var].eq(elements_left[s.var] - 1),
-                                         op.eq(s.target + 1), step.eq(0)]
+                        next_element(m, s, elements_left[s.var], op, step, done=done)
                         continue
                     if s.kind == "pad":
                         length = pad_bytes(plan, s, pos, counts)
@@ -315,33 +315,26 @@ class Deserializer(wiring.Component):
         the stream as an element count."""
         B = self._width // 8
         v = self.plan.variables[s.var]
-        nread = -(-4 // B)
-        value = (counts[s.var][:32] - int(v.nul))[:32]
+        count = counts[s.var]
+        value = (count[:32] - int(v.nul))[:32]
         bad_count, bad_code = count_error(s.var)
-        with m.Switch(step):
-            for j in range(nread):
-                k = min(B, 4 - j * B)
-                with m.Case(j):
-                    with m.If(avail >= k):
-                        m.d.sync += [counts[s.var].word_select(j * B + x, 8)
-                                     .eq(window.word_select(x, 8)) for x in range(k)]
-                        m.d.sync += step.eq(j + 1)
-                        take(k)
-                    with m.Elif(ended):
-                        fail(DeserializerError.EARLY_END)
-            for j in range(nread):
-                k = min(B, 4 - j * B)
-                with m.Case(nread + j):
-                    with m.If(bad_count if j == 0 else Const(0)):
-                        fail(bad_code)
-                    with m.Else():
-                        m.d.comb += [chunk.valid.eq(1), chunk.len.eq(k), chunk.last.eq(0),
-                                     chunk.data.eq(value[j * 8 * B:j * 8 * B + 8 * k])]
-                        with m.If(chunk.ready):
-                            if j == nread - 1:
-                                next_op(i)
-                            else:
-                                m.d.sync += step.eq(nread + j + 1)
+
+        def read(j, offset, k, moved):
+            with m.If(avail >= k):
+                m.d.sync += [count.word_select(offset + x, 8).eq(window.word_select(x, 8))
+                             for x in range(k)]
+                take(k)
+                moved()
+            with m.Elif(ended):
+                fail(DeserializerError.EARLY_END)
+
+        def write(j, offset, k, moved):
+            with m.If(bad_count if j == 0 else Const(0)):
+                fail(bad_code)
+            with m.Else():
+                send_count_chunk(m, chunk, value, offset, k, moved)
+
+        count_step(m, step, B, read, write, then=lambda: next_op(i))
 
     def _run(self, m, s, i, window, avail, ended, fields, counts, length_prefix, step, take,
              fail, next_op, chunk=None):

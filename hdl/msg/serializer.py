@@ -9,7 +9,8 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
-from .steps import RuntimeStep, pad_bytes, payload_bytes
+from .steps import (RuntimeStep, count_chunks, count_step, next_element, pad_bytes,
+                    payload_bytes, send_count_chunk)
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
 
@@ -165,8 +166,9 @@ class Serializer(wiring.Component):
         stream_at = plan.step_streams()
 
         op = Signal(range(max(len(steps), 2)))
-        nread = -(-4 // B)       # cycles of an inner count, read and then written
-        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"] + [2 * nread, 1])
+        # an inner count is read from the packed stream, then written
+        max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"]
+                        + [2 * count_chunks(B), 1])
         step = Signal(range(max_steps + 1))
         remaining = Signal(32)
         pos = Signal(32)
@@ -272,37 +274,9 @@ class Serializer(wiring.Component):
                                               stream, next_op)
                             continue
                         if s.kind == "count":
-                            v = plan.variables[s.var]
-                            count = counts[s.var]
-                            with m.Switch(step):
-                                for j in range(nread):
-                                    k = min(B, 4 - j * B)
-                                    ok, data, take = read(unpackers[stream], k, stream)
-                                    with m.Case(j):
-                                        with m.If(ok):
-                                            take()
-                                            m.d.sync += [count.word_select(j * B + x, 8)
-                                                         .eq(data.word_select(x, 8))
-                                                         for x in range(k)]
-                                            m.d.sync += step.eq(j + 1)
-                                wire = (count + int(v.nul))[:32]
-                                for j in range(nread):
-                                    k = min(B, 4 - j * B)
-                                    with m.Case(nread + j):
-                                        with m.If(count > (v.bound or self._max_count)
-                                                  if j == 0 else Const(0)):
-                                            with m.If(~reported[stream]):
-                                                report(SerializerError.LENGTH)
-                                            m.d.sync += [count.eq(0), reported[stream].eq(1)]
-                                        with m.Else():
-                                            m.d.comb += [
-                                                chunk.valid.eq(1), chunk.len.eq(k),
-                                                chunk.data.eq(wire[j * 8 * B:j * 8 * B + 8 * k])]
-                                            with m.If(chunk.ready):
-                                                if j == nread - 1:
-                                                    next_op(i)
-                                                else:
-                                                    m.d.sync += step.eq(nread + j + 1)
+                            self._count(m, s, i, chunk, step, counts[s.var],
+                                        read, unpackers[stream], stream, reported[stream],
+                                        report, next_op)
                             continue
                         if s.kind == "loop":
                             top = plan.variables[s.var].into is None
@@ -318,14 +292,13 @@ class Serializer(wiring.Component):
                                 next_op(i)
                             continue
                         if s.kind == "next":
-                            with m.If(elements_left[s.var] == 1):
-                                if plan.variables[s.var].into is None:
-                                    end_of_stream(s.var, False, last_op, lambda i=i: next_op(i))
-                                else:
+                            if plan.variables[s.var].into is None:
+                                def done(s=s, i=i, last_op=last_op):
+                                    end_of_stream(s.var, False, last_op, lambda: next_op(i))
+                            else:
+                                def done(i=i):
                                     next_op(i)
-                            with m.Else():
-                                m.d.sync += [elements_left[s.var].eq(elements_left[s.var] - 1),
-                                             op.eq(s.target + 1), step.eq(0)]
+                            next_element(m, s, elements_left[s.var], op, step, done=done)
                             continue
                         if s.kind == "run":
                             bits = []
@@ -402,6 +375,33 @@ class Serializer(wiring.Component):
                                     advance()
         return m
 
+
+    def _count(self, m, s, i, chunk, step, count, read, unpacker, stream, reported, report,
+               next_op):
+        """The count of an inner variable: read from the packed stream into its register,
+        checked against its bound (above it: reported, written as 0), then written in the
+        framing's form (CDR strings: plus the NUL)."""
+        B = self._width // 8
+        v = self.plan.variables[s.var]
+        wire = (count + int(v.nul))[:32]
+
+        def load(j, offset, k, moved):
+            ok, data, take = read(unpacker, k, stream)
+            with m.If(ok):
+                take()
+                m.d.sync += [count.word_select(offset + x, 8).eq(data.word_select(x, 8))
+                             for x in range(k)]
+                moved()
+
+        def write(j, offset, k, moved):
+            with m.If(count > (v.bound or self._max_count) if j == 0 else Const(0)):
+                with m.If(~reported):
+                    report(SerializerError.LENGTH)
+                m.d.sync += [count.eq(0), reported.eq(1)]
+            with m.Else():
+                send_count_chunk(m, chunk, wire, offset, k, moved)
+
+        count_step(m, step, B, load, write, then=lambda: next_op(i))
 
     def _element_run(self, m, s, i, chunk, step, read, unpacker, stream, next_op):
         """A ``run`` inside elements: element bytes come from the packed stream, padding and

@@ -3,7 +3,11 @@ step (``pad``, ``payload``) moves, and how a step is cut into chunks of at most 
 
 from amaranth.hdl import Const, Mux, Signal
 
-__all__ = ["payload_bytes", "pad_bytes", "RuntimeStep"]
+__all__ = ["payload_bytes", "pad_bytes", "RuntimeStep", "COUNT_BYTES", "count_chunks",
+           "count_chunk_cases", "count_step", "send_count_chunk", "next_element"]
+
+#: bytes of an element count on the wire and in a packed element (``uint32``)
+COUNT_BYTES = 4
 
 
 def payload_bytes(variable, element_count):
@@ -60,3 +64,58 @@ class RuntimeStep:
             m.d.sync += [self._remaining.eq(Mux(self._step != 0, self._remaining - self._B,
                                                 self._length - self._B)),
                          self._step.eq(1)]
+
+
+def count_chunks(bytes_per_beat):
+    """Chunks (cycles) that move one element count at ``bytes_per_beat`` bytes a cycle."""
+    return -(-COUNT_BYTES // bytes_per_beat)
+
+
+def count_chunk_cases(m, step, bytes_per_beat, first, chunk_case, *, then):
+    """Cases ``first`` .. ``first + count_chunks() - 1`` of ``step``, one per chunk of an
+    element count: ``chunk_case(j, offset, k, moved)`` writes the logic of chunk ``j``
+    (``k`` bytes from byte ``offset``) and calls ``moved()`` in the cycle the chunk moves,
+    which goes to the next case and after the last one to ``then()``."""
+    B = bytes_per_beat
+    n = count_chunks(B)
+    for j in range(n):
+        with m.Case(first + j):
+            def moved(j=j):
+                if j == n - 1:
+                    then()
+                else:
+                    m.d.sync += step.eq(first + j + 1)
+            chunk_case(j, j * B, min(B, COUNT_BYTES - j * B), moved)
+
+
+def count_step(m, step, bytes_per_beat, read, write, *, then):
+    """The cases of a ``count`` step on ``step``: the count is read in chunks (``read``), then
+    written in chunks (``write``; both as ``chunk_case`` of :func:`count_chunk_cases`), then
+    ``then()``."""
+    n = count_chunks(bytes_per_beat)
+
+    def to_write():
+        m.d.sync += step.eq(n)
+
+    with m.Switch(step):
+        count_chunk_cases(m, step, bytes_per_beat, 0, read, then=to_write)
+        count_chunk_cases(m, step, bytes_per_beat, n, write, then=then)
+
+
+def send_count_chunk(m, chunk, value, offset, k, moved):
+    """Offer bytes ``offset .. offset + k`` of the 32-bit ``value`` as one chunk (not the
+    last of a message); ``moved()`` when it is taken."""
+    m.d.comb += [chunk.valid.eq(1), chunk.len.eq(k), chunk.last.eq(0),
+                 chunk.data.eq(value[8 * offset:8 * (offset + k)])]
+    with m.If(chunk.ready):
+        moved()
+
+
+def next_element(m, step_desc, elements_left, op, step, *, done):
+    """A ``next`` step: back to the first step of the loop body while elements are left,
+    ``done()`` after the last one."""
+    with m.If(elements_left == 1):
+        done()
+    with m.Else():
+        m.d.sync += [elements_left.eq(elements_left - 1), op.eq(step_desc.target + 1),
+                     step.eq(0)]
