@@ -109,3 +109,10 @@ def test_decode_errors(ros2):
         decode_cdr(library, "sensor_msgs/Image", bytes(bad_pad))
     with pytest.raises(WireError, match=r"not a little-endian CDR encapsulation"):
         decode_cdr(library, "sensor_msgs/Image", b"\x00\x00\x00\x00" + good[4:])
+    # a string that is not UTF-8 (what a non-checking DDS peer may send) is a WireError
+    # naming it, not a UnicodeDecodeError that would escape the ROS 2 bridge's rejection
+    frame = good.index(IMAGE["header"]["frame_id"].encode())
+    not_utf8 = bytearray(good)
+    not_utf8[frame] = 0xD5
+    with pytest.raises(WireError, match=r"header.frame_id: string is not UTF-8"):
+        decode_cdr(library, "sensor_msgs/Image", bytes(not_utf8))

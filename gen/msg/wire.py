@@ -160,7 +160,11 @@ class _Codec:
                     if not raw or raw[-1] != 0:
                         raise WireError(f"{path}: string without its NUL terminator")
                     raw = raw[:-1]
-                return raw.decode("utf-8")
+                try:
+                    return raw.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    raise WireError(f"{path}: string is not UTF-8 ({exc.reason} at byte "
+                                    f"{exc.start})") from None
             fmt = STRUCT_FORMAT[type_.name]
             size = struct.calcsize(fmt)
             self._skip_pad(size, path)
