@@ -135,8 +135,21 @@ def build_finemb_line(**params):
     return FinembLine(_io_descriptor(params.pop("io")), params.pop("nodes"), **params)
 
 
+def build_services(**params):
+    """A :class:`gen.services.ServiceGraph`: ``server`` ("sort" or "fibonacci"), ``interface``
+    (``pkg/srv/Name`` or ``pkg/action/Name``), ``msg_dirs``, ``clients`` and the server's
+    parameters."""
+    from gen.msg import MessageLibrary
+    from gen.services import ServiceGraph, server_plans
+    library = MessageLibrary([Path(d) for d in params.pop("msg_dirs", ())], store="ros2_humble")
+    server = params.pop("server")
+    plans = server_plans(library, server, params.pop("interface"))
+    return ServiceGraph(server, plans, **params)
+
+
 #: name -> builder
 TOPS = {
+    "services": build_services,
     "finemb_node": build_finemb_node,
     "finemb_line": build_finemb_line,
     "ros1_node": build_ros1_node,

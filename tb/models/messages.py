@@ -24,7 +24,7 @@ _NUMPY = {"bool": np.bool_, "byte": np.int8, "char": np.uint8, "int8": np.int8,
 
 
 def golden_store(store, folders=()):
-    """A rosbags type store with the project's .msg and .srv types registered."""
+    """A rosbags type store with the project's .msg, .srv and .action types registered."""
     ts = get_typestore(Stores(store))
     types = {}
     for folder in folders:
@@ -37,6 +37,12 @@ def golden_store(store, folders=()):
                 request, response = path.read_text().split("---\n")
                 for part, suffix in ((request, "Request"), (response, "Response")):
                     name = f"{package}/srv/{path.stem}_{suffix}"
+                    parsed = get_types_from_msg(part, name)
+                    types.update({name: value for value in parsed.values()})
+            elif path.suffix == ".action":
+                parts = path.read_text().split("---\n")
+                for part, suffix in zip(parts, ("Goal", "Result", "Feedback")):
+                    name = f"{package}/action/{path.stem}_{suffix}"
                     parsed = get_types_from_msg(part, name)
                     types.update({name: value for value in parsed.values()})
     ts.register(types)
