@@ -63,12 +63,19 @@ RESOURCE_ARGS = {
     "rossub": (4, 6, 'node, message, "topic", wait_us | node, pkg/Type, "topic", hw [, depth]'),
     "rospub": (3, 4, 'node, message, "topic" | node, pkg/Type, "topic", hw'),
     "rossrvmsg": (3, 3, "package, srv, Type"),
-    "rossrvs": (2, 4, 'node, service message[, "service", wait_us]'),
-    "rossrvc": (2, 4, 'node, service message[, "service", wait_us]'),
+    "rossrvs": (2, 4, 'node, service message[, "service", wait_us] | node, service message, '
+                      '"service", hw [, depth]'),
+    "rossrvc": (2, 4, 'node, service message[, "service", wait_us] | node, service message, '
+                      '"service", hw [, depth]'),
     "rosactionmsg": (3, 3, "package, action, Type"),
-    "rosactions": (4, 4, 'node, action message, "action", wait_us'),
-    "rosactionc": (4, 4, 'node, action message, "action", wait_us'),
+    "rosactions": (4, 4, 'node, action message, "action", wait_us | ..., "action", hw '
+                         '[, depth]'),
+    "rosactionc": (4, 4, 'node, action message, "action", wait_us | ..., "action", hw '
+                         '[, depth]'),
 }
+#: services and actions that may run over hardware topics -> (what it is, its message resource)
+HW_CALLS = {"rossrvs": ("service", "rossrvmsg"), "rossrvc": ("service", "rossrvmsg"),
+            "rosactions": ("action", "rosactionmsg"), "rosactionc": ("action", "rosactionmsg")}
 #: resource type -> (argument index, resource type it must name in the same group)
 REFERENCES = {
     "rostmr": ((0, ("rosnode",)),),
@@ -248,6 +255,10 @@ class HwEndpoint:
     depth: int
     where: Location
     port: str = None
+    #: the build.cfg key of the resource, and for a service or action over hardware topics
+    #: its interface (``pkg/srv/Name``, ``pkg/action/Name``)
+    key: str = None
+    interface: str = None
 
 
 @dataclass
@@ -610,6 +621,8 @@ def _resource(key, value, group, where):
     if kind not in RESOURCE_ARGS:
         raise ConfigError(where, f"unknown resource type {kind!r}; expected one of "
                                  f"{', '.join(RESOURCE_ARGS)}")
+    if kind in HW_CALLS and "hw" in rest:
+        return _hw_call_endpoints(key, kind, rest, group, where)
     lo, hi, names = RESOURCE_ARGS[kind]
     hw = kind in ("rossub", "rospub") and "hw" in rest
     if not hw and kind in ("rossub", "rospub"):
@@ -666,9 +679,7 @@ def _hw_endpoint(key, kind, rest, group, where):
     if depth and (depth < 2 or depth > 65536 or depth & (depth - 1)):
         raise ConfigError(where, f"expected a subscriber FIFO depth that is a power of two in "
                                  f"2..65536 (beats), found {depth}")
-    topic = unquote(rest[2]).strip("/").replace("/", "_")
-    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", topic):
-        raise ConfigError(where, f"hardware topic name {rest[2]} does not make a port name")
+    topic = _hw_topic_name(rest[2], where)
     r = Resource(key, "hwtopic" + ("sub" if kind == "rossub" else "pub"), rest, group, 0, where,
                  f"{pkg}/msg/{typ}", key=key, declared=kind)
     r.topic = topic
@@ -676,10 +687,53 @@ def _hw_endpoint(key, kind, rest, group, where):
     return r
 
 
+def _hw_topic_name(token, where):
+    topic = unquote(token).strip("/").replace("/", "_")
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", topic):
+        raise ConfigError(where, f"hardware topic name {token} does not make a port name")
+    return topic
+
+
+def _hw_call_endpoints(key, kind, rest, group, where):
+    """A service or action over hardware topics (docs/services.md): its request and reply
+    topics, ``<name>_request`` and ``<name>_reply``; the interface comes from the message
+    resource (argument 2) once the group is read."""
+    if len(rest) not in (4, 5) or rest[3] != "hw":
+        raise ConfigError(where, f"expected '{kind}, node, message, \"name\", hw [, depth]' for "
+                                 f"a {HW_CALLS[kind][0]} over hardware topics "
+                                 f"(docs/services.md); found {', '.join([kind] + rest)}")
+    depth = _positive(rest[4], where, "subscriber FIFO depth", lo=0) if len(rest) == 5 else 0
+    if depth and (depth < 2 or depth > 65536 or depth & (depth - 1)):
+        raise ConfigError(where, f"expected a subscriber FIFO depth that is a power of two in "
+                                 f"2..65536 (beats), found {depth}")
+    name = _hw_topic_name(rest[2], where)
+    serves = kind in ("rossrvs", "rosactions")
+    out = []
+    for part, direction in (("request", "sub" if serves else "pub"),
+                            ("reply", "pub" if serves else "sub")):
+        r = Resource(f"{key}_{part}", "hwtopic" + direction, rest, group, 0, where, key=key,
+                     declared=kind)
+        r.topic = f"{name}_{part}"
+        r.depth = depth if direction == "sub" else 0
+        r.interface_ref = rest[1]
+        out.append(r)
+    return out
+
+
 def _check_references(members):
-    """Each node and message argument names a resource of the right type in the group."""
+    """Each node and message argument names a resource of the right type in the group; a
+    service or action over hardware topics gets its interface from its message resource."""
     declared = {r.key: r.declared for r in members}
     for r in members:
+        if getattr(r, "interface_ref", None) is not None:
+            wanted = HW_CALLS[r.declared][1]
+            source = next((x for x in members if x.key == r.interface_ref), None)
+            if source is None or source.declared != wanted:
+                what = f"a {source.declared} resource" if source else "not defined"
+                raise ConfigError(r.where, f"argument 2 ({r.interface_ref!r}) must name a "
+                                           f"{wanted} resource of group {r.group!r}; it is "
+                                           f"{what}")
+            r.msgtype = _message_type(source.args, wanted, source.where)
         refs = ((0, ("rosnode",)),) if r.type.startswith("hwtopic") else \
             REFERENCES.get(r.type, ())
         for index, wanted in refs:
@@ -712,8 +766,10 @@ def _thread_resources(thread, resources):
         if r.group not in thread.groups:
             continue
         if r.type.startswith("hwtopic"):
+            call = getattr(r, "interface_ref", None) is not None
             thread.endpoints.append(HwEndpoint(thread, r.type[len("hwtopic"):], r.topic,
-                                               r.msgtype, r.depth, r.where))
+                                               r.msgtype, r.depth, r.where, key=r.key,
+                                               interface=r.msgtype if call else None))
         else:
             thread.resources.append(r)
 
@@ -776,7 +832,14 @@ def check_messages(project, library):
     """Every message type the project names is defined (standard interfaces or the project's
     ``msg`` folder); raise a :class:`ConfigError` at the first one that is not."""
     for r in project.resources:
-        if r.msgtype is not None and r.msgtype not in library:
+        if getattr(r, "interface_ref", None) is not None:
+            parts = ("Request", "Response") if "/srv/" in r.msgtype else ("Goal", "Result")
+            missing = [f"{r.msgtype}_{p}" for p in parts if f"{r.msgtype}_{p}" not in library]
+            if missing:
+                raise ConfigError(r.where, f"interface {r.msgtype} is not defined (no "
+                                           f"{missing[0]}; standard ROS 2 interfaces and "
+                                           f"{', '.join(map(str, project.msg_dirs))})")
+        elif r.msgtype is not None and r.msgtype not in library:
             raise ConfigError(r.where, f"message type {r.msgtype} is not defined (standard "
                                        f"ROS 2 interfaces and {', '.join(map(str, project.msg_dirs))})")
 

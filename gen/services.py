@@ -13,7 +13,7 @@ from hdl.dds.service import ServiceClient
 from hdl.dds.sort_server import SortServer
 from hdl.params import check_choice, check_int
 
-__all__ = ["ServiceGraph", "SERVERS", "server_plans"]
+__all__ = ["ServiceGraph", "SERVERS", "interface_plans"]
 
 #: server node kinds -> the interface they serve, its form and what the bench calls it
 SERVERS = {"sort": "service", "fibonacci": "action"}
@@ -21,11 +21,13 @@ SERVERS = {"sort": "service", "fibonacci": "action"}
 _TOPIC_PORTS = ("request_out", "reply_in", "request_in", "reply_out")
 
 
-def server_plans(library, server, interface):
-    """The ``cdr`` stream plans a server node of kind ``server`` needs for ``interface`` (a
-    ``pkg/srv/Name`` or ``pkg/action/Name`` of ``library``)."""
+def interface_plans(library, interface):
+    """The ``cdr`` stream plans of ``interface`` (``pkg/srv/Name`` or ``pkg/action/Name`` of
+    ``library``) as its server nodes and clients take them: ``request_plan`` and
+    ``reply_plan`` of a service, ``goal_plan`` and ``result_plan`` of an action (the feedback
+    has the result's form in the Fibonacci action)."""
     from gen.msg.plan import stream_plan
-    if server == "sort":
+    if "/srv/" in interface:
         return {"request_plan": stream_plan(library, f"{interface}_Request"),
                 "reply_plan": stream_plan(library, f"{interface}_Response")}
     return {"goal_plan": stream_plan(library, f"{interface}_Goal"),
@@ -43,7 +45,7 @@ class ServiceGraph(wiring.Component):
         ``"sort"`` (:class:`~hdl.dds.sort_server.SortServer`, a service) or ``"fibonacci"``
         (:class:`~hdl.dds.fibonacci_server.FibonacciServer`, an action).
     plans : dict
-        The server's plans (:func:`server_plans`).
+        The interface's plans (:func:`interface_plans`).
     clients : int
         Client ends, 1..8, with ids 1..clients.
     server_params : dict

@@ -21,6 +21,7 @@ and its topic ports become ports of the system top, for a core made elsewhere.
 
 import importlib.util
 import sys
+from dataclasses import dataclass
 
 from amaranth.hdl import Module
 from amaranth.lib import wiring
@@ -32,7 +33,7 @@ from hdl.stream import StreamFIFO
 
 from .config import ConfigError, Location, project_library
 
-__all__ = ["HW_TOPIC_STREAM", "ThreadContext", "SystemTop", "thread_module_path",
+__all__ = ["HW_TOPIC_STREAM", "ThreadContext", "HwCall", "SystemTop", "thread_module_path",
            "build_thread", "build_system", "thread_sources", "message_memory_layout"]
 
 
@@ -104,12 +105,46 @@ class ThreadContext:
             out_port=ports.get("pub", "topic_out"), in_port=ports.get("sub", "topic_in"),
             **options)
 
+    def hw_call(self, name):
+        """The service or action resource ``name`` of this thread over hardware topics
+        (``rossrvs``/``rossrvc``/``rosactions``/``rosactionc`` ending in ``hw``): a
+        :class:`HwCall`."""
+        mine = [ep for ep in self.endpoints if ep.key == name]
+        if not mine:
+            keys = sorted({ep.key for ep in self.endpoints if ep.interface})
+            raise ConfigError(self.thread.where, f"thread {self.thread.name}: no service or "
+                                                 f"action {name!r} over hardware topics; it "
+                                                 f"has {', '.join(keys) or 'none'}")
+        ports = {ep.topic.rsplit("_", 1)[1]: ep.port for ep in mine}
+        from gen.services import interface_plans
+        return HwCall(mine[0].interface, ports["request"], ports["reply"],
+                      interface_plans(self._library, mine[0].interface))
+
     def thread_signature(self):
         """The slot ports plus the topic ports this thread must have."""
         members = dict(ThreadSignature(self.arch).members)
         for ep in self.endpoints:
             members[ep.port] = (In if ep.direction == "sub" else Out)(HW_TOPIC_STREAM)
         return wiring.Signature(members)
+
+
+@dataclass
+class HwCall:
+    """A thread's service or action over hardware topics (docs/services.md).
+
+    Attributes
+    ----------
+    interface : str
+        ``pkg/srv/Name`` or ``pkg/action/Name``.
+    request_port, reply_port : str
+        The thread's ports on the ``<name>_request`` and ``<name>_reply`` topics.
+    plans : dict
+        :func:`gen.services.interface_plans` of the interface.
+    """
+    interface: str
+    request_port: str
+    reply_port: str
+    plans: dict
 
 
 def message_memory_layout(library, typename, arch):

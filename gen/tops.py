@@ -140,11 +140,10 @@ def build_services(**params):
     (``pkg/srv/Name`` or ``pkg/action/Name``), ``msg_dirs``, ``clients`` and the server's
     parameters."""
     from gen.msg import MessageLibrary
-    from gen.services import ServiceGraph, server_plans
+    from gen.services import ServiceGraph, interface_plans
     library = MessageLibrary([Path(d) for d in params.pop("msg_dirs", ())], store="ros2_humble")
-    server = params.pop("server")
-    plans = server_plans(library, server, params.pop("interface"))
-    return ServiceGraph(server, plans, **params)
+    plans = interface_plans(library, params.pop("interface"))
+    return ServiceGraph(params.pop("server"), plans, **params)
 
 
 #: name -> builder

@@ -160,6 +160,23 @@ BAD = [
      20, "ResourceGroup@Res", "img", ["rosmsg takes", "1 argument"]),
     ("bad mbox size", ('"/out"', '"/out"\nbox = mbox, lots'), 23, "ResourceGroup@Res", "box",
      ["mbox size", "'lots'"]),
+    ("hw service without its interface", ('"/out"', '"/out"\nsrv = rossrvs, node_1, img, '
+                                                    '"sort", hw'),
+     23, "ResourceGroup@Res", "srv", ["'img'", "rossrvmsg", "a rosmsg resource"]),
+    ("hw service: hw in the wrong place", ('"/out"', '"/out"\nsm = rossrvmsg, my, srv, S\n'
+                                                     'srv = rossrvs, node_1, sm, hw, "sort"'),
+     24, "ResourceGroup@Res", "srv", ["\"name\", hw", "docs/services.md"]),
+    ("hw service FIFO depth", ('"/out"', '"/out"\nsm = rossrvmsg, my, srv, S\n'
+                                         'srv = rossrvc, node_1, sm, "sort", hw, 3'),
+     24, "ResourceGroup@Res", "srv", ["power of two", "3"]),
+    ("hw service with no server", ('"/out"', '"/out"\nsm = rossrvmsg, std_srvs, srv, Trigger\n'
+                                             'srv = rossrvc, node_1, sm, "sort", hw'),
+     24, "ResourceGroup@Res", "srv", ["'sort_request'", "no subscriber"]),
+    ("hw action of an undefined interface", ('"/out"', '"/out"\nam = rosactionmsg, nav, action, '
+                                                       'Drive\nas = rosactions, node_1, am, '
+                                                       '"drive", hw\nac = rosactionc, node_1, '
+                                                       'am, "drive", hw'),
+     23, "ResourceGroup@Res", "am", ["nav/action/Drive", "not defined"]),
 ]
 
 
@@ -176,6 +193,30 @@ def test_bad_config(tmp_path, what, edit, line, section, key, words):
         (str(path), line, section, key), str(err)
     for w in words:
         assert w in err.message, f"{what}: {w!r} not in {err.message!r}"
+
+
+def test_hw_service_and_action_topics(tmp_path):
+    """``rossrvs``/``rossrvc``/``rosactions``/``rosactionc`` ending in ``hw`` become the
+    ``<name>_request`` and ``<name>_reply`` hardware topics, clients publishing requests,
+    the server replies, with the subscriber FIFO depth on the subscribing side."""
+    text = BASE.replace('"/out"', '"/out"\nsm = rossrvmsg, std_srvs, srv, Trigger\n'
+                                  'srv = rossrvs, node_1, sm, "/check", hw, 16\n'
+                                  'cli = rossrvc, node_1, sm, "/check", hw, 32', 1)
+    path = tmp_path / "build.cfg"
+    path.write_text(text)
+    p = load_project(path, check=False)     # the message store has no services
+    request, reply = p.topics["check_request"], p.topics["check_reply"]
+    assert request.msgtype == reply.msgtype == "std_srvs/srv/Trigger"
+    assert [(e.key, e.direction, e.depth, e.port) for e in request.pubs + request.subs] == \
+        [("cli", "pub", 0, "check_request_out"), ("srv", "sub", 16, "check_request_in")]
+    assert [(e.key, e.direction, e.depth) for e in reply.pubs + reply.subs] == \
+        [("srv", "pub", 0), ("cli", "sub", 32)]
+    assert all(e.interface == "std_srvs/srv/Trigger" for e in p.threads[0].endpoints)
+    example = load_project(ROOT / "examples/hw_services/build.cfg")
+    assert sorted(example.topics) == ["fibonacci_reply", "fibonacci_request", "sort_reply",
+                                      "sort_request"]
+    assert [e.thread.name for e in example.topics["sort_request"].pubs] == \
+        ["SortClientA", "SortClientB"]
 
 
 def test_base_config_is_good(tmp_path):

@@ -200,6 +200,40 @@ def test_sort_action_example(tmp_path):
     assert results["goals"] == [{"goal": 0, "size": 257, "accepted": False}]
 
 
+def fibonacci(n):
+    values = [0, 1][:n + 1]
+    while len(values) < n + 1:
+        values.append(values[-1] + values[-2])
+    return values
+
+
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
+def test_services_over_hardware_topics(sim, tmp_path):
+    """examples/hw_services: two hardware clients call the hardware sort service at once (each
+    reply is its request sorted); two hardware clients send goals to the hardware Fibonacci
+    server at once: valid goals end SUCCEEDED with F(0..order) after ``order`` feedbacks (a
+    goal that found the server busy was refused and sent again), invalid orders are refused,
+    a cancel after 3 feedbacks ends the goal CANCELED with the values sent so far, a cancel of
+    a goal never sent is answered ERROR_UNKNOWN_GOAL_ID."""
+    results = run_project_sim(ROOT / "examples/hw_services/build.cfg", sim, out=tmp_path / "o",
+                              args={"calls": "2", "size": "64"},
+                              thread_params=["SortServer.block_size=64",
+                                             "FibServer.step_cycles=40"], limit_ms=5)
+    calls = results["sort_calls"]
+    assert len(calls) == 4 and all(c["sorted"] for c in calls), calls
+    goals = {(g["client"], g["order"], g["status"]): g for g in results["fibonacci_goals"]}
+    for client, order in (("FibClientA", 10), ("FibClientB", 20), ("FibClientB", 0)):
+        g = goals[(client, order, 0)]
+        assert (g["result"], g["feedbacks"], g["values"]) == (4, order, fibonacci(order)), g
+    for client, order in (("FibClientA", 47), ("FibClientB", -1)):
+        assert goals[(client, order, 1)]["values"] == []
+    cancelled = goals[("FibClientA", 30, 0)]
+    assert (cancelled["result"], cancelled["cancel"]) == (5, 0), cancelled
+    assert cancelled["feedbacks"] >= 3 and cancelled["values"] == fibonacci(cancelled["feedbacks"])
+    stranger = goals[("FibClientA", 5, 0)]
+    assert (stranger["result"], stranger["cancel"], stranger["values"]) == (4, 2, fibonacci(5))
+
+
 @pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
 def test_inverse_kinematics_node(sim, tmp_path):
     """examples/inverse_kinematics: ReconROS' test client's words through the hardware node;

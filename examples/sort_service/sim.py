@@ -1,6 +1,7 @@
 """Software side of the sort service demo for ``rosgate sim``: two clients call the service
 "srv" at the same time (both hardware slots serve it); every response must be its request
-sorted. ``--arg requests=N`` (default 3 per client) and ``--arg size=N`` (default 2048)."""
+sorted. ``--arg requests=N`` (default 3 per client), ``--arg size=N`` (default 2048) and
+``--arg clients=N`` (default 2)."""
 
 import random
 
@@ -23,7 +24,8 @@ async def clients(ctx):
     n = int(ctx.args.get("requests", 3))
     size = int(ctx.args.get("size", 2048))
     ctx.results["calls"] = []
-    await Combine(*(cocotb.start_soon(_client(ctx, k, n, size)) for k in range(2)))
+    await Combine(*(cocotb.start_soon(_client(ctx, k, n, size))
+                    for k in range(int(ctx.args.get("clients", 2)))))
     ctx.results["all_sorted"] = all(c["sorted"] for c in ctx.results["calls"])
 
 

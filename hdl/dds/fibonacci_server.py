@@ -81,7 +81,7 @@ class FibonacciServer(wiring.Component):
 
         order = Signal(32)
         computed = Signal(range(64))      # index of the last value computed
-        wait = Signal(range(self._step_cycles + 1))
+        wait = Signal(range(self._step_cycles + 2))
         a, b = Signal(32), Signal(32, init=1)     # the generator: F(i), F(i + 1)
         tail_seen = Signal()
         tail_out = ser.m_axis.tvalid & ser.m_axis.tready & ser.m_axis.tlast
