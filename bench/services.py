@@ -12,7 +12,7 @@ from tb.harness import ROOT, SIM_BUILD
 
 HW_SERVICES = ROOT / "examples" / "hw_services" / "build.cfg"
 MEMORY_SERVICE = ROOT / "examples" / "sort_service" / "build.cfg"
-SIZES = [1, 256, 2048]
+SIZES = [0, 1, 256, 2048]
 ORDERS = [0, 10, 46]
 #: cycles between two Fibonacci values in the bench (the server's work per step)
 STEP_CYCLES = 0
@@ -87,8 +87,32 @@ def markdown(r):
     for g in r["fibonacci"]:
         lines.append(f"| {g['order']} | {g['feedbacks']} | {g['cycles']:,} | "
                      f"{g['cycles'] / r['clock_mhz']:.2f} |")
-    return "\n".join(lines + [""])
+    return "\n".join(lines + ["", "![round trips](services.png)", ""])
+
+
+def plot(r, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (ax_sort, ax_fib) = plt.subplots(1, 2, figsize=(11, 4))
+    labels = [str(row["values"]) for row in r["sort"]]
+    x = range(len(labels))
+    ax_sort.bar([i - 0.2 for i in x], [row["hw_topics_cycles"] for row in r["sort"]], 0.4,
+                label="hardware topics")
+    ax_sort.bar([i + 0.2 for i in x], [row["memory_cycles"] for row in r["sort"]], 0.4,
+                label="ReconROS memory-based")
+    ax_sort.set(xticks=list(x), xticklabels=labels, yscale="log", xlabel="values sorted",
+                ylabel="round trip (cycles at 100 MHz)", title="sort service")
+    ax_sort.legend()
+    ax_fib.plot([g["order"] for g in r["fibonacci"]], [g["cycles"] for g in r["fibonacci"]],
+                "o-")
+    ax_fib.set(xlabel="goal order", ylabel="goal to result (cycles)",
+               title=f"Fibonacci action, {r['step_cycles']} cycles of work per value")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def write_results(results, resources, folder):
+    plot(results, folder / "services.png")
     return write_report(folder, "services", results, markdown(results))
