@@ -77,7 +77,7 @@ def _kernel_classes():
     from hdl import kernels as k
     return {"sobel": k.Sobel, "gaussian": k.GaussianBlur, "gray": k.BgrToGray,
             "hsv": k.BgrToHsv, "inrange": k.InRange, "traffic_light": k.TrafficLightDetector,
-            "equalize": k.EqualizeHist, "sort": k.MergeSorter, "pid": k.PidController,
+            "equalize": k.EqualizeHist, "compensation": k.ImageCompensation, "sort": k.MergeSorter, "pid": k.PidController,
             "inverse_kinematics": k.InverseKinematics, "ball_control": k.BallControl,
             "servo_pwm": k.ServoPwm, "mnist": _mnist_cnn}
 

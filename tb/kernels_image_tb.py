@@ -130,6 +130,8 @@ class KernelPort:
             return golden.gray(pixels).tobytes()
         if self.kind == "equalize":
             return golden.equalize(pixels[:, :, 0]).tobytes()
+        if self.kind == "compensation":
+            return golden.compensate(pixels, self.spec["clip_percent"])[0].tobytes()
         if self.kind == "hsv":
             return golden.hsv(pixels).tobytes()
         if self.kind == "inrange":

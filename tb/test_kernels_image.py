@@ -17,6 +17,7 @@ import cocotb
 import numpy as np
 
 from hdl.kernels.colour import TRAFFIC_DETECTION
+from hdl.kernels import compensation
 from hdl.kernels.equalize import ROUND_STAGES, TABLE_STAGES
 from tb.harness import cocotb_bench
 from tb.models import image as golden
@@ -37,6 +38,7 @@ KERNELS = {
     "traffic": _k("traffic_light", pixels_per_beat=2),
     "equalize_p1": _k("equalize", pixels_per_beat=1),
     "equalize_p4": _k("equalize", pixels_per_beat=4),
+    "compensation_p4": _k("compensation", pixels_per_beat=4, clip_percent=1.5),
 }
 
 CONFIGS = {"image": dict(kernels=KERNELS)}
@@ -143,6 +145,12 @@ async def full_rate_frame_time(dut):
             # the table pipeline's stages
             latency += budget
             budget += 256 + 64 + TABLE_STAGES + ROUND_STAGES
+        if k.kind == "compensation":
+            # one frame of latency; per frame 256 bins, a 72-step division, the constants'
+            # and the table's pipelines and 256 entries
+            latency += budget
+            budget += 256 + 72 + 256 + compensation.CONSTANT_STAGES + \
+                compensation.TABLE_STAGES + 8
         ends = [p.cycles[-1] - start for p in k.sink.packets]
         tb.log.info("%s: frame ends at cycles %s (budget %d per frame)", k.name, ends, budget)
         assert ends[1] - ends[0] <= budget + 5, (k.name, ends, budget)

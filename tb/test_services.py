@@ -22,8 +22,10 @@ ACTION_TESTS = ["fibonacci_concurrent_goals", "fibonacci_cancel", "fibonacci_bad
 
 CONFIGS = {"sort": SORT, "fibonacci": FIBONACCI}
 test_services_sort = cocotb_bench("services", {"sort": SORT}, testcases=SORT_TESTS)
+# the action's Verilator run is in make test-full (make test: the service on both simulators)
 test_services_fibonacci = cocotb_bench("services", {"fibonacci": FIBONACCI},
-                                       testcases=ACTION_TESTS)
+                                       testcases=ACTION_TESTS,
+                                       long=[("fibonacci", "verilator")])
 
 #: a client id no client has (raw frames)
 STRANGER = 9

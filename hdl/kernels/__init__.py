@@ -3,6 +3,7 @@ docs/kernels.md)."""
 
 from .ball_control import BallControl
 from .colour import BgrToGray, BgrToHsv, InRange, PixelKernel, TrafficLightDetector
+from .compensation import ImageCompensation
 from .equalize import EqualizeHist
 from .gaussian import GaussianBlur
 from .image import FrameGuard
@@ -15,6 +16,6 @@ from .sort import MergeSorter
 from .window import WindowFilter
 
 __all__ = ["BallControl", "BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur",
-           "InRange", "InverseKinematics", "MergeSorter", "MnistCnn", "PidController",
+           "ImageCompensation", "InRange", "InverseKinematics", "MergeSorter", "MnistCnn", "PidController",
            "PixelKernel", "ServoPwm", "Sobel", "SobelByteLanes", "TrafficLightDetector",
            "WindowFilter"]

@@ -37,31 +37,33 @@ def _unregistered(value, name):
     return value
 
 
-def round_to_float32(m, value, sticky_in, name, stage=_unregistered):
+def round_to_float32(m, value, sticky_in, name, stage=_unregistered, *, bits=24):
     """Round the non-negative integer ``value`` (with ``sticky_in``: a non-zero remainder
-    below it) to 24 significant bits, to nearest, ties to even. Returns ``(mantissa,
-    shift)``: the rounded value is ``mantissa << shift`` (``mantissa < 2**24``).
+    below it) to ``bits`` significant bits (24: float32, 53: float64), to nearest, ties to
+    even. Returns ``(mantissa, shift)``: the rounded value is ``mantissa << shift``
+    (``mantissa < 2**bits``).
 
     ``stage(value, name)`` is applied after the leading-one search and after the rounding
     decision: a register there splits the logic into three shorter paths (two cycles of
     latency)."""
+    top = bits - 1
     lead = _leading_one(m, value, f"{name}_lead")
     shift = Signal(range(len(value) + 1), name=f"{name}_shift")
-    m.d.comb += shift.eq(Mux(lead > 23, lead - 23, 0))
+    m.d.comb += shift.eq(Mux(lead > top, lead - top, 0))
     value, sticky_in = stage(value, f"{name}_value"), stage(sticky_in, f"{name}_sticky")
     shift = stage(shift, f"{name}_shift_r")
-    kept, round_bit, lower = Signal(24, name=f"{name}_kept"), Signal(name=f"{name}_round_bit"), \
-        Signal(name=f"{name}_lower")
+    kept, round_bit, lower = Signal(bits, name=f"{name}_kept"), \
+        Signal(name=f"{name}_round_bit"), Signal(name=f"{name}_lower")
     shifted, first, rest = _shift_for_rounding(value, shift)
     m.d.comb += [kept.eq(shifted), round_bit.eq(first), lower.eq(sticky_in | rest)]
     up = round_bit & (lower | kept[0])
     kept, up = stage(kept, f"{name}_kept_r"), stage(up, f"{name}_up")
     shift = stage(shift, f"{name}_shift_r2")
-    mantissa = Signal(25, name=f"{name}_mant")
+    mantissa = Signal(bits + 1, name=f"{name}_mant")
     m.d.comb += mantissa.eq(kept + up)
-    out_m = Signal(24, name=f"{name}_m")
+    out_m = Signal(bits, name=f"{name}_m")
     out_s = Signal(range(len(value) + 2), name=f"{name}_s")
-    with m.If(mantissa[24]):
+    with m.If(mantissa[bits]):
         m.d.comb += [out_m.eq(mantissa >> 1), out_s.eq(shift + 1)]
     with m.Else():
         m.d.comb += [out_m.eq(mantissa), out_s.eq(shift)]

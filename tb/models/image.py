@@ -75,6 +75,13 @@ def equalize(image):
     return _cv2().equalizeHist(image)
 
 
+def compensate(image, clip_percent=1.0):
+    """The AutoRace ``image_compensation`` node with OpenCV (:func:`host.autorace.compensate`):
+    ``(image, min_gray, max_gray)``."""
+    from host.autorace import compensate as node
+    return node(image, clip_percent)
+
+
 def in_range(image, lower, upper):
     """``cv2.inRange`` with per-channel bounds."""
     return _cv2().inRange(image, np.array(lower, np.uint8), np.array(upper, np.uint8))

@@ -1,0 +1,346 @@
+"""Perspective warp with bilinear interpolation, as ``cv2.warpPerspective`` computes it
+(docs/kernels.md): the image projection of the AutoRace lane-following chain."""
+
+from fractions import Fraction
+
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
+from amaranth.lib import wiring
+from amaranth.lib.memory import Memory
+from amaranth.lib.wiring import In, Out
+
+from ..params import ParameterError, check_int
+from ..stream import StreamFIFO
+from .image import FrameGuard, check_image_params, image_stream_signature
+
+__all__ = ["PerspectiveWarp", "MATRIX_FRACTION_BITS", "COORD_FRACTION_BITS"]
+
+#: fraction bits of the matrix entries (each double is rounded to a multiple of 2**-64)
+MATRIX_FRACTION_BITS = 64
+#: fraction bits of a source coordinate (OpenCV computes it in float32)
+COORD_FRACTION_BITS = 16
+#: quotient bits of the coordinate division: |x| < 2**(QUOTIENT_BITS - 16) pixels (else
+#: outside)
+QUOTIENT_BITS = 28
+#: registers from a beat's coordinates to its output pixels
+PIPELINE_STAGES = QUOTIENT_BITS + 5
+
+
+def _fixed(value, what):
+    try:
+        exact = Fraction(float(value))
+    except (TypeError, ValueError, OverflowError):
+        raise ParameterError(what, value, "a finite number") from None
+    return round(exact * (1 << MATRIX_FRACTION_BITS))
+
+
+class _Divider(wiring.Component):
+    """``floor(2**16 n / w)`` for ``w > 0``, pipelined, one division per cycle: restoring
+    division of ``|n| 2**16`` by ``w``, one quotient bit per stage, the sign after.
+    ``outside`` when the magnitude reaches ``2**QUOTIENT_BITS``."""
+
+    def __init__(self, width):
+        self._width = width
+        super().__init__({"n": In(signed(width)), "w": In(width), "valid": In(1),
+                          "q": Out(signed(QUOTIENT_BITS + 1)), "outside": Out(1),
+                          "q_valid": Out(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        W, Q, F = self._width, QUOTIENT_BITS, COORD_FRACTION_BITS
+        neg = self.n < 0
+        mag = Signal(W + F)
+        m.d.comb += mag.eq(Mux(neg, -self.n, self.n) << F)
+        rem, den = Signal(W + F), Signal(W)
+        quo, sign, out, v = Signal(Q), Signal(), Signal(), Signal()
+        m.d.sync += [rem.eq(mag), den.eq(self.w), sign.eq(neg), v.eq(self.valid),
+                     out.eq(mag >= (self.w << Q))]
+        for k in reversed(range(Q)):
+            shifted = den << k
+            ge = rem >= shifted
+            rem_n, den_n, quo_n = Signal(W + F), Signal(W), Signal(Q)
+            sign_n, out_n, v_n = Signal(), Signal(), Signal()
+            m.d.sync += [rem_n.eq(Mux(ge, rem - shifted, rem)), den_n.eq(den),
+                         quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out), v_n.eq(v)]
+            rem, den, quo, sign, out, v = rem_n, den_n, quo_n, sign_n, out_n, v_n
+        m.d.comb += [self.q.eq(Mux(sign, -quo - (rem != 0), quo)), self.outside.eq(out),
+                     self.q_valid.eq(v)]
+        return m
+
+
+class PerspectiveWarp(wiring.Component):
+    """``cv2.warpPerspective(src, H, (dst_width, dst_height))`` on ``bgr8`` frames: bilinear
+    interpolation, border constant 0.
+
+    A source frame is stored whole (four banks by row and column parity, so one read per bank
+    gives a pixel's 2x2 neighbourhood), then the destination frame streams out, ``P`` pixels
+    per beat. Each destination pixel's source position is ``((m0 x + m1 y + m2) / (m6 x + m7
+    y + m8), (m3 x + m4 y + m5) / (...))``, computed exactly with the inverse matrix's entries
+    as multiples of ``2**-64`` and truncated to ``2**-16`` pixel (a pipelined divider per
+    coordinate and lane). The value is the bilinear mix of the four neighbours with the
+    fractions' products as weights (they sum to ``2**32``), rounded to nearest; neighbours
+    outside the source count as 0.
+
+    OpenCV (5.x) computes the position and the mix in float32 and rounds the result, so the
+    two differ by at most 1, and only in a pixel whose value lies within float32's error of a
+    half (about 1 % of the pixels of a photograph); never by more.
+
+    Parameters
+    ----------
+    matrix : 3x3 numbers
+        The inverse map, destination pixel -> source pixel (``cv2.invert(H)`` of the forward
+        homography, which ``cv2.warpPerspective`` uses); its bottom row must make the
+        denominator positive over the whole destination (checked at the four corners).
+    src_width, src_height : int
+        The source frame (the input must be exactly this size).
+    dst_width, dst_height : int
+        The destination frame.
+    pixels_per_beat : int
+        1, 2, 4 or 8, in and out.
+
+    Members
+    -------
+    i : In(image_stream_signature(3, P))
+        Source frames.
+    o : Out(image_stream_signature(3, P))
+        Destination frames, ``tuser`` on the first beat, ``tlast`` on the last.
+    err_short, err_long, err_size : Out(1)
+        Bad source frames (:class:`~hdl.kernels.image.FrameGuard`; the size is the
+        parameters').
+    outside : Out(32)
+        Destination pixels of the last frame whose whole neighbourhood lay outside the source.
+    """
+
+    def __init__(self, matrix, *, src_width, src_height, dst_width, dst_height,
+                 pixels_per_beat=1):
+        check_image_params(3, pixels_per_beat, src_width, src_height, channel_choices=(3,))
+        check_int("dst_width", dst_width, pixels_per_beat, 1 << 12)
+        check_int("dst_height", dst_height, 1, 1 << 12)
+        if dst_width % pixels_per_beat:
+            raise ParameterError("dst_width", dst_width,
+                                 f"a multiple of pixels_per_beat ({pixels_per_beat})")
+        if src_width % 2 or src_height % 2:
+            raise ParameterError("src_width, src_height", (src_width, src_height),
+                                 "even sizes (the frame store's banks)")
+        rows = [list(r) for r in matrix]
+        if len(rows) != 3 or any(len(r) != 3 for r in rows):
+            raise ParameterError("matrix", matrix, "3 rows of 3 numbers")
+        self._m = [_fixed(v, f"matrix[{i // 3}][{i % 3}]")
+                   for i, v in enumerate(x for r in rows for x in r)]
+        m6, m7, m8 = self._m[6:]
+        for x, y in ((0, 0), (dst_width - 1, 0), (0, dst_height - 1),
+                     (dst_width - 1, dst_height - 1)):
+            if m6 * x + m7 * y + m8 <= 0:
+                raise ParameterError("matrix", matrix,
+                                     f"a map whose denominator is positive over the "
+                                     f"destination (at ({x}, {y}) it is not: the homography "
+                                     f"maps that pixel to infinity or behind the camera)")
+        self._p = pixels_per_beat
+        self._src = (src_width, src_height)
+        self._dst = (dst_width, dst_height)
+        sig = image_stream_signature(3, pixels_per_beat)
+        super().__init__({"i": In(sig), "o": Out(sig), "err_short": Out(1),
+                          "err_long": Out(1), "err_size": Out(1), "outside": Out(32)})
+
+    pixels_per_beat = property(lambda self: self._p)
+
+    def elaborate(self, platform):
+        m = Module()
+        P = self._p
+        sw, sh = self._src
+        dw, dh = self._dst
+        m.submodules.guard = guard = FrameGuard(3, P, sw, sh, min_width=sw, min_height=sh)
+        wiring.connect(m, wiring.flipped(self.i), guard.i)
+        m.d.comb += [guard.width.eq(sw), guard.height.eq(sh),
+                     self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long),
+                     self.err_size.eq(guard.err_size)]
+
+        # the frame store: bank (row & 1, col & 1) holds pixel (r, c) at (r >> 1) * sw/2 +
+        # (c >> 1); a beat of P pixels writes P/2 (or 1) pixels into each bank it touches
+        per_word = max(P // 2, 1)
+        words_per_row = sw // 2 // per_word
+        depth = (sh // 2) * words_per_row
+        banks = [[Memory(shape=24 * per_word, depth=depth, init=[]) for _ in range(2)]
+                 for _ in range(2)]
+        for r in range(2):
+            for c in range(2):
+                m.submodules[f"bank{r}{c}"] = banks[r][c]
+        row, col = Signal(range(sh + 1)), Signal(range(sw + 1))
+        storing = Signal(init=1)
+        take = guard.o.tvalid & guard.o.tready
+        m.d.comb += guard.o.tready.eq(storing)
+        word_addr = (row >> 1) * words_per_row + (col >> 1) // per_word
+        for r in range(2):
+            for c in range(2):
+                wp = banks[r][c].write_port()
+                if P == 1:
+                    data = guard.o.tdata
+                    hit = (row[0] == r) & (col[0] == c)
+                else:
+                    data = Cat(*(guard.o.tdata.word_select(k, 24) for k in range(c, P, 2)))
+                    hit = row[0] == r
+                m.d.comb += [wp.addr.eq(word_addr), wp.data.eq(data), wp.en.eq(take & hit)]
+        with m.If(take):
+            with m.If(col + P == sw):
+                m.d.sync += [col.eq(0), row.eq(row + 1)]
+            with m.Else():
+                m.d.sync += col.eq(col + P)
+            with m.If(guard.o.tlast):
+                m.d.sync += [storing.eq(0), row.eq(0), col.eq(0)]
+
+        # destination coordinates: numerators per lane, stepped exactly
+        m0, m1, m2, m3, m4, m5, m6, m7, m8 = self._m
+        width = max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
+        x_row = [Signal(signed(width), name=f"xn_row{k}") for k in range(3)]
+        x_lane = [[Signal(signed(width), name=f"n{k}_lane{p}") for k in range(3)]
+                  for p in range(P)]
+        step = (m0, m3, m6)
+        down = (m1, m4, m7)
+        start = (m2, m5, m8)
+        dx, dy = Signal(range(dw + 1)), Signal(range(dh + 1))
+        issuing = Signal()
+        m.submodules.out_fifo = out_fifo = StreamFIFO(image_stream_signature(3, P), 64)
+        in_flight = Signal(range(PIPELINE_STAGES + 4))
+        room = out_fifo.level + in_flight < 60
+        issue = issuing & room
+        last_beat = (dx + P == dw) & (dy == dh - 1)
+
+        divs = []
+        for p in range(P):
+            pair = [_Divider(width), _Divider(width)]
+            m.submodules[f"div_x{p}"], m.submodules[f"div_y{p}"] = pair
+            for k, d in enumerate(pair):
+                m.d.comb += [d.n.eq(x_lane[p][k]), d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
+            divs.append(pair)
+        with m.If(issue):
+            with m.If(dx + P == dw):
+                m.d.sync += [dx.eq(0), dy.eq(dy + 1)]
+                for k in range(3):
+                    m.d.sync += x_row[k].eq(x_row[k] + down[k])
+                    for p in range(P):
+                        m.d.sync += x_lane[p][k].eq(x_row[k] + down[k] + p * step[k])
+                with m.If(dy == dh - 1):
+                    m.d.sync += issuing.eq(0)
+            with m.Else():
+                m.d.sync += dx.eq(dx + P)
+                for k in range(3):
+                    for p in range(P):
+                        m.d.sync += x_lane[p][k].eq(x_lane[p][k] + P * step[k])
+
+        # the frame's beat flags travel with the division
+        first_flag, last_flag = Signal(), Signal()
+        m.d.comb += [first_flag.eq((dx == 0) & (dy == 0)), last_flag.eq(last_beat)]
+        flags = Cat(first_flag, last_flag)
+        for _ in range(QUOTIENT_BITS + 1):
+            nxt = Signal(2)
+            m.d.sync += nxt.eq(flags)
+            flags = nxt
+
+        # stage A: pixel, weights, bank addresses and which neighbours are inside
+        a_valid = Signal()
+        m.d.sync += a_valid.eq(divs[0][0].q_valid)
+        lanes = []
+        for p in range(P):
+            qx, qy = divs[p][0], divs[p][1]
+            sx, sy = Signal(signed(QUOTIENT_BITS), name=f"sx{p}"), \
+                Signal(signed(QUOTIENT_BITS), name=f"sy{p}")
+            F = COORD_FRACTION_BITS
+            ax, ay = Signal(F, name=f"ax{p}"), Signal(F, name=f"ay{p}")
+            away = Signal(name=f"away{p}")
+            m.d.sync += [sx.eq(qx.q >> F), sy.eq(qy.q >> F), ax.eq(qx.q[:F]), ay.eq(qy.q[:F]),
+                         away.eq(qx.outside | qy.outside)]
+            lanes.append((sx, sy, ax, ay, away))
+        flags_a = Signal(2)
+        m.d.sync += flags_a.eq(flags)
+
+        # stage B: bank reads (pixel (r, c) of the neighbourhood comes from bank
+        # ((sy + r) & 1, (sx + c) & 1)), weights and the inside flags registered alongside
+        b_valid, flags_b = Signal(), Signal(2)
+        m.d.sync += [b_valid.eq(a_valid), flags_b.eq(flags_a)]
+        picked = []
+        for p, (sx, sy, ax, ay, away) in enumerate(lanes):
+            reads = {}
+            for r in range(2):
+                for c in range(2):
+                    port = banks[r][c].read_port()
+                    # the neighbour of this parity: row sy or sy + 1, column sx or sx + 1
+                    ny = Mux(sy[0] == r, sy, sy + 1)
+                    nx = Mux(sx[0] == c, sx, sx + 1)
+                    m.d.comb += port.addr.eq((ny >> 1) * words_per_row +
+                                             (nx >> 1)[:16] // per_word)
+                    inside = Signal(name=f"in{p}_{r}{c}")
+                    m.d.sync += inside.eq(~away & (ny >= 0) & (ny < sh) & (nx >= 0) & (nx < sw))
+                    sel = Signal(range(per_word), name=f"sel{p}_{r}{c}")
+                    if per_word > 1:
+                        m.d.sync += sel.eq((nx >> 1)[:16] % per_word)
+                    reads[(r, c)] = (port, inside, sel)
+            F = COORD_FRACTION_BITS
+            one = 1 << F
+            # the four weights, products of the fractions (they sum to 2**32)
+            wts = {}
+            for dyo, wy in ((0, one - ay), (1, ay)):
+                for dxo, wx in ((0, one - ax), (1, ax)):
+                    w = Signal(2 * F + 1, name=f"w{p}_{dyo}{dxo}")
+                    m.d.sync += w.eq(wx * wy)
+                    wts[(dyo, dxo)] = w
+            sxb, syb = Signal(name=f"sx0b{p}"), Signal(name=f"sy0b{p}")
+            m.d.sync += [sxb.eq(sx[0]), syb.eq(sy[0])]
+            axb, ayb = wts, None
+            picked.append((reads, axb, ayb, sxb, syb))
+
+        # stage C: the weighted sum, registered; stage D: rounded, into the FIFO
+        c_valid, flags_c = Signal(), Signal(2)
+        m.d.sync += [c_valid.eq(b_valid), flags_c.eq(flags_b)]
+        out_pixels = []
+        for p, (reads, weights, _, sx0, sy0) in enumerate(picked):
+            channels = []
+            for ch in range(3):
+                total = Const(0, 2 * COORD_FRACTION_BITS + 9)
+                for (dyo, dxo), wgt in weights.items():
+                    # neighbour (dyo, dxo) is in bank ((sy + dyo) & 1, (sx + dxo) & 1)
+                    value = Const(0, 8)
+                    for (r, c), (port, inside, sel) in reads.items():
+                        word = port.data
+                        px = word.word_select(sel, 24) if per_word > 1 else word
+                        mine = ((sy0 ^ dyo) == r) & ((sx0 ^ dxo) == c)
+                        value = Mux(mine & inside, px.word_select(ch, 8), value)
+                    total = total + value * wgt
+                acc = Signal(2 * COORD_FRACTION_BITS + 9, name=f"acc{p}_{ch}")
+                m.d.sync += acc.eq(total)
+                channels.append(acc)
+            half = 1 << (2 * COORD_FRACTION_BITS - 1)
+            out_pixels.append(Cat(*(((a + half) >> (2 * COORD_FRACTION_BITS))[:8]
+                                    for a in channels)))
+        m.d.comb += [out_fifo.s_axis.tvalid.eq(c_valid), out_fifo.s_axis.tdata.eq(Cat(*out_pixels)),
+                     out_fifo.s_axis.tuser.eq(flags_c[0]), out_fifo.s_axis.tlast.eq(flags_c[1])]
+        wiring.connect(m, out_fifo.m_axis, wiring.flipped(self.o))
+        m.d.sync += in_flight.eq(in_flight + issue - c_valid)
+
+        # counting the pixels whose neighbourhood is all outside
+        none_inside = Signal(range(P + 1))
+        m.d.sync += none_inside.eq(sum(~(reads[(0, 0)][1] | reads[(0, 1)][1] |
+                                         reads[(1, 0)][1] | reads[(1, 1)][1])
+                                       for reads, *_ in picked))
+        outside = Signal(32)
+        with m.If(c_valid):
+            m.d.sync += outside.eq(outside + none_inside)
+            with m.If(flags_c[1]):
+                m.d.sync += [self.outside.eq(outside + none_inside), outside.eq(0)]
+
+        # one frame at a time: store the source, issue the destination, let it drain
+        with m.FSM():
+            with m.State("STORE"):
+                with m.If(~storing):
+                    m.d.sync += [issuing.eq(1), dx.eq(0), dy.eq(0)]
+                    for k in range(3):
+                        m.d.sync += x_row[k].eq(start[k])
+                        for p in range(P):
+                            m.d.sync += x_lane[p][k].eq(start[k] + p * step[k])
+                    m.next = "ISSUE"
+            with m.State("ISSUE"):
+                with m.If(issue & last_beat):
+                    m.next = "DRAIN"
+            with m.State("DRAIN"):
+                with m.If((in_flight == 0) & ~c_valid):
+                    m.d.sync += storing.eq(1)
+                    m.next = "STORE"
+        return m
