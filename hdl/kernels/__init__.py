@@ -8,14 +8,16 @@ from .equalize import EqualizeHist
 from .gaussian import GaussianBlur
 from .image import FrameGuard
 from .inverse_kinematics import InverseKinematics
+from .lane import LaneControl, LaneDetector
 from .mnist import MnistCnn
 from .pid import PidController
 from .servo_pwm import ServoPwm
 from .sobel import Sobel, SobelByteLanes
 from .sort import MergeSorter
+from .warp import PerspectiveWarp
 from .window import WindowFilter
 
 __all__ = ["BallControl", "BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur",
-           "ImageCompensation", "InRange", "InverseKinematics", "MergeSorter", "MnistCnn", "PidController",
+           "ImageCompensation", "InRange", "InverseKinematics", "LaneControl", "LaneDetector", "MergeSorter", "MnistCnn", "PerspectiveWarp", "PidController",
            "PixelKernel", "ServoPwm", "Sobel", "SobelByteLanes", "TrafficLightDetector",
            "WindowFilter"]
