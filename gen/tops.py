@@ -146,8 +146,19 @@ def build_services(**params):
     return ServiceGraph(params.pop("server"), plans, **params)
 
 
+def build_av_chain(**params):
+    """A :class:`gen.av_chain.AvChain`: ``corners`` (and ``bev_corners``) of the projection
+    and the :class:`~gen.av_chain.ChainConfig` fields (lists become tuples)."""
+    from gen.av_chain import AvChain, chain_config
+
+    def tuples(v):
+        return tuple(tuples(x) for x in v) if isinstance(v, (list, tuple)) else v
+    return AvChain(chain_config(**{k: tuples(v) for k, v in params.items()}))
+
+
 #: name -> builder
 TOPS = {
+    "av_chain": build_av_chain,
     "services": build_services,
     "finemb_node": build_finemb_node,
     "finemb_line": build_finemb_line,

@@ -11,15 +11,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["BEV_SIZE", "CAMERA_SIZE", "LaneParams", "LightParams", "ControlParams",
-           "compensate", "blur", "project", "homography", "lane_centre", "LaneControl",
+from gen.av_chain import BEV_CORNERS, homography, inverse_map
+
+__all__ = ["BEV_SIZE", "BEV_CORNERS", "CAMERA_SIZE", "LaneParams", "LightParams", "ControlParams",
+           "compensate", "blur", "project", "homography", "inverse_map", "lane_centre",
+           "LaneControl",
            "traffic_lights"]
 
 CAMERA_SIZE = (640, 480)
 #: the bird's-eye view (width, height): AutoRace's projection output
 BEV_SIZE = (1000, 600)
-#: where the corners of the bird's-eye view go: top-left, top-right, bottom-right, bottom-left
-BEV_CORNERS = ((200, 0), (800, 0), (800, 600), (200, 600))
 
 
 def _cv2():
@@ -66,19 +67,10 @@ def blur(image, ksize=5):
     return _cv2().GaussianBlur(image, (ksize, ksize), 0)
 
 
-def homography(corners):
-    """The projection's homography: camera pixel -> bird's-eye pixel, from the four camera
-    points ``corners`` (top-left, top-right, bottom-right, bottom-left) that become the corners
-    of :data:`BEV_CORNERS` (``cv2.getPerspectiveTransform``)."""
+def project(image, matrix, size=BEV_SIZE):
+    """``cv2.warpPerspective(image, matrix, size)``: bilinear, border constant 0."""
     cv2 = _cv2()
-    return cv2.getPerspectiveTransform(np.array(corners, np.float32),
-                                       np.array(BEV_CORNERS, np.float32))
-
-
-def project(image, matrix):
-    """``cv2.warpPerspective(image, matrix, BEV_SIZE)``: bilinear, border constant 0."""
-    cv2 = _cv2()
-    return cv2.warpPerspective(image, matrix, BEV_SIZE, flags=cv2.INTER_LINEAR,
+    return cv2.warpPerspective(image, matrix, tuple(size), flags=cv2.INTER_LINEAR,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 

@@ -14,7 +14,7 @@ BENCHES = {"tb.test_topic": "topic", "tb.test_msg_codec": "msg_codec",
            "tb.test_kernels_image": "kernels", "tb.test_kernels_control": "kernels",
            "tb.test_kernels_mnist": "kernels", "tb.test_net_stack": "net",
            "tb.test_ros1_registers": "ros1_node", "tb.test_finemb_node": "finemb_node",
-           "tb.test_services": "services"}
+           "tb.test_services": "services", "tb.test_av_chain": "av_chain"}
 #: bench module -> its configuration tables besides ``CONFIGS``
 MORE_CONFIGS = {"tb.test_net_stack": ("SMALL_RING", "WIDE_USER")}
 

@@ -38,7 +38,7 @@ KERNELS = {
     "traffic": _k("traffic_light", pixels_per_beat=2),
     "equalize_p1": _k("equalize", pixels_per_beat=1),
     "equalize_p4": _k("equalize", pixels_per_beat=4),
-    "compensation_p4": _k("compensation", pixels_per_beat=4, clip_percent=1.5),
+    "compensation_p2": _k("compensation", pixels_per_beat=2, clip_percent=1.5),
 }
 
 CONFIGS = {"image": dict(kernels=KERNELS)}

@@ -13,12 +13,14 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from host.autorace import BEV_SIZE, CAMERA_SIZE
+
 import numpy as np
 
 #: camera points that become the bird's-eye corners (top-left, top-right, bottom-right,
-#: bottom-left): the camera sees the road from 1.2 bird's-eye pixels ahead of its bumper
+#: bottom-left), at scale 1
 CORNERS = ((260, 260), (380, 260), (620, 460), (20, 460))
-from host.autorace import BEV_SIZE, CAMERA_SIZE  # noqa: E402
+BEV_CORNERS = ((200, 0), (800, 0), (800, 600), (200, 600))
 LANE_WIDTH = 300
 STRIPE_WIDTH = 16
 BAND_TOP = 400
@@ -29,6 +31,44 @@ WHITE = (235, 235, 235)
 RED_LAMP, GREEN_LAMP, DARK_LAMP = (30, 30, 230), (60, 220, 40), (40, 40, 40)
 
 
+@dataclass(frozen=True)
+class Geometry:
+    """The scene at ``scale`` (1: the 640x480 camera, the 1000x600 bird's-eye view; the
+    short tests use 0.2)."""
+    scale: float = 1.0
+
+    def sized(self, v):
+        return int(round(v * self.scale))
+
+    @property
+    def camera(self):
+        return tuple(self.sized(v) for v in CAMERA_SIZE)
+
+    @property
+    def bev(self):
+        return tuple(self.sized(v) for v in BEV_SIZE)
+
+    @property
+    def corners(self):
+        return tuple((self.sized(x), self.sized(y)) for x, y in CORNERS)
+
+    @property
+    def bev_corners(self):
+        return tuple((self.sized(x), self.sized(y)) for x, y in BEV_CORNERS)
+
+    @property
+    def band_top(self):
+        return self.sized(BAND_TOP)
+
+    @property
+    def lane_width(self):
+        return 2 * self.sized(LANE_WIDTH / 2)
+
+    def homography(self):
+        from host.autorace import homography
+        return homography(self.corners, self.bev_corners)
+
+
 @dataclass
 class Frame:
     index: int
@@ -37,77 +77,81 @@ class Frame:
     light: str                 # "dark", "red" or "green"
 
 
-def lane_centre_at(t, y):
+def lane_centre_at(t, y, scale=1.0):
     """Column of the lane centre in bird's-eye row ``y`` at frame ``t``: a slow sway and a
     curve that comes and goes."""
+    y = y / scale
     sway = 60 * math.sin(2 * math.pi * t / 90)
     curve = 1.6e-4 * math.sin(2 * math.pi * t / 55) * (BEV_SIZE[1] - y) ** 2
-    return 500 + sway + curve
+    return (500 + sway + curve) * scale
 
 
 def phase(t, red_from, green_from):
     return "dark" if t < red_from else "red" if t < green_from else "green"
 
 
-def camera_homography():
-    from host.autorace import homography
-    return homography(CORNERS)
+def camera_homography(geometry=Geometry()):
+    return geometry.homography()
 
 
-def bird_view(t, rng):
+def bird_view(t, rng, geometry=Geometry()):
     """The road in the bird's-eye plane at 4x resolution (anti-aliased when reduced)."""
     import cv2
-    s = 4
-    w, h = BEV_SIZE
+    s, g = 4, geometry
+    w, h = g.bev
     road = np.empty((h * s, w * s, 3), np.uint8)
     road[:] = ASPHALT
     ys = (np.arange(h * s) + 0.5) / s
     xs = (np.arange(w * s) + 0.5) / s
-    centre = np.array([lane_centre_at(t, y) for y in ys])[:, None]
-    half = STRIPE_WIDTH / 2
-    left = np.abs(xs[None, :] - (centre - LANE_WIDTH / 2)) < half
-    right = np.abs(xs[None, :] - (centre + LANE_WIDTH / 2)) < half
+    centre = np.array([lane_centre_at(t, y, g.scale) for y in ys])[:, None]
+    half = max(STRIPE_WIDTH * g.scale, 2) / 2
+    lane = LANE_WIDTH * g.scale
+    left = np.abs(xs[None, :] - (centre - lane / 2)) < half
+    right = np.abs(xs[None, :] - (centre + lane / 2)) < half
     road[left] = YELLOW
     road[right] = WHITE
-    small = cv2.resize(road, BEV_SIZE, interpolation=cv2.INTER_AREA)
+    small = cv2.resize(road, (w, h), interpolation=cv2.INTER_AREA)
     texture = rng.normal(0, 3, small.shape)
     return np.clip(small + texture, 0, 255).astype(np.uint8)
 
 
-def camera_view(bev, t, rng, light):
+def camera_view(bev, t, rng, light, geometry=Geometry()):
     """The camera image: the road through the homography, sky above, the traffic light,
     exposure drift and sensor noise."""
     import cv2
-    h = camera_homography()
-    cam = cv2.warpPerspective(bev, h, CAMERA_SIZE, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+    g = geometry
+    h = g.homography()
+    size = g.camera
+    cam = cv2.warpPerspective(bev, h, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
     # what lies beyond the bird's-eye plane is sky
     ones = np.full(bev.shape[:2], 255, np.uint8)
-    seen = cv2.warpPerspective(ones, h, CAMERA_SIZE,
-                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
+    seen = cv2.warpPerspective(ones, h, size, flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
     cam[~seen] = SKY
-    cv2.rectangle(cam, (560, 30), (600, 130), (25, 25, 25), -1)
+    z = g.sized
+    cv2.rectangle(cam, (z(560), z(30)), (z(600), z(130)), (25, 25, 25), -1)
     lamps = {"red": (RED_LAMP, DARK_LAMP), "green": (DARK_LAMP, GREEN_LAMP),
              "dark": (DARK_LAMP, DARK_LAMP)}[light]
-    cv2.circle(cam, (580, 55), 14, lamps[0], -1, lineType=cv2.LINE_AA)
-    cv2.circle(cam, (580, 105), 14, lamps[1], -1, lineType=cv2.LINE_AA)
+    cv2.circle(cam, (z(580), z(55)), z(14), lamps[0], -1, lineType=cv2.LINE_AA)
+    cv2.circle(cam, (z(580), z(105)), z(14), lamps[1], -1, lineType=cv2.LINE_AA)
     gain = 0.75 + 0.2 * math.sin(2 * math.pi * t / 40)
     offset = 15 * math.cos(2 * math.pi * t / 65)
     noisy = cam.astype(np.float64) * gain + offset + rng.normal(0, 2, cam.shape)
     return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
 
 
-def frames(count=100, *, seed=1, red_from=None, green_from=None):
+def frames(count=100, *, seed=1, red_from=None, green_from=None, geometry=Geometry()):
     """The scene's frames: ``count`` of them at 30 fps, the light red from frame
     ``red_from`` (default 30 % of the way) and green from ``green_from`` (60 %)."""
     rng = np.random.default_rng(seed)
     red_from = int(0.3 * count) if red_from is None else red_from
     green_from = int(0.6 * count) if green_from is None else green_from
-    band = np.arange(BAND_TOP, BEV_SIZE[1]) + 0.5
+    g = geometry
+    band = np.arange(g.band_top, g.bev[1]) + 0.5
     for t in range(count):
         light = phase(t, red_from, green_from)
-        bev = bird_view(t, rng)
-        image = camera_view(bev, t, rng, light)
-        centre = float(np.mean([lane_centre_at(t, y) for y in band]))
+        bev = bird_view(t, rng, g)
+        image = camera_view(bev, t, rng, light, g)
+        centre = float(np.mean([lane_centre_at(t, y, g.scale) for y in band]))
         yield Frame(t, image, centre, light)
 
 

@@ -90,6 +90,8 @@ class Topic(wiring.Component):
         two in 2..64 and at most ``fifo_depth``; default 4.
     user_width, id_width, dest_width : int
         Sideband widths carried unchanged (0 = absent).
+    keep : bool
+        Whether the streams have ``tkeep`` (default; image streams have none).
     register : bool
         Insert the register slice (default). Without it the topic is purely combinational.
     monitor : bool
@@ -111,12 +113,12 @@ class Topic(wiring.Component):
     """
 
     def __init__(self, pubs, subs, data_width, *, fifo_depth=0, qos="keep_all", history=None,
-                 user_width=0, id_width=0, dest_width=0, register=True, monitor=True,
-                 counter_width=32):
+                 user_width=0, id_width=0, dest_width=0, keep=True, register=True,
+                 monitor=True, counter_width=32):
         check_int("pubs", pubs, 1, MAX_ENDPOINTS)
         check_int("subs", subs, 1, MAX_ENDPOINTS)
-        self._stream = AXIStreamSignature(data_width, user_width=user_width, id_width=id_width,
-                                          dest_width=dest_width)
+        self._stream = AXIStreamSignature(data_width, keep=keep, user_width=user_width,
+                                          id_width=id_width, dest_width=dest_width)
         if (not isinstance(fifo_depth, int) or isinstance(fifo_depth, bool) or
                 (fifo_depth != 0 and (fifo_depth < 2 or fifo_depth > MAX_FIFO_DEPTH or
                                       fifo_depth & (fifo_depth - 1)))):

@@ -1,12 +1,12 @@
 """Per-pixel colour kernels, bit-exact with OpenCV (docs/kernels.md): BGR to GRAY,
 BGR to HSV, ``inRange``, and a traffic-light detector built from them."""
 
-from amaranth.hdl import Cat, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
 from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..params import check_int
+from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 from .image import (FrameGuard, check_image_params, image_kernel_members,
                     image_stream_signature)
@@ -217,11 +217,22 @@ class InRange(PixelKernel):
 
 
 def in_range(pixel, lower, upper):
-    """1 where every byte of ``pixel`` lies within the bytes of ``lower`` and ``upper``."""
-    ok = 1
+    """1 where every byte of ``pixel`` lies within the bytes of ``lower`` and ``upper``
+    (values, or tuples of constants per channel: then a comparison that always holds, with 0
+    or 255, is left out)."""
+    ok = Const(1, 1)
     for c in range(len(pixel) // 8):
         x = pixel.word_select(c, 8)
-        ok = ok & (x >= lower.word_select(c, 8)) & (x <= upper.word_select(c, 8))
+        if isinstance(lower, tuple):
+            if lower[c] > 0:
+                ok = ok & (x >= lower[c])
+        else:
+            ok = ok & (x >= lower.word_select(c, 8))
+        if isinstance(upper, tuple):
+            if upper[c] < 255:
+                ok = ok & (x <= upper[c])
+        else:
+            ok = ok & (x <= upper.word_select(c, 8))
     return ok
 
 
@@ -248,9 +259,11 @@ class TrafficLightDetector(wiring.Component):
     width, height : In
         Frame size (see :class:`PixelKernel`).
     red_lower0, red_upper0, red_lower1, red_upper1, green_lower, green_upper : In(24)
-        HSV bounds (H in byte 0, S in byte 1, V in byte 2).
+        HSV bounds (H in byte 0, S in byte 1, V in byte 2); absent when the ``bounds``
+        parameter fixes them (a dict of these names to (H, S, V) tuples).
     min_pixels : In(31)
-        Pixels a colour needs for a detection.
+        Pixels a colour needs for a detection; absent when the ``min_pixels`` parameter fixes
+        it.
     err_short, err_long, err_size : Out(1)
         Bad frames (:class:`~hdl.kernels.image.FrameGuard`); a cut or padded frame still
         yields a detection (padding is black, so it never counts).
@@ -259,16 +272,25 @@ class TrafficLightDetector(wiring.Component):
     BOUNDS = ("red_lower0", "red_upper0", "red_lower1", "red_upper1", "green_lower",
               "green_upper")
 
-    def __init__(self, *, pixels_per_beat=1, max_width=640, max_height=480):
+    def __init__(self, *, pixels_per_beat=1, max_width=640, max_height=480, bounds=None,
+                 min_pixels=None):
         check_int("max_width", max_width, 1, 1 << 14)
         self._p, self._max_width, self._max_height = pixels_per_beat, max_width, max_height
+        if bounds is not None:
+            missing = [n for n in self.BOUNDS if n not in bounds]
+            if missing:
+                raise ParameterError("bounds", bounds, f"all of {', '.join(self.BOUNDS)}")
+            bounds = {n: tuple(bounds[n]) for n in self.BOUNDS}
+        self._bounds = bounds
+        self._min_pixels = (None if min_pixels is None else
+                            check_int("min_pixels", min_pixels, 0, (1 << 31) - 1))
         super().__init__({
             "i": In(image_stream_signature(3, pixels_per_beat)),
             "det": Out(AXIStreamSignature(64, keep=False)),
             "width": In(range(max_width + 1)),
             "height": In(range(max_height + 1)),
-            **{name: In(24) for name in self.BOUNDS},
-            "min_pixels": In(31),
+            **({name: In(24) for name in self.BOUNDS} if bounds is None else {}),
+            **({"min_pixels": In(31)} if min_pixels is None else {}),
             "err_short": Out(1),
             "err_long": Out(1),
             "err_size": Out(1),
@@ -286,12 +308,15 @@ class TrafficLightDetector(wiring.Component):
         red, green = Signal(31), Signal(31)
         red_n = red
         green_n = green
+        bound = (self._bounds.get if self._bounds is not None else
+                 lambda name: getattr(self, name))
+        min_pixels = self._min_pixels if self._min_pixels is not None else self.min_pixels
         for p in range(P):
             px = hsv.o.tdata.word_select(p, 24)
-            is_red = in_range(px, self.red_lower0, self.red_upper0) | \
-                in_range(px, self.red_lower1, self.red_upper1)
+            is_red = in_range(px, bound("red_lower0"), bound("red_upper0")) | \
+                in_range(px, bound("red_lower1"), bound("red_upper1"))
             red_n = red_n + is_red
-            green_n = green_n + in_range(px, self.green_lower, self.green_upper)
+            green_n = green_n + in_range(px, bound("green_lower"), bound("green_upper"))
         det_valid = Signal()
         m.d.comb += [self.det.tvalid.eq(det_valid), self.det.tlast.eq(1),
                      hsv.o.tready.eq(~(det_valid & ~self.det.tready & hsv.o.tlast))]
@@ -302,9 +327,9 @@ class TrafficLightDetector(wiring.Component):
                 det = data.View(TRAFFIC_DETECTION, self.det.tdata)
                 m.d.sync += [red.eq(0), green.eq(0), det_valid.eq(1),
                              det.red_pixels.eq(red_n[:31]),
-                             det.red.eq(red_n[:31] >= self.min_pixels),
+                             det.red.eq(red_n[:31] >= min_pixels),
                              det.green_pixels.eq(green_n[:31]),
-                             det.green.eq(green_n[:31] >= self.min_pixels)]
+                             det.green.eq(green_n[:31] >= min_pixels)]
             with m.Else():
                 m.d.sync += [red.eq(red_n), green.eq(green_n)]
         return m

@@ -78,9 +78,6 @@ class LaneDetector(wiring.Component):
         m.d.comb += [hsv.width.eq(W), hsv.height.eq(H), self.err_short.eq(hsv.err_short),
                      self.err_long.eq(hsv.err_long), self.err_size.eq(hsv.err_size)]
 
-        def bound(values):
-            return Const(values[0] | values[1] << 8 | values[2] << 16, 24)
-
         row, col = Signal(range(H + 1)), Signal(range(W + 1))
         count_bits = (W * H).bit_length()
         sum_bits = (W * W * H).bit_length()
@@ -91,8 +88,8 @@ class LaneDetector(wiring.Component):
         in_band = row >= self._band_top
         for p in range(P):
             px = hsv.o.tdata.word_select(p, 24)
-            yellow = in_band & in_range(px, bound(self._yellow[0]), bound(self._yellow[1]))
-            white = in_band & in_range(px, bound(self._white[0]), bound(self._white[1]))
+            yellow = in_band & in_range(px, self._yellow[0], self._yellow[1])
+            white = in_band & in_range(px, self._white[0], self._white[1])
             add_ny = add_ny + yellow
             add_nw = add_nw + white
             add_sy = add_sy + Mux(yellow, col + p, 0)

@@ -88,8 +88,9 @@ class PerspectiveWarp(wiring.Component):
     ----------
     matrix : 3x3 numbers
         The inverse map, destination pixel -> source pixel (``cv2.invert(H)`` of the forward
-        homography, which ``cv2.warpPerspective`` uses); its bottom row must make the
-        denominator positive over the whole destination (checked at the four corners).
+        homography, which ``cv2.warpPerspective`` uses); its bottom row must give the
+        denominator one sign over the whole destination (checked at the four corners; a
+        negative one is made positive by scaling the map by -1).
     src_width, src_height : int
         The source frame (the input must be exactly this size).
     dst_width, dst_height : int
@@ -126,9 +127,14 @@ class PerspectiveWarp(wiring.Component):
             raise ParameterError("matrix", matrix, "3 rows of 3 numbers")
         self._m = [_fixed(v, f"matrix[{i // 3}][{i % 3}]")
                    for i, v in enumerate(x for r in rows for x in r)]
+        corners = ((0, 0), (dst_width - 1, 0), (0, dst_height - 1),
+                   (dst_width - 1, dst_height - 1))
         m6, m7, m8 = self._m[6:]
-        for x, y in ((0, 0), (dst_width - 1, 0), (0, dst_height - 1),
-                     (dst_width - 1, dst_height - 1)):
+        if all(m6 * x + m7 * y + m8 < 0 for x, y in corners):
+            # the same map scaled by -1: the denominator becomes positive
+            self._m = [-v for v in self._m]
+        m6, m7, m8 = self._m[6:]
+        for x, y in corners:
             if m6 * x + m7 * y + m8 <= 0:
                 raise ParameterError("matrix", matrix,
                                      f"a map whose denominator is positive over the "

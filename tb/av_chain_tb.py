@@ -1,0 +1,151 @@
+"""The test bench of the ``av_chain`` top (gen.av_chain.AvChain): driving-scene frames into the
+camera port, every topic's tap and the command port recorded with the cycle of each beat, and
+the software chain (host/autorace.py, OpenCV) as the golden model of every stage."""
+
+import logging
+import os
+import random
+import sys
+
+import cocotb
+import numpy as np
+from cocotb.clock import Clock
+from cocotb.triggers import RisingEdge
+from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
+
+from host import autorace
+from tb.harness import ROOT, bench_params
+from tb.streams import PacketSink, bursty_pauses, random_pauses, reset_aresetn
+
+sys.path.insert(0, str(ROOT / "examples" / "av_chain"))
+import scene  # noqa: E402  (the example's scene generator)
+
+__all__ = ["CLOCK_NS", "SMALL", "AvChainTB", "chain_params"]
+
+CLOCK_NS = 10
+
+
+def chain_params(scale, pixels_per_beat):
+    """The top's parameters for the scene at ``scale``."""
+    g = scene.Geometry(scale)
+    return dict(corners=g.corners, bev_corners=g.bev_corners, camera=g.camera, bev=g.bev,
+                pixels_per_beat=pixels_per_beat, band_top=g.band_top,
+                lane_width=g.lane_width, lane_min_pixels=max(1, round(200 * scale ** 2)),
+                light_min_pixels=max(1, round(100 * scale ** 2)),
+                target=g.sized(500))
+
+
+#: the short configuration: the scene at a fifth of its size, 4 pixels per beat
+SMALL = chain_params(0.2, 4)
+
+
+class AvChainTB:
+    TAPS = ("tap_a", "tap_b", "tap_c", "tap_d", "tap_e", "tap_f", "command")
+
+    def __init__(self, dut):
+        self.dut = dut
+        self.params = bench_params()
+        self.p = self.params["pixels_per_beat"]
+        self.camera_size, self.bev_size = tuple(self.params["camera"]), tuple(self.params["bev"])
+        self.rng = random.Random(cocotb.RANDOM_SEED)
+        self.log = logging.getLogger("cocotb.tb")
+        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        self.source = AxiStreamSource(AxiStreamBus.from_prefix(dut, "camera"), dut.aclk,
+                                      dut.aresetn, reset_active_level=False)
+        self.source.log.setLevel(logging.WARNING)
+        self.sinks = {name: PacketSink(dut, name, dut.aclk) for name in self.TAPS}
+        self.frame_in = []           # cycle of each camera frame's last beat
+        self.cycle = 0
+        cocotb.start_soon(self._watch_camera())
+        g = scene.Geometry(self.params["camera"][0] / scene.CAMERA_SIZE[0])
+        self.geometry = g
+        self.matrix = g.homography()
+        self.lane_params = autorace.LaneParams(band_top=self.params["band_top"],
+                                               lane_width=self.params["lane_width"],
+                                               min_pixels=self.params["lane_min_pixels"])
+        self.light_params = autorace.LightParams(min_pixels=self.params["light_min_pixels"])
+        self.control_params = autorace.ControlParams(target=self.params["target"])
+
+    async def _watch_camera(self):
+        d = self.dut
+        while True:
+            await RisingEdge(d.aclk)
+            self.cycle += 1
+            if d.camera_tvalid.value == 1 and d.camera_tready.value == 1 and \
+                    d.camera_tlast.value == 1:
+                self.frame_in.append(self.cycle)
+
+    async def reset(self):
+        await reset_aresetn(self.dut)
+
+    def set_pauses(self, idle, backpressure):
+        self.source.set_pause_generator(random_pauses(random.Random(self.rng.random()), idle)
+                                        if idle else None)
+        for sink in self.sinks.values():
+            sink.set_pause_generator(bursty_pauses(random.Random(self.rng.random()),
+                                                   backpressure, 8) if backpressure else None)
+
+    async def send(self, image):
+        await self.source.send(AxiStreamFrame(image.tobytes()))
+
+    def frames(self, count, **kwargs):
+        return list(scene.frames(count, geometry=self.geometry, **kwargs))
+
+    def images(self, tap, size):
+        w, h = size
+        return [np.frombuffer(bytes(p.data), np.uint8).reshape(h, w, 3)
+                for p in self.sinks[tap].packets]
+
+    async def wait_for(self, condition, timeout_cycles, what):
+        for _ in range(timeout_cycles):
+            if condition():
+                return
+            await RisingEdge(self.dut.aclk)
+        raise AssertionError(f"timeout after {timeout_cycles} cycles waiting for {what}")
+
+    def check_stages(self, frames):
+        """Every stage against OpenCV and the software nodes; returns the per-frame report."""
+        comp = self.images("tap_a", self.camera_size)
+        blurred = self.images("tap_b", self.camera_size)
+        bev = self.images("tap_c", self.bev_size)
+        lanes = [int.from_bytes(p.data, "little") for p in self.sinks["tap_d"].packets]
+        stops = [int.from_bytes(p.data, "little") for p in self.sinks["tap_e"].packets]
+        starts = [int.from_bytes(p.data, "little") for p in self.sinks["tap_f"].packets]
+        commands = [int.from_bytes(p.data, "little") for p in self.sinks["command"].packets]
+        assert len(comp) == len(blurred) == len(bev) == len(lanes) == len(commands) == \
+            len(frames), (len(comp), len(blurred), len(bev), len(lanes), len(commands))
+        from hdl.kernels.lane import DRIVE_COMMAND, LANE_RESULT
+        control = autorace.LaneControl(self.control_params)
+        armed, expected_stops, expected_starts = False, [], []
+        report = []
+        for k, f in enumerate(frames):
+            a, _, _ = autorace.compensate(f.image)
+            assert (comp[k] == a).all(), f"frame {k}: compensation differs from OpenCV"
+            b = autorace.blur(comp[k])
+            assert (blurred[k] == b).all(), f"frame {k}: blur differs from OpenCV"
+            c = autorace.project(blurred[k], self.matrix, self.bev_size)
+            diff = np.abs(bev[k].astype(int) - c.astype(int))
+            assert diff.max() <= 1, f"frame {k}: projection differs by {diff.max()}"
+            centre, left, right = autorace.lane_centre(bev[k], self.lane_params)
+            r = LANE_RESULT.from_bits(lanes[k])
+            got = (r.centre if r.has_centre else None, r.left if r.has_left else None,
+                   r.right if r.has_right else None)
+            assert got == (centre, left, right), f"frame {k}: lane {got} != {centre, left, right}"
+            red, green = autorace.traffic_lights(comp[k], self.light_params)
+            if red:
+                expected_stops.append(k)
+                control.stop()
+                armed = True
+            if green and armed:
+                expected_starts.append(k)
+                control.start()
+                armed = False
+            cmd = DRIVE_COMMAND.from_bits(commands[k])
+            assert (cmd.speed, cmd.turn) == control.step(centre), f"frame {k}: command"
+            report.append({"frame": k, "centre": centre, "truth": f.centre,
+                           "light": f.light, "off_by_one": int((diff.max(axis=2) > 0).sum())})
+        assert stops == expected_stops and starts == expected_starts, (stops, starts)
+        return report
+
+
+PARAMS = bench_params() if "ROSGATE_PARAMS" in os.environ else {}
