@@ -12,8 +12,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import (ball_on_plate, finemb, hmt, kernels, msg, net, reconos,  # noqa: E402
-                   reconos_apps, ros2, services, timing)
+from bench import (av_chain, ball_on_plate, finemb, hmt, kernels, msg, net,  # noqa: E402
+                   reconos, reconos_apps, ros2, services, timing)
 from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -32,6 +32,7 @@ BENCHES = [
     ("ROS 2 bridge: overhead per message against a Cyclone loopback round trip", ros2),
     ("ball-on-plate control loop: four hardware threads closed through a plant model",
      ball_on_plate),
+    ("the fpgaDDS lane-following chain: chain alpha over 100 scene frames", av_chain),
     ("services and actions over hardware topics against ReconROS' memory-based services",
      services),
     ("timing: every core placed and routed on ECP5 (LFE5UM5G-85F-8), 3 seeds", timing),

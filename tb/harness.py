@@ -45,7 +45,7 @@ SIM_BUILD = ROOT / "sim_build"
 #: Tops whose Verilator model is compiled without optimisation (``OPT_FAST=-O0``): their C++
 #: is large and their benches simulate little, so the build dominates (ros1_node: 41 s for
 #: build and run at -O0 against 80 s at the default -Os, on 2 cores without ccache).
-QUICK_BUILD_TOPS = frozenset({"ros1_node", "finemb_node", "finemb_line", "av_chain"})
+QUICK_BUILD_TOPS = frozenset({"ros1_node", "finemb_node", "finemb_line"})
 
 bench_params = top_params
 bench_manifest = top_manifest
