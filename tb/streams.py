@@ -111,7 +111,12 @@ class PacketSink(_Pausable):
         self.current = Packet()
         self.cycle = 0
         self.tready.value = 0
-        cocotb.start_soon(self._run())
+        self._task = cocotb.start_soon(self._run())
+
+    def stop(self, ready=1):
+        """Stop taking beats; leave ``tready`` at ``ready``."""
+        self._task.cancel()
+        self.tready.value = ready
 
     async def _run(self):
         while True:
