@@ -9,6 +9,7 @@ import os
 import statistics
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from bench.report import write_report
 from tb.av_chain_tb import chain_params
@@ -54,14 +55,19 @@ def measure(log=print):
     log(f"  generating {FRAMES} scene frames...")
     frames = list(scene.frames(FRAMES))
     entries, per_frame = [], {}
-    for p in (4, 1):
-        out = SIM_BUILD / f"bench-av_chain-p{p}.json"
-        log(f"  simulating the hardware-topic chain at {p} px/clk over {FRAMES} frames "
-            f"(Verilator)...")
+    ppcs = (4, 1)
+    outs = {p: SIM_BUILD / f"bench-av_chain-p{p}.json" for p in ppcs}
+
+    def simulate(p):
         run_bench("bench.av_chain_bench", "av_chain", f"bench_p{p}", chain_params(1.0, p),
                   "verilator", quiet=True, optimise=True,
-                  extra_env={"ROSGATE_BENCH_OUT": str(out), "ROSGATE_AV_FRAMES": str(FRAMES)})
-        rec = json.loads(out.read_text())
+                  extra_env={"ROSGATE_BENCH_OUT": str(outs[p]), "ROSGATE_AV_FRAMES": str(FRAMES)})
+    log(f"  simulating the hardware-topic chain at {' and '.join(map(str, ppcs))} px/clk over "
+        f"{FRAMES} frames each, side by side (Verilator; about half an hour)...")
+    with ThreadPoolExecutor(len(ppcs)) as pool:
+        list(pool.map(simulate, ppcs))
+    for p in ppcs:
+        rec = json.loads(outs[p].read_text())
         ms = [c / (CLOCK_MHZ * 1e3) for c in rec["latencies"]]
         mean, sd = _stats(ms)
         error = max(abs(r["centre"] - r["truth"]) for r in rec["frames"])
