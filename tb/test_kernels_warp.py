@@ -7,7 +7,6 @@ pixel), so a pixel may differ by 1 where the interpolated value lies within floa
 of a half; never by more (docs/kernels.md). Bad frames (short, long) are flagged and the
 next frame is right; a map to infinity is refused."""
 
-import random
 
 import numpy as np
 import pytest

@@ -9,7 +9,7 @@ from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
 from ..params import ParameterError, check_power_of_two
 from ..stream import AXIStreamSignature, StreamRepacker
-from .service import BODY_STREAM, ReplyStatus, ServiceServer
+from .service import ReplyStatus, ServiceServer
 from .topic import HW_TOPIC_STREAM
 
 __all__ = ["SortServer", "WordFeeder"]
