@@ -8,7 +8,8 @@ from amaranth.lib.memory import Memory
 
 from ..params import ParameterError, check_int
 from .colour import GRAY_WEIGHTS
-from .equalize import ROUND_STAGES, _shift_for_rounding, round_to_float32
+from .equalize import (ROUND_STAGES, _shift_for_rounding, histogram_banks, round_to_float32,
+                       stream_through_table)
 from .image import FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["ImageCompensation", "clip_hundredths"]
@@ -98,13 +99,7 @@ class ImageCompensation(wiring.Component):
                      self.err_size.eq(guard.err_size)]
 
         m.submodules.frame = frame = SyncFIFOBuffered(width=24 * P + 1, depth=max_pixels // P)
-        hists = []
-        for p in range(P):
-            mem = Memory(shape=count_bits, depth=256, init=[])
-            m.submodules[f"hist{p}"] = mem
-            wr = mem.write_port()
-            rd = mem.read_port(transparent_for=(wr,))
-            hists.append((wr, rd))
+        hists = histogram_banks(m, P, count_bits)
         m.submodules.lut = lut = Memory(shape=8, depth=256, init=[])
         lut_wr = lut.write_port()
 
@@ -136,23 +131,7 @@ class ImageCompensation(wiring.Component):
                 m.d.sync += filling.eq(0)
 
         # output: every channel through the table
-        draining = Signal()
-        o_valid, o_first = Signal(), Signal(init=1)
-        adv = Signal()
-        m.d.comb += [adv.eq(~o_valid | self.o.tready), self.o.tvalid.eq(o_valid),
-                     frame.r_en.eq(adv & draining)]
-        for k in range(3 * P):
-            port = lut.read_port()
-            m.d.comb += [port.addr.eq(frame.r_data.word_select(k, 8)), port.en.eq(adv),
-                         self.o.tdata.word_select(k, 8).eq(port.data)]
-        out_last = frame.r_data[24 * P]
-        with m.If(adv):
-            m.d.sync += [o_valid.eq(draining & frame.r_rdy), self.o.tlast.eq(out_last),
-                         self.o.tuser.eq(o_first)]
-            with m.If(draining & frame.r_rdy):
-                m.d.sync += o_first.eq(out_last)
-                with m.If(out_last):
-                    m.d.sync += draining.eq(0)
+        draining = stream_through_table(m, frame, lut, self.o, 3 * P)
 
         # the limits: one scan of the bins (clearing them)
         j = Signal(9)

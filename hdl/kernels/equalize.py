@@ -8,7 +8,8 @@ from amaranth.lib.memory import Memory
 from ..params import ParameterError
 from .image import FrameGuard, check_image_params, image_kernel_members
 
-__all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32"]
+__all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32",
+           "histogram_banks", "stream_through_table"]
 
 #: the reciprocal 255 / D is computed as floor(255 * 2**SCALE_BITS / D) before rounding
 SCALE_BITS = 48
@@ -68,6 +69,44 @@ def round_to_float32(m, value, sticky_in, name, stage=_unregistered, *, bits=24)
     with m.Else():
         m.d.comb += [out_m.eq(mantissa), out_s.eq(shift)]
     return out_m, out_s
+
+
+def histogram_banks(m, banks, count_bits):
+    """``banks`` histograms of 256 bins (one per pixel of a beat): ``(write, read)`` port pairs,
+    each read transparent for its write, so a bin read in the cycle it is incremented sees
+    the new count."""
+    out = []
+    for p in range(banks):
+        mem = Memory(shape=count_bits, depth=256, init=[])
+        m.submodules[f"hist{p}"] = mem
+        wr = mem.write_port()
+        out.append((wr, mem.read_port(transparent_for=(wr,))))
+    return out
+
+
+def stream_through_table(m, frame, lut, o, values):
+    """Stream the frames of the buffer ``frame`` (``values`` bytes and a ``tlast`` bit per
+    entry) out on ``o``, every byte through the table ``lut``, once ``draining`` (returned) is
+    set; ``draining`` clears at the frame's last beat. ``tuser`` marks each frame's first
+    beat."""
+    draining = Signal()
+    o_valid, o_first = Signal(), Signal(init=1)
+    adv = Signal()
+    m.d.comb += [adv.eq(~o_valid | o.tready), o.tvalid.eq(o_valid),
+                 frame.r_en.eq(adv & draining)]
+    for k in range(values):
+        port = lut.read_port()
+        m.d.comb += [port.addr.eq(frame.r_data.word_select(k, 8)), port.en.eq(adv),
+                     o.tdata.word_select(k, 8).eq(port.data)]
+    out_last = frame.r_data[8 * values]
+    with m.If(adv):
+        m.d.sync += [o_valid.eq(draining & frame.r_rdy), o.tlast.eq(out_last),
+                     o.tuser.eq(o_first)]
+        with m.If(draining & frame.r_rdy):
+            m.d.sync += o_first.eq(out_last)
+            with m.If(out_last):
+                m.d.sync += draining.eq(0)
+    return draining
 
 
 #: registers in :func:`round_to_float32` when it is pipelined
@@ -137,13 +176,7 @@ class EqualizeHist(wiring.Component):
                      self.err_size.eq(guard.err_size)]
 
         m.submodules.frame = frame = SyncFIFOBuffered(width=8 * P + 1, depth=max_pixels // P)
-        hists = []
-        for p in range(P):
-            mem = Memory(shape=count_bits, depth=256, init=[])
-            m.submodules[f"hist{p}"] = mem
-            wr = mem.write_port()
-            rd = mem.read_port(transparent_for=(wr,))
-            hists.append((wr, rd))
+        hists = histogram_banks(m, P, count_bits)
         m.submodules.lut = lut = Memory(shape=8, depth=256, init=[])
         lut_wr = lut.write_port()
 
@@ -170,23 +203,7 @@ class EqualizeHist(wiring.Component):
                 m.d.sync += filling.eq(0)
 
         # output: through the table of the frame at the head of the buffer
-        draining = Signal()
-        o_valid, o_first = Signal(), Signal(init=1)
-        adv = Signal()
-        lut_rd = [lut.read_port() for _ in range(P)]
-        m.d.comb += [adv.eq(~o_valid | self.o.tready), self.o.tvalid.eq(o_valid),
-                     frame.r_en.eq(adv & draining)]
-        for p, port in enumerate(lut_rd):
-            m.d.comb += [port.addr.eq(frame.r_data.word_select(p, 8)), port.en.eq(adv),
-                         self.o.tdata.word_select(p, 8).eq(port.data)]
-        out_last = frame.r_data[8 * P]
-        with m.If(adv):
-            m.d.sync += [o_valid.eq(draining & frame.r_rdy), self.o.tlast.eq(out_last),
-                         self.o.tuser.eq(o_first)]
-            with m.If(draining & frame.r_rdy):
-                m.d.sync += o_first.eq(out_last)
-                with m.If(out_last):
-                    m.d.sync += draining.eq(0)
+        draining = stream_through_table(m, frame, lut, self.o, P)
 
         # the table: scan the bins (clearing them), divide once at the first non-empty one
         j = Signal(9)

@@ -99,6 +99,26 @@ def put_words(m, os, fifo, h_mbox, left, high, state, *, then):
             m.next = state
 
 
+def report_states(m, os, h_done, status_word, status, cycles, count, fifo, *, then):
+    """The states that report a call into mailbox ``h_done``: ``STATUS`` (``status_word``),
+    ``CYCLES``, ``RESULT_COUNT``, then the ``count`` result words of ``fifo`` when ``status``
+    is OK, else whatever ``fifo`` holds is dropped (a refused call left nothing, a bad reply
+    perhaps a cut packet); then ``then``."""
+    left, high = Signal(32, name="report_left"), Signal(name="report_high")
+    with m.State("STATUS"):
+        os.mbox_put(h_done, status_word, then="CYCLES")
+    with m.State("CYCLES"):
+        os.mbox_put(h_done, cycles, then="RESULT_COUNT")
+    with m.State("RESULT_COUNT"):
+        m.d.sync += [left.eq(count), high.eq(0)]
+        with m.If(status == CallStatus.OK):
+            os.mbox_put(h_done, count, then="RESULT_VALUES")
+        with m.Else():
+            os.mbox_put(h_done, count, then="DRAIN")
+    put_words(m, os, fifo, h_done, left, high, "RESULT_VALUES", then=then)
+    drain(m, fifo, "DRAIN", then=then)
+
+
 def drain(m, fifo, state, *, then):
     """State ``state``: drop whatever ``fifo`` holds, then go to ``then``."""
     with m.State(state):
@@ -169,7 +189,6 @@ class SortClientThread(HardwareThread):
         timing = Signal()
         with m.If(timing):
             m.d.sync += cycles.eq(cycles + 1)
-        left, high = Signal(32), Signal()
         m.d.comb += ser.fields.payload[self._in.path].eq(n)
         with m.FSM():
             with m.State("INIT"):
@@ -233,19 +252,7 @@ class SortClientThread(HardwareThread):
                 with m.If(des.error.valid):
                     m.d.sync += [timing.eq(0), status.eq(CallStatus.BAD_REPLY), count.eq(0)]
                     m.next = "STATUS"
-            with m.State("STATUS"):
-                os.mbox_put(h_done, status, then="CYCLES")
-            with m.State("CYCLES"):
-                os.mbox_put(h_done, cycles, then="RESULT_COUNT")
-            with m.State("RESULT_COUNT"):
-                m.d.sync += [left.eq(count), high.eq(0)]
-                with m.If(status == CallStatus.OK):
-                    os.mbox_put(h_done, count, then="RESULT_VALUES")
-                with m.Else():
-                    os.mbox_put(h_done, count, then="DRAIN")
-            put_words(m, os, in_fifo, h_done, left, high, "RESULT_VALUES", then="COUNT")
-            # a refused call left nothing, a bad reply perhaps a cut packet
-            drain(m, in_fifo, "DRAIN", then="COUNT")
+            report_states(m, os, h_done, status, status, cycles, count, in_fifo, then="COUNT")
         return m
 
 
@@ -312,8 +319,8 @@ class FibonacciClientThread(HardwareThread):
         feedbacks, cancel_code = Signal(8), Signal(8)
         result_status, status = Signal(8), Signal(8)
         cancel_sent, cancels_open, result_done = Signal(), Signal(2), Signal()
-        cycles, count, left = Signal(32), Signal(32), Signal(32)
-        high, timing = Signal(), Signal()
+        cycles, count = Signal(32), Signal(32)
+        timing = Signal()
         goal = client.goal_sequence
         with m.If(timing):
             m.d.sync += cycles.eq(cycles + 1)
@@ -385,17 +392,6 @@ class FibonacciClientThread(HardwareThread):
                 with m.If(client.cancel.ready):
                     m.d.sync += cancel_sent.eq(1)
                     m.next = "RUNNING"
-            with m.State("STATUS"):
-                os.mbox_put(h_done, Cat(status, result_status, cancel_code, feedbacks),
-                            then="CYCLES")
-            with m.State("CYCLES"):
-                os.mbox_put(h_done, cycles, then="RESULT_COUNT")
-            with m.State("RESULT_COUNT"):
-                m.d.sync += [left.eq(count), high.eq(0)]
-                with m.If(status == CallStatus.OK):
-                    os.mbox_put(h_done, count, then="RESULT_VALUES")
-                with m.Else():
-                    os.mbox_put(h_done, count, then="DRAIN")
-            put_words(m, os, in_fifo, h_done, left, high, "RESULT_VALUES", then="COMMAND")
-            drain(m, in_fifo, "DRAIN", then="COMMAND")
+            report_states(m, os, h_done, Cat(status, result_status, cancel_code, feedbacks),
+                          status, cycles, count, in_fifo, then="COMMAND")
         return m
