@@ -21,6 +21,7 @@ import pytest
 from host.cli import main as rosgate
 from host.project_sim import run_project_sim
 from tb.models import inverse_kinematics as ik_model
+from tb.models.services import fibonacci
 from tb.models.ball_control import BallControlModel, leg_words, servo_pulse
 
 from .harness import ROOT
@@ -198,13 +199,6 @@ def test_sort_action_example(tmp_path):
                               out=tmp_path / "b", args={"goals": "1", "size": "257"},
                               limit_ms=5)
     assert results["goals"] == [{"goal": 0, "size": 257, "accepted": False}]
-
-
-def fibonacci(n):
-    values = [0, 1][:n + 1]
-    while len(values) < n + 1:
-        values.append(values[-1] + values[-2])
-    return values
 
 
 @pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])

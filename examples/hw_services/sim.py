@@ -14,9 +14,13 @@ import random
 import cocotb
 from cocotb.triggers import Combine, Timer
 
-OK, REFUSED = 0, 1
-SUCCEEDED, CANCELED = 4, 5
-ERROR_NONE, ERROR_UNKNOWN_GOAL_ID, NO_CANCEL = 0, 2, 0xFF
+from hdl.dds.action import CancelStatus, GoalStatus
+from hdl.dds.fibonacci_server import MAX_ORDER
+from hdl.reconos.service_threads import CallStatus
+
+OK, REFUSED = CallStatus.OK, CallStatus.REFUSED
+SUCCEEDED, CANCELED = GoalStatus.SUCCEEDED, GoalStatus.CANCELED
+ERROR_NONE, ERROR_UNKNOWN_GOAL_ID = CancelStatus.ERROR_NONE, CancelStatus.ERROR_UNKNOWN_GOAL_ID
 
 
 def fibonacci(n):
@@ -71,7 +75,7 @@ async def _fibonacci_client(ctx, thread, goals):
             ctx.results["fibonacci_goals"].append(record)
             ctx.log(f"{thread}: goal order {order}: status {status}, result {result}, "
                     f"{feedbacks} feedbacks, {cycles} cycles")
-            if status != REFUSED or not 0 <= order <= 46:
+            if status != REFUSED or not 0 <= order <= MAX_ORDER:
                 break
             await Timer(2, "us")     # the server was busy: again
 
