@@ -13,14 +13,13 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from host.autorace import BEV_SIZE, CAMERA_SIZE
+from host.autorace import BEV_CORNERS, BEV_SIZE, CAMERA_SIZE
 
 import numpy as np
 
 #: camera points that become the bird's-eye corners (top-left, top-right, bottom-right,
 #: bottom-left), at scale 1
 CORNERS = ((260, 260), (380, 260), (620, 460), (20, 460))
-BEV_CORNERS = ((200, 0), (800, 0), (800, 600), (200, 600))
 LANE_WIDTH = 300
 STRIPE_WIDTH = 16
 BAND_TOP = 400
@@ -88,10 +87,6 @@ def lane_centre_at(t, y, scale=1.0):
 
 def phase(t, red_from, green_from):
     return "dark" if t < red_from else "red" if t < green_from else "green"
-
-
-def camera_homography(geometry=Geometry()):
-    return geometry.homography()
 
 
 def bird_view(t, rng, geometry=Geometry()):
