@@ -7,11 +7,11 @@ traffic lights are the integer rules of docs/av_chain.md, which the hardware nod
 too.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from gen.av_chain import BEV_CORNERS, homography, inverse_map
+from gen.av_chain import BEV_CORNERS, ChainConfig, homography, inverse_map
 
 __all__ = ["BEV_SIZE", "BEV_CORNERS", "CAMERA_SIZE", "LaneParams", "LightParams", "ControlParams",
            "compensate", "blur", "project", "homography", "inverse_map", "lane_centre",
@@ -19,6 +19,10 @@ __all__ = ["BEV_SIZE", "BEV_CORNERS", "CAMERA_SIZE", "LaneParams", "LightParams"
            "traffic_lights"]
 
 CAMERA_SIZE = (640, 480)
+#: the chain's parameters as the hardware takes them (gen.av_chain.ChainConfig): one
+#: definition for both
+_CHAIN = {f.name: f.default for f in fields(ChainConfig)}
+
 #: the bird's-eye view (width, height): AutoRace's projection output
 BEV_SIZE = (1000, 600)
 
@@ -79,13 +83,13 @@ class LaneParams:
     """Lane following: HSV bounds of the left (yellow) and right (white) stripe and the band of
     bird's-eye rows they are looked for in; ``lane_width`` places the centre when one stripe
     is missing."""
-    yellow_lower: tuple = (20, 100, 100)
-    yellow_upper: tuple = (40, 255, 255)
-    white_lower: tuple = (0, 0, 170)
-    white_upper: tuple = (179, 60, 255)
-    band_top: int = 400
-    lane_width: int = 300
-    min_pixels: int = 200
+    yellow_lower: tuple = _CHAIN["yellow"][0]
+    yellow_upper: tuple = _CHAIN["yellow"][1]
+    white_lower: tuple = _CHAIN["white"][0]
+    white_upper: tuple = _CHAIN["white"][1]
+    band_top: int = _CHAIN["band_top"]
+    lane_width: int = _CHAIN["lane_width"]
+    min_pixels: int = _CHAIN["lane_min_pixels"]
 
 
 def lane_centre(bev, params=LaneParams()):
@@ -122,11 +126,11 @@ def lane_centre(bev, params=LaneParams()):
 @dataclass(frozen=True)
 class ControlParams:
     """Lane control: PD gains in 1/1024 (mrad/s per pixel), top speed (mm/s), the limits."""
-    kp: int = 2560
-    kd: int = 7168
-    max_speed: int = 220
-    max_turn: int = 2000
-    target: int = 500
+    kp: int = _CHAIN["kp"]
+    kd: int = _CHAIN["kd"]
+    max_speed: int = _CHAIN["max_speed"]
+    max_turn: int = _CHAIN["max_turn"]
+    target: int = _CHAIN["target"]
 
 
 class LaneControl:
@@ -168,9 +172,9 @@ class LaneControl:
 class LightParams:
     """Traffic lights: HSV ranges of a lit red lamp (red wraps around H = 0) and a lit green
     one, and the pixels that make a detection."""
-    red_ranges: tuple = (((0, 150, 150), (10, 255, 255)), ((170, 150, 150), (179, 255, 255)))
-    green_range: tuple = ((45, 150, 150), (90, 255, 255))
-    min_pixels: int = 100
+    red_ranges: tuple = _CHAIN["red_ranges"]
+    green_range: tuple = _CHAIN["green_range"]
+    min_pixels: int = _CHAIN["light_min_pixels"]
 
 
 def traffic_lights(image, params=LightParams()):
