@@ -59,7 +59,10 @@ def detector_results(frames, p, *, seed=0):
     return out
 
 
-@pytest.mark.parametrize("p", [pytest.param(1, marks=pytest.mark.full), 4])
+# make test-full: make test runs LaneDetector at 1 px/clk against the same software node in
+# tb/test_av_chain.py
+@pytest.mark.parametrize("p", [pytest.param(1, marks=pytest.mark.full),
+                               pytest.param(4, marks=pytest.mark.full)])
 def test_detector_equals_the_software_node(p):
     rng = np.random.default_rng(p)
     frames = [road(rng, 70, 130), road(rng, 63.5, 141), road(rng, left=50),

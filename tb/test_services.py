@@ -21,7 +21,9 @@ SORT_TESTS = ["sort_concurrent_clients", "sort_bad_requests", "sort_unmatched_re
 ACTION_TESTS = ["fibonacci_concurrent_goals", "fibonacci_cancel", "fibonacci_bad_input"]
 
 CONFIGS = {"sort": SORT, "fibonacci": FIBONACCI}
-test_services_sort = cocotb_bench("services", {"sort": SORT}, testcases=SORT_TESTS)
+# Verilator in make test-full (make test: Icarus; both simulators build the same top)
+test_services_sort = cocotb_bench("services", {"sort": SORT}, testcases=SORT_TESTS,
+                                  long=[("sort", "verilator")])
 # the action's Verilator run is in make test-full (make test: the service on both simulators)
 test_services_fibonacci = cocotb_bench("services", {"fibonacci": FIBONACCI},
                                        testcases=ACTION_TESTS,
