@@ -18,13 +18,13 @@ from amaranth.lib.wiring import In, Out
 
 from hdl.dds import Topic
 from hdl.kernels import (GaussianBlur, ImageCompensation, LaneControl, LaneDetector,
-                         PerspectiveWarp, TrafficLightDetector)
-from hdl.kernels.colour import TRAFFIC_DETECTION
+                         LightEvent, LightNode, PerspectiveWarp, TrafficLightDetector)
 from hdl.kernels.image import image_stream_signature
-from hdl.stream import AXIStreamSignature
+from hdl.kernels.lane import EVENT_STREAM
 
-__all__ = ["ChainConfig", "AvChain", "LightEvent", "homography", "inverse_map", "BEV_CORNERS",
-           "chain_config"]
+__all__ = ["ChainConfig", "AvChain", "homography", "inverse_map", "BEV_CORNERS",
+           "CAMERA_CORNERS", "NODES", "chain_config", "chain_node", "scaled_params",
+           "scaled_config", "reconros_thread"]
 
 #: where the corners of AutoRace's 1000x600 bird's-eye view lie in it: top-left, top-right,
 #: bottom-right, bottom-left
@@ -55,7 +55,29 @@ def chain_config(*, corners, bev_corners=BEV_CORNERS, **params):
     return ChainConfig(matrix=tuple(tuple(float(v) for v in row) for row in matrix),
                        **params)
 
-EVENT_STREAM = AXIStreamSignature(64, keep=False)
+
+#: the camera points of the example scene (examples/av_chain) that become the bird's-eye
+#: corners, top-left, top-right, bottom-right, bottom-left, at scale 1
+CAMERA_CORNERS = ((260, 260), (380, 260), (620, 460), (20, 460))
+
+
+def scaled_params(scale=1.0, pixels_per_beat=4):
+    """The :func:`chain_config` arguments of the example chain at ``scale`` (1: the 640x480
+    camera and the 1000x600 bird's-eye view; the short tests use 0.2): sizes, corners, the
+    lane band and the controller's target scale with the image, pixel counts with its area."""
+    def sized(v):
+        return int(round(v * scale))
+    return dict(corners=tuple((sized(x), sized(y)) for x, y in CAMERA_CORNERS),
+                bev_corners=tuple((sized(x), sized(y)) for x, y in BEV_CORNERS),
+                camera=(sized(640), sized(480)), bev=(sized(1000), sized(600)),
+                pixels_per_beat=pixels_per_beat, band_top=sized(400),
+                lane_width=2 * sized(150), lane_min_pixels=max(1, round(200 * scale ** 2)),
+                light_min_pixels=max(1, round(100 * scale ** 2)), target=sized(500))
+
+
+def scaled_config(scale=1.0, pixels_per_beat=4):
+    """The :class:`ChainConfig` of :func:`scaled_params`."""
+    return chain_config(**scaled_params(scale, pixels_per_beat))
 
 
 @dataclass(frozen=True)
@@ -83,46 +105,45 @@ class ChainConfig:
     target: int = 500
 
 
-class LightEvent(wiring.Component):
-    """Turns a traffic-light detector's beat per frame into events: ``colour`` ``"red"``
-    sends a stop event on every frame with red; ``"green"`` sends a start event on a frame
-    with green once armed by a stop event (``arm``), and disarms.
+#: the chain's nodes, in the order of the diagram
+NODES = ("compensation", "blur", "projection", "lane_following", "lane_control", "red_light",
+         "green_light")
 
-    Members
-    -------
-    det : In(AXIStreamSignature(64, keep=False))
-        :data:`~hdl.kernels.colour.TRAFFIC_DETECTION` beats.
-    arm : In(stream.Signature(1))
-        Stop events (green only; always ready).
-    event : Out(EVENT_STREAM)
-        One beat per event, ``tdata`` the frame's number, ``tlast`` set.
-    """
 
-    def __init__(self, colour):
-        self.colour = colour
-        super().__init__({"det": In(EVENT_STREAM), "arm": In(stream.Signature(1)),
-                          "event": Out(EVENT_STREAM)})
-
-    def elaborate(self, platform):
-        m = Module()
-        det = TRAFFIC_DETECTION(self.det.tdata)
-        frame = Signal(32)
-        armed = Signal()
-        seen = det.red if self.colour == "red" else (det.green & armed)
-        pending = Signal()
-        m.d.comb += [self.arm.ready.eq(1), self.event.tvalid.eq(pending),
-                     self.event.tlast.eq(1), self.det.tready.eq(~pending)]
-        with m.If(self.arm.valid):
-            m.d.sync += armed.eq(1)
-        with m.If(self.event.tvalid & self.event.tready):
-            m.d.sync += pending.eq(0)
-        with m.If(self.det.tvalid & self.det.tready):
-            m.d.sync += frame.eq(frame + 1)
-            with m.If(seen):
-                m.d.sync += [pending.eq(1), self.event.tdata.eq(frame)]
-                if self.colour == "green":
-                    m.d.sync += armed.eq(0)
-        return m
+def chain_node(config, name, *, events=False):
+    """The kernel of node ``name`` (one of :data:`NODES`) of the chain ``config``; with
+    ``events`` a traffic-light node is a :class:`~hdl.kernels.LightNode` (detector and event
+    rule, a beat per frame), otherwise only its detector."""
+    c = config
+    P = c.pixels_per_beat
+    (cw, ch), (bw, bh) = c.camera, c.bev
+    (rl0, ru0), (rl1, ru1) = c.red_ranges
+    light = dict(pixels_per_beat=P, max_width=cw, max_height=ch,
+                 bounds={"red_lower0": rl0, "red_upper0": ru0, "red_lower1": rl1,
+                         "red_upper1": ru1, "green_lower": c.green_range[0],
+                         "green_upper": c.green_range[1]},
+                 min_pixels=c.light_min_pixels)
+    if name in ("red_light", "green_light"):
+        colour = name.split("_")[0]
+        return LightNode(colour, **light) if events else TrafficLightDetector(**light)
+    builders = {
+        "compensation": lambda: ImageCompensation(clip_percent=c.clip_percent,
+                                                  pixels_per_beat=P, max_width=cw,
+                                                  max_height=ch),
+        "blur": lambda: GaussianBlur(c.blur_ksize, pixels_per_beat=P, max_width=cw,
+                                     max_height=ch),
+        "projection": lambda: PerspectiveWarp(c.matrix, src_width=cw, src_height=ch,
+                                              dst_width=bw, dst_height=bh, pixels_per_beat=P),
+        "lane_following": lambda: LaneDetector(width=bw, height=bh, band_top=c.band_top,
+                                               lane_width=c.lane_width,
+                                               min_pixels=c.lane_min_pixels, yellow=c.yellow,
+                                               white=c.white, pixels_per_beat=P),
+        "lane_control": lambda: LaneControl(kp=c.kp, kd=c.kd, max_speed=c.max_speed,
+                                            max_turn=c.max_turn, target=c.target),
+    }
+    if name not in builders:
+        raise ValueError(f"no chain node {name!r}; the nodes are {', '.join(NODES)}")
+    return builders[name]()
 
 
 class AvChain(wiring.Component):
@@ -159,31 +180,9 @@ class AvChain(wiring.Component):
         P = c.pixels_per_beat
         (cw, ch), (bw, bh) = c.camera, c.bev
         img = image_stream_signature(3, P)
-        (rl0, ru0), (rl1, ru1) = c.red_ranges
-        light_bounds = {"red_lower0": rl0, "red_upper0": ru0, "red_lower1": rl1,
-                        "red_upper1": ru1, "green_lower": c.green_range[0],
-                        "green_upper": c.green_range[1]}
-        nodes = {
-            "compensation": ImageCompensation(clip_percent=c.clip_percent, pixels_per_beat=P,
-                                              max_width=cw, max_height=ch),
-            "blur": GaussianBlur(c.blur_ksize, pixels_per_beat=P, max_width=cw, max_height=ch),
-            "projection": PerspectiveWarp(c.matrix, src_width=cw, src_height=ch,
-                                          dst_width=bw, dst_height=bh, pixels_per_beat=P),
-            "lane_following": LaneDetector(width=bw, height=bh, band_top=c.band_top,
-                                           lane_width=c.lane_width,
-                                           min_pixels=c.lane_min_pixels, yellow=c.yellow,
-                                           white=c.white, pixels_per_beat=P),
-            "lane_control": LaneControl(kp=c.kp, kd=c.kd, max_speed=c.max_speed,
-                                        max_turn=c.max_turn, target=c.target),
-            "red_light": TrafficLightDetector(pixels_per_beat=P, max_width=cw, max_height=ch,
-                                              bounds=light_bounds,
-                                              min_pixels=c.light_min_pixels),
-            "green_light": TrafficLightDetector(pixels_per_beat=P, max_width=cw,
-                                                max_height=ch, bounds=light_bounds,
-                                                min_pixels=c.light_min_pixels),
-            "red_event": LightEvent("red"),
-            "green_event": LightEvent("green"),
-        }
+        nodes = {name: chain_node(c, name) for name in NODES}
+        nodes["red_event"] = LightEvent("red")
+        nodes["green_event"] = LightEvent("green")
         for name, node in nodes.items():
             m.submodules[name] = node
         comp, blur, proj = nodes["compensation"], nodes["blur"], nodes["projection"]
@@ -232,3 +231,40 @@ class AvChain(wiring.Component):
         for k, e in enumerate(errors):
             m.d.comb += self.errors[k].eq(e)
         return m
+
+
+def reconros_thread(ctx, name):
+    """The ReconOS hardware thread of node ``name`` (one of :data:`NODES`) for a project's
+    ``build(ctx)`` (examples/av_chain): its kernel in a
+    :class:`~hdl.reconos.image_node.ImageNodeThread` or, for lane control, a
+    :class:`~hdl.reconos.image_node.LaneControlThread`, with the resource names of the
+    example's build.cfg. The thread's ``Parameters`` ``scale`` and ``pixels_per_beat`` choose
+    the :func:`scaled_config`."""
+    from hdl.reconos.image_node import ImageNodeThread, LaneControlThread
+    try:
+        scale = float(ctx.params.get("scale", 1))
+    except ValueError:
+        raise ValueError(f"scale={ctx.params['scale']!r} is not a number") from None
+    if not 0 < scale <= 1:
+        raise ValueError(f"scale={scale!r} is not in (0, 1]")
+    ppc = ctx.params.get("pixels_per_beat", "4")
+    if not str(ppc).isdigit():
+        raise ValueError(f"pixels_per_beat={ppc!r} is not 1, 2, 4 or 8")
+    c = scaled_config(scale, int(ppc))
+    kernel = chain_node(c, name, events=True)
+    h = ctx.handle
+    if name == "lane_control":
+        return LaneControlThread(ctx.arch, kernel, h_lane=h("lane"), h_lane_msg=h("lane_in"),
+                                 h_stop=h("stop"), h_stop_msg=h("stop_in"), h_start=h("start"),
+                                 h_start_msg=h("start_in"), h_pub=h("pub"), h_out=h("cmd_out"))
+    has = {r.name for r in ctx.thread.resources}
+    out = {"lane_following": "lane_out", "red_light": "event_out",
+           "green_light": "event_out"}.get(name, "image_out")
+    sizes = {"compensation": (c.camera, c.camera), "blur": (c.camera, c.camera),
+             "projection": (c.camera, c.bev), "lane_following": (c.bev, None),
+             "red_light": (c.camera, None), "green_light": (c.camera, None)}[name]
+    arm = dict(h_arm=h("arm"), h_arm_msg=h("arm_in")) if name == "green_light" else {}
+    return ImageNodeThread(ctx.arch, kernel, h_sub=h("sub"), h_pub=h("pub"), h_in=h("image_in"),
+                           h_out=h(out), image_offsets=ctx.offsets("sensor_msgs/msg/Image"),
+                           in_size=sizes[0], out_size=sizes[1],
+                           h_err=h("bad_frames") if "bad_frames" in has else None, **arm)

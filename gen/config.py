@@ -369,8 +369,8 @@ def _parameters(sec, file):
 
 def apply_parameters(project, settings, option="--param"):
     """Set thread parameters from ``THREAD.NAME=VALUE`` strings (the command line's
-    ``--param``), over the build.cfg's ``Parameters``; a bad setting raises
-    :class:`ValueError` naming it."""
+    ``--param``; ``*.NAME=VALUE`` sets it for every thread), over the build.cfg's
+    ``Parameters``; a bad setting raises :class:`ValueError` naming it."""
     names = {t.name: t for t in project.threads}
     for setting in settings:
         target, eq, value = setting.partition("=")
@@ -378,6 +378,10 @@ def apply_parameters(project, settings, option="--param"):
         if not eq or not dot or not name.isidentifier() or not value:
             raise ValueError(f"{option} {setting!r}: expected THREAD.NAME=VALUE, for example "
                              f"Sobel.mode=reconros")
+        if thread == "*":
+            for t in project.threads:
+                t.params[name] = value
+            continue
         if thread not in names:
             raise ValueError(f"{option} {setting!r}: no thread {thread!r} in {project.path} "
                              f"(threads: {', '.join(names) or 'none'})")

@@ -15,8 +15,7 @@ from gen.av_chain import BEV_CORNERS, ChainConfig, homography, inverse_map
 
 __all__ = ["BEV_SIZE", "BEV_CORNERS", "CAMERA_SIZE", "LaneParams", "LightParams", "ControlParams",
            "compensate", "blur", "project", "homography", "inverse_map", "lane_centre",
-           "LaneControl",
-           "traffic_lights"]
+           "LaneControl", "traffic_lights", "ChainStep", "SoftwareChain"]
 
 CAMERA_SIZE = (640, 480)
 #: the chain's parameters as the hardware takes them (gen.av_chain.ChainConfig): one
@@ -188,3 +187,66 @@ def traffic_lights(image, params=LightParams()):
     green = cv2.inRange(hsv, np.array(params.green_range[0], np.uint8),
                         np.array(params.green_range[1], np.uint8)) > 0
     return int(red.sum()) >= params.min_pixels, int(green.sum()) >= params.min_pixels
+
+
+@dataclass
+class ChainStep:
+    """What the software chain made of one camera frame."""
+    compensated: np.ndarray      # topic A
+    blurred: np.ndarray          # topic B
+    projected: np.ndarray        # topic C, the bird's-eye view
+    lane: tuple                  # topic D: (centre, left, right) as lane_centre gives them
+    red: bool
+    green: bool
+    stop: bool                   # a stop event (topic E) for this frame
+    start: bool                  # a start event (topic F)
+    command: tuple               # (speed_mm_s, turn_mrad_s)
+
+
+class SoftwareChain:
+    """The whole chain of a :class:`gen.av_chain.ChainConfig` in software, frame by frame:
+    the reference of the hardware variants and the software variant itself. Traffic lights
+    are detected on the compensated image; red sends a stop event on every red frame and
+    arms green; green sends a start event on its first green frame after that."""
+
+    def __init__(self, config):
+        self.config = c = config
+        self.lane_params = LaneParams(yellow_lower=c.yellow[0], yellow_upper=c.yellow[1],
+                                      white_lower=c.white[0], white_upper=c.white[1],
+                                      band_top=c.band_top, lane_width=c.lane_width,
+                                      min_pixels=c.lane_min_pixels)
+        self.light_params = LightParams(red_ranges=c.red_ranges, green_range=c.green_range,
+                                        min_pixels=c.light_min_pixels)
+        self.control = LaneControl(ControlParams(kp=c.kp, kd=c.kd, max_speed=c.max_speed,
+                                                 max_turn=c.max_turn, target=c.target))
+        self.armed = False
+
+    def project(self, image):
+        """The projection with the config's destination -> source map (what
+        ``cv2.warpPerspective`` computes from the forward homography)."""
+        cv2 = _cv2()
+        return cv2.warpPerspective(image, np.array(self.config.matrix, np.float64),
+                                   tuple(self.config.bev),
+                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def step(self, image, bev=None):
+        """One camera frame through every node: a :class:`ChainStep`. With ``bev``, lane
+        following takes that bird's-eye view instead of its own projection: the reference of
+        a chain whose projection rounds differently (within 1, as the hardware does)."""
+        c = self.config
+        a = compensate(image, c.clip_percent)[0]
+        b = blur(a, c.blur_ksize)
+        projected = self.project(b)
+        lane = lane_centre(projected if bev is None else bev, self.lane_params)
+        red, green = traffic_lights(a, self.light_params)
+        stop = red
+        if red:
+            self.control.stop()
+            self.armed = True
+        start = green and self.armed
+        if start:
+            self.control.start()
+            self.armed = False
+        command = self.control.step(lane[0])
+        return ChainStep(a, b, projected, lane, red, green, stop, start, command)

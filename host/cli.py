@@ -219,7 +219,8 @@ def _add_project_commands(commands):
         p.add_argument("build_cfg", type=Path, help="the ReconROS project file (build.cfg)")
         p.add_argument("--param", action="append", default=[], metavar="THREAD.NAME=VALUE",
                        help="set a thread parameter over the build.cfg's Parameters "
-                            "(repeatable), e.g. Sobel.mode=reconros")
+                            "(repeatable), e.g. Sobel.mode=reconros; *.NAME=VALUE sets "
+                            "it for every thread")
         p.set_defaults(func=func, options={}, parser=p)
         return p
 

@@ -13,6 +13,7 @@ from cocotb.clock import Clock
 from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
+from gen.av_chain import scaled_params
 from host import autorace
 from tb.harness import ROOT, bench_params
 from tb.streams import PacketSink, bursty_pauses, random_pauses, reset_aresetn
@@ -25,14 +26,8 @@ __all__ = ["CLOCK_NS", "SMALL", "AvChainTB", "chain_params"]
 CLOCK_NS = 10
 
 
-def chain_params(scale, pixels_per_beat):
-    """The top's parameters for the scene at ``scale``."""
-    g = scene.Geometry(scale)
-    return dict(corners=g.corners, bev_corners=g.bev_corners, camera=g.camera, bev=g.bev,
-                pixels_per_beat=pixels_per_beat, band_top=g.band_top,
-                lane_width=g.lane_width, lane_min_pixels=max(1, round(200 * scale ** 2)),
-                light_min_pixels=max(1, round(100 * scale ** 2)),
-                target=g.sized(500))
+#: the top's parameters for the scene at a scale and pixels per beat
+chain_params = scaled_params
 
 
 #: the short configuration: the scene at a fifth of its size, 1 pixel per beat

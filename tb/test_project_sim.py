@@ -306,3 +306,26 @@ def test_ball_on_plate_settles(tmp_path):
     results = run_project_sim(BALL / "build.cfg", "verilator", out=tmp_path / "out",
                               args={"periods": "300"}, limit_ms=100)
     assert results["final_radius_mm"] < 3.0, results["final_radius_mm"]
+
+
+@pytest.mark.parametrize("sim", ["verilator", pytest.param("icarus", marks=pytest.mark.full)])
+def test_av_chain_reconros_variant(sim, tmp_path):
+    """examples/av_chain, its seven nodes ReconOS threads with their topics through memory,
+    the scene at a fifth of its size: bad frames are dropped by the node they reach and
+    reported with their number, the chain then runs frames that are dark, red, green: every
+    stage as OpenCV computes it (the projection within 1), lane centres near the scene's
+    ground truth, a stop event on each red frame and a start on the first green one, one
+    command per frame."""
+    results = run_project_sim(ROOT / "examples/av_chain/build.cfg", sim, out=tmp_path / "o",
+                              args={"frames": "4", "red_from": "1", "green_from": "3",
+                                    "bad_frames": "1"},
+                              thread_params=["*.scale=0.2", "*.pixels_per_beat=1"], limit_ms=20)
+    assert [(b["node"], b["frame"]) for b in results["bad_frames"]] == [
+        ("Compensation", 0), ("Compensation", 1), ("Compensation", 2), ("Compensation", 3),
+        ("LaneFollowing", 0)]
+    frames = results["frames"]
+    assert [f["light"] for f in frames] == ["dark", "red", "red", "green"]
+    assert results["stages_bit_exact"], frames
+    assert (results["stops"], results["starts"]) == ([1, 2], [3])
+    assert all(abs(f["centre"] - f["truth"]) <= 5 for f in frames), frames
+    assert [f["speed"] for f in frames][1:3] == [0, 0] and frames[3]["speed"] > 0

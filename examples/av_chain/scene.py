@@ -13,13 +13,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from gen.av_chain import CAMERA_CORNERS as CORNERS
 from host.autorace import BEV_CORNERS, BEV_SIZE, CAMERA_SIZE
 
 import numpy as np
 
-#: camera points that become the bird's-eye corners (top-left, top-right, bottom-right,
-#: bottom-left), at scale 1
-CORNERS = ((260, 260), (380, 260), (620, 460), (20, 460))
 LANE_WIDTH = 300
 STRIPE_WIDTH = 16
 BAND_TOP = 400

@@ -8,7 +8,7 @@ from .equalize import EqualizeHist
 from .gaussian import GaussianBlur
 from .image import FrameGuard
 from .inverse_kinematics import InverseKinematics
-from .lane import LaneControl, LaneDetector
+from .lane import LaneControl, LaneDetector, LightEvent, LightNode
 from .mnist import MnistCnn
 from .pid import PidController
 from .servo_pwm import ServoPwm
@@ -18,6 +18,6 @@ from .warp import PerspectiveWarp
 from .window import WindowFilter
 
 __all__ = ["BallControl", "BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur",
-           "ImageCompensation", "InRange", "InverseKinematics", "LaneControl", "LaneDetector", "MergeSorter", "MnistCnn", "PerspectiveWarp", "PidController",
+           "ImageCompensation", "InRange", "InverseKinematics", "LaneControl", "LaneDetector", "LightEvent", "LightNode", "MergeSorter", "MnistCnn", "PerspectiveWarp", "PidController",
            "PixelKernel", "ServoPwm", "Sobel", "SobelByteLanes", "TrafficLightDetector",
            "WindowFilter"]

@@ -7,10 +7,14 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
 from ..stream import AXIStreamSignature
-from .colour import BgrToHsv, in_range
+from .colour import TRAFFIC_DETECTION, BgrToHsv, in_range
 from .image import image_stream_signature
 
-__all__ = ["LaneDetector", "LaneControl", "LANE_RESULT", "DRIVE_COMMAND"]
+__all__ = ["LaneDetector", "LaneControl", "LightEvent", "LightNode", "LANE_RESULT",
+           "DRIVE_COMMAND", "EVENT_STREAM"]
+
+#: a stream of one-beat messages: lane results, light events, driving commands
+EVENT_STREAM = AXIStreamSignature(64, keep=False)
 
 #: one per frame: the means of the two stripes and the centre (bird's-eye columns)
 LANE_RESULT = data.StructLayout({"centre": signed(16), "left": 16, "right": 16,
@@ -284,4 +288,113 @@ class LaneControl(wiring.Component):
                              cmd.speed.eq(Mux(stopped, 0, speed)),
                              cmd.turn.eq(Mux(stopped, 0, turn))]
                 m.next = "WAIT"
+        return m
+
+
+class LightEvent(wiring.Component):
+    """Turns a traffic-light detector's beat per frame into events: ``colour`` ``"red"``
+    sends a stop event on every frame with red; ``"green"`` sends a start event on a frame
+    with green once armed by a stop event (``arm``), and disarms.
+
+    Parameters
+    ----------
+    colour : str
+        ``"red"`` or ``"green"``.
+    every_frame : bool
+        Emit a beat for every frame, ``tuser`` set on those that are events (for a node that
+        must know a frame is done, such as a ReconOS thread); otherwise only the events.
+
+    Members
+    -------
+    det : In(EVENT_STREAM)
+        :data:`~hdl.kernels.colour.TRAFFIC_DETECTION` beats.
+    arm : In(stream.Signature(1))
+        Stop events (green only; always ready).
+    event : Out(EVENT_STREAM)
+        One beat per event (or per frame), ``tdata`` the frame's number from 0, ``tlast`` set.
+    """
+
+    COLOURS = ("red", "green")
+
+    def __init__(self, colour, *, every_frame=False):
+        from ..params import check_choice
+        self.colour = check_choice("colour", colour, self.COLOURS)
+        self.every_frame = bool(every_frame)
+        out = AXIStreamSignature(64, keep=False, user_width=1) if every_frame else EVENT_STREAM
+        super().__init__({"det": In(EVENT_STREAM), "arm": In(stream.Signature(1)),
+                          "event": Out(out)})
+
+    def elaborate(self, platform):
+        m = Module()
+        det = data.View(TRAFFIC_DETECTION, self.det.tdata)
+        frame = Signal(32)
+        armed = Signal()
+        seen = det.red if self.colour == "red" else (det.green & armed)
+        pending = Signal()
+        m.d.comb += [self.arm.ready.eq(1), self.event.tvalid.eq(pending),
+                     self.event.tlast.eq(1), self.det.tready.eq(~pending)]
+        with m.If(self.arm.valid):
+            m.d.sync += armed.eq(1)
+        with m.If(self.event.tvalid & self.event.tready):
+            m.d.sync += pending.eq(0)
+        with m.If(self.det.tvalid & self.det.tready):
+            m.d.sync += frame.eq(frame + 1)
+            if self.every_frame:
+                m.d.sync += [pending.eq(1), self.event.tdata.eq(frame),
+                             self.event.tuser.eq(seen)]
+            else:
+                with m.If(seen):
+                    m.d.sync += [pending.eq(1), self.event.tdata.eq(frame)]
+            with m.If(seen):
+                if self.colour == "green":
+                    m.d.sync += armed.eq(0)
+        return m
+
+
+class LightNode(wiring.Component):
+    """A traffic-light node as one kernel: a :class:`~hdl.kernels.TrafficLightDetector` and a
+    :class:`LightEvent` that reports every frame (for a ReconOS thread, which publishes the
+    frames that are events).
+
+    Parameters
+    ----------
+    colour : str
+        ``"red"`` (stop events) or ``"green"`` (start events once armed).
+    **detector :
+        The :class:`~hdl.kernels.TrafficLightDetector` parameters.
+
+    Members
+    -------
+    i, width, height, err_short, err_long, err_size :
+        As the detector's.
+    arm : In(stream.Signature(1))
+        As :class:`LightEvent`'s.
+    o : Out(AXIStreamSignature(64, keep=False, user_width=1))
+        One beat per frame: ``tdata`` the frame's number, ``tuser`` set on an event.
+    """
+
+    def __init__(self, colour, **detector):
+        from .colour import TrafficLightDetector
+        self.detector = TrafficLightDetector(**detector)
+        self.events = LightEvent(colour, every_frame=True)
+        members = {k: v for k, v in self.detector.signature.members.items() if k != "det"}
+        super().__init__({**members, "arm": In(stream.Signature(1)),
+                          "o": Out(self.events.signature.members["event"].signature)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.detector = det = self.detector
+        m.submodules.events = ev = self.events
+        for name, member in self.signature.members.items():
+            if name in ("arm", "o"):
+                continue
+            if member.is_signature:
+                wiring.connect(m, wiring.flipped(getattr(self, name)), getattr(det, name))
+            elif member.flow == In:
+                m.d.comb += getattr(det, name).eq(getattr(self, name))
+            else:
+                m.d.comb += getattr(self, name).eq(getattr(det, name))
+        wiring.connect(m, det.det, ev.det)
+        wiring.connect(m, wiring.flipped(self.arm), ev.arm)
+        wiring.connect(m, ev.event, wiring.flipped(self.o))
         return m

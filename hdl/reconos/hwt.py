@@ -690,15 +690,17 @@ class MemCalls:
             m.d.sync += sent.eq(0)
             m.next = then
 
-    def transform(self, src, dst, length, sink, source, *, then):
+    def transform(self, src, dst, length, sink, source, *, then, out_length=None):
         """Stream ``length`` bytes (a multiple of W) from ``src`` into ``sink`` and, at the
-        same time, from ``source`` to ``dst``: a streaming kernel between the two sees one
-        element per cycle. ``then`` once the written data is in memory."""
+        same time, ``out_length`` bytes (a multiple of W; default ``length``) from ``source``
+        to ``dst``: a streaming kernel between the two sees one element per cycle. ``then``
+        once the written data is in memory."""
         m, e = self._m, self.engine
+        out_length = length if out_length is None else out_length
         r_sent, w_sent = Signal(name="tf_r_sent"), Signal(name="tf_w_sent")
         restart = self._unpack(sink, self._elements(length, sink), "tf")
         self._issue(e.read_cmd, src, length, r_sent, *restart)
-        self._issue(e.write_cmd, dst, length, w_sent, *self._pack(source, "tf"))
+        self._issue(e.write_cmd, dst, out_length, w_sent, *self._pack(source, "tf"))
         with m.If(~r_sent):
             m.d.comb += [sink.tvalid.eq(0), e.read_data.ready.eq(0)]
         with m.If(~w_sent):

@@ -1,0 +1,172 @@
+"""The camera and the reference of the lane-following chain for ``rosgate sim``
+(docs/av_chain.md).
+
+The camera publishes the example's driving scene (scene.py) on /camera/image, one frame at a
+time: the next frame goes out when the chain's command for the last one has arrived on /cmd
+(the latency the fpgaDDS paper calls chain alpha, measured from the publication to the
+command). Every frame is also run through the chain in software (host.autorace, OpenCV) and
+each topic's message compared with it: the compensated and blurred images byte for byte, the
+bird's-eye view within 1 per byte (OpenCV computes it in float32), the lane result, the
+events on /light/stop and /light/start, the command.
+
+``--arg frames=N`` (default 100), ``--arg seed=S`` (1), ``--arg red_from=K``,
+``--arg green_from=K`` (30 % and 60 % of the frames), ``--arg bad_frames=1``: before the
+scene, frames each node must drop (a wrong size, a wrong encoding, a step that does not fit
+the width, a short payload to the compensation; a wrong size straight to lane following).
+"""
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from gen.av_chain import scaled_config
+from hdl.kernels.lane import DRIVE_COMMAND, LANE_RESULT
+from host.autorace import SoftwareChain
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import scene  # noqa: E402  (the example's scene generator, next to this file)
+
+TOPICS = {"compensated": "/image/compensated", "blurred": "/image/blurred",
+          "projected": "/image/projected", "lane": "/lane", "stop": "/light/stop",
+          "start": "/light/start", "command": "/cmd"}
+
+
+def image_msg(pixels, seq, *, encoding="bgr8", step=None, data=None):
+    height, width = pixels.shape[:2]
+    return {"header": {"stamp": {"sec": seq, "nanosec": 0}, "frame_id": "camera"},
+            "height": height, "width": width, "encoding": encoding, "is_bigendian": 0,
+            "step": 3 * width if step is None else step,
+            "data": pixels.tobytes() if data is None else data}
+
+
+def chain_settings(project):
+    """``(scale, pixels_per_beat)`` of the project's threads (they must agree)."""
+    seen = {(float(t.params.get("scale", 1)), int(t.params.get("pixels_per_beat", 4)))
+            for t in project.threads}
+    if len(seen) != 1:
+        raise ValueError(f"the threads' scale and pixels_per_beat differ: {sorted(seen)}; set "
+                         "them for all with --param '*.scale=...'")
+    return seen.pop()
+
+
+def bad_frames(config):
+    """``(topic, message, node)``: frames the node must drop."""
+    (cw, ch), (bw, bh) = config.camera, config.bev
+    grey = np.full((ch, cw, 3), 128, np.uint8)
+    return [
+        ("/camera/image", image_msg(np.full((ch, cw - 8, 3), 128, np.uint8), 0),
+         "Compensation"),
+        ("/camera/image", image_msg(grey, 0, encoding="rgb8"), "Compensation"),
+        ("/camera/image", image_msg(grey, 0, step=3 * cw + 24,
+                                    data=bytes((3 * cw + 24) * ch)), "Compensation"),
+        ("/camera/image", image_msg(grey, 0, data=grey.tobytes()[:-24]), "Compensation"),
+        ("/image/projected", image_msg(np.full((bh - 1, bw, 3), 128, np.uint8), 0),
+         "LaneFollowing"),
+    ]
+
+
+def setup(ctx):
+    scale, ppc = chain_settings(ctx.project)
+    ctx.config = scaled_config(scale, ppc)
+    ctx.subs = {k: ctx.broker.subscribe(t) for k, t in TOPICS.items()}
+    ctx.results.update(variant="reconros", scale=scale, ppc=ppc, clock_mhz=ctx.clock_mhz,
+                       frames=[], bad_frames=[])
+
+
+def _compare(ctx, k, frame, sub, command):
+    """Frame ``k``'s messages on every topic against the software chain; returns the
+    frame's report and the reference's step."""
+    (cw, ch), (bw, bh) = ctx.config.camera, ctx.config.bev
+
+    def image(name, w, h):
+        msg = sub[name].get_nowait()
+        if msg is None:
+            raise AssertionError(f"frame {k}: nothing on {TOPICS[name]}")
+        geometry = (msg["width"], msg["height"], msg["encoding"], msg["step"])
+        if geometry != (w, h, "bgr8", 3 * w) or len(msg["data"]) != 3 * w * h:
+            raise AssertionError(f"frame {k}: {TOPICS[name]} is {geometry} with "
+                                 f"{len(msg['data'])} bytes; expected {w}x{h} bgr8")
+        if msg["header"]["stamp"]["sec"] != k:
+            raise AssertionError(f"frame {k}: {TOPICS[name]} has the stamp of frame "
+                                 f"{msg['header']['stamp']['sec']}")
+        return np.frombuffer(msg["data"], np.uint8).reshape(h, w, 3)
+    a, b = image("compensated", cw, ch), image("blurred", cw, ch)
+    c = image("projected", bw, bh)
+    # lane following and control follow the hardware's bird's-eye view (within 1 of OpenCV)
+    step = ctx.reference.step(frame.image, bev=c)
+    diff = np.abs(c.astype(int) - step.projected.astype(int))
+    lane = LANE_RESULT.from_bits(sub["lane"].get_nowait()["data"])
+    got_lane = (lane.centre if lane.has_centre else None, lane.left if lane.has_left else None,
+                lane.right if lane.has_right else None)
+    cmd = DRIVE_COMMAND.from_bits(command["data"])
+    return {"compensation_exact": bool((a == step.compensated).all()),
+            "blur_exact": bool((b == step.blurred).all()),
+            "projection_max_diff": int(diff.max()),
+            "projection_off_by_one": int((diff.max(axis=2) > 0).sum()),
+            "lane_equal": got_lane == tuple(step.lane),
+            "centre": got_lane[0], "speed": int(cmd.speed), "turn": int(cmd.turn),
+            "command_equal": (int(cmd.speed), int(cmd.turn)) == tuple(step.command)}, step
+
+
+async def camera(ctx):
+    args = ctx.args
+    if args.get("bad_frames", "0") == "1":
+        for topic, msg, node in bad_frames(ctx.config):
+            ctx.broker.publish(topic, msg)
+            number = await ctx.resource(node, "bad_frames").state.get()
+            ctx.results["bad_frames"].append({"node": node, "frame": number,
+                                              "encoding": msg["encoding"],
+                                              "size": [msg["width"], msg["height"]]})
+            ctx.log(f"camera: {node} dropped its frame {number} ({msg['width']}x"
+                    f"{msg['height']} {msg['encoding']}, {len(msg['data'])} bytes)")
+        for sub in ctx.subs.values():       # the bad frame sent to /image/projected
+            while sub.get_nowait() is not None:
+                pass
+    count = int(args.get("frames", 100))
+    geometry = scene.Geometry(ctx.config.camera[0] / scene.CAMERA_SIZE[0])
+    ctx.reference = SoftwareChain(ctx.config)
+    stops, starts, expected_stops, expected_starts = [], [], [], []
+    red_from = int(args["red_from"]) if "red_from" in args else None
+    green_from = int(args["green_from"]) if "green_from" in args else None
+    for frame in scene.frames(count, seed=int(args.get("seed", 1)), red_from=red_from,
+                              green_from=green_from, geometry=geometry):
+        k = frame.index
+        start = ctx.now()
+        ctx.broker.publish("/camera/image", image_msg(frame.image, k))
+        command = await ctx.subs["command"].get()
+        cycles = ctx.now() - start
+        report, step = _compare(ctx, k, frame, ctx.subs, command)
+        entry = {"frame": k, "cycles": cycles, "truth": frame.centre, "light": frame.light,
+                 **report}
+        for name, got, want, fired in (("stop", stops, expected_stops, step.stop),
+                                       ("start", starts, expected_starts, step.start)):
+            while (msg := ctx.subs[name].get_nowait()) is not None:
+                got.append(msg["data"])
+            if fired:
+                want.append(k)
+        ctx.results["frames"].append(entry)
+        ctx.log(f"camera: frame {k}: {cycles} cycles, centre {entry['centre']} (truth "
+                f"{frame.centre:.1f}), speed {entry['speed']} turn {entry['turn']}")
+    frames = ctx.results["frames"]
+    cycles = [f["cycles"] for f in frames]
+    mean = sum(cycles) / len(cycles)
+    errors = [abs(f["centre"] - f["truth"]) for f in frames if f["centre"] is not None]
+    exact = all(f["compensation_exact"] and f["blur_exact"] and f["projection_max_diff"] <= 1
+                and f["lane_equal"] and f["command_equal"] for f in frames)
+    ctx.results.update(
+        stops=stops, starts=starts, expected_stops=expected_stops,
+        expected_starts=expected_starts, events_equal=(stops, starts) == (expected_stops,
+                                                                         expected_starts),
+        mean_cycles=mean, sd_cycles=math.sqrt(sum((c - mean) ** 2 for c in cycles)
+                                              / len(cycles)),
+        lane_centre_max_error_px=max(errors) if errors else None, stages_bit_exact=exact)
+    ms = mean / (ctx.clock_mhz * 1000)
+    ctx.log(f"camera: {len(frames)} frames, chain alpha {mean:,.0f} cycles = {ms:.3f} ms at "
+            f"{ctx.clock_mhz:g} MHz (sd {ctx.results['sd_cycles']:,.0f}); every stage as "
+            f"OpenCV: {'yes' if exact else 'NO'}; events as the reference: "
+            f"{'yes' if ctx.results['events_equal'] else 'NO'}")
+
+
+NODES = [camera]

@@ -1,0 +1,7 @@
+"""The chain's green light node as a ReconOS hardware thread (docs/av_chain.md)."""
+
+from gen.av_chain import reconros_thread
+
+
+def build(ctx):
+    return reconros_thread(ctx, "green_light")
