@@ -27,6 +27,8 @@ DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
 ENGINE_GOAL = 1.6
 GATEWAY_CFG = Path(__file__).resolve().parents[1] / "examples" / "hwtopic_gateway" / "build.cfg"
 SYSTEM_CFG = Path(__file__).resolve().parents[1] / "examples" / "sobel_dip" / "build.cfg"
+AV_CHAIN_CFG = Path(__file__).resolve().parents[1] / "examples" / "av_chain" / "build.cfg"
+HW_SERVICES_CFG = Path(__file__).resolve().parents[1] / "examples" / "hw_services" / "build.cfg"
 
 
 def _kernel(spec):
@@ -84,6 +86,11 @@ def catalog():
     add("finemb_node", "FinEmbP PID node (2 ports, forwarding, client, page buffer, PID)",
         finemb_node, "finemb_node", net.CLOCK_MHZ)
 
+    for name, label, build, fallbacks in av_chain_nodes():
+        add(f"av_{name}", label, build, f"av_{name}", kernels.CLOCK_MHZ, fallbacks)
+    for name, label, build in service_nodes():
+        add(name, label, build, name, kernels.CLOCK_MHZ)
+
     def system():
         from gen.config import load_project
         from gen.system import build_system
@@ -100,6 +107,64 @@ def catalog():
     add("gateway_image", "ROS gateway of examples/hwtopic_gateway (sensor_msgs/Image, both "
         "directions, r64)", gateway, "rt_gateway1", reconos.CLOCK_MHZ)
     return cores
+
+
+def av_chain_nodes():
+    """``(name, label, build, fallbacks)`` of the lane-following chain's nodes at 4 px/clk
+    (docs/av_chain.md) and of one of its ReconOS threads; a node whose frame store exceeds the
+    device's block RAM falls back to a 320x240 camera."""
+    from gen.av_chain import chain_node, scaled_config
+
+    def node(name, scale, events=False):
+        return lambda: chain_node(scaled_config(scale, 4), name, events=events)
+    rows = []
+    for name, label, store in (
+            ("compensation", "Image Compensation, 640x480 bgr8 frame buffered", True),
+            ("projection", "Image Projection (perspective warp to 1000x600), 640x480 source "
+                           "stored", True),
+            ("lane_following", "Lane Following, 1000x600 bird's-eye view", False),
+            ("lane_control", "Lane Control", False),
+            ("red_light", "Traffic light node (detector + events), 640x480", False)):
+        fallbacks = ([(label.replace("640x480", "320x240").replace("1000x600", "500x300")
+                       + " (the 640x480 store needs 400 DP16KD)",
+                       node(name, 0.5, name == "red_light"))] if store else [])
+        ppc = "" if name == "lane_control" else ", 4 px/clk"
+        rows.append((f"{name}_p4" if ppc else name, f"{label}{ppc}",
+                     node(name, 1.0, name == "red_light"), fallbacks))
+
+    def blur_thread():
+        from gen.config import apply_parameters, load_project
+        from gen.system import build_thread
+        project = apply_parameters(load_project(AV_CHAIN_CFG), ["*.pixels_per_beat=4"])
+        thread = next(t for t in project.threads if t.name == "Blur")
+        return build_thread(project, thread, thread.slots[0])
+    rows.append(("blur_thread_p4", "ReconOS thread of the chain's Gaussian blur "
+                 "(examples/av_chain, r64, 4 px/clk)", blur_thread, []))
+    return rows
+
+
+def service_nodes():
+    """``(name, label, build)`` of the service and action ends and server nodes
+    (docs/services.md), with the example's interfaces."""
+    from gen.config import load_project, project_library
+    from gen.services import interface_plans
+    from hdl.dds.action import ActionClient, ActionServer
+    from hdl.dds.fibonacci_server import FibonacciServer
+    from hdl.dds.service import ServiceClient, ServiceServer
+    from hdl.dds.sort_server import SortServer
+
+    def plans(interface):
+        return interface_plans(project_library(load_project(HW_SERVICES_CFG)), interface)
+    return [
+        ("service_client", "service client end, 4 pending", lambda: ServiceClient(1)),
+        ("service_server", "service server end", ServiceServer),
+        ("action_client", "action client end", lambda: ActionClient(1)),
+        ("action_server", "action server end", ActionServer),
+        ("sort_server", "sort service server node, 2048 block",
+         lambda: SortServer(**plans("my_reconros_services/srv/Sort"))),
+        ("fibonacci_server", "Fibonacci action server node",
+         lambda: FibonacciServer(**plans("example_interfaces/action/Fibonacci"))),
+    ]
 
 
 def _place(core, entry, seeds, log):

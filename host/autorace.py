@@ -230,15 +230,17 @@ class SoftwareChain:
                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
-    def step(self, image, bev=None):
-        """One camera frame through every node: a :class:`ChainStep`. With ``bev``, lane
-        following takes that bird's-eye view instead of its own projection: the reference of
-        a chain whose projection rounds differently (within 1, as the hardware does)."""
+    def step(self, image, bev=None, lane=None):
+        """One camera frame through every node: a :class:`ChainStep`. To follow a hardware
+        chain whose projection rounds differently (within 1, as the hardware does), lane
+        following can take the hardware's bird's-eye view ``bev`` instead of its own
+        projection, or lane control the hardware's lane result ``lane``."""
         c = self.config
         a = compensate(image, c.clip_percent)[0]
         b = blur(a, c.blur_ksize)
         projected = self.project(b)
-        lane = lane_centre(projected if bev is None else bev, self.lane_params)
+        if lane is None:
+            lane = lane_centre(projected if bev is None else bev, self.lane_params)
         red, green = traffic_lights(a, self.light_params)
         stop = red
         if red:

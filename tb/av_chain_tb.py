@@ -14,6 +14,7 @@ from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
 from gen.av_chain import scaled_params
+from gen.tops import build_av_chain
 from host import autorace
 from tb.harness import ROOT, bench_params
 from tb.streams import PacketSink, bursty_pauses, random_pauses, reset_aresetn
@@ -21,17 +22,13 @@ from tb.streams import PacketSink, bursty_pauses, random_pauses, reset_aresetn
 sys.path.insert(0, str(ROOT / "examples" / "av_chain"))
 import scene  # noqa: E402  (the example's scene generator)
 
-__all__ = ["CLOCK_NS", "SMALL", "AvChainTB", "chain_params"]
+__all__ = ["CLOCK_NS", "SMALL", "AvChainTB"]
 
 CLOCK_NS = 10
 
 
-#: the top's parameters for the scene at a scale and pixels per beat
-chain_params = scaled_params
-
-
 #: the short configuration: the scene at a fifth of its size, 1 pixel per beat
-SMALL = chain_params(0.2, 1)
+SMALL = scaled_params(0.2, 1)
 
 
 class AvChainTB:
@@ -48,14 +45,10 @@ class AvChainTB:
         self.frame_in = []           # cycle of each camera frame's last beat
         self.cycle = 0
         self._start_sinks()
-        g = scene.Geometry(self.params["camera"][0] / scene.CAMERA_SIZE[0])
-        self.geometry = g
-        self.matrix = g.homography()
-        self.lane_params = autorace.LaneParams(band_top=self.params["band_top"],
-                                               lane_width=self.params["lane_width"],
-                                               min_pixels=self.params["lane_min_pixels"])
-        self.light_params = autorace.LightParams(min_pixels=self.params["light_min_pixels"])
-        self.control_params = autorace.ControlParams(target=self.params["target"])
+        self.geometry = scene.Geometry(self.params["camera"][0] / scene.CAMERA_SIZE[0])
+        self.reference = autorace.SoftwareChain(build_av_chain(**self.params).config)
+        self.expected_stops, self.expected_starts = [], []
+        self._frame = 0
 
     def _start_sinks(self):
         dut = self.dut
@@ -125,48 +118,37 @@ class AvChainTB:
         (sinks of ``tap_a``, ``tap_b``, ``tap_c`` holding the frame's packets first), every
         stage's image against OpenCV; returns the frame's report."""
         from hdl.kernels.lane import DRIVE_COMMAND, LANE_RESULT
-        if not hasattr(self, "_control"):
-            self._control = autorace.LaneControl(self.control_params)
-            self._armed, self.expected_stops, self.expected_starts = False, [], []
-            self._frame = 0
         k = self._frame
         self._frame += 1
         (cw, ch), (bw, bh) = self.camera_size, self.bev_size
-        a, _, _ = autorace.compensate(frame.image)
         entry = {"frame": k, "truth": frame.centre, "light": frame.light}
+        r = LANE_RESULT.from_bits(lane)
+        got = (r.centre if r.has_centre else None, r.left if r.has_left else None,
+               r.right if r.has_right else None)
         if images is not None:
             def pop(tap, w, h):
                 packets = images[tap].packets
                 assert packets, f"{tap}: no packet for frame {k}"
                 return np.frombuffer(bytes(packets.pop(0).data), np.uint8).reshape(h, w, 3)
             comp, blurred, bev = pop("tap_a", cw, ch), pop("tap_b", cw, ch), pop("tap_c", bw, bh)
-            assert (comp == a).all(), f"frame {k}: compensation differs from OpenCV"
-            assert (blurred == autorace.blur(comp)).all(), f"frame {k}: blur differs from OpenCV"
-            c = autorace.project(blurred, self.matrix, self.bev_size)
-            diff = np.abs(bev.astype(int) - c.astype(int))
+            # lane following is checked on the hardware's bird's-eye view (within 1 of OpenCV)
+            step = self.reference.step(frame.image, bev=bev)
+            assert (comp == step.compensated).all(), f"frame {k}: compensation differs from OpenCV"
+            assert (blurred == step.blurred).all(), f"frame {k}: blur differs from OpenCV"
+            diff = np.abs(bev.astype(int) - step.projected.astype(int))
             assert diff.max() <= 1, f"frame {k}: projection differs by {diff.max()}"
-            expected_lane = autorace.lane_centre(bev, self.lane_params)
+            assert got == step.lane, f"frame {k}: lane {got} != {step.lane}"
             entry["off_by_one"] = int((diff.max(axis=2) > 0).sum())
         else:
-            bev = None
-        r = LANE_RESULT.from_bits(lane)
-        got = (r.centre if r.has_centre else None, r.left if r.has_left else None,
-               r.right if r.has_right else None)
-        if bev is not None:
-            assert got == expected_lane, f"frame {k}: lane {got} != {expected_lane}"
-        centre = got[0]
-        red, green = autorace.traffic_lights(a, self.light_params)
-        if red:
+            step = self.reference.step(frame.image, lane=got)
+        if step.stop:
             self.expected_stops.append(k)
-            self._control.stop()
-            self._armed = True
-        if green and self._armed:
+        if step.start:
             self.expected_starts.append(k)
-            self._control.start()
-            self._armed = False
         cmd = DRIVE_COMMAND.from_bits(command)
-        assert (cmd.speed, cmd.turn) == self._control.step(centre), f"frame {k}: command"
-        entry.update(centre=centre, speed=cmd.speed, turn=cmd.turn, red=red, green=green)
+        assert (cmd.speed, cmd.turn) == step.command, f"frame {k}: command"
+        entry.update(centre=got[0], speed=cmd.speed, turn=cmd.turn, red=step.red,
+                     green=step.green)
         return entry
 
     def check_events(self):

@@ -317,15 +317,15 @@ def test_av_chain_reconros_variant(sim, tmp_path):
     ground truth, a stop event on each red frame and a start on the first green one, one
     command per frame."""
     results = run_project_sim(ROOT / "examples/av_chain/build.cfg", sim, out=tmp_path / "o",
-                              args={"frames": "4", "red_from": "1", "green_from": "3",
+                              args={"frames": "3", "red_from": "1", "green_from": "2",
                                     "bad_frames": "1"},
                               thread_params=["*.scale=0.2", "*.pixels_per_beat=1"], limit_ms=20)
     assert [(b["node"], b["frame"]) for b in results["bad_frames"]] == [
         ("Compensation", 0), ("Compensation", 1), ("Compensation", 2), ("Compensation", 3),
         ("LaneFollowing", 0)]
     frames = results["frames"]
-    assert [f["light"] for f in frames] == ["dark", "red", "red", "green"]
+    assert [f["light"] for f in frames] == ["dark", "red", "green"]
     assert results["stages_bit_exact"], frames
-    assert (results["stops"], results["starts"]) == ([1, 2], [3])
+    assert (results["stops"], results["starts"]) == ([1], [2])
     assert all(abs(f["centre"] - f["truth"]) <= 5 for f in frames), frames
-    assert [f["speed"] for f in frames][1:3] == [0, 0] and frames[3]["speed"] > 0
+    assert [f["speed"] > 0 for f in frames] == [True, False, True], frames
