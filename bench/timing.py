@@ -179,7 +179,18 @@ def _place(core, entry, seeds, log):
             clocks = {"clk": entry["clock_mhz"]}
         vfile = folder / f"{entry['top']}.v"
         write_if_changed(vfile, text)
-        _, cells = synthesise(vfile, entry["top"], folder)
+        try:
+            _, cells = synthesise(vfile, entry["top"], folder)
+        except TimingError:
+            if k == len(entry["configs"]) - 1:
+                raise
+            # YoWASP's Yosys runs in 4 GiB of WebAssembly memory: a frame store too large
+            # for the device can also be too large to map
+            why = "Yosys (YoWASP) ran out of memory mapping its RAM"
+            if k == 0:
+                full = {"full_config": label, "full_does_not_fit": why, "full_mult18": None}
+            log(f"    {label}: not synthesised ({why})")
+            continue
         over = {c: n for c, n in cells.items() if n > DEVICE_LIMITS.get(c, n)}
         if over:
             why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items())

