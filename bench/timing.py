@@ -112,7 +112,7 @@ def catalog():
 def av_chain_nodes():
     """``(name, label, build, fallbacks)`` of the lane-following chain's nodes at 4 px/clk
     (docs/av_chain.md) and of one of its ReconOS threads; a node whose frame store exceeds the
-    device's block RAM falls back to a 320x240 camera."""
+    device's block RAM falls back to a 320x240 camera, then a 128x96 one."""
     from gen.av_chain import chain_node, scaled_config
 
     def node(name, scale, events=False):
@@ -125,9 +125,9 @@ def av_chain_nodes():
             ("lane_following", "Lane Following, 1000x600 bird's-eye view", False),
             ("lane_control", "Lane Control", False),
             ("red_light", "Traffic light node (detector + events), 640x480", False)):
-        fallbacks = ([(label.replace("640x480", "320x240").replace("1000x600", "500x300")
-                       + " (the 640x480 store needs 400 DP16KD)",
-                       node(name, 0.5, name == "red_light"))] if store else [])
+        fallbacks = [(label.replace("640x480", f"{round(640 * k)}x{round(480 * k)}")
+                      .replace("1000x600", f"{round(1000 * k)}x{round(600 * k)}"),
+                      node(name, k)) for k in (0.5, 0.2)] if store else []
         ppc = "" if name == "lane_control" else ", 4 px/clk"
         rows.append((f"{name}_p4" if ppc else name, f"{label}{ppc}",
                      node(name, 1.0, name == "red_light"), fallbacks))

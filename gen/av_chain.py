@@ -12,8 +12,8 @@ tap for the test bench (tie its ``tready`` high otherwise).
 
 from dataclasses import dataclass
 
-from amaranth.hdl import Module, Signal
-from amaranth.lib import stream, wiring
+from amaranth.hdl import Module
+from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from hdl.dds import Topic
@@ -23,7 +23,8 @@ from hdl.kernels.image import image_stream_signature
 from hdl.kernels.lane import EVENT_STREAM
 
 __all__ = ["ChainConfig", "AvChain", "homography", "inverse_map", "BEV_CORNERS",
-           "CAMERA_CORNERS", "NODES", "chain_config", "chain_node", "scaled_params",
+           "CAMERA_CORNERS", "NODES", "chain_config", "chain_node", "chain_topics",
+           "scaled_params",
            "scaled_config", "reconros_thread"]
 
 #: where the corners of AutoRace's 1000x600 bird's-eye view lie in it: top-left, top-right,
@@ -146,6 +147,21 @@ def chain_node(config, name, *, events=False):
     return builders[name]()
 
 
+def chain_topics(config):
+    """The chain's six topic fabrics (:class:`hdl.dds.Topic`), name -> fabric: A (compensated
+    images) to the blur, the two light nodes and a tap; B, C and D each to its consumer and a
+    tap; E (stop events) to lane control, the green node and a tap; F (start events) to lane
+    control and a tap."""
+    img = image_stream_signature(3, config.pixels_per_beat)
+
+    def fabric(signature, subscribers):
+        return Topic(1, subscribers, signature.data_width, keep=False,
+                     user_width=1 if signature.user_width else 0, monitor=False)
+    return {"a": fabric(img, 4), "b": fabric(img, 2), "c": fabric(img, 2),
+            "d": fabric(EVENT_STREAM, 2), "e": fabric(EVENT_STREAM, 3),
+            "f": fabric(EVENT_STREAM, 2)}
+
+
 class AvChain(wiring.Component):
     """The chain of :data:`ChainConfig` with its seven nodes and six topics.
 
@@ -177,9 +193,7 @@ class AvChain(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         c = self.config
-        P = c.pixels_per_beat
-        (cw, ch), (bw, bh) = c.camera, c.bev
-        img = image_stream_signature(3, P)
+        cw, ch = c.camera
         nodes = {name: chain_node(c, name) for name in NODES}
         nodes["red_event"] = LightEvent("red")
         nodes["green_event"] = LightEvent("green")
@@ -193,25 +207,23 @@ class AvChain(wiring.Component):
         for n in (comp, blur):
             m.d.comb += [n.width.eq(cw), n.height.eq(ch)]
 
-        def topic(name, signature, publisher, subscribers):
-            t = Topic(1, len(subscribers), signature.data_width, keep=False,
-                      user_width=1 if signature.user_width else 0, monitor=False)
+        topics = chain_topics(c)
+        for name, t in topics.items():
             m.submodules[f"topic_{name}"] = t
-            wiring.connect(m, publisher, t.s_axis[0])
+
+        def join(name, publisher, subscribers):
+            wiring.connect(m, publisher, topics[name].s_axis[0])
             for j, sub in enumerate(subscribers):
-                wiring.connect(m, t.m_axis[j], sub)
+                wiring.connect(m, topics[name].m_axis[j], sub)
 
         wiring.connect(m, wiring.flipped(self.camera), comp.i)
-        topic("a", img, comp.o, [blur.i, red.i, green.i, wiring.flipped(self.tap_a)])
-        topic("b", img, blur.o, [proj.i, wiring.flipped(self.tap_b)])
-        topic("c", img, proj.o, [lane.i, wiring.flipped(self.tap_c)])
-        topic("d", EVENT_STREAM, lane.o, [control.lane, wiring.flipped(self.tap_d)])
+        join("a", comp.o, [blur.i, red.i, green.i, wiring.flipped(self.tap_a)])
+        join("b", blur.o, [proj.i, wiring.flipped(self.tap_b)])
+        join("c", proj.o, [lane.i, wiring.flipped(self.tap_c)])
+        join("d", lane.o, [control.lane, wiring.flipped(self.tap_d)])
         wiring.connect(m, red.det, nodes["red_event"].det)
         wiring.connect(m, green.det, nodes["green_event"].det)
-        # E: the stop events, to Lane Control and the green node; F: the start events
-        stop_e = Topic(1, 3, 64, keep=False, monitor=False)
-        start_f = Topic(1, 2, 64, keep=False, monitor=False)
-        m.submodules.topic_e, m.submodules.topic_f = stop_e, start_f
+        stop_e, start_f = topics["e"], topics["f"]
         wiring.connect(m, nodes["red_event"].event, stop_e.s_axis[0])
         wiring.connect(m, nodes["green_event"].event, start_f.s_axis[0])
         for t, event_port, taps in ((stop_e, (control.stop, nodes["green_event"].arm),

@@ -10,7 +10,6 @@ takes words, on three subscriptions.
 """
 
 from amaranth.hdl import Cat, Const, Module, Signal
-from amaranth.lib import wiring
 
 from ..params import ParameterError, check_int
 from ..stream import StreamRepacker
