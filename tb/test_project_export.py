@@ -19,7 +19,7 @@ from host.cli import main as rosgate
 from host.lint import lint_verilog
 
 from .harness import ROOT
-from .projects import EXAMPLES, external_threads_project
+from .projects import EXAMPLES, EXPORT_PARAMS, external_threads_project
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,8 @@ def exported(tmp_path_factory):
     for name in EXAMPLES:
         folder = tmp_path_factory.mktemp(name)
         cfg = ROOT / "examples" / name / "build.cfg"
-        assert rosgate(["export-hw", str(cfg), "-o", str(folder)]) == 0
+        params = [a for p in EXPORT_PARAMS.get(name, ()) for a in ("--param", p)]
+        assert rosgate(["export-hw", str(cfg), "-o", str(folder), *params]) == 0
         out[name] = (load_project(cfg), folder, json.loads((folder / "manifest.json").read_text()))
     return out
 

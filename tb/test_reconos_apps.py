@@ -142,10 +142,12 @@ async def sobel_service_pair_on_a_photograph(dut):
 
 
 CONFIGS = apps_configs()
-#: r64 on Verilator in ``make test``; r32, and both on Icarus, in the long matrix (a fresh
-#: 2-core ``make test`` stays under 10 minutes; the ``reconos`` top itself runs on both
-#: simulators and both architectures in ``make test`` through the system benches)
-test_reconos_apps = cocotb_bench("reconos", {"apps_r64": CONFIGS["apps_r64"]},
+#: all in the long matrix (a fresh 2-core ``make test`` stays under 10 minutes; the
+#: ``reconos`` top itself runs on both simulators and both architectures in ``make test``
+#: through the system benches, and the example projects run the sort service, the sort
+#: action and the Sobel pair there)
+test_reconos_apps = cocotb_bench("reconos", {"apps_r64": pytest.param(CONFIGS["apps_r64"],
+                                                                      marks=pytest.mark.full)},
                                  simulators=("verilator",))
 test_reconos_apps_long = cocotb_bench(
     "reconos", {k: pytest.param(v, marks=pytest.mark.full) for k, v in CONFIGS.items()},
