@@ -7,8 +7,8 @@ __all__ = ["EXAMPLES", "EXPORT_PARAMS", "example_cfg", "external_threads_project
 #: every folder of examples/ with a build.cfg
 EXAMPLES = sorted(p.parent.name for p in (ROOT / "examples").glob("*/build.cfg"))
 #: ``--param`` settings the export tests use: the lane-following chain at a fifth of its
-#: frame size (its 4 px/clk logic whole; the full-size export takes two and a half minutes)
-EXPORT_PARAMS = {"av_chain": ["*.scale=0.2"]}
+#: frame size and 1 px/clk (the full-size export at 4 px/clk takes two and a half minutes)
+EXPORT_PARAMS = {"av_chain": ["*.scale=0.2", "*.pixels_per_beat=1"]}
 
 
 def example_cfg(name):

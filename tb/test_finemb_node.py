@@ -25,7 +25,8 @@ from tb.models.pid import AvrPid
 from .finemb_tb import PID_IO, NodeTB, node_ip
 
 CONFIGS = {"pid": dict(io=PID_IO, mac="02:00:00:00:46:01", serial=7, app_deadline=256)}
-test_finemb_node = cocotb_bench("finemb_node", CONFIGS)
+#: make test: Icarus; Verilator in test-full
+test_finemb_node = cocotb_bench("finemb_node", CONFIGS, long=[("pid", "verilator")])
 
 GAINS = dict(p_gain=256, i_gain=64, d_gain=32)
 

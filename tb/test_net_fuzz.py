@@ -7,7 +7,7 @@ both directions through a Linux-like peer model.
 Oracles: the session's streams arrive byte-exact in both directions; ICMP and RBCP are still
 answered afterwards; every frame sent is counted once (``frames_in``) and ends either
 delivered or in one drop counter; every frame the engine sends has a good FCS and goes to a
-MAC address it has heard from (or broadcast). 100 frames in make test, 10,000 in test-full;
+MAC address it has heard from (or broadcast). 50 frames in make test, 10,000 in test-full;
 the seed is logged.
 """
 
@@ -32,7 +32,7 @@ from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB, SessionPort, checks
 FRAMES = int(os.environ.get("ROSGATE_FUZZ_FRAMES", 100))
 
 
-@pytest.mark.parametrize("frames", [pytest.param(100, id="100"),
+@pytest.mark.parametrize("frames", [pytest.param(50, id="50"),
                                     pytest.param(10_000, id="10k", marks=pytest.mark.full)])
 def test_net_fuzz(frames):
     run_bench(__name__, "net", "stack", NET_CONFIGS["stack"], "verilator",

@@ -32,7 +32,8 @@ from tb.net_tb import (
 )
 
 CONFIGS = NET_CONFIGS
-test_net = cocotb_bench("net", CONFIGS)
+#: make test: Verilator (whose build the fuzz test shares); Icarus in test-full
+test_net = cocotb_bench("net", CONFIGS, long=[("stack", "icarus")])
 #: Sessions with 32-bit user streams (``user_width``): the tests that move data through the
 #: user ports run on it, on Verilator in the long matrix only.
 WIDE_USER = WIDE_USER_CONFIGS

@@ -28,7 +28,6 @@ from .harness import ROOT
 from .models.image import IMAGES
 from .models.sobel import sobel_byte_lanes
 
-SIMS = ("icarus", "verilator")
 SOBEL_DIP = ROOT / "examples" / "sobel_dip" / "build.cfg"
 PHOTO = IMAGES / "coffee_80x60.png"
 
@@ -60,7 +59,7 @@ def rng_image(rng, width, height):
     return np.frombuffer(rng.randbytes(width * height * 3), np.uint8).reshape(height, width, 3)
 
 
-@pytest.mark.parametrize("sim", SIMS)
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
 def test_sobel_dip_equals_opencv(sim, tmp_path):
     """Every image through ``rosgate sim`` comes back equal to OpenCV's Sobel edge image
     (compared here, from the PNGs the viewer wrote), with a montage next to it; consecutive
