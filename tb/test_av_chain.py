@@ -21,9 +21,12 @@ from .av_chain_tb import SMALL, AvChainTB
 
 CONFIGS = {"small_p1": SMALL}
 
-# make test: the latency and bad-frame test on Verilator; make test-full: every test on both
-# simulators (the design is large: its idle-and-backpressure run takes half a minute)
-test_av_chain = cocotb_bench("av_chain", CONFIGS, simulators=("verilator",),
+# make test-full only (the same nodes run in make test as the threads of examples/av_chain,
+# tb/test_project_sim.py; the top is linted there): the latency and bad-frame test on
+# Verilator, and every test on both simulators (the design is large: its
+# idle-and-backpressure run takes half a minute)
+test_av_chain = cocotb_bench("av_chain", {"small_p1": pytest.param(SMALL, marks=pytest.mark.full)},
+                             simulators=("verilator",),
                              testcases=["chain_alpha_latency_and_bad_frames"])
 test_av_chain_full = cocotb_bench("av_chain", {"small_p1_all": pytest.param(
     SMALL, marks=pytest.mark.full)})
