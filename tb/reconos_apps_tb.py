@@ -10,6 +10,7 @@ import cv2
 from cocotb.triggers import ClockCycles, with_timeout
 
 from host.reconos import Resource
+from host.reconos.messages import image_message as image_msg
 
 from .models.sobel import sobel_byte_lanes
 from .reconos_tb import ReconosTB, slot_of
@@ -21,13 +22,6 @@ SORT_SRV = "sorter_msgs/srv/Sort"
 SORT_ACTION = "sorter_msgs/action/Sort"
 #: simulated time limit of one request (the bench clock is 100 MHz)
 LIMIT_US = 20_000
-
-
-def image_msg(pixels, *, encoding="bgr8", step=None, seq=0):
-    height, width = pixels.shape[:2]
-    return {"header": {"stamp": {"sec": seq, "nanosec": 0}, "frame_id": "camera"},
-            "height": height, "width": width, "encoding": encoding, "is_bigendian": 0,
-            "step": step if step is not None else width * 3, "data": pixels.tobytes()}
 
 
 class AppsTB(ReconosTB):

@@ -24,6 +24,7 @@ import numpy as np
 from gen.av_chain import scaled_config
 from hdl.kernels.lane import DRIVE_COMMAND, LANE_RESULT
 from host.autorace import SoftwareChain
+from host.reconos.messages import image_message as image_msg
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scene  # noqa: E402  (the example's scene generator, next to this file)
@@ -31,14 +32,6 @@ import scene  # noqa: E402  (the example's scene generator, next to this file)
 TOPICS = {"compensated": "/image/compensated", "blurred": "/image/blurred",
           "projected": "/image/projected", "lane": "/lane", "stop": "/light/stop",
           "start": "/light/start", "command": "/cmd"}
-
-
-def image_msg(pixels, seq, *, encoding="bgr8", step=None, data=None):
-    height, width = pixels.shape[:2]
-    return {"header": {"stamp": {"sec": seq, "nanosec": 0}, "frame_id": "camera"},
-            "height": height, "width": width, "encoding": encoding, "is_bigendian": 0,
-            "step": 3 * width if step is None else step,
-            "data": pixels.tobytes() if data is None else data}
 
 
 def chain_settings(project):

@@ -21,6 +21,8 @@ import cv2
 import numpy as np
 from cocotb.queue import Queue
 
+from host.reconos.messages import image_message as image_msg
+
 HERE = Path(__file__).resolve().parent
 IMAGES = HERE.parent / "images"
 SOBEL_RESPONSE = "application_msgs/srv/SobelSrv_Response"
@@ -55,13 +57,6 @@ def reconros_sobel(pixels):
 
 
 REFERENCES = {"opencv": ("opencv", opencv_sobel), "reconros": ("reference", reconros_sobel)}
-
-
-def image_msg(pixels, seq):
-    height, width = pixels.shape[:2]
-    return {"header": {"stamp": {"sec": seq, "nanosec": 0}, "frame_id": "camera"},
-            "height": height, "width": width, "encoding": "bgr8", "is_bigendian": 0,
-            "step": width * 3, "data": pixels.tobytes()}
 
 
 def _mode(project):

@@ -14,6 +14,7 @@ from amaranth.hdl import Cat, Const, Module, Signal
 from ..params import ParameterError, check_int
 from ..stream import StreamRepacker
 from .hwt import HardwareThread
+from .threads import _image_offsets
 
 __all__ = ["ImageNodeThread", "LaneControlThread", "ENCODING_BGR8"]
 
@@ -22,19 +23,11 @@ ENCODING_BGR8 = int.from_bytes(b"bgr8", "little")
 
 
 def _image_fields(offsets, arch):
-    """The Image members a node reads, checked: byte offsets of ``height``, ``width``,
-    ``encoding``, ``is_bigendian``, ``step`` and ``data``."""
-    need = ("header", "height", "encoding", "is_bigendian", "step", "data")
-    missing = [k for k in need if k not in offsets]
-    if missing:
-        raise ParameterError("image_offsets", offsets, f"the offsets of {', '.join(need)}")
-    out = {k: int(offsets[k]) for k in need}
-    out["width"] = out["height"] + 4
-    wb = arch.word_bytes
-    for k in ("height", "encoding", "is_bigendian", "data"):
-        if out[k] % wb:
-            raise ParameterError("image_offsets", offsets, f"{k} at a multiple of {wb}")
-    return out
+    """The Image members a node reads, checked (:func:`~hdl.reconos.threads._image_offsets`)
+    with ``header``, whose stamp an image node copies."""
+    if "header" not in offsets:
+        raise ParameterError("image_offsets", offsets, "the offset of header")
+    return {**_image_offsets(offsets, arch), "header": int(offsets["header"])}
 
 
 def _words(fields, start, count, wb):

@@ -597,7 +597,10 @@ def _image_offsets(offsets, arch):
         if offsets[a] % wb or offsets[b] % wb:
             raise ValueError(f"image_offsets: {a} ({offsets[a]}) and {b} ({offsets[b]}) must be "
                              f"multiples of the {wb}-byte word")
-    return {k: int(offsets[k]) for k in need}
+    out = {k: int(offsets[k]) for k in need}
+    # rosidl: ``uint32 width`` follows ``uint32 height`` (in the same word on r64)
+    out["width"] = out["height"] + 4
+    return out
 
 
 def _image_geometry_states(m, mem, name, src, dst, off, *, then):
@@ -711,8 +714,7 @@ class SobelServerThread(HardwareThread):
         # comparison in one cycle do not meet 100 MHz
         area = Signal(64)
         shape_ok = Signal()
-        # rosidl: ``uint32 width`` follows ``uint32 height`` (in the same word on r64)
-        width_at = off["height"] + 4
+        width_at = off["width"]
         m.d.comb += [height.eq(_lane32(dims, off["height"], wb)),
                      width.eq(_lane32(widths, width_at, wb)),
                      step.eq(_lane32(steps, off["step"], wb))]

@@ -6,7 +6,7 @@ import struct
 from gen.msg.wire import BYTE_ELEMENTS
 from gen.msg.wire import STRUCT_FORMAT as _FMT
 
-__all__ = ["MessageMemory"]
+__all__ = ["MessageMemory", "image_message"]
 
 
 class MessageMemory:
@@ -145,3 +145,14 @@ class MessageMemory:
             return list(struct.unpack(f"<{n}{_FMT[t.element.name]}", raw))
         size, _ = self.layout.size_align(t.element)
         return [self._read_value(ptr + i * size, t.element) for i in range(n)]
+
+
+def image_message(pixels, seq=0, *, encoding="bgr8", step=None, data=None, frame_id="camera"):
+    """The ``sensor_msgs/Image`` value of the ``height x width x 3`` array ``pixels``, stamped
+    ``seq`` seconds; ``encoding``, ``step`` and ``data`` override what the pixels give (for
+    images a node must refuse)."""
+    height, width = pixels.shape[:2]
+    return {"header": {"stamp": {"sec": seq, "nanosec": 0}, "frame_id": frame_id},
+            "height": height, "width": width, "encoding": encoding, "is_bigendian": 0,
+            "step": 3 * width if step is None else step,
+            "data": pixels.tobytes() if data is None else data}
