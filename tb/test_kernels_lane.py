@@ -5,6 +5,8 @@ frames with two stripes, one stripe, none, noise, at 1 and 4 pixels per beat, un
 idle and backpressure; the control's commands for a sequence of results with stop and start
 events."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -81,13 +83,20 @@ def test_detector_parameters_checked():
         LaneDetector(width=W, height=H, band_top=H)
 
 
-def test_control_equals_the_software_node():
+@pytest.mark.parametrize("max_speed", [None, 32767])
+def test_control_equals_the_software_node(max_speed):
+    """The chain's parameters, and the largest top speed (its division's widest quotient,
+    on the results at the target)."""
     rng = np.random.default_rng(5)
     params = autorace.ControlParams()
+    if max_speed is not None:
+        params = dataclasses.replace(params, max_speed=max_speed)
     events = []                               # per lane result: (stop, start) before it
     results = []
     for k in range(40):
         centre = None if k % 11 == 5 else int(rng.integers(-50, 1100))
+        if k in (3, 30):
+            centre = params.target
         results.append(centre)
         events.append((k == 12, k == 25))
     model = autorace.LaneControl(params)
@@ -126,3 +135,4 @@ def test_control_equals_the_software_node():
         got.append((c.speed, c.turn))
     assert got == expected
     assert expected[13] == (0, 0) and expected[26] != (0, 0)
+    assert expected[30][0] == params.max_speed

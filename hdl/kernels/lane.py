@@ -249,6 +249,7 @@ class LaneControl(wiring.Component):
         error = Signal(signed(17))
         raw = Signal(signed(40))
         numer, quotient, k = Signal(30), Signal(16), Signal(range(17))
+        abs_error, magnitude, turn_left = Signal(17), Signal(30), Signal()
         out_valid = Signal()
         cmd = Signal(DRIVE_COMMAND)
         m.d.comb += [self.o.tvalid.eq(out_valid), self.o.tdata.eq(cmd), self.o.tlast.eq(1)]
@@ -267,15 +268,20 @@ class LaneControl(wiring.Component):
                     with m.Else():
                         m.next = "SEND"
             with m.State("TURN"):
-                magnitude = Mux(raw < 0, -raw, raw) >> 10
+                m.d.sync += [abs_error.eq(Mux(error < 0, -error, error)),
+                             magnitude.eq(Mux(raw < 0, -raw, raw) >> 10), turn_left.eq(raw > 0)]
+                m.next = "NUMERATOR"
+            with m.State("NUMERATOR"):
+                # registered |e| and |raw| keep each of these cycles to one carry chain deep
                 limited = Mux(magnitude > self._max_turn, self._max_turn, magnitude)
-                m.d.sync += turn.eq(Mux(raw > 0, -limited, limited))
-                ae = Mux(error < 0, -error, error)
-                m.d.sync += [numer.eq(Mux(ae >= 500, 0, self._max_speed * (500 - ae))),
-                             quotient.eq(0), k.eq(16)]
+                m.d.sync += [turn.eq(Mux(turn_left, -limited, limited)),
+                             numer.eq(Mux(abs_error >= 500, 0,
+                                          self._max_speed * (500 - abs_error))),
+                             quotient.eq(0), k.eq(15)]
                 m.next = "SPEED"
             with m.State("SPEED"):
-                # (max_speed (500 - |e|)) // 500, one quotient bit per cycle
+                # (max_speed (500 - |e|)) // 500, one quotient bit per cycle; it is below
+                # 2**15 (max_speed < 2**15), so 15 steps
                 shifted = Const(500, 30) << (k - 1).as_unsigned()
                 ge = numer >= shifted
                 m.d.sync += [numer.eq(Mux(ge, numer - shifted, numer)),
