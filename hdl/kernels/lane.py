@@ -206,7 +206,7 @@ class LaneControl(wiring.Component):
     mrad/s (toward zero, limited to ``max_turn``) and the speed ``max_speed (500 - |e|) // 500``
     mm/s (0 beyond); a result without a centre repeats the last command. A stop event holds
     the command at 0 until a start event. One :data:`DRIVE_COMMAND` per lane result, 20
-    cycles later (a 16-step division by 500).
+    cycles later (a 15-step division by 500).
 
     Parameters
     ----------
