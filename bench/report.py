@@ -15,14 +15,15 @@ RESOURCE_COLUMNS = (("LUT", "LUT"), ("INV", "INV"), ("FF", "FF"), ("LUTRAM", "LU
                     ("BRAM18 eq.", "BRAM18_equiv"), ("DSP", "DSP"), ("CARRY4", "CARRY4"))
 
 
-def component_resources(component, top, file_stem):
+def component_resources(component, top, file_stem, *, blackbox=None):
     """Export ``component`` as Verilog module ``top`` (to ``sim_build/bench-resources/
     <file_stem>.v``, rewritten only when it changed) and return its yosys estimate without
-    the per-cell list."""
+    the per-cell list (``blackbox``: :func:`~gen.export.resources.estimate_resources`)."""
     text, _ = export_verilog(component, top)
     vfile = SIM_BUILD / "bench-resources" / f"{file_stem}.v"
     write_if_changed(vfile, text)
-    return {k: v for k, v in estimate_resources(vfile, top).items() if k != "cells"}
+    return {k: v for k, v in estimate_resources(vfile, top, blackbox=blackbox).items()
+            if k != "cells"}
 
 
 def resource_table(rows, label, title, *, detail="", extra=()):

@@ -3,6 +3,8 @@
 Estimates for trends and comparisons, not Vivado's numbers (docs/testing.md, Vivado-free checks).
 """
 
+import hashlib
+import json
 import re
 import shutil
 import subprocess
@@ -13,9 +15,15 @@ __all__ = ["estimate_resources", "YOSYS_COMMAND"]
 YOSYS_COMMAND = "synth_xilinx -flatten -family xc7"
 
 
-def estimate_resources(verilog, top):
+def estimate_resources(verilog, top, *, blackbox=None):
     """Return ``{"LUT", "INV", "FF", "LUTRAM", "BRAM36", "BRAM18", "DSP", "CARRY4", "cells"}``
     for ``top``.
+
+    ``blackbox`` (a regular expression) leaves the modules whose names it matches in full out
+    of the estimate: a caller adds their own estimates times ``cells[name]``, the instance
+    count (for cores with many copies of one large block, which Yosys would map copy by
+    copy). An estimate is kept beside the Verilog and reused while the Verilog, the command
+    and this Yosys stay the same.
 
     LUT counts LUT1..LUT6, as the anchors of docs/network.md were measured. INV cells are
     counted apart: ``synth_xilinx`` leaves one per flip-flop for the exported active-low
@@ -30,14 +38,30 @@ def estimate_resources(verilog, top):
     from .verilog import without_zero_memory_init, write_if_changed
     source = Path(verilog).with_suffix(".synth.v")
     write_if_changed(source, without_zero_memory_init(Path(verilog).read_text()))
-    script = f"read_verilog -sv {source}; {YOSYS_COMMAND} -top {top}; stat"
+    text = source.read_text()
+    boxed = []
+    if blackbox is not None:
+        boxed = [n for n in re.findall(r"^module \\?(\S+)", text, re.M)
+                 if re.search(blackbox, n)]
+        if not boxed:
+            raise ValueError(f"blackbox {blackbox!r} matches no module of {verilog}")
+    box = f"hierarchy -top {top}; blackbox {' '.join(_escaped(n) for n in boxed)}; " \
+        if boxed else ""
+    script = f"read_verilog -sv {source}; {box}{YOSYS_COMMAND} -top {top}; stat"
+    version = subprocess.run([yosys, "-V"], capture_output=True, text=True).stdout
+    key = hashlib.sha1(f"{version}\n{script}\n{text}".encode()).hexdigest()
+    cached = source.with_suffix(".resources.json")
+    if cached.exists():
+        saved = json.loads(cached.read_text())
+        if saved.get("key") == key:
+            return saved["estimate"]
     result = subprocess.run([yosys, "-q", "-p", script, "-l", "/dev/stdout"],
                             capture_output=True, text=True)
     if result.returncode:
         raise RuntimeError(f"yosys failed on {verilog}:\n{result.stderr[-2000:]}")
     text = result.stdout
     stat = text[text.rindex("Printing statistics"):] if "Printing statistics" in text else text
-    cells = {name: int(n) for name, n in re.findall(r"^\s+(\w+)\s+(\d+)\s*$", stat, re.M)}
+    cells = {name: int(n) for name, n in re.findall(r"^\s+(\S+)\s+(\d+)\s*$", stat, re.M)}
     total = lambda pred: sum(n for name, n in cells.items() if pred(name))  # noqa: E731
     res = {
         "LUT": total(lambda c: re.fullmatch(r"LUT[1-6]", c) is not None),
@@ -52,4 +76,10 @@ def estimate_resources(verilog, top):
         "cells": cells,
     }
     res["BRAM18_equiv"] = res["BRAM18"] + 2 * res["BRAM36"]
+    cached.write_text(json.dumps({"key": key, "estimate": res}))
     return res
+
+
+def _escaped(name):
+    """A module name as a Yosys command names it (``\\a.b`` for a name with dots)."""
+    return name if re.fullmatch(r"[A-Za-z_]\w*", name) else "\\" + name

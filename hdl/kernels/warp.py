@@ -12,7 +12,7 @@ from ..params import ParameterError, check_int
 from ..stream import StreamFIFO
 from .image import FrameGuard, check_image_params, image_stream_signature
 
-__all__ = ["PerspectiveWarp", "MATRIX_FRACTION_BITS", "COORD_FRACTION_BITS"]
+__all__ = ["PerspectiveWarp", "CoordinateDivider", "MATRIX_FRACTION_BITS", "COORD_FRACTION_BITS"]
 
 #: fraction bits of the matrix entries (each double is rounded to a multiple of 2**-64)
 MATRIX_FRACTION_BITS = 64
@@ -33,10 +33,17 @@ def _fixed(value, what):
     return round(exact * (1 << MATRIX_FRACTION_BITS))
 
 
-class _Divider(wiring.Component):
+class CoordinateDivider(wiring.Component):
     """``floor(2**16 n / w)`` for ``w > 0``, pipelined, one division per cycle: restoring
     division of ``|n| 2**16`` by ``w``, one quotient bit per stage, the sign after.
-    ``outside`` when the magnitude reaches ``2**QUOTIENT_BITS``."""
+    ``outside`` when the magnitude reaches ``2**QUOTIENT_BITS``. A
+    :class:`PerspectiveWarp` has two per pixel lane (its ``div_x<p>`` and ``div_y<p>``).
+
+    Parameters
+    ----------
+    width : int
+        Bits of ``n`` (signed) and ``w``.
+    """
 
     def __init__(self, width):
         self._width = width
@@ -149,6 +156,16 @@ class PerspectiveWarp(wiring.Component):
 
     pixels_per_beat = property(lambda self: self._p)
 
+    @property
+    def _divider_width(self):
+        # a numerator m x + m' y + m'' with x, y < 2**13
+        return max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
+
+    def coordinate_divider(self):
+        """A new :class:`CoordinateDivider` as this warp instantiates it ``2 P`` times (one
+        per coordinate and pixel lane): resource estimates synthesise it once."""
+        return CoordinateDivider(self._divider_width)
+
     def elaborate(self, platform):
         m = Module()
         P = self._p
@@ -195,7 +212,7 @@ class PerspectiveWarp(wiring.Component):
 
         # destination coordinates: numerators per lane, stepped exactly
         m0, m1, m2, m3, m4, m5, m6, m7, m8 = self._m
-        width = max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
+        width = self._divider_width
         x_row = [Signal(signed(width), name=f"xn_row{k}") for k in range(3)]
         x_lane = [[Signal(signed(width), name=f"n{k}_lane{p}") for k in range(3)]
                   for p in range(P)]
@@ -212,7 +229,7 @@ class PerspectiveWarp(wiring.Component):
 
         divs = []
         for p in range(P):
-            pair = [_Divider(width), _Divider(width)]
+            pair = [CoordinateDivider(width), CoordinateDivider(width)]
             m.submodules[f"div_x{p}"], m.submodules[f"div_y{p}"] = pair
             for k, d in enumerate(pair):
                 m.d.comb += [d.n.eq(x_lane[p][k]), d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
