@@ -128,12 +128,14 @@ class LaneDetector(wiring.Component):
         result = Signal(LANE_RESULT)
         out_valid = Signal()
         has_y, has_w = Signal(), Signal()
+        sy_nw, sw_ny = Signal(sum_bits + count_bits), Signal(sum_bits + count_bits)
+        ny_nw = Signal(2 * count_bits)
         m.d.comb += [self.o.tvalid.eq(out_valid), self.o.tdata.eq(result), self.o.tlast.eq(1)]
         with m.If(self.o.tvalid & self.o.tready):
             m.d.sync += out_valid.eq(0)
 
-        def start(n, d, then):
-            m.d.sync += [numer.eq(n), denom.eq(d), quotient.eq(0), k.eq(qbits)]
+        def start(n, d, then, steps=qbits):
+            m.d.sync += [numer.eq(n), denom.eq(d), quotient.eq(0), k.eq(steps)]
             m.next = then
 
         def divide(done):
@@ -172,15 +174,21 @@ class LaneDetector(wiring.Component):
                     m.next = "CENTRE"
                 divide(right_done)
             with m.State("CENTRE"):
-                with m.If(has_y & has_w):
-                    start(2 * tsy * tw + 2 * tsw * ty + 2 * ty * tw, 4 * ty * tw, "DIV_CENTRE")
-                with m.Elif(has_y):
-                    start(2 * tsy + ty * half + ty, 2 * ty, "DIV_CENTRE")
-                with m.Elif(has_w):
-                    # (2 Sw - Nw lane_width + Nw) // (2 Nw); the numerator may be negative
-                    start(2 * tsw + tw, 2 * tw, "DIV_ONE_SIDED")
+                # the products registered before their sum; the centre's quotient is below
+                # 2**13, so its division takes one step less and the frame no cycle more
+                m.d.sync += [sy_nw.eq(tsy * tw), sw_ny.eq(tsw * ty), ny_nw.eq(ty * tw)]
+                with m.If(has_y | has_w):
+                    m.next = "CENTRE_SUM"
                 with m.Else():
                     m.next = "SEND"
+            with m.State("CENTRE_SUM"):
+                with m.If(has_y & has_w):
+                    start(2 * (sy_nw + sw_ny + ny_nw), 4 * ny_nw, "DIV_CENTRE", qbits - 1)
+                with m.Elif(has_y):
+                    start(2 * tsy + ty * half + ty, 2 * ty, "DIV_CENTRE", qbits - 1)
+                with m.Else():
+                    # (2 Sw - Nw lane_width + Nw) // (2 Nw); the numerator may be negative
+                    start(2 * tsw + tw, 2 * tw, "DIV_ONE_SIDED", qbits - 1)
             with m.State("DIV_CENTRE"):
                 def centre_done(q):
                     m.d.sync += [result.centre.eq(q), result.has_centre.eq(1)]
