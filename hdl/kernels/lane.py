@@ -87,77 +87,87 @@ class LaneDetector(wiring.Component):
         sum_bits = (W * W * H).bit_length()
         ny, nw = Signal(count_bits), Signal(count_bits)
         sy, sw = Signal(sum_bits), Signal(sum_bits)
+        # a beat's stripe flags are registered before they are counted and summed, so the
+        # HSV range checks and the adder tree take a cycle each
+        yellow, white = Signal(P), Signal(P)
+        beat_col, beat_valid, beat_last = Signal.like(col), Signal(), Signal()
+        in_band = row >= self._band_top
         add_ny, add_nw = Const(0, count_bits), Const(0, count_bits)
         add_sy, add_sw = Const(0, sum_bits), Const(0, sum_bits)
-        in_band = row >= self._band_top
         for p in range(P):
             px = hsv.o.tdata.word_select(p, 24)
-            yellow = in_band & in_range(px, self._yellow[0], self._yellow[1])
-            white = in_band & in_range(px, self._white[0], self._white[1])
-            add_ny = add_ny + yellow
-            add_nw = add_nw + white
-            add_sy = add_sy + Mux(yellow, col + p, 0)
-            add_sw = add_sw + Mux(white, col + p, 0)
+            m.d.sync += [yellow[p].eq(in_band & in_range(px, self._yellow[0], self._yellow[1])),
+                         white[p].eq(in_band & in_range(px, self._white[0], self._white[1]))]
+            add_ny = add_ny + yellow[p]
+            add_nw = add_nw + white[p]
+            add_sy = add_sy + Mux(yellow[p], beat_col + p, 0)
+            add_sw = add_sw + Mux(white[p], beat_col + p, 0)
 
         busy = Signal()
         take = hsv.o.tvalid & hsv.o.tready
-        m.d.comb += hsv.o.tready.eq(~busy)
+        m.d.comb += hsv.o.tready.eq(~busy & ~(beat_valid & beat_last))
+        m.d.sync += [beat_valid.eq(take), beat_col.eq(col), beat_last.eq(hsv.o.tlast)]
+        with m.If(take):
+            with m.If(hsv.o.tlast):
+                m.d.sync += [row.eq(0), col.eq(0)]
+            with m.Elif(col + P == W):
+                m.d.sync += [col.eq(0), row.eq(row + 1)]
+            with m.Else():
+                m.d.sync += col.eq(col + P)
         # the frame's totals, then the divisions
         ty, tw, tsy, tsw = (Signal(count_bits), Signal(count_bits), Signal(sum_bits),
                             Signal(sum_bits))
-        with m.If(take):
-            with m.If(hsv.o.tlast):
+        has_y, has_w = Signal(), Signal()
+        with m.If(beat_valid):
+            with m.If(beat_last):
                 m.d.sync += [ty.eq(ny + add_ny), tw.eq(nw + add_nw), tsy.eq(sy + add_sy),
                              tsw.eq(sw + add_sw), ny.eq(0), nw.eq(0), sy.eq(0), sw.eq(0),
-                             row.eq(0), col.eq(0), busy.eq(1)]
+                             has_y.eq(ny + add_ny >= self._min),
+                             has_w.eq(nw + add_nw >= self._min), busy.eq(1)]
             with m.Else():
                 m.d.sync += [ny.eq(ny + add_ny), nw.eq(nw + add_nw), sy.eq(sy + add_sy),
                              sw.eq(sw + add_sw)]
-                with m.If(col + P == W):
-                    m.d.sync += [col.eq(0), row.eq(row + 1)]
-                with m.Else():
-                    m.d.sync += col.eq(col + P)
 
-        # a serial divider: quotient = numer // denom, 16 quotient bits (the results are
+        # a serial divider: quotient = numer // divisor, 16 quotient bits (the results are
         # columns below 4096 and halves of them)
         qbits = 16
         nbits = 2 * sum_bits + 4
-        numer, denom = Signal(nbits), Signal(nbits)
+        numer, shifted = Signal(nbits), Signal(nbits + qbits)
         quotient = Signal(qbits)
         k = Signal(range(qbits + 1))
         result = Signal(LANE_RESULT)
         out_valid = Signal()
-        has_y, has_w = Signal(), Signal()
-        sy_nw, sw_ny = Signal(sum_bits + count_bits), Signal(sum_bits + count_bits)
-        ny_nw = Signal(2 * count_bits)
         m.d.comb += [self.o.tvalid.eq(out_valid), self.o.tdata.eq(result), self.o.tlast.eq(1)]
         with m.If(self.o.tvalid & self.o.tready):
             m.d.sync += out_valid.eq(0)
 
         def start(n, d, then, steps=qbits):
-            m.d.sync += [numer.eq(n), denom.eq(d), quotient.eq(0), k.eq(steps)]
+            # the divisor shifted into place once, then one bit right per step (no barrel
+            # shifter between the step count and the comparison)
+            m.d.sync += [numer.eq(n), shifted.eq(d << (steps - 1)), quotient.eq(0),
+                         k.eq(steps)]
             m.next = then
 
         def divide(done):
-            shifted = denom << (k - 1).as_unsigned()
             ge = numer >= shifted
-            m.d.sync += [numer.eq(Mux(ge, numer - shifted, numer)),
+            m.d.sync += [numer.eq(Mux(ge, numer - shifted, numer)), shifted.eq(shifted >> 1),
                          quotient.eq(Cat(ge, quotient[:-1])), k.eq(k - 1)]
             with m.If(k == 1):
                 done(Cat(ge, quotient[:-1]))
 
         half = self._lane_width
+        partials = [[Signal(len(x) + len(y)) for x, y, _ in _partial_products(a, b)]
+                    for a, b in ((tsy, tw), (tsw, ty), (ty, tw))]
+        products = [Signal(len(a) + len(b)) for a, b in ((tsy, tw), (tsw, ty), (ty, tw))]
+        y_only = Signal(count_bits + 12)
         with m.FSM():
             with m.State("COUNT"):
                 with m.If(busy & ~out_valid):
-                    m.d.sync += [has_y.eq(ty >= self._min), has_w.eq(tw >= self._min),
-                                 result.eq(0)]
-                    m.next = "LEFT"
-            with m.State("LEFT"):
-                with m.If(has_y):
-                    start(tsy, ty, "DIV_LEFT")
-                with m.Else():
-                    m.next = "RIGHT"
+                    m.d.sync += result.eq(0)
+                    with m.If(has_y):
+                        start(tsy, ty, "DIV_LEFT")
+                    with m.Else():
+                        m.next = "RIGHT"
             with m.State("DIV_LEFT"):
                 def left_done(q):
                     m.d.sync += [result.left.eq(q), result.has_left.eq(1)]
@@ -174,21 +184,33 @@ class LaneDetector(wiring.Component):
                     m.next = "CENTRE"
                 divide(right_done)
             with m.State("CENTRE"):
-                # the products registered before their sum; the centre's quotient is below
-                # 2**13, so its division takes one step less and the frame no cycle more
-                m.d.sync += [sy_nw.eq(tsy * tw), sw_ny.eq(tsw * ty), ny_nw.eq(ty * tw)]
+                # the products as partial products of at most 18x18 bits (one multiplier
+                # each), registered, then summed, then the numerator; the centre's quotient
+                # is below 2**13, so its division takes two steps less and the frame no
+                # cycle more
+                for parts, (a, b) in zip(partials, ((tsy, tw), (tsw, ty), (ty, tw))):
+                    for reg, (x, y, _) in zip(parts, _partial_products(a, b)):
+                        m.d.sync += reg.eq(x * y)
+                m.d.sync += y_only.eq(ty * (half + 1))
                 with m.If(has_y | has_w):
-                    m.next = "CENTRE_SUM"
+                    m.next = "CENTRE_ADD"
                 with m.Else():
                     m.next = "SEND"
+            with m.State("CENTRE_ADD"):
+                for product, parts, (a, b) in zip(products, partials,
+                                                  ((tsy, tw), (tsw, ty), (ty, tw))):
+                    m.d.sync += product.eq(sum(reg << shift for reg, (_, _, shift)
+                                               in zip(parts, _partial_products(a, b))))
+                m.next = "CENTRE_SUM"
             with m.State("CENTRE_SUM"):
+                sy_nw, sw_ny, ny_nw = products
                 with m.If(has_y & has_w):
-                    start(2 * (sy_nw + sw_ny + ny_nw), 4 * ny_nw, "DIV_CENTRE", qbits - 1)
+                    start(2 * (sy_nw + sw_ny + ny_nw), 4 * ny_nw, "DIV_CENTRE", qbits - 2)
                 with m.Elif(has_y):
-                    start(2 * tsy + ty * half + ty, 2 * ty, "DIV_CENTRE", qbits - 1)
+                    start(2 * tsy + y_only, 2 * ty, "DIV_CENTRE", qbits - 2)
                 with m.Else():
                     # (2 Sw - Nw lane_width + Nw) // (2 Nw); the numerator may be negative
-                    start(2 * tsw + tw, 2 * tw, "DIV_ONE_SIDED", qbits - 1)
+                    start(2 * tsw + tw, 2 * tw, "DIV_ONE_SIDED", qbits - 2)
             with m.State("DIV_CENTRE"):
                 def centre_done(q):
                     m.d.sync += [result.centre.eq(q), result.has_centre.eq(1)]
@@ -206,6 +228,14 @@ class LaneDetector(wiring.Component):
                 m.d.sync += [out_valid.eq(1), busy.eq(0)]
                 m.next = "COUNT"
         return m
+
+
+def _partial_products(a, b, bits=17):
+    """``(x, y, shift)`` with ``a * b == sum(x * y << shift)``, each ``x`` and ``y`` at most
+    ``bits`` wide (an unsigned operand of one ECP5 or Xilinx multiplier)."""
+    def pieces(v):
+        return [(v[i:i + bits], i) for i in range(0, len(v), bits)]
+    return [(x, y, i + j) for x, i in pieces(a) for y, j in pieces(b)]
 
 
 class LaneControl(wiring.Component):
