@@ -1,10 +1,12 @@
 """The fpgaDDS lane-following chain benchmark (docs/av_chain.md): chain alpha over 100 scene
 frames for the hardware-topic (fpgaDDS) variant at 1 and 4 pixels per clock under Verilator,
-over a few full-size frames for the ReconROS variant (examples/av_chain: the same nodes as
-ReconOS threads, topics through memory and the broker) at 1 and 4 pixels per clock, and the
-software variant (the OpenCV nodes of host/autorace.py on this machine), beside the fpgaDDS
-paper's Table III. Writes ``bench/results/av_chain.json`` with the ``chain_alpha`` list, the
-Markdown table and the plots (latency per frame, the lane overlay of one frame)."""
+over a few full-size frames and over the scene's 100 frames at a fifth of the size for the
+ReconROS variant (examples/av_chain: the same nodes as ReconOS threads, topics through memory
+and the broker) at 1 and 4 pixels per clock, and the software variant (the OpenCV nodes of
+host/autorace.py on this machine), beside the fpgaDDS paper's Table III; the whole chain's
+Yosys resources beside its Table II. Writes ``bench/results/av_chain.json`` with the
+``chain_alpha`` list (and ``reconros_scaled``, ``resources``), the Markdown tables and the
+plots (latency per frame, the lane overlay of one frame)."""
 
 import json
 import os
@@ -13,8 +15,8 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 
-from bench.report import write_report
-from gen.av_chain import scaled_config, scaled_params
+from bench.report import RESOURCE_COLUMNS, component_resources, resource_table, write_report
+from gen.av_chain import NODES, chain_node, chain_topics, scaled_config, scaled_params
 from host.project_sim import run_project_sim
 from tb.harness import ROOT, SIM_BUILD, run_bench
 
@@ -27,12 +29,21 @@ FRAMES = int(os.environ.get("ROSGATE_AV_FRAMES", 100))
 #: model (seven threads, the ReconOS infrastructure, memory in cocotb) simulates about 6,000
 #: cycles/s at 4 px/clk, a frame there is 1.4 million cycles
 RECONROS_FRAMES = int(os.environ.get("ROSGATE_AV_RECONROS_FRAMES", 4))
+#: the ReconROS variant's frames and frame scale for the spread over the scene: 100 frames at
+#: a fifth of the size (128x96 camera, 200x120 view), some 17 and 30 min at 4 and 1 px/clk
+RECONROS_SCALED = (int(os.environ.get("ROSGATE_AV_RECONROS_SCALED_FRAMES", 100)), 0.2)
 PROJECT = ROOT / "examples" / "av_chain" / "build.cfg"
 CLOCK_MHZ = 100
 #: fpgaDDS Table III: chain alpha, mean (sd) in ms
 PAPER = {"software": (274.44, 14.96), "reconros": (110.72, 7.73), "fpgadds": (20.58, 0.13)}
 #: fpgaDDS Table II: LUTs of the whole hardware chain with fpgaDDS
 PAPER_LUT = 44939
+#: fpgaDDS Table II, the same row: block RAM (36 Kb), UltraRAM and DSP of the chain on the ZCU104
+PAPER_MEMORY = {"BRAM36": 255.0, "URAM": 91, "DSP": 230}
+#: the ZCU104's XCZU7EV: CLB LUTs, flip-flops, 36 Kb block RAMs, UltraRAMs, DSP slices
+XCZU7EV = {"LUT": 230400, "FF": 460800, "BRAM36": 312, "URAM": 96, "DSP": 1728}
+#: the projection's coordinate dividers, estimated once and counted per instance
+DIVIDER_MODULES = r"\.div_[xy]\d+$"
 
 
 def _stats(values):
@@ -53,23 +64,27 @@ def _software(frames, log):
     return times, errors
 
 
-def _reconros(ppcs, log):
+def _reconros(ppcs, log, frames=RECONROS_FRAMES, scale=1.0):
     """The ReconROS variant under ``rosgate sim``, the px/clk settings side by side: its
     results per px/clk."""
     def simulate(p):
-        return p, run_project_sim(PROJECT, "verilator", out=SIM_BUILD / f"bench-av_chain-p{p}",
-                                  args={"frames": str(RECONROS_FRAMES)},
-                                  thread_params=[f"*.pixels_per_beat={p}"], limit_ms=1000)
+        return p, run_project_sim(PROJECT, "verilator",
+                                  out=SIM_BUILD / f"bench-av_chain-p{p}-s{scale}",
+                                  args={"frames": str(frames)},
+                                  thread_params=[f"*.pixels_per_beat={p}"] +
+                                  ([f"*.scale={scale}"] if scale != 1 else []),
+                                  limit_ms=1000)
+    size = "full-size" if scale == 1 else f"{scale:g}-scale"
     log(f"  simulating the ReconROS variant (examples/av_chain) at {' and '.join(map(str, ppcs))}"
-        f" px/clk over {RECONROS_FRAMES} full-size frames each, side by side (Verilator; "
+        f" px/clk over {frames} {size} frames each, side by side (Verilator; "
         "about half an hour)...")
     with ThreadPoolExecutor(len(ppcs)) as pool:
         return dict(pool.map(simulate, ppcs))
 
 
-def reconros_entries(runs):
+def reconros_entries(runs, scale=1.0):
     """The ``chain_alpha`` entries and the per-frame ms of the ReconROS runs (px/clk ->
-    ``rosgate sim`` results)."""
+    ``rosgate sim`` results) at frame ``scale``."""
     entries, per_frame = [], {}
     for p, rec in sorted(runs.items(), reverse=True):
         ms = [f["cycles"] / (CLOCK_MHZ * 1e3) for f in rec["frames"]]
@@ -83,7 +98,9 @@ def reconros_entries(runs):
                         "stops": rec["stops"], "starts": rec["starts"],
                         "note": "the broker and the delegate threads in software take no "
                                 "simulated time: a lower bound"})
-        per_frame[f"reconros_p{p}"] = ms
+        if scale != 1:
+            entries[-1]["scale"] = scale
+        per_frame[f"reconros_p{p}" + (f"_scale{scale:g}" if scale != 1 else "")] = ms
     return entries, per_frame
 
 
@@ -119,6 +136,9 @@ def measure(log=print):
     reconros, reconros_ms = reconros_entries(_reconros(ppcs, log))
     entries += reconros
     per_frame.update(reconros_ms)
+    frames_scaled, scale = RECONROS_SCALED
+    scaled, scaled_ms = reconros_entries(_reconros(ppcs, log, frames_scaled, scale), scale)
+    per_frame.update(scaled_ms)
     times, errors = _software(frames, log)
     mean, sd = _stats(times)
     entries.append({"variant": "software", "ppc": None, "clock_mhz": None,
@@ -126,15 +146,85 @@ def measure(log=print):
                     "lane_centre_max_error_px": round(max(errors), 3),
                     "stages_bit_exact": True, "note": "wall-clock on this machine"})
     per_frame["software"] = times
-    return {"chain_alpha": entries, "per_frame_ms": per_frame, "paper": PAPER,
+    return {"chain_alpha": entries, "reconros_scaled": scaled, "per_frame_ms": per_frame,
+            "paper": PAPER,
             "paper_lut": PAPER_LUT, "overlay_frame": 50}
 
 
+def _add(rows, label):
+    """The sum of the estimates ``rows`` as one row labelled ``label``."""
+    keys = [k for _, k in RESOURCE_COLUMNS]
+    return {"part": label, **{k: sum(r[k] for r in rows) for k in keys}}
+
+
+def _node_resources(config, name, log):
+    """The estimate of node ``name`` at ``config``'s size: the projection without its
+    coordinate dividers plus one divider's estimate per instance (Yosys maps each of the
+    ``2 P`` identical 100-bit dividers on its own and takes hours over them)."""
+    node = chain_node(config, name, events=True)
+    stem = f"av-{name}-p{config.pixels_per_beat}"
+    if name != "projection":
+        return component_resources(node, f"av_{name}", stem)
+    rest = component_resources(node, f"av_{name}", stem, blackbox=DIVIDER_MODULES)
+    divider = component_resources(node.coordinate_divider(), "av_projection_divider",
+                                  "av-projection-divider")
+    count = 2 * config.pixels_per_beat
+    log(f"    projection: {rest['LUT']} LUT without its {count} coordinate dividers, "
+        f"{divider['LUT']} LUT each")
+    return _add([rest] + [divider] * count, name)
+
+
 def measure_resources(log=print):
-    return {}
+    """Yosys estimates of the whole hardware chain (the fpgaDDS variant's seven nodes and six
+    topic fabrics, at the camera's 640x480) at 4 and 1 px/clk, beside fpgaDDS Table II."""
+    rows = []
+    for p in (4, 1):
+        config = scaled_config(1.0, p)
+        log(f"  yosys estimates of the chain's nodes and topics at {p} px/clk "
+            "(minutes per node the first time)...")
+        parts = []
+        for name in NODES:
+            parts.append({"part": name, **_node_resources(config, name, log)})
+            log(f"    {name}: {parts[-1]['LUT']} LUT, {parts[-1]['FF']} FF, "
+                f"{parts[-1]['BRAM18_equiv'] / 2:g} BRAM36 eq., {parts[-1]['DSP']} DSP")
+        topics = [component_resources(t, f"av_topic_{k}", f"av-topic-{k}-p{p}")
+                  for k, t in chain_topics(config).items()]
+        parts.append(_add(topics, "topic fabrics A-F"))
+        total = _add(parts, "whole chain")
+        rows += [dict(r, ppc=p) for r in parts + [total]]
+    return rows
 
 
-def markdown(r):
+def resource_lines(resources):
+    """The Markdown of the chain's resources beside fpgaDDS Table II."""
+    if not resources:
+        return []
+    lines = resource_table(resources, "part", "part (px/clk)",
+                           detail=", 640x480 camera, 1000x600 bird's-eye view")
+    # the label column says the px/clk of each row
+    for i, r in enumerate(resources):
+        lines[5 + i] = lines[5 + i].replace(f"| {r['part']} |", f"| {r['part']} ({r['ppc']}) |",
+                                            1)
+    paper = PAPER_MEMORY
+    lines += ["", "The whole chain beside fpgaDDS Table II (its chain on the ZCU104's XCZU7EV) "
+              "and the device:", "",
+              "| chain | LUT | % of XCZU7EV | BRAM36 eq. | DSP |", "|---|---|---|---|---|",
+              f"| fpgaDDS paper (Vivado) | {PAPER_LUT:,} | "
+              f"{100 * PAPER_LUT / XCZU7EV['LUT']:.0f} % | {paper['BRAM36']:g} + "
+              f"{paper['URAM']} URAM | {paper['DSP']} |"]
+    for r in resources:
+        if r["part"] == "whole chain":
+            lines.append(f"| rosgate, {r['ppc']} px/clk (Yosys) | {r['LUT']:,} | "
+                         f"{100 * r['LUT'] / XCZU7EV['LUT']:.0f} % | "
+                         f"{r['BRAM18_equiv'] / 2:g} | {r['DSP']} |")
+    lines += ["", f"The XCZU7EV has {XCZU7EV['BRAM36']} BRAM36 and {XCZU7EV['URAM']} UltraRAMs "
+              "(288 Kb each; Yosys' xc7 flow maps no UltraRAM, so every store counts as "
+              "BRAM36 here). The projection's coordinate dividers are estimated once and "
+              "counted per instance (two per px/clk)."]
+    return lines
+
+
+def markdown(r, resources=()):
     lines = ["# The fpgaDDS lane-following chain", "",
              "Chain alpha (the frame's last beat into Image Compensation to Lane Control's "
              "command for it) over the scene's frames, beside fpgaDDS Table III.", "",
@@ -146,6 +236,10 @@ def markdown(r):
         lines.append(f"| {e['variant']} | {e['ppc'] or '-'} | {e['frames']} | "
                      f"{e['mean_ms']} | {e['sd_ms']} | {e['lane_centre_max_error_px']} | "
                      f"{'yes' if e['stages_bit_exact'] else 'no'} | {paper_text} |")
+    for e in r.get("reconros_scaled", []):
+        lines.append(f"| reconros at {e['scale']:g} scale | {e['ppc']} | {e['frames']} | "
+                     f"{e['mean_ms']} | {e['sd_ms']} | {e['lane_centre_max_error_px']} | "
+                     f"{'yes' if e['stages_bit_exact'] else 'no'} | - |")
     lines += ["", "The projection is within 1 of OpenCV's float32 result where the value lies "
               "within float32's error of a half (docs/kernels.md); every other stage is "
               "bit-exact. The software row is wall-clock on this machine, not simulated.", "",
@@ -155,8 +249,13 @@ def markdown(r):
               "node starts, through one 64-bit memory port. The software side (broker, "
               "delegate threads) takes no simulated time there, so they are a lower bound; "
               f"they cover {RECONROS_FRAMES} full-size frames per px/clk because the "
-              "simulation costs minutes per frame.", "",
+              "simulation costs minutes per frame; the rows at a fifth of the size (128x96 "
+              "camera, 200x120 view) cover the scene's 100 frames and show the spread over "
+              "it. At that size the lane centre is further from the scene's truth in its "
+              "200-pixel view, in the software chain as in hardware: every frame's lane "
+              "result equals the software chain's.", "",
               "![chain alpha per frame](av_chain.png)", ""]
+    lines += resource_lines(resources)
     return "\n".join(lines)
 
 
@@ -201,4 +300,5 @@ def overlay(r, path):
 def write_results(results, resources, folder):
     plot(results, folder / "av_chain.png")
     overlay(results, folder / "av_chain_overlay.png")
-    return write_report(folder, "av_chain", results, markdown(results))
+    return write_report(folder, "av_chain", {**results, "resources": resources},
+                        markdown(results, resources))
