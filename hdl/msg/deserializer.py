@@ -9,7 +9,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
-from .serializer import ErrorSignature, check_plan_width, payload_port
+from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
 from .steps import (RuntimeStep, count_chunks, count_step, next_element, pad_bytes,
                     payload_bytes, send_count_chunk)
 
@@ -156,10 +156,11 @@ class Deserializer(wiring.Component):
         code_now = Signal(3)
         m.d.comb += self.error.code.eq(Mux(self.error.valid, code_now, error_code))
 
+        count_errors(m, self.error)
+
         def fail(code):
             m.d.comb += [self.error.valid.eq(1), code_now.eq(code), unpacker.flush.eq(1)]
-            m.d.sync += [error_code.eq(code), self.error.count.eq(self.error.count + 1),
-                         op.eq(WAIT), step.eq(0)]
+            m.d.sync += [error_code.eq(code), op.eq(WAIT), step.eq(0)]
 
         def take(n):
             m.d.comb += unpacker.take.eq(n)

@@ -37,7 +37,7 @@ class ErrorSignature(wiring.Signature):
         Reason code (:class:`SerializerError`, :class:`~hdl.msg.DeserializerError`) while
         ``valid``; it keeps the last code afterwards.
     count : Out(32)
-        Messages with an error since reset (wraps).
+        Messages with an error since reset (wraps), counted the cycle after ``valid``.
     """
 
     def __init__(self):
@@ -48,6 +48,15 @@ class ErrorSignature(wiring.Signature):
 
     def __hash__(self):
         return hash(type(self))
+
+
+def count_errors(m, error):
+    """Count ``error``'s pulses into ``error.count``, the cycle after each: the counter's
+    enable comes from a register, not from the logic that decides an error."""
+    pulse = Signal()
+    m.d.sync += pulse.eq(error.valid)
+    with m.If(pulse):
+        m.d.sync += error.count.eq(error.count + 1)
 
 
 def payload_port(variable, direction):
@@ -182,9 +191,11 @@ class Serializer(wiring.Component):
         code_now = Signal(3)
         m.d.comb += self.error.code.eq(Mux(self.error.valid, code_now, error_code))
 
+        count_errors(m, self.error)
+
         def report(code):
             m.d.comb += [self.error.valid.eq(1), code_now.eq(code)]
-            m.d.sync += [error_code.eq(code), self.error.count.eq(self.error.count + 1)]
+            m.d.sync += error_code.eq(code)
 
         def next_op(i):
             if i == len(steps) - 1:
