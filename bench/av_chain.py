@@ -30,7 +30,7 @@ FRAMES = int(os.environ.get("ROSGATE_AV_FRAMES", 100))
 #: cycles/s at 4 px/clk, a frame there is 1.4 million cycles
 RECONROS_FRAMES = int(os.environ.get("ROSGATE_AV_RECONROS_FRAMES", 4))
 #: the ReconROS variant's frames and frame scale for the spread over the scene: 100 frames at
-#: a fifth of the size (128x96 camera, 200x120 view), some 17 and 30 min at 4 and 1 px/clk
+#: a fifth of the size (128x96 camera, 200x120 view), 16 to 19 min each, side by side
 RECONROS_SCALED = (int(os.environ.get("ROSGATE_AV_RECONROS_SCALED_FRAMES", 100)), 0.2)
 PROJECT = ROOT / "examples" / "av_chain" / "build.cfg"
 CLOCK_MHZ = 100
