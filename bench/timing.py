@@ -16,7 +16,7 @@ from gen.export.verilog import export_verilog, write_if_changed
 from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, synthesise,
                          synthesise_parts,
                          time_verilog)
-from tb.harness import SIM_BUILD
+from tb.harness import ROOT, SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FOLDER = SIM_BUILD / "timing"
@@ -237,7 +237,8 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
         try:
             row = _place(core, entry, seeds, log)
         except TimingError as exc:
-            why = str(exc).splitlines()[0]
+            # the logs' paths relative to the repository: no host paths in the results
+            why = str(exc).splitlines()[0].replace(f"{ROOT}/", "")
             rows.append({"core": core, "label": entry["label"], "top": entry["top"],
                          "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
             log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
