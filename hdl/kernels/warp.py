@@ -182,11 +182,19 @@ class PerspectiveWarp(wiring.Component):
         per_word = max(P // 2, 1)
         words_per_row = sw // 2 // per_word
         depth = (sh // 2) * words_per_row
-        banks = [[Memory(shape=24 * per_word, depth=depth, init=[]) for _ in range(2)]
-                 for _ in range(2)]
+        # each bank is copied once per pair of pixel lanes (every lane reads its own 2x2
+        # neighbourhood in the same cycle); the even lane's read shares its copy's port with
+        # the write port (stores and reads never overlap), so a copy fits one true-dual-port
+        # block RAM and the store takes P/2 copies instead of P
+        copies = max(P // 2, 1)
+        banks = [[[Memory(shape=24 * per_word, depth=depth, init=[]) for _ in range(copies)]
+                  for _ in range(2)] for _ in range(2)]
+        shared_addr = [[[Signal(range(depth), name=f"addr{r}{c}_{k}") for k in range(copies)]
+                        for c in range(2)] for r in range(2)]
         for r in range(2):
             for c in range(2):
-                m.submodules[f"bank{r}{c}"] = banks[r][c]
+                for k in range(copies):
+                    m.submodules[f"bank{r}{c}_{k}"] = banks[r][c][k]
         row, col = Signal(range(sh + 1)), Signal(range(sw + 1))
         storing = Signal(init=1)
         take = guard.o.tvalid & guard.o.tready
@@ -194,14 +202,16 @@ class PerspectiveWarp(wiring.Component):
         word_addr = (row >> 1) * words_per_row + (col >> 1) // per_word
         for r in range(2):
             for c in range(2):
-                wp = banks[r][c].write_port()
                 if P == 1:
                     data = guard.o.tdata
                     hit = (row[0] == r) & (col[0] == c)
                 else:
                     data = Cat(*(guard.o.tdata.word_select(k, 24) for k in range(c, P, 2)))
                     hit = row[0] == r
-                m.d.comb += [wp.addr.eq(word_addr), wp.data.eq(data), wp.en.eq(take & hit)]
+                for k in range(copies):
+                    wp = banks[r][c][k].write_port()
+                    m.d.comb += [wp.addr.eq(shared_addr[r][c][k]), wp.data.eq(data),
+                                 wp.en.eq(take & hit)]
         with m.If(take):
             with m.If(col + P == sw):
                 m.d.sync += [col.eq(0), row.eq(row + 1)]
@@ -284,12 +294,17 @@ class PerspectiveWarp(wiring.Component):
             reads = {}
             for r in range(2):
                 for c in range(2):
-                    port = banks[r][c].read_port()
+                    port = banks[r][c][p // 2].read_port()
                     # the neighbour of this parity: row sy or sy + 1, column sx or sx + 1
                     ny = Mux(sy[0] == r, sy, sy + 1)
                     nx = Mux(sx[0] == c, sx, sx + 1)
-                    m.d.comb += port.addr.eq((ny >> 1) * words_per_row +
-                                             (nx >> 1)[:16] // per_word)
+                    addr = (ny >> 1) * words_per_row + (nx >> 1)[:16] // per_word
+                    if p % 2 == 0:
+                        shared = shared_addr[r][c][p // 2]
+                        m.d.comb += [shared.eq(Mux(storing, word_addr, addr)),
+                                     port.addr.eq(shared)]
+                    else:
+                        m.d.comb += port.addr.eq(addr)
                     inside = Signal(name=f"in{p}_{r}{c}")
                     m.d.sync += inside.eq(~away & (ny >= 0) & (ny < sh) & (nx >= 0) & (nx < sw))
                     sel = Signal(range(per_word), name=f"sel{p}_{r}{c}")
