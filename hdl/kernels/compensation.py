@@ -132,13 +132,19 @@ class ImageCompensation(wiring.Component):
         draining = stream_through_table(m, frame, lut_reads, self.o, 3 * P)
 
         # the limits: one scan of the bins (clearing them)
+        # a bin's count (the banks' sum) and 20000 times it are registered the cycle after
+        # its read; the scan compares 20000 * the running count with the two limits, so its
+        # cycle holds one addition and two comparisons
         j = Signal(9)
-        acc = Signal(count_bits + 1)
         lo, hi = Signal(range(-1, 256)), Signal(range(-1, 256))
         lo_found = Signal()
         clip_scaled = Signal(count_bits + 15)        # 20000 * c = N * clip_hundredths
+        hi_limit = Signal(count_bits + 16)           # 20000 * (N - c)
         hist_sum = Signal(count_bits + 1)
+        bin_count, bin_scaled = Signal(count_bits + 1), Signal(count_bits + 16)
+        acc_scaled = Signal(count_bits + 16)          # 20000 * the bins' count so far
         m.d.comb += hist_sum.eq(sum(rd.data for _, rd in hists))
+        m.d.sync += [bin_count.eq(hist_sum), bin_scaled.eq(hist_sum * 20000)]
         # alpha and beta as the node computes them (float64) and OpenCV converts them (float32)
         R = Signal(9)                                   # |range|
         numer = Signal(SCALE_BITS + 8)
@@ -194,30 +200,35 @@ class ImageCompensation(wiring.Component):
         with m.FSM():
             with m.State("FILL"):
                 with m.If(~filling & ~grey_valid & ~inc_valid & ~draining):
-                    m.d.sync += [j.eq(0), acc.eq(0), lo_found.eq(0), hi.eq(-1), lo.eq(0),
-                                 clip_scaled.eq(total * self._clip)]
-                    m.next = "READ"
-            with m.State("READ"):
+                    m.d.sync += [j.eq(0), acc_scaled.eq(0), lo_found.eq(0), hi.eq(-1),
+                                 lo.eq(0), clip_scaled.eq(total * self._clip),
+                                 hi_limit.eq(total * (20000 - self._clip))]
+                    for _, rd in hists:
+                        m.d.comb += rd.addr.eq(0)
+                    m.next = "FIRST"
+            with m.State("FIRST"):
+                # bin 0's count is registered; bin 1 is read
                 for _, rd in hists:
-                    m.d.comb += rd.addr.eq(j)
+                    m.d.comb += rd.addr.eq(1)
                 m.next = "BIN"
             with m.State("BIN"):
+                # bin j's count is in bin_count; bin j + 2 is read
                 for wr, _ in hists:
                     m.d.comb += [wr.en.eq(1), wr.addr.eq(j), wr.data.eq(0)]
-                new_acc = acc + hist_sum
-                m.d.sync += acc.eq(new_acc)
+                new_acc = acc_scaled + bin_scaled
+                m.d.sync += acc_scaled.eq(new_acc)
                 if self._clip:
-                    with m.If(~lo_found & (new_acc * 20000 >= clip_scaled)):
+                    with m.If(~lo_found & (new_acc >= clip_scaled)):
                         m.d.sync += [lo.eq(j), lo_found.eq(1)]
-                    with m.If(new_acc * 20000 < total * 20000 - clip_scaled):
+                    with m.If(new_acc < hi_limit):
                         m.d.sync += hi.eq(j)
                 else:
-                    with m.If(~lo_found & (hist_sum != 0)):
+                    with m.If(~lo_found & (bin_count != 0)):
                         m.d.sync += [lo.eq(j), lo_found.eq(1)]
-                    with m.If(hist_sum != 0):
+                    with m.If(bin_count != 0):
                         m.d.sync += hi.eq(j)
                 for _, rd in hists:
-                    m.d.comb += rd.addr.eq(j + 1)
+                    m.d.comb += rd.addr.eq(j + 2)
                 m.d.sync += j.eq(j + 1)
                 with m.If(j == 255):
                     m.next = "RANGE"
