@@ -7,7 +7,7 @@ from amaranth.lib.wiring import In, Out
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
 from ..params import ParameterError, check_int
-from ..stream import AXIStreamSignature, RegisterSlice, StreamRepacker
+from ..stream import RegisterSlice, StreamRepacker
 from .action import ActionServer, GoalStatus
 from .topic import HW_TOPIC_STREAM
 
@@ -79,32 +79,27 @@ class FibonacciServer(wiring.Component):
             m.d.comb += getattr(self, name).eq(getattr(server, name))
         wiring.connect(m, packer.m_axis, getattr(ser, payload_port(self._sequence, "s")))
         to_result = Signal()
-        # the serializer's messages leave through a register slice, each beat with the port it
-        # is for (tuser: the result): the action server's port choice and ready do not reach
-        # back into the serializer's byte packer, and the next message need not wait for it
-        m.submodules.out_slice = out = RegisterSlice(AXIStreamSignature(64, user_width=1))
-        m.d.comb += [out.s_axis.tdata.eq(ser.m_axis.tdata), out.s_axis.tkeep.eq(ser.m_axis.tkeep),
-                     out.s_axis.tlast.eq(ser.m_axis.tlast), out.s_axis.tuser.eq(to_result),
-                     out.s_axis.tvalid.eq(ser.m_axis.tvalid),
-                     ser.m_axis.tready.eq(out.s_axis.tready)]
+        # the serializer's messages leave through a register slice: the action server's port
+        # choice and ready do not reach back into the serializer's byte packer
+        m.submodules.out_slice = out = RegisterSlice(ser.signature.members["m_axis"].signature)
+        wiring.connect(m, ser.m_axis, out.s_axis)
 
         order = Signal(32)
         computed = Signal(range(64))      # index of the last value computed
         wait = Signal(range(self._step_cycles + 2))
         a, b = Signal(32), Signal(32, init=1)     # the generator: F(i), F(i + 1)
         tail_seen = Signal()
-        tail_out = ser.m_axis.tvalid & ser.m_axis.tready & ser.m_axis.tlast
+        tail_out = out.m_axis.tvalid & out.m_axis.tready & out.m_axis.tlast
         emitted = Signal(range(64))
         status = Signal(8)
         good_order = (~order[31]) & (order <= MAX_ORDER)
 
         # the serializer's messages go to FEEDBACK or RESULT
-        for port, chosen in ((server.feedback, ~out.m_axis.tuser),
-                             (server.result, out.m_axis.tuser)):
+        for port, chosen in ((server.feedback, ~to_result), (server.result, to_result)):
             m.d.comb += [port.tvalid.eq(out.m_axis.tvalid & chosen),
                          port.tdata.eq(out.m_axis.tdata), port.tkeep.eq(out.m_axis.tkeep),
                          port.tlast.eq(out.m_axis.tlast)]
-        m.d.comb += [out.m_axis.tready.eq(Mux(out.m_axis.tuser, server.result.tready,
+        m.d.comb += [out.m_axis.tready.eq(Mux(to_result, server.result.tready,
                                               server.feedback.tready)),
                      server.result_status.eq(status),
                      ser.fields.payload[self._sequence.path].eq(computed + 1),
@@ -161,8 +156,9 @@ class FibonacciServer(wiring.Component):
                     m.d.sync += [a.eq(0), b.eq(1), emitted.eq(0)]
                     m.next = "SENT"
             with m.State("SENT"):
-                # the message's last beat may still be in the serializer: it must enter the
-                # slice, with the port it is for, before ``to_result`` changes
+                # the message's last beat may still be in the serializer or the slice: it
+                # must reach the port it was meant for before ``to_result`` changes (the
+                # action server must see the same order of events as without the slice)
                 with m.If((tail_seen | tail_out) & to_result):
                     m.next = "IDLE"
                 with m.Elif(tail_seen | tail_out):
