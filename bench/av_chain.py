@@ -42,8 +42,6 @@ PAPER_LUT = 44939
 PAPER_MEMORY = {"BRAM36": 255.0, "URAM": 91, "DSP": 230}
 #: the ZCU104's XCZU7EV: CLB LUTs, flip-flops, 36 Kb block RAMs, UltraRAMs, DSP slices
 XCZU7EV = {"LUT": 230400, "FF": 460800, "BRAM36": 312, "URAM": 96, "DSP": 1728}
-#: the projection's coordinate dividers, estimated once and counted per instance
-DIVIDER_MODULES = r"\.div_[xy]\d+$"
 
 
 def _stats(values):
@@ -166,10 +164,10 @@ def _node_resources(config, name, log):
     stem = f"av-{name}-p{config.pixels_per_beat}"
     if name != "projection":
         return component_resources(node, f"av_{name}", stem)
-    rest = component_resources(node, f"av_{name}", stem, blackbox=DIVIDER_MODULES)
+    rest = component_resources(node, f"av_{name}", stem, blackbox=node.DIVIDER_SUBMODULES)
     divider = component_resources(node.coordinate_divider(), "av_projection_divider",
                                   "av-projection-divider")
-    count = 2 * config.pixels_per_beat
+    count = node.coordinate_divider_count
     log(f"    projection: {rest['LUT']} LUT without its {count} coordinate dividers, "
         f"{divider['LUT']} LUT each")
     return _add([rest] + [divider] * count, name)
@@ -200,12 +198,9 @@ def resource_lines(resources):
     """The Markdown of the chain's resources beside fpgaDDS Table II."""
     if not resources:
         return []
-    lines = resource_table(resources, "part", "part (px/clk)",
+    lines = resource_table([dict(r, label=f"{r['part']} ({r['ppc']})") for r in resources],
+                           "label", "part (px/clk)",
                            detail=", 640x480 camera, 1000x600 bird's-eye view")
-    # the label column says the px/clk of each row
-    for i, r in enumerate(resources):
-        lines[5 + i] = lines[5 + i].replace(f"| {r['part']} |", f"| {r['part']} ({r['ppc']}) |",
-                                            1)
     paper = PAPER_MEMORY
     lines += ["", "The whole chain beside fpgaDDS Table II (its chain on the ZCU104's XCZU7EV) "
               "and the device:", "",

@@ -156,9 +156,11 @@ class LaneDetector(wiring.Component):
                 done(Cat(ge, quotient[:-1]))
 
         half = self._lane_width
-        partials = [[Signal(len(x) + len(y)) for x, y, _ in _partial_products(a, b)]
-                    for a, b in ((tsy, tw), (tsw, ty), (ty, tw))]
-        products = [Signal(len(a) + len(b)) for a, b in ((tsy, tw), (tsw, ty), (ty, tw))]
+        # the centre's products Sy Nw, Sw Ny, Ny Nw, each split into partial products
+        pairs = ((tsy, tw), (tsw, ty), (ty, tw))
+        splits = [_partial_products(a, b) for a, b in pairs]
+        partials = [[Signal(len(x) + len(y)) for x, y, _ in split] for split in splits]
+        products = [Signal(len(a) + len(b)) for a, b in pairs]
         y_only = Signal(count_bits + 12)
         with m.FSM():
             with m.State("COUNT"):
@@ -188,8 +190,8 @@ class LaneDetector(wiring.Component):
                 # each), registered, then summed, then the numerator; the centre's quotient
                 # is below 2**13, so its division takes two steps less and the frame no
                 # cycle more
-                for parts, (a, b) in zip(partials, ((tsy, tw), (tsw, ty), (ty, tw))):
-                    for reg, (x, y, _) in zip(parts, _partial_products(a, b)):
+                for parts, split in zip(partials, splits):
+                    for reg, (x, y, _) in zip(parts, split):
                         m.d.sync += reg.eq(x * y)
                 m.d.sync += y_only.eq(ty * (half + 1))
                 with m.If(has_y | has_w):
@@ -197,10 +199,9 @@ class LaneDetector(wiring.Component):
                 with m.Else():
                     m.next = "SEND"
             with m.State("CENTRE_ADD"):
-                for product, parts, (a, b) in zip(products, partials,
-                                                  ((tsy, tw), (tsw, ty), (ty, tw))):
-                    m.d.sync += product.eq(sum(reg << shift for reg, (_, _, shift)
-                                               in zip(parts, _partial_products(a, b))))
+                for product, parts, split in zip(products, partials, splits):
+                    m.d.sync += product.eq(sum(reg << shift
+                                               for reg, (_, _, shift) in zip(parts, split)))
                 m.next = "CENTRE_SUM"
             with m.State("CENTRE_SUM"):
                 sy_nw, sw_ny, ny_nw = products

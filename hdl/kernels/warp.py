@@ -161,10 +161,17 @@ class PerspectiveWarp(wiring.Component):
         # a numerator m x + m' y + m'' with x, y < 2**13
         return max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
 
+    #: the names of the :class:`CoordinateDivider` submodules, ``div_x<p>`` and ``div_y<p>``
+    #: (a regular expression over a hierarchical module name)
+    DIVIDER_SUBMODULES = r"\.div_[xy]\d+$"
+
     def coordinate_divider(self):
-        """A new :class:`CoordinateDivider` as this warp instantiates it ``2 P`` times (one
-        per coordinate and pixel lane): resource estimates synthesise it once."""
+        """A new :class:`CoordinateDivider` as this warp instantiates it
+        :attr:`coordinate_divider_count` times (one per coordinate and pixel lane): resource
+        estimates synthesise it once."""
         return CoordinateDivider(self._divider_width)
+
+    coordinate_divider_count = property(lambda self: 2 * self._p)
 
     def elaborate(self, platform):
         m = Module()
@@ -239,7 +246,7 @@ class PerspectiveWarp(wiring.Component):
 
         divs = []
         for p in range(P):
-            pair = [CoordinateDivider(width), CoordinateDivider(width)]
+            pair = [self.coordinate_divider(), self.coordinate_divider()]
             m.submodules[f"div_x{p}"], m.submodules[f"div_y{p}"] = pair
             for k, d in enumerate(pair):
                 m.d.comb += [d.n.eq(x_lane[p][k]), d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
