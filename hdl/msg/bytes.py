@@ -142,6 +142,12 @@ class ByteUnpacker(wiring.Component):
     further beat is accepted until ``flush``. ``flush`` discards the window and, if the
     message's ``tlast`` has not been seen, every input beat up to and including it.
 
+    The consumer names the bytes it would take (``amount``) apart from its decision to take
+    them (``take``): the window's next state is built for taking ``amount`` bytes and for
+    taking none, and ``take`` only chooses between the two. A consumer whose ``amount`` comes
+    from its registers and whose decision comes late keeps the barrel shift out of its
+    decision's path.
+
     Members
     -------
     s_axis : In(AXIStreamSignature(data_width))
@@ -152,8 +158,10 @@ class ByteUnpacker(wiring.Component):
         Bytes in the window; may exceed ``data_width // 8`` (only the first W/8 are shown).
     ended : Out(1)
         The message's last beat has been absorbed: ``avail`` bytes are all that is left.
-    take : In(range(data_width // 8 + 1))
-        Bytes consumed this cycle; at most ``avail``.
+    amount : In(range(data_width // 8 + 1))
+        Bytes consumed if ``take``; at most ``avail`` then.
+    take : In(1)
+        Consume ``amount`` bytes this cycle.
     flush : In(1)
         Drop the rest of the message (window and input up to ``tlast``); ``take`` is ignored.
     dropping : Out(1)
@@ -164,8 +172,8 @@ class ByteUnpacker(wiring.Component):
         B = data_width // 8
         super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
                           "window": Out(data_width), "avail": Out(range(2 * B + 1)),
-                          "ended": Out(1), "take": In(range(B + 1)), "flush": In(1),
-                          "dropping": Out(1)})
+                          "ended": Out(1), "amount": In(range(B + 1)), "take": In(1),
+                          "flush": In(1), "dropping": Out(1)})
         self._width = data_width
 
     def elaborate(self, platform):
@@ -179,22 +187,32 @@ class ByteUnpacker(wiring.Component):
         m.d.comb += [self.window.eq(buf[:W]), self.avail.eq(count), self.ended.eq(ended),
                      self.dropping.eq(dropping)]
 
+        # both next states, taking ``amount`` bytes and taking none, from registers and the
+        # input beat; ``take`` chooses
+        n = keep_count(s.tkeep)
+        beat = Cat(byte_mask(s.tdata, B, n), Const(0, W))
         left = Signal(range(2 * B + 1))
-        m.d.comb += left.eq(count - self.take)
+        m.d.comb += left.eq(count - self.amount)
+        room_taken = ~ended & (left <= B)
+        room_kept = ~ended & (count <= B)
+        shifted = buf >> (self.amount * 8)
+
         with m.If(dropping):
             m.d.comb += s.tready.eq(1)
             with m.If(s.tvalid & s.tlast):
                 m.d.sync += dropping.eq(0)
         with m.Elif(self.flush):
             m.d.sync += [count.eq(0), buf.eq(0), ended.eq(0), dropping.eq(~ended)]
-        with m.Else():
-            m.d.comb += s.tready.eq(~ended & (left <= B))
-            shifted = buf >> (self.take * 8)
-            with m.If(s.tvalid & s.tready):
-                n = keep_count(s.tkeep)
-                data = byte_mask(s.tdata, B, n)
-                m.d.sync += [buf.eq(shifted | (Cat(data, Const(0, W)) << (left * 8))),
-                             count.eq(left + n), ended.eq(s.tlast)]
+        with m.Elif(self.take):
+            m.d.comb += s.tready.eq(room_taken)
+            with m.If(s.tvalid & room_taken):
+                m.d.sync += [buf.eq(shifted | (beat << (left * 8))), count.eq(left + n),
+                             ended.eq(s.tlast)]
             with m.Else():
                 m.d.sync += [buf.eq(shifted), count.eq(left)]
+        with m.Else():
+            m.d.comb += s.tready.eq(room_kept)
+            with m.If(s.tvalid & room_kept):
+                m.d.sync += [buf.eq(buf | (beat << (count * 8))), count.eq(count + n),
+                             ended.eq(s.tlast)]
         return m

@@ -114,6 +114,12 @@ class Deserializer(wiring.Component):
         m.d.comb += self.fields.payload.eq(shown)
         count_width = 64 if reconros else 32
         counts = [Signal(count_width, name=f"count{v.index}") for v in plan.variables]
+        # A count is written through its next value, and what the steps derive from it (its
+        # checks, its field's length) is registered from that next value: equal to a function
+        # of the count in every cycle, from flip-flops rather than the count's arithmetic. A
+        # count is always read at least one step before it is used.
+        count_next = [Signal(count_width, name=f"count_next{v.index}") for v in plan.variables]
+        empty, count_bad, count_bad_code, lengths = self._count_facts(m, counts, count_next)
         ports = {v.index: getattr(self, payload_port(v, "m")) for v in plan.streams}
         length_prefix = Signal(32)
 
@@ -163,8 +169,14 @@ class Deserializer(wiring.Component):
             m.d.sync += [error_code.eq(code), op.eq(WAIT), step.eq(0)]
 
         def take(n):
-            m.d.comb += unpacker.take.eq(n)
+            """Take ``n`` bytes, the amount this step offers, in the cycle its condition holds.
+            The amount is given to the unpacker outside the condition (it comes from
+            registers), so the unpacker's shift is not behind the step's decision."""
+            m.d.comb += unpacker.take.eq(1)
             m.d.sync += pos.eq(pos + n)
+
+        def offer(n):
+            m.d.comb += unpacker.amount.eq(n)
 
         def next_op(i):
             m.d.sync += [op.eq(i + 1), step.eq(0)]
@@ -174,13 +186,7 @@ class Deserializer(wiring.Component):
         def count_error(var):
             """(bad, code) of the element count of variable ``var``: above its bound or
             ``max_count`` (LENGTH), or a CDR string count of 0 (FORMAT)."""
-            v = plan.variables[var]
-            bound = v.bound or self._max_count
-            element_count = counts[var] - int(v.nul)
-            if not v.nul:
-                return element_count > bound, Const(DeserializerError.LENGTH, 3)
-            return ((counts[var] == 0) | (element_count > bound),
-                    Mux(counts[var] == 0, DeserializerError.FORMAT, DeserializerError.LENGTH))
+            return count_bad[var], count_bad_code[var]
 
         def close(var, then):
             """End the packet of elements stream ``var`` (an empty last chunk), then
@@ -198,19 +204,19 @@ class Deserializer(wiring.Component):
                 with m.Case(i):
                     chunk = chunks.get(stream_at[i])
                     if s.kind == "run":
-                        self._run(m, s, i, window, avail, ended, fields, counts, length_prefix,
-                                  step, take, fail, next_op, chunk)
+                        self._run(m, s, i, window, avail, ended, fields, count_next,
+                                  length_prefix, step, (offer, take), fail, next_op, chunk)
                         continue
                     if s.kind == "count":
-                        self._count(m, s, i, window, avail, ended, counts, step, take, fail,
-                                    next_op, chunk, count_error)
+                        self._count(m, s, i, window, avail, ended, counts, count_next, step,
+                                    (offer, take), fail, next_op, chunk, count_error)
                         continue
                     if s.kind == "loop":
                         top = plan.variables[s.var].into is None
                         bad_count, bad_code = count_error(s.var)
                         with m.If(bad_count):
                             fail(bad_code)
-                        with m.Elif(counts[s.var] == 0):
+                        with m.Elif(empty[s.var]):
                             if top:
                                 close(s.var, lambda s=s: next_op(s.target))
                             else:
@@ -231,15 +237,17 @@ class Deserializer(wiring.Component):
                         next_element(m, s, elements_left[s.var], op, step, done=done)
                         continue
                     if s.kind == "pad":
-                        length = pad_bytes(plan, s, pos, counts)
+                        length = pad_bytes(plan, s, pos, empty)
                     else:
-                        v = plan.variables[s.var]
-                        length = payload_bytes(v, counts[s.var] - int(v.nul))[:count_width + 3]
+                        length = lengths[s.var]
                     walk = RuntimeStep(m, i, B, step=step, remaining=remaining, length=length,
                                        next_step=next_op)
                     k, final, advance = walk.k, walk.final, walk.advance
                     have = avail >= k
                     short = ~have & ended
+                    # a payload that ends early ends the message: what it takes then does not
+                    # matter (the window is flushed), so the unpacker is offered k
+                    offer(k)
 
                     if s.kind == "pad":
                         # a bad count of the sequence this padding aligns is reported as
@@ -310,8 +318,46 @@ class Deserializer(wiring.Component):
                     m.d.sync += [op.eq(0), step.eq(0), pos.eq(0)]
         return m
 
-    def _count(self, m, s, i, window, avail, ended, counts, step, take, fail, next_op, chunk,
-               count_error):
+    def _count_facts(self, m, counts, count_next):
+        """Registers beside each count, from its next value: (empty, bad, bad_code, lengths),
+        per variable: no elements; a bad count (above its bound or ``max_count``: LENGTH, or a
+        CDR string count of 0: FORMAT) and its code; the bytes of its field (``None`` for
+        packed elements, which have no payload step)."""
+        width = len(counts[0]) if counts else 32
+        empty, bad, bad_code, lengths = [], [], [], []
+        for v, count, nxt in zip(self.plan.variables, counts, count_next):
+            m.d.comb += nxt.eq(count)
+            m.d.sync += count.eq(nxt)
+            bound = v.bound or self._max_count
+            nul = int(v.nul)
+            # their values for a count of 0, the count's reset value
+            is_empty = Signal(name=f"empty{v.index}", init=1)
+            is_bad = Signal(name=f"bad_count{v.index}", init=v.nul)
+            code = Signal(3, name=f"bad_code{v.index}",
+                          init=DeserializerError.FORMAT if v.nul else DeserializerError.LENGTH)
+            too_many = nxt - nul > bound
+            m.d.sync += is_empty.eq(nxt == 0)
+            if v.nul:
+                m.d.sync += [is_bad.eq((nxt == 0) | too_many),
+                             code.eq(Mux(nxt == 0, DeserializerError.FORMAT,
+                                         DeserializerError.LENGTH))]
+            else:
+                m.d.sync += is_bad.eq(too_many)
+            empty.append(is_empty)
+            bad.append(is_bad)
+            bad_code.append(code)
+            if v.elements:
+                lengths.append(None)
+                continue
+            length_width = width + 3
+            length = Signal(length_width, name=f"length{v.index}",
+                            init=payload_bytes(v, -nul) & ((1 << length_width) - 1))
+            m.d.sync += length.eq(payload_bytes(v, nxt - nul)[:length_width])
+            lengths.append(length)
+        return empty, bad, bad_code, lengths
+
+    def _count(self, m, s, i, window, avail, ended, counts, count_next, step, taking, fail,
+               next_op, chunk, count_error):
         """The count of an inner variable: read into its register, checked, then written to
         the stream as an element count."""
         B = self._width // 8
@@ -320,10 +366,13 @@ class Deserializer(wiring.Component):
         value = (count[:32] - int(v.nul))[:32]
         bad_count, bad_code = count_error(s.var)
 
+        offer, take = taking
+
         def read(j, offset, k, moved):
+            offer(k)
             with m.If(avail >= k):
-                m.d.sync += [count.word_select(offset + x, 8).eq(window.word_select(x, 8))
-                             for x in range(k)]
+                m.d.comb += [count_next[s.var].word_select(offset + x, 8)
+                             .eq(window.word_select(x, 8)) for x in range(k)]
                 take(k)
                 moved()
             with m.Elif(ended):
@@ -337,18 +386,20 @@ class Deserializer(wiring.Component):
 
         count_step(m, step, B, read, write, then=lambda: next_op(i))
 
-    def _run(self, m, s, i, window, avail, ended, fields, counts, length_prefix, step, take,
-             fail, next_op, chunk=None):
+    def _run(self, m, s, i, window, avail, ended, fields, count_next, length_prefix, step,
+             taking, fail, next_op, chunk=None):
         """One ``run`` step: static byte ranges land in fixed registers, checks per byte;
         inside a loop, element bytes go to the stream's ``chunk``."""
         B = self._width // 8
+        offer, take = taking
         nsteps = -(-s.nbytes // B)
         with m.Switch(step):
             for j in range(nsteps):
                 k = min(B, s.nbytes - j * B)
                 with m.Case(j):
+                    offer(k)
                     bad_padding, bad_format = [], []
-                    writes, emitted = [], []
+                    writes, count_writes, emitted = [], [], []
                     start = 0
                     for part in s.parts:
                         lo, hi = max(start, j * B), min(start + part.nbytes, j * B + k)
@@ -362,7 +413,8 @@ class Deserializer(wiring.Component):
                                     writes.append(fields.word_select(
                                         part.leaf.offset // 8 + index, 8).eq(byte))
                             elif part.kind == "count":
-                                writes.append(counts[part.var].word_select(index, 8).eq(byte))
+                                count_writes.append(
+                                    count_next[part.var].word_select(index, 8).eq(byte))
                                 if index < 4:
                                     offset = self.plan.variables[part.var].count.offset
                                     writes.append(fields.word_select(offset // 8 + index, 8)
@@ -388,6 +440,7 @@ class Deserializer(wiring.Component):
                                              chunk.len.eq(len(emitted)), chunk.last.eq(0)]
                             with m.If(chunk.ready if emitted else Const(1)):
                                 m.d.sync += writes
+                                m.d.comb += count_writes
                                 take(k)
                                 if j == nsteps - 1:
                                     next_op(i)

@@ -162,6 +162,7 @@ class Serializer(wiring.Component):
                             else Signal(32, name=f"count{v.index}")) for v in plan.variables}
         lengths = {v.index: payload_bytes(v, counts[v.index]) for v in plan.variables
                    if not v.elements}
+        empty = {var: count == 0 for var, count in counts.items()}
         # a sequence of messages or strings: its packed elements are read through a window
         unpackers, reported = {}, {}
         for v in plan.streams:
@@ -243,12 +244,15 @@ class Serializer(wiring.Component):
 
         def read(unpacker, need, stream):
             """``need`` bytes of a packed elements stream, zeros past its end (reported once):
-            (ok to go on, data, ``take()`` to call in the cycle they are used)."""
+            (ok to go on, data, ``take()`` to call in the cycle they are used). Called where
+            the step is decoded, outside the conditions of ``take()``: the amount goes to the
+            unpacker from there."""
             have = unpacker.avail >= need
             data = byte_mask(unpacker.window, B, unpacker.avail)
+            m.d.comb += unpacker.amount.eq(Mux(have, need, unpacker.avail))
 
             def take():
-                m.d.comb += unpacker.take.eq(Mux(have, need, unpacker.avail))
+                m.d.comb += unpacker.take.eq(1)
                 with m.If(~have):
                     with m.If(~reported[stream]):
                         report(SerializerError.PAYLOAD_SHORT)
@@ -330,7 +334,7 @@ class Serializer(wiring.Component):
                                             else:
                                                 m.d.sync += step.eq(j + 1)
                             continue
-                        length = pad_bytes(plan, s, pos, counts) if s.kind == "pad" \
+                        length = pad_bytes(plan, s, pos, empty) if s.kind == "pad" \
                             else lengths[s.var]
                         walk = RuntimeStep(m, i, B, step=step, remaining=remaining,
                                            length=length, next_step=next_op)
@@ -424,12 +428,12 @@ class Serializer(wiring.Component):
             for j in range(nsteps):
                 k = min(B, s.nbytes - j * B)
                 need = sum(kinds[j * B:j * B + k])
-                ok, data, take = read(unpacker, need, stream)
-                out, used = [], 0
-                for element in kinds[j * B:j * B + k]:
-                    out.append(data.word_select(used, 8) if element else Const(0, 8))
-                    used += element
                 with m.Case(j):
+                    ok, data, take = read(unpacker, need, stream)
+                    out, used = [], 0
+                    for element in kinds[j * B:j * B + k]:
+                        out.append(data.word_select(used, 8) if element else Const(0, 8))
+                        used += element
                     m.d.comb += [chunk.valid.eq(ok), chunk.len.eq(k), chunk.data.eq(Cat(*out))]
                     with m.If(ok & chunk.ready):
                         take()

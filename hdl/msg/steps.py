@@ -15,9 +15,10 @@ def payload_bytes(variable, element_count):
     return element_count << (variable.element_bytes.bit_length() - 1)
 
 
-def pad_bytes(plan, step, pos, counts):
+def pad_bytes(plan, step, pos, empty):
     """Zero bytes of a ``pad`` step at byte position ``pos`` of the message: up to the step's
-    alignment counted from ``plan.origin``; none before the elements of an empty sequence."""
+    alignment counted from ``plan.origin``; none before the elements of an empty sequence
+    (``empty[var]``: variable ``var`` has no elements)."""
     # the alignment is a power of two: only the low bits of the position take part (a
     # word-wide subtraction would put a carry chain in front of the position's adder)
     bits = (step.align - 1).bit_length()
@@ -25,7 +26,7 @@ def pad_bytes(plan, step, pos, counts):
         return Const(0, 1)
     length = (Const(plan.origin % step.align, bits) - pos[:bits])[:bits]
     if step.var is not None:
-        length = Mux(counts[step.var] == 0, 0, length)
+        length = Mux(empty[step.var], 0, length)
     return length
 
 
@@ -48,11 +49,22 @@ class RuntimeStep:
         self.k = Signal(range(B + 1), name=f"k{index}")
         m.d.comb += self.left.eq(Mux(step != 0, remaining, length))
         # B is a power of two: "at least B" and "at most B" are tests of the high bits, not
-        # word-wide comparisons (a carry chain each, in front of the next step's subtraction)
+        # word-wide comparisons (a carry chain each, in front of the next step's subtraction).
+        # Both sources are tested, the choice comes after the tests.
         low = B.bit_length() - 1
-        at_least_b = self.left[low:].any()
-        m.d.comb += self.k.eq(Mux(at_least_b, B, self.left[:low]))
-        self.final = ~self.left[low + 1:].any() & (~self.left[low] | ~self.left[:low].any())
+
+        def k_of(left):
+            return Mux(left[low:].any(), B, left[:low])
+
+        def final_of(left):
+            return ~left[low + 1:].any() & (~left[low] | ~left[:low].any())
+
+        later = step != 0
+        first = Signal(len(remaining), name=f"length{index}")
+        m.d.comb += first.eq(length)
+        m.d.comb += self.k.eq(Mux(later, k_of(remaining), k_of(first)))
+        self.final = Signal(name=f"final{index}")
+        m.d.comb += self.final.eq(Mux(later, final_of(remaining), final_of(first)))
 
     def advance(self):
         m = self._m
