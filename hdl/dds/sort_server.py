@@ -8,7 +8,7 @@ from ..kernels.sort import MergeSorter
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
 from ..params import ParameterError, check_power_of_two
-from ..stream import AXIStreamSignature, StreamRepacker
+from ..stream import AXIStreamSignature, RegisterSlice, StreamRepacker
 from .service import ReplyStatus, ServiceServer
 from .topic import HW_TOPIC_STREAM
 
@@ -146,8 +146,13 @@ class SortServer(wiring.Component):
         wiring.connect(m, ser.m_axis, server.reply)
         m.d.comb += self.bad_frames.eq(server.bad_frames)
 
-        values = getattr(des, payload_port(self._in_field, "m"))
-        wiring.connect(m, values, feeder.s_axis)
+        # a register slice between the deserializer and the feeder: the feeder's ready does
+        # not reach into the deserializer's byte window
+        values_port = payload_port(self._in_field, "m")
+        m.submodules.values_slice = values_slice = RegisterSlice(
+            des.signature.members[values_port].signature)
+        wiring.connect(m, getattr(des, values_port), values_slice.s_axis)
+        wiring.connect(m, values_slice.m_axis, feeder.s_axis)
         wiring.connect(m, feeder.m_axis, sorter.i)
         sorted_in = getattr(ser, payload_port(self._out_field, "s"))
         in_count = des.fields.payload[self._in_field.path]
