@@ -409,6 +409,8 @@ class MemifEngine(wiring.Component):
         # ---- write buffer and issuer ----
         m.submodules.wbuf = wbuf = SyncFIFO(width=w, depth=2 * cw)
         w_rem_in = Signal(w)     # words the user still has to supply for the command
+        w_open = Signal()        # w_rem_in != 0, from a flip-flop: the data path's ready does
+                                 # not wait for a word-wide zero test
         w_addr_cur = Signal(w)
         w_rem = Signal(w)        # bytes not yet issued
         w_len = Signal(w)
@@ -422,14 +424,15 @@ class MemifEngine(wiring.Component):
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
-                                 w_rem_in.eq(w_cmd_len >> sh), w_len_valid.eq(0)]
+                                 w_rem_in.eq(w_cmd_len >> sh), w_open.eq(1),
+                                 w_len_valid.eq(0)]
                 with m.Else():
                     m.d.comb += done_now.eq(1)
         m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
-                     wbuf.w_en.eq(self.write_data.valid & (w_rem_in != 0)),
-                     self.write_data.ready.eq(wbuf.w_rdy & (w_rem_in != 0))]
+                     wbuf.w_en.eq(self.write_data.valid & w_open),
+                     self.write_data.ready.eq(wbuf.w_rdy & w_open)]
         with m.If(self.write_data.valid & self.write_data.ready):
-            m.d.sync += w_rem_in.eq(w_rem_in - 1)
+            m.d.sync += [w_rem_in.eq(w_rem_in - 1), w_open.eq(w_rem_in != 1)]
 
         # ---- the request sequencer (owns hwt2mem) ----
         seq_words = Signal(w)    # data words left of the current write chunk
@@ -730,6 +733,10 @@ class MemCalls:
         write_left = Signal(w, name=f"{tag}_write_left")
         r_sent, w_sent = Signal(name=f"{tag}_r_sent"), Signal(name=f"{tag}_w_sent")
         written, tail_in = Signal(name=f"{tag}_written"), Signal(name=f"{tag}_tail_in")
+        # read_left == 1 and write_left != 0 from flip-flops: the stream handshakes do not
+        # wait for word-wide comparisons
+        read_final = Signal(name=f"{tag}_read_final")
+        write_more = Signal(name=f"{tag}_write_more")
         t_word = Signal(w, name=f"{tag}_t_word")
         d_word = Signal(w, name=f"{tag}_d_word")
         merged = Signal(w, name=f"{tag}_merged")
@@ -740,10 +747,11 @@ class MemCalls:
             m.d.comb += merged.word_select(b, 8).eq(
                 Mux(tail > b, t_word.word_select(b, 8), keep) if b < wb - 1 else keep)
         with m.State(name):
-            self._issue(e.read_cmd, src, words_in << sh, r_sent, read_left.eq(words_in))
+            self._issue(e.read_cmd, src, words_in << sh, r_sent, read_left.eq(words_in),
+                        read_final.eq(words_in == 1))
             self._issue(e.write_cmd, dst, main, w_sent, write_left.eq(main >> sh),
-                        written.eq(0), tail_in.eq(tail == 0))
-            final = read_left == 1
+                        write_more.eq((main >> sh) != 0), written.eq(0), tail_in.eq(tail == 0))
+            final = read_final
             m.d.comb += [
                 sink.tdata.eq(e.read_data.payload.data),
                 sink.tlast.eq(final),
@@ -755,16 +763,16 @@ class MemCalls:
                 e.read_data.ready.eq(r_sent & sink.tready),
             ]
             with m.If(sink.tvalid & sink.tready):
-                m.d.sync += read_left.eq(read_left - 1)
-            to_memory = w_sent & (write_left != 0)
+                m.d.sync += [read_left.eq(read_left - 1), read_final.eq(read_left == 2)]
+            to_memory = w_sent & write_more
             m.d.comb += [
                 e.write_data.valid.eq(to_memory & source.tvalid),
                 e.write_data.payload.eq(source.tdata),
                 source.tready.eq(Mux(to_memory, e.write_data.ready, w_sent & ~tail_in)),
             ]
             with m.If(e.write_data.valid & e.write_data.ready):
-                m.d.sync += write_left.eq(write_left - 1)
-            with m.If(w_sent & (write_left == 0) & ~tail_in & source.tvalid):
+                m.d.sync += [write_left.eq(write_left - 1), write_more.eq(write_left != 1)]
+            with m.If(w_sent & ~write_more & ~tail_in & source.tvalid):
                 m.d.sync += [t_word.eq(source.tdata), tail_in.eq(1)]
             with m.If(e.write_done):
                 m.d.sync += written.eq(1)

@@ -1,6 +1,9 @@
 """The MEMIF MMU: virtual to physical translation with a TLB and a hardware page-table walk
 (docs/reconos.md)."""
 
+import operator
+from functools import reduce
+
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
@@ -54,9 +57,13 @@ class TLB(wiring.Component):
         vpns = [Signal.like(self.lookup_vpn, name=f"vpn{i}") for i in range(n)]
         ppns = [Signal.like(self.hit_ppn, name=f"ppn{i}") for i in range(n)]
         nxt = Signal(range(n))
-        for i in reversed(range(n)):
-            with m.If(valid[i] & (vpns[i] == self.lookup_vpn)):
-                m.d.comb += [self.hit.eq(1), self.hit_ppn.eq(ppns[i])]
+        # the first match as a one-hot vector and an OR of its entries, not a chain of n
+        # priority multiplexers
+        match = Signal(n)
+        m.d.comb += match.eq(Cat(valid[i] & (vpns[i] == self.lookup_vpn) for i in range(n)))
+        first = [match[i] & ~match[:i].any() if i else match[0] for i in range(n)]
+        m.d.comb += [self.hit.eq(match.any()),
+                     self.hit_ppn.eq(reduce(operator.or_, (Mux(first[i], ppns[i], 0) for i in range(n))))]
         with m.If(self.write):
             for i in range(n):
                 with m.If(nxt == i):
