@@ -88,10 +88,15 @@ class MemoryController(wiring.Component):
         head = data.View(track_layout, track.r_data)
 
         length = req.length
-        offset = req.addr[:8]
+        cb = MEMIF_CHUNK.bit_length() - 1       # MEMIF_CHUNK is a power of two
+        offset = req.addr[:cb]
         good = Signal()
+        # "at most one chunk" as tests of the high bits, and the chunk-boundary test on the
+        # chunk-wide bits only (a word-wide addition and comparison are carry chains in front
+        # of the AXI address registers)
+        within = (length[cb + 1:] == 0) & (~length[cb] | (length[:cb] == 0))
         m.d.comb += good.eq(~req.bad & (length != 0) & (length[:wb.bit_length() - 1] == 0) &
-                            (length <= MEMIF_CHUNK) & (offset + length <= MEMIF_CHUNK))
+                            within & (offset + length[:cb + 1] <= MEMIF_CHUNK))
         words = Signal(lb)
         m.d.comb += words.eq(request_words(a, length))
 
