@@ -31,10 +31,12 @@ class TLB(wiring.Component):
     -------
     lookup_vpn : In(vpn_bits)
     hit : Out(1)
-        ``lookup_vpn`` is in a valid entry (combinational, the first matching entry wins).
+        ``lookup_vpn`` is in a valid entry (combinational).
     hit_ppn : Out(ppn_bits)
     write : In(1)
-        Store ``write_vpn -> write_ppn`` into the next entry of the round-robin pointer.
+        Store ``write_vpn -> write_ppn`` into the next entry of the round-robin pointer. Only
+        for a VPN that is in no valid entry (the MMU writes after a lookup missed): at most one
+        entry matches a lookup, and ``hit_ppn`` is the OR of the matching entries' PPNs.
     write_vpn, write_ppn : In
     flush : In(1)
         Invalidate every entry (ReconROS defect 8, docs/reconos.md: ReconOS only clears them on
@@ -57,13 +59,15 @@ class TLB(wiring.Component):
         vpns = [Signal.like(self.lookup_vpn, name=f"vpn{i}") for i in range(n)]
         ppns = [Signal.like(self.hit_ppn, name=f"ppn{i}") for i in range(n)]
         nxt = Signal(range(n))
-        # the first match as a one-hot vector and an OR of its entries, not a chain of n
-        # priority multiplexers
+        # at most one entry matches (see ``write``), so the PPN is an OR of the matching
+        # entries, not a chain of n priority multiplexers
         match = Signal(n)
-        m.d.comb += match.eq(Cat(valid[i] & (vpns[i] == self.lookup_vpn) for i in range(n)))
-        first = [match[i] & ~match[:i].any() if i else match[0] for i in range(n)]
-        m.d.comb += [self.hit.eq(match.any()),
-                     self.hit_ppn.eq(reduce(operator.or_, (Mux(first[i], ppns[i], 0) for i in range(n))))]
+        m.d.comb += [
+            match.eq(Cat(valid[i] & (vpns[i] == self.lookup_vpn) for i in range(n))),
+            self.hit.eq(match.any()),
+            self.hit_ppn.eq(reduce(operator.or_,
+                                   (Mux(match[i], ppns[i], 0) for i in range(n)))),
+        ]
         with m.If(self.write):
             for i in range(n):
                 with m.If(nxt == i):
