@@ -114,24 +114,32 @@ class BytePacker(wiring.Component):
                              Cat(*(count > i for i in range(B))))),
             self.first.eq(first),
         ]
-        taken = Signal(range(B + 1))
-        with m.If(out.tvalid & out.tready):
-            m.d.comb += taken.eq(Mux(count >= B, B, count))
+        # The next state is built for a beat leaving and for none, each with and without a
+        # chunk coming in, from registers and the chunk; the output handshake (the consumer's
+        # ready) and the chunk's acceptance only choose. Kept wires: synthesis maps each
+        # candidate on its own, so the choice is the last LUT before the flip-flops.
+        sent = out.tvalid & out.tready
+        with m.If(sent):
             m.d.sync += first.eq(out.tlast)
-        left = Signal(range(2 * B + 1))
-        final_left = Signal()
-        m.d.comb += [left.eq(count - taken),
-                     final_left.eq(final & ~(out.tvalid & out.tready & out.tlast)),
-                     chunk.ready.eq((left <= B) & ~final_left)]
-        shifted = Signal(2 * W)
-        m.d.comb += shifted.eq(buf >> (taken * 8))
+        beat_bytes = Mux(count >= B, B, count)
+        left_sent = Signal(range(2 * B + 1))
+        m.d.comb += [left_sent.eq(count - beat_bytes),
+                     chunk.ready.eq(Mux(sent, (left_sent <= B) & ~(final & ~out.tlast),
+                                        (count <= B) & ~final))]
+        data = Cat(byte_mask(chunk.data, B, chunk.len), Const(0, W))
+        shifted = buf >> (beat_bytes * 8)
+        candidates = {}
+        for name, value in (("sent_in", shifted | (data << (left_sent * 8))),
+                            ("sent", shifted), ("in", buf | (data << (count * 8)))):
+            candidates[name] = Signal(2 * W, name=f"buf_{name}", attrs={"keep": 1})
+            m.d.comb += candidates[name].eq(value)
         with m.If(chunk.valid & chunk.ready):
-            data = byte_mask(chunk.data, B, chunk.len)
-            m.d.sync += [buf.eq(shifted | (Cat(data, Const(0, W)) << (left * 8))),
-                         count.eq(left + chunk.len),
+            m.d.sync += [buf.eq(Mux(sent, candidates["sent_in"], candidates["in"])),
+                         count.eq(Mux(sent, left_sent, count) + chunk.len),
                          final.eq(chunk.last)]
-        with m.Else():
-            m.d.sync += [buf.eq(shifted), count.eq(left), final.eq(final_left)]
+        with m.Elif(sent):
+            m.d.sync += [buf.eq(candidates["sent"]), count.eq(left_sent),
+                         final.eq(final & ~out.tlast)]
         return m
 
 
@@ -196,6 +204,13 @@ class ByteUnpacker(wiring.Component):
         room_taken = ~ended & (left <= B)
         room_kept = ~ended & (count <= B)
         shifted = buf >> (self.amount * 8)
+        # kept wires: synthesis maps each next state on its own, so ``take`` and ``flush``
+        # meet them in the last LUT before the flip-flop instead of at the start of the cone
+        buf_taken = Signal(2 * W, attrs={"keep": 1})
+        buf_kept = Signal(2 * W, attrs={"keep": 1})
+        m.d.comb += [buf_taken.eq(Mux(s.tvalid & room_taken, shifted | (beat << (left * 8)),
+                                      shifted)),
+                     buf_kept.eq(Mux(s.tvalid & room_kept, buf | (beat << (count * 8)), buf))]
 
         with m.If(dropping):
             m.d.comb += s.tready.eq(1)
@@ -205,14 +220,14 @@ class ByteUnpacker(wiring.Component):
             m.d.sync += [count.eq(0), buf.eq(0), ended.eq(0), dropping.eq(~ended)]
         with m.Elif(self.take):
             m.d.comb += s.tready.eq(room_taken)
+            m.d.sync += buf.eq(buf_taken)
             with m.If(s.tvalid & room_taken):
-                m.d.sync += [buf.eq(shifted | (beat << (left * 8))), count.eq(left + n),
-                             ended.eq(s.tlast)]
+                m.d.sync += [count.eq(left + n), ended.eq(s.tlast)]
             with m.Else():
-                m.d.sync += [buf.eq(shifted), count.eq(left)]
+                m.d.sync += count.eq(left)
         with m.Else():
             m.d.comb += s.tready.eq(room_kept)
+            m.d.sync += buf.eq(buf_kept)
             with m.If(s.tvalid & room_kept):
-                m.d.sync += [buf.eq(buf | (beat << (count * 8))), count.eq(count + n),
-                             ended.eq(s.tlast)]
+                m.d.sync += [count.eq(count + n), ended.eq(s.tlast)]
         return m

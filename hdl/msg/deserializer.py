@@ -10,8 +10,8 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
-from .steps import (RuntimeStep, count_chunks, count_step, next_element, pad_bytes,
-                    payload_bytes, send_count_chunk)
+from .steps import (ChunkFacts, RuntimeStep, StepRemainder, chunk_facts, count_chunks,
+                    count_step, next_element, pad_bytes, payload_bytes, send_count_chunk)
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -119,7 +119,8 @@ class Deserializer(wiring.Component):
         # of the count in every cycle, from flip-flops rather than the count's arithmetic. A
         # count is always read at least one step before it is used.
         count_next = [Signal(count_width, name=f"count_next{v.index}") for v in plan.variables]
-        empty, count_bad, count_bad_code, lengths = self._count_facts(m, counts, count_next)
+        empty, count_bad, count_bad_code, lengths, firsts = self._count_facts(m, counts,
+                                                                             count_next)
         ports = {v.index: getattr(self, payload_port(v, "m")) for v in plan.streams}
         length_prefix = Signal(32)
 
@@ -146,7 +147,7 @@ class Deserializer(wiring.Component):
         max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"]
                         + [2 * count_chunks(B), 1])
         step = Signal(range(max_steps + 1))
-        remaining = Signal(count_width + 3)
+        remainder = StepRemainder(m, count_width + 3, B)
         pos = Signal(32)
         offered = Signal()     # fields offered for this message (until accepted)
         with m.If(self.fields.valid & self.fields.ready):
@@ -237,11 +238,11 @@ class Deserializer(wiring.Component):
                         next_element(m, s, elements_left[s.var], op, step, done=done)
                         continue
                     if s.kind == "pad":
-                        length = pad_bytes(plan, s, pos, empty)
+                        length, first = pad_bytes(plan, s, pos, empty), None
                     else:
-                        length = lengths[s.var]
-                    walk = RuntimeStep(m, i, B, step=step, remaining=remaining, length=length,
-                                       next_step=next_op)
+                        length, first = lengths[s.var], firsts[s.var]
+                    walk = RuntimeStep(m, i, B, step=step, remainder=remainder, length=length,
+                                       next_step=next_op, first=first)
                     k, final, advance = walk.k, walk.final, walk.advance
                     have = avail >= k
                     short = ~have & ended
@@ -276,16 +277,21 @@ class Deserializer(wiring.Component):
                         fail(bad_code)
                     with m.Else():
                         n = Mux(short, avail, k)
+                        # the window's bytes past ``avail`` are zero: a short chunk is the
+                        # window as it is, and the late ``short`` only chooses between
+                        # masks built from registers
+                        data = Mux(short, window, byte_mask(window, B, k))
                         if chunk is not None:      # inside the elements of a stream
                             valid, ready = chunk.valid, chunk.ready
-                            m.d.comb += [chunk.data.eq(byte_mask(window, B, n)),
-                                         chunk.len.eq(n), chunk.last.eq(0)]
+                            m.d.comb += [chunk.data.eq(data), chunk.len.eq(n),
+                                         chunk.last.eq(0)]
                         else:
                             port = ports[s.var]
                             valid, ready = port.tvalid, port.tready
                             m.d.comb += [
-                                port.tdata.eq(byte_mask(window, B, n)),
-                                port.tkeep.eq(Cat(*(n > j for j in range(B)))),
+                                port.tdata.eq(data),
+                                port.tkeep.eq(Mux(short, Cat(*(avail > j for j in range(B))),
+                                                  Cat(*(k > j for j in range(B))))),
                                 port.tlast.eq(final | short),
                                 port.tuser.eq(step == 0),
                             ]
@@ -319,12 +325,14 @@ class Deserializer(wiring.Component):
         return m
 
     def _count_facts(self, m, counts, count_next):
-        """Registers beside each count, from its next value: (empty, bad, bad_code, lengths),
-        per variable: no elements; a bad count (above its bound or ``max_count``: LENGTH, or a
-        CDR string count of 0: FORMAT) and its code; the bytes of its field (``None`` for
-        packed elements, which have no payload step)."""
+        """Registers beside each count, from its next value: (empty, bad, bad_code, lengths,
+        firsts), per variable: no elements; a bad count (above its bound or ``max_count``:
+        LENGTH, or a CDR string count of 0: FORMAT) and its code; the bytes of its field and
+        its first chunk's ``(k, final)`` (:class:`RuntimeStep`; ``None`` for packed elements,
+        which have no payload step)."""
         width = len(counts[0]) if counts else 32
-        empty, bad, bad_code, lengths = [], [], [], []
+        B = self._width // 8
+        empty, bad, bad_code, lengths, firsts = [], [], [], [], []
         for v, count, nxt in zip(self.plan.variables, counts, count_next):
             m.d.comb += nxt.eq(count)
             m.d.sync += count.eq(nxt)
@@ -348,13 +356,24 @@ class Deserializer(wiring.Component):
             bad_code.append(code)
             if v.elements:
                 lengths.append(None)
+                firsts.append(None)
                 continue
             length_width = width + 3
-            length = Signal(length_width, name=f"length{v.index}",
-                            init=payload_bytes(v, -nul) & ((1 << length_width) - 1))
-            m.d.sync += length.eq(payload_bytes(v, nxt - nul)[:length_width])
+            init = payload_bytes(v, -nul) & ((1 << length_width) - 1)
+            length = Signal(length_width, name=f"length{v.index}", init=init)
+            length_next = Signal(length_width, name=f"length_next{v.index}")
+            m.d.comb += length_next.eq(payload_bytes(v, nxt - nul)[:length_width])
+            m.d.sync += length.eq(length_next)
+            facts = []
+            for name, value, reset in zip(ChunkFacts._fields, chunk_facts(length_next, B),
+                                          (min(init, B), init <= B,
+                                           B if init >= 2 * B else init % B, init <= 2 * B)):
+                fact = Signal(len(value), name=f"length_{name}{v.index}", init=reset)
+                m.d.sync += fact.eq(value)
+                facts.append(fact)
             lengths.append(length)
-        return empty, bad, bad_code, lengths
+            firsts.append(ChunkFacts(*facts))
+        return empty, bad, bad_code, lengths, firsts
 
     def _count(self, m, s, i, window, avail, ended, counts, count_next, step, taking, fail,
                next_op, chunk, count_error):

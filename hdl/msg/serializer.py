@@ -9,8 +9,8 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
-from .steps import (RuntimeStep, count_chunks, count_step, next_element, pad_bytes,
-                    payload_bytes, send_count_chunk)
+from .steps import (RuntimeStep, StepRemainder, count_chunks, count_step, next_element,
+                    pad_bytes, payload_bytes, send_count_chunk)
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
 
@@ -180,7 +180,7 @@ class Serializer(wiring.Component):
         max_steps = max([-(-s.nbytes // B) for s in steps if s.kind == "run"]
                         + [2 * count_chunks(B), 1])
         step = Signal(range(max_steps + 1))
-        remaining = Signal(32)
+        remainder = StepRemainder(m, 32, B, registered=False)
         pos = Signal(32)
         fill = Signal()
         drain = Signal()
@@ -336,7 +336,7 @@ class Serializer(wiring.Component):
                             continue
                         length = pad_bytes(plan, s, pos, empty) if s.kind == "pad" \
                             else lengths[s.var]
-                        walk = RuntimeStep(m, i, B, step=step, remaining=remaining,
+                        walk = RuntimeStep(m, i, B, step=step, remainder=remainder,
                                            length=length, next_step=next_op)
                         left, k, final, advance = walk.left, walk.k, walk.final, walk.advance
                         m.d.comb += chunk.len.eq(k)
@@ -361,8 +361,8 @@ class Serializer(wiring.Component):
                                 next_op(i)
                         with m.Elif(fill):
                             with m.If(shortfall_pending):
-                                m.d.sync += [remaining.eq(remaining - shortfall),
-                                             shortfall_pending.eq(0)]
+                                remainder.set(remainder.value - shortfall)
+                                m.d.sync += shortfall_pending.eq(0)
                             with m.Else():
                                 m.d.comb += [chunk.valid.eq(1), chunk.last.eq(last_op & final)]
                                 with m.If(chunk.ready):
@@ -383,7 +383,8 @@ class Serializer(wiring.Component):
                                     report(SerializerError.PAYLOAD_SHORT)
                                     # what is left is counted in the next cycle (an
                                     # error path: no subtraction behind the port's tkeep)
-                                    m.d.sync += [fill.eq(1), step.eq(1), remaining.eq(left),
+                                    remainder.set(left)
+                                    m.d.sync += [fill.eq(1), step.eq(1),
                                                  shortfall.eq(Mux(supplied < k, supplied, k)),
                                                  shortfall_pending.eq(1)]
                                 with m.Else():

@@ -1,9 +1,13 @@
 """Step arithmetic shared by the serializer and the deserializer: how many bytes a runtime
 step (``pad``, ``payload``) moves, and how a step is cut into chunks of at most W/8 bytes."""
 
-from amaranth.hdl import Const, Mux, Signal
+from typing import NamedTuple
 
-__all__ = ["payload_bytes", "pad_bytes", "RuntimeStep", "COUNT_BYTES", "count_chunks",
+from amaranth.hdl import Const, Mux, Signal, Value
+
+__all__ = ["payload_bytes", "pad_bytes", "chunk_bytes", "last_chunk", "ChunkFacts",
+           "chunk_facts", "StepRemainder",
+           "RuntimeStep", "COUNT_BYTES", "count_chunks",
            "count_chunk_cases", "count_step", "send_count_chunk", "next_element"]
 
 #: bytes of an element count on the wire and in a packed element (``uint32``)
@@ -30,52 +34,141 @@ def pad_bytes(plan, step, pos, empty):
     return length
 
 
-class RuntimeStep:
-    """One runtime step cut into chunks: ``left`` bytes to go (``length`` in its first cycle,
-    then the ``remaining`` register), ``k`` bytes this cycle, ``final`` on the last chunk.
+def chunk_bytes(left, bytes_per_beat):
+    """Bytes of the next chunk of a step with ``left`` bytes to go: ``min(left, B)``."""
+    # B is a power of two: "at least B" and "at most B" are tests of the high bits, not
+    # word-wide comparisons (a carry chain each, in front of the next step's subtraction)
+    low = bytes_per_beat.bit_length() - 1
+    return Mux(left[low:].any(), bytes_per_beat, left[:low])
 
-    ``advance()`` (inside the condition that the chunk moved) goes to the next step through
-    ``next_step`` or keeps counting.
+
+def last_chunk(left, bytes_per_beat):
+    """The next chunk of a step with ``left`` bytes to go is its last: ``left <= B``."""
+    low = bytes_per_beat.bit_length() - 1
+    return ~left[low + 1:].any() & (~left[low] | ~left[:low].any())
+
+
+class ChunkFacts(NamedTuple):
+    """What the chunk logic reads of a step's bytes to go, ``left``."""
+    #: bytes of the next chunk, ``min(left, B)``
+    k: Value
+    #: the next chunk is the last, ``left <= B``
+    final: Value
+    #: the same two of the chunk after it (``left - B``, when ``left > B``)
+    k_after: Value
+    final_after: Value
+
+
+def chunk_facts(left, bytes_per_beat):
+    """:class:`ChunkFacts` of ``left``, tests of its bits (no comparison, no subtraction:
+    B is a power of two, so ``left - B`` has the low bits of ``left``)."""
+    B, low = bytes_per_beat, bytes_per_beat.bit_length() - 1
+    return ChunkFacts(chunk_bytes(left, B), last_chunk(left, B),
+                      Mux(left[low + 1:].any(), B, left[:low]), last_chunk(left, 2 * B))
+
+
+class StepRemainder:
+    """The bytes a runtime step has still to move after its first chunk, shared by the
+    steps, with its chunk size and last-chunk test kept in flip-flops beside it: the chunk
+    logic reads them without a word-wide test in front of its decision.
+
+    The steps :meth:`propose` their next remainder with its size and test where these do
+    not depend on a decision, and :meth:`load_proposed` it in the cycle the chunk moves;
+    :meth:`set` writes any other value.
+
+    ``registered=False`` computes ``k`` and ``final`` from ``value`` instead: for a user
+    whose decision does not wait for them (the serializer's waits for its payload ports).
+
+    Members
+    -------
+    value, k, final
+        The bytes to go, and :class:`ChunkFacts` ``k`` and ``final`` of them (flip-flops
+        unless ``registered=False``).
+    after : ChunkFacts
+        Of ``value`` (from flip-flops); its ``k_after`` and ``final_after`` are what one
+        more chunk leaves.
     """
 
-    def __init__(self, m, index, bytes_per_beat, *, step, remaining, length, next_step):
+    def __init__(self, m, width, bytes_per_beat, *, registered=True):
+        self._m, self._B = m, bytes_per_beat
+        self._registered = registered
+        self.value = Signal(width, name="remaining")
+        self.k = Signal(range(bytes_per_beat + 1), name="remaining_k")
+        self.final = Signal(name="remaining_final", init=1)
+        self.after = chunk_facts(self.value, bytes_per_beat)
+        self._proposed = (Signal(width, name="proposed"), Signal.like(self.k, name="proposed_k"),
+                          Signal(name="proposed_final"))
+        self._load = Signal(name="remaining_load")
+        if registered:
+            with m.If(self._load):
+                m.d.sync += [self.value.eq(self._proposed[0]), self.k.eq(self._proposed[1]),
+                             self.final.eq(self._proposed[2])]
+        else:
+            m.d.comb += [self.k.eq(self.after.k), self.final.eq(self.after.final)]
+            with m.If(self._load):
+                m.d.sync += self.value.eq(self._proposed[0])
+
+    def propose(self, value, k, final):
+        """The next remainder ``value`` and its facts (one proposal per cycle)."""
+        self._m.d.comb += [p.eq(x) for p, x in zip(self._proposed, (value, k, final))]
+
+    def load_proposed(self):
+        """Load this cycle's proposal at the next clock edge."""
+        self._m.d.comb += self._load.eq(1)
+
+    def set(self, value):
+        """``remaining = value`` at the next clock edge (registered ``k`` and ``final`` are
+        computed from ``value``: a test behind whatever computes it)."""
+        left = Signal(len(self.value), name="remaining_set")
+        self._m.d.comb += left.eq(value)
+        self._m.d.sync += self.value.eq(left)
+        if self._registered:
+            self._m.d.sync += [self.k.eq(chunk_bytes(left, self._B)),
+                               self.final.eq(last_chunk(left, self._B))]
+
+
+class RuntimeStep:
+    """One runtime step cut into chunks: ``left`` bytes to go (``length`` in its first cycle,
+    then the shared :class:`StepRemainder`), ``k`` bytes this cycle, ``final`` on the last
+    chunk.
+
+    ``first`` gives :func:`chunk_facts` of ``length`` when the caller keeps them in
+    flip-flops beside it; otherwise they are computed from ``length``. ``advance()``
+    (inside the condition that the chunk moved) goes to the next step through ``next_step``
+    or keeps counting.
+    """
+
+    def __init__(self, m, index, bytes_per_beat, *, step, remainder, length, next_step,
+                 first=None):
         B = bytes_per_beat
         assert B & (B - 1) == 0, "bytes per beat is a power of two"
-        self._m, self._B = m, B
-        self._step, self._remaining, self._next = step, remaining, next_step
-        self._length = length
+        self._m, self._step, self._remainder, self._next = m, step, remainder, next_step
         self.index = index
+        remaining = remainder.value
         self.left = Signal(len(remaining), name=f"left{index}")
         self.k = Signal(range(B + 1), name=f"k{index}")
-        m.d.comb += self.left.eq(Mux(step != 0, remaining, length))
-        # B is a power of two: "at least B" and "at most B" are tests of the high bits, not
-        # word-wide comparisons (a carry chain each, in front of the next step's subtraction).
-        # Both sources are tested, the choice comes after the tests.
-        low = B.bit_length() - 1
-
-        def k_of(left):
-            return Mux(left[low:].any(), B, left[:low])
-
-        def final_of(left):
-            return ~left[low + 1:].any() & (~left[low] | ~left[:low].any())
-
-        later = step != 0
-        first = Signal(len(remaining), name=f"length{index}")
-        m.d.comb += first.eq(length)
-        m.d.comb += self.k.eq(Mux(later, k_of(remaining), k_of(first)))
         self.final = Signal(name=f"final{index}")
-        m.d.comb += self.final.eq(Mux(later, final_of(remaining), final_of(first)))
+        later = step != 0
+        m.d.comb += self.left.eq(Mux(later, remaining, length))
+        if first is None:
+            length_now = Signal(len(remaining), name=f"length{index}")
+            m.d.comb += length_now.eq(length)
+            first = chunk_facts(length_now, B)
+        # each source's facts and difference first, the choice after them: no test or
+        # subtraction behind the step decode
+        m.d.comb += [self.k.eq(Mux(later, remainder.k, first.k)),
+                     self.final.eq(Mux(later, remainder.final, first.final))]
+        remainder.propose(Mux(later, remaining - B, length - B),
+                          Mux(later, remainder.after.k_after, first.k_after),
+                          Mux(later, remainder.after.final_after, first.final_after))
 
     def advance(self):
         m = self._m
         with m.If(self.final):
             self._next(self.index)
         with m.Else():
-            # both differences straight from their sources, the choice after them: the
-            # subtraction is not behind the step decode
-            m.d.sync += [self._remaining.eq(Mux(self._step != 0, self._remaining - self._B,
-                                                self._length - self._B)),
-                         self._step.eq(1)]
+            self._remainder.load_proposed()
+            m.d.sync += self._step.eq(1)
 
 
 def count_chunks(bytes_per_beat):
