@@ -31,7 +31,8 @@ class TLB(wiring.Component):
     -------
     lookup_vpn : In(vpn_bits)
     hit : Out(1)
-        ``lookup_vpn`` is in a valid entry (combinational).
+        The ``lookup_vpn`` of the previous cycle is in a valid entry: the comparison with
+        every entry is registered, and ``hit`` and ``hit_ppn`` are made from that register.
     hit_ppn : Out(ppn_bits)
     write : In(1)
         Store ``write_vpn -> write_ppn`` into the next entry of the round-robin pointer. Only
@@ -62,8 +63,8 @@ class TLB(wiring.Component):
         # at most one entry matches (see ``write``), so the PPN is an OR of the matching
         # entries, not a chain of n priority multiplexers
         match = Signal(n)
+        m.d.sync += match.eq(Cat(valid[i] & (vpns[i] == self.lookup_vpn) for i in range(n)))
         m.d.comb += [
-            match.eq(Cat(valid[i] & (vpns[i] == self.lookup_vpn) for i in range(n))),
             self.hit.eq(match.any()),
             self.hit_ppn.eq(reduce(operator.or_,
                                    (Mux(match[i], ppns[i], 0) for i in range(n)))),
@@ -172,11 +173,10 @@ class MMU(wiring.Component):
                 return Cat(Const(0, 3), va[30:39], self.pgd[PAGE_BITS:])
             return Cat(Const(0, 2), va[20:32], self.pgd[14:])
 
-        # the lookup is registered: a request is translated in the cycle after it arrived
-        # (its payload holds still until ready); a flush in between looks it up again
+        # the TLB's lookup is registered: a request is translated in the cycle after it
+        # arrived (its payload holds still until ready); a flush in between looks it up again
         looked = Signal()
-        hit, hit_ppn = Signal(), Signal.like(tlb.hit_ppn)
-        m.d.sync += [hit.eq(tlb.hit), hit_ppn.eq(tlb.hit_ppn)]
+        hit, hit_ppn = tlb.hit, tlb.hit_ppn
 
         with m.FSM():
             with m.State("IDLE"):

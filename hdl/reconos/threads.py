@@ -730,8 +730,12 @@ class SobelServerThread(HardwareThread):
                 to_pixels.signature.members["m_axis"].signature)
             m.submodules.result_slice = result_slice = RegisterSlice(
                 to_words.signature.members["s_axis"].signature.flip())
+            # and after the word repacker: the memory write's ready does not reach its buffer
+            m.submodules.word_slice = word_slice = RegisterSlice(
+                to_words.signature.members["m_axis"].signature)
             wiring.connect(m, to_pixels.m_axis, pixel_slice.s_axis)
             wiring.connect(m, result_slice.m_axis, to_words.s_axis)
+            wiring.connect(m, to_words.m_axis, word_slice.s_axis)
             pixels, results = pixel_slice.m_axis, result_slice.s_axis
             m.d.comb += [sobel.width.eq(width), sobel.height.eq(height),
                          sobel.i.tdata.eq(pixels.tdata),
@@ -783,7 +787,7 @@ class SobelServerThread(HardwareThread):
                     m.next = "FILTER"
             if self.mode == "opencv":
                 mem.transform_bytes_states("FILTER", src, dst, n, to_pixels.s_axis,
-                                           to_words.m_axis, then="RESPOND")
+                                           word_slice.m_axis, then="RESPOND")
             else:
                 with m.State("FILTER"):
                     mem.transform(src, dst, n, sobel.i, sobel.o, then="RESPOND")
