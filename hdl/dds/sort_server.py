@@ -54,26 +54,29 @@ class WordFeeder(wiring.Component):
         m = Module()
         s, out = self.s_axis, self.m_axis
         left = Signal(32)            # words still to send
+        # left != 0 and left == 1 from flip-flops: the handshakes do not wait for 32-bit tests
+        some, one = Signal(), Signal()
         ended = Signal(init=1)       # the input packet's tlast was taken
         high = Signal()              # the low word of the held beat has been sent
         words = Mux(s.tkeep[7], 2, Mux(s.tkeep[3], 1, 0))
         from_input = ~ended & s.tvalid
         sent = out.tvalid & out.tready
         m.d.comb += [
-            self.busy.eq((left != 0) | ~ended),
+            self.busy.eq(some | ~ended),
             out.tdata.eq(Mux(ended, 0xFFFF_FFFF, Mux(high, s.tdata[32:], s.tdata[:32]))),
-            out.tlast.eq(left == 1),
-            out.tvalid.eq((left != 0) & (ended | (s.tvalid & (words > high)))),
+            out.tlast.eq(one),
+            out.tvalid.eq(some & (ended | (s.tvalid & (words > high)))),
             # a beat is taken once its words are sent, or at once when it carries none to send
-            s.tready.eq(~ended & ((left == 0) | (words <= high) |
-                                  (out.tready & ((words == high + 1) | (left == 1))))),
+            s.tready.eq(~ended & (~some | (words <= high) |
+                                  (out.tready & ((words == high + 1) | one)))),
         ]
         taken = s.tvalid & s.tready
         with m.If(self.start):
-            m.d.sync += [left.eq(self.count), ended.eq(0), high.eq(0)]
+            m.d.sync += [left.eq(self.count), some.eq(self.count != 0),
+                         one.eq(self.count == 1), ended.eq(0), high.eq(0)]
         with m.Else():
             with m.If(sent):
-                m.d.sync += left.eq(left - 1)
+                m.d.sync += [left.eq(left - 1), some.eq(~one), one.eq(left == 2)]
             with m.If(taken):
                 m.d.sync += [high.eq(0), ended.eq(s.tlast)]
             with m.Elif(sent & from_input):
