@@ -10,8 +10,9 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
-from .steps import (ChunkFacts, RuntimeStep, StepRemainder, chunk_facts, count_chunks,
-                    count_step, next_element, pad_bytes, payload_bytes, send_count_chunk)
+from .steps import (ChunkFacts, RuntimeStep, StepRemainder, chunk_facts, chunk_facts_value,
+                    count_chunks, count_step, next_element, pad_bytes, payload_bytes,
+                    send_count_chunk)
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -328,8 +329,8 @@ class Deserializer(wiring.Component):
         """Registers beside each count, from its next value: (empty, bad, bad_code, lengths,
         firsts), per variable: no elements; a bad count (above its bound or ``max_count``:
         LENGTH, or a CDR string count of 0: FORMAT) and its code; the bytes of its field and
-        its first chunk's ``(k, final)`` (:class:`RuntimeStep`; ``None`` for packed elements,
-        which have no payload step)."""
+        their :class:`ChunkFacts` (``RuntimeStep``'s ``first``; ``None`` for packed
+        elements, which have no payload step)."""
         width = len(counts[0]) if counts else 32
         B = self._width // 8
         empty, bad, bad_code, lengths, firsts = [], [], [], [], []
@@ -366,8 +367,7 @@ class Deserializer(wiring.Component):
             m.d.sync += length.eq(length_next)
             facts = []
             for name, value, reset in zip(ChunkFacts._fields, chunk_facts(length_next, B),
-                                          (min(init, B), init <= B,
-                                           B if init >= 2 * B else init % B, init <= 2 * B)):
+                                          chunk_facts_value(init, B)):
                 fact = Signal(len(value), name=f"length_{name}{v.index}", init=reset)
                 m.d.sync += fact.eq(value)
                 facts.append(fact)

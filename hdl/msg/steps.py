@@ -6,7 +6,7 @@ from typing import NamedTuple
 from amaranth.hdl import Const, Mux, Signal, Value
 
 __all__ = ["payload_bytes", "pad_bytes", "chunk_bytes", "last_chunk", "ChunkFacts",
-           "chunk_facts", "StepRemainder",
+           "chunk_facts", "chunk_facts_value", "StepRemainder",
            "RuntimeStep", "COUNT_BYTES", "count_chunks",
            "count_chunk_cases", "count_step", "send_count_chunk", "next_element"]
 
@@ -65,6 +65,13 @@ def chunk_facts(left, bytes_per_beat):
     B, low = bytes_per_beat, bytes_per_beat.bit_length() - 1
     return ChunkFacts(chunk_bytes(left, B), last_chunk(left, B),
                       Mux(left[low + 1:].any(), B, left[:low]), last_chunk(left, 2 * B))
+
+
+def chunk_facts_value(left, bytes_per_beat):
+    """:func:`chunk_facts` of the integer ``left`` (a register's reset value)."""
+    B = bytes_per_beat
+    return ChunkFacts(min(left, B), int(left <= B), B if left >= 2 * B else left % B,
+                      int(left <= 2 * B))
 
 
 class StepRemainder:
