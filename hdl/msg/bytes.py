@@ -46,6 +46,15 @@ class ChunkSignature(wiring.Signature):
         return hash((type(self), self._data_width))
 
 
+def kept(m, value, name):
+    """``value`` on a wire synthesis keeps (Yosys and Vivado ``keep``): the logic in front of
+    it is mapped on its own, so a late signal that chooses between such wires meets them in
+    the last LUT before the flip-flops instead of at the start of one merged cone."""
+    wire = Signal(len(value), name=name, attrs={"keep": 1})
+    m.d.comb += wire.eq(value)
+    return wire
+
+
 class ChunkRegisterSlice(wiring.Component):
     """Register slice of a chunk link: ``o`` and ``i.ready`` from flip-flops, one chunk per
     cycle, one cycle of latency (see :class:`~hdl.stream.RegisterSlice`).
@@ -115,9 +124,8 @@ class BytePacker(wiring.Component):
             self.first.eq(first),
         ]
         # The next state is built for a beat leaving and for none, each with and without a
-        # chunk coming in, from registers and the chunk; the output handshake (the consumer's
-        # ready) and the chunk's acceptance only choose. Kept wires: synthesis maps each
-        # candidate on its own, so the choice is the last LUT before the flip-flops.
+        # chunk coming in, from registers and the chunk, on kept wires; the output handshake
+        # (the consumer's ready) and the chunk's acceptance only choose.
         sent = out.tvalid & out.tready
         with m.If(sent):
             m.d.sync += first.eq(out.tlast)
@@ -128,17 +136,15 @@ class BytePacker(wiring.Component):
                                         (count <= B) & ~final))]
         data = Cat(byte_mask(chunk.data, B, chunk.len), Const(0, W))
         shifted = buf >> (beat_bytes * 8)
-        candidates = {}
-        for name, value in (("sent_in", shifted | (data << (left_sent * 8))),
-                            ("sent", shifted), ("in", buf | (data << (count * 8)))):
-            candidates[name] = Signal(2 * W, name=f"buf_{name}", attrs={"keep": 1})
-            m.d.comb += candidates[name].eq(value)
+        buf_sent_in = kept(m, (shifted | (data << (left_sent * 8)))[:2 * W], "buf_sent_in")
+        buf_sent = kept(m, shifted, "buf_sent")
+        buf_in = kept(m, (buf | (data << (count * 8)))[:2 * W], "buf_in")
         with m.If(chunk.valid & chunk.ready):
-            m.d.sync += [buf.eq(Mux(sent, candidates["sent_in"], candidates["in"])),
+            m.d.sync += [buf.eq(Mux(sent, buf_sent_in, buf_in)),
                          count.eq(Mux(sent, left_sent, count) + chunk.len),
                          final.eq(chunk.last)]
         with m.Elif(sent):
-            m.d.sync += [buf.eq(candidates["sent"]), count.eq(left_sent),
+            m.d.sync += [buf.eq(buf_sent), count.eq(left_sent),
                          final.eq(final & ~out.tlast)]
         return m
 
@@ -204,13 +210,11 @@ class ByteUnpacker(wiring.Component):
         room_taken = ~ended & (left <= B)
         room_kept = ~ended & (count <= B)
         shifted = buf >> (self.amount * 8)
-        # kept wires: synthesis maps each next state on its own, so ``take`` and ``flush``
-        # meet them in the last LUT before the flip-flop instead of at the start of the cone
-        buf_taken = Signal(2 * W, attrs={"keep": 1})
-        buf_kept = Signal(2 * W, attrs={"keep": 1})
-        m.d.comb += [buf_taken.eq(Mux(s.tvalid & room_taken, shifted | (beat << (left * 8)),
-                                      shifted)),
-                     buf_kept.eq(Mux(s.tvalid & room_kept, buf | (beat << (count * 8)), buf))]
+        # each next state on a kept wire: ``take`` and ``flush`` only choose
+        buf_taken = kept(m, Mux(s.tvalid & room_taken, shifted | (beat << (left * 8)),
+                                shifted)[:2 * W], "buf_taken")
+        buf_kept = kept(m, Mux(s.tvalid & room_kept, buf | (beat << (count * 8)),
+                               buf)[:2 * W], "buf_kept")
 
         with m.If(dropping):
             m.d.comb += s.tready.eq(1)

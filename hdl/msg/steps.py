@@ -130,8 +130,8 @@ class StepRemainder:
         self._m.d.comb += left.eq(value)
         self._m.d.sync += self.value.eq(left)
         if self._registered:
-            self._m.d.sync += [self.k.eq(chunk_bytes(left, self._B)),
-                               self.final.eq(last_chunk(left, self._B))]
+            facts = chunk_facts(left, self._B)
+            self._m.d.sync += [self.k.eq(facts.k), self.final.eq(facts.final)]
 
 
 class RuntimeStep:
