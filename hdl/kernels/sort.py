@@ -82,7 +82,15 @@ class MergeSorter(wiring.Component):
         length = Signal(range(n + 1))
         count = Signal(range(n + 1))        # elements stored
         run = Signal(range(n + 1))          # run width of this pass
-        base, i, j, k = (Signal(range(2 * n + 1), name=nm) for nm in ("base", "i", "j", "k"))
+        i, j, k = (Signal(range(2 * n + 1), name=nm) for nm in ("i", "j", "k"))
+        # the current pair's bounds, kept in registers so that no adder lies between the
+        # counters and the read addresses: x_end = base + run, y_end = base + 2 run (also
+        # the next pair's base), y_last = y_end - 1, next_j = y_end + run (the next pair's
+        # second run), last_pair = (y_end == n). Each is updated from registers at a pair
+        # boundary, with one adder
+        x_end, y_end, y_last, next_j = (Signal(range(2 * n + 1), name=nm)
+                                        for nm in ("x_end", "y_end", "y_last", "next_j"))
+        last_pair = Signal()
         p = Signal(range(passes + 1))
         src = Signal()                      # memory read in this pass: 0 = A, 1 = B
         ovalid, olast = Signal(), Signal()
@@ -125,8 +133,9 @@ class MergeSorter(wiring.Component):
             with m.State("PRIME"):
                 m.d.comb += self.busy.eq(1)
                 m.d.comb += [rx.addr.eq(0), ry.addr.eq(1)]
-                m.d.sync += [i.eq(0), j.eq(1), k.eq(0), base.eq(0), run.eq(1),
-                             fresh_x.eq(1), fresh_y.eq(1)]
+                m.d.sync += [i.eq(0), j.eq(1), k.eq(0), run.eq(1),
+                             x_end.eq(1), y_end.eq(2), y_last.eq(1), next_j.eq(3),
+                             last_pair.eq(n == 2), fresh_x.eq(1), fresh_y.eq(1)]
                 m.next = "MERGE"
             with m.State("MERGE"):
                 # one element per cycle. Each run's memory port always reads the element after
@@ -141,8 +150,8 @@ class MergeSorter(wiring.Component):
                 hx, hy = Signal(w), Signal(w)
                 m.d.comb += [hx.eq(Mux(fresh_x, rx.data, held_x)),
                              hy.eq(Mux(fresh_y, ry.data, held_y))]
-                x_ok = i != base + run
-                y_ok = j != base + 2 * run
+                x_ok = i != x_end
+                y_ok = j != y_end
                 take_x = Signal()
                 m.d.comb += take_x.eq(x_ok & (~y_ok | (hx <= hy)))
                 value = Mux(take_x, hx, hy)
@@ -166,16 +175,23 @@ class MergeSorter(wiring.Component):
                     with m.Else():
                         m.d.sync += j.eq(j + 1)
                     m.d.sync += [k.eq(k + 1), fresh_x.eq(take_x), fresh_y.eq(~take_x)]
-                    with m.If(k == base + 2 * run - 1):
-                        nb = base + 2 * run
+                    with m.If(k == y_last):
                         m.d.sync += [fresh_x.eq(1), fresh_y.eq(1)]
-                        with m.If(nb == n):
-                            m.d.comb += [rd_i.eq(0), rd_j.eq(2 * run), rd_half.eq(~src)]
-                            m.d.sync += [p.eq(p + 1), run.eq(run << 1), base.eq(0), i.eq(0),
-                                         j.eq(2 * run), k.eq(0)]
+                        with m.If(last_pair):
+                            r2 = run << 1
+                            m.d.comb += [rd_i.eq(0), rd_j.eq(r2), rd_half.eq(~src)]
+                            m.d.sync += [p.eq(p + 1), run.eq(r2), i.eq(0), j.eq(r2), k.eq(0),
+                                         x_end.eq(r2), y_end.eq(r2 << 1),
+                                         y_last.eq((r2 << 1) - 1),
+                                         next_j.eq((r2 << 1) + r2),
+                                         last_pair.eq((r2 << 1) == n)]
                         with m.Else():
-                            m.d.comb += [rd_i.eq(nb), rd_j.eq(nb + run)]
-                            m.d.sync += [base.eq(nb), i.eq(nb), j.eq(nb + run)]
+                            m.d.comb += [rd_i.eq(y_end), rd_j.eq(next_j)]
+                            m.d.sync += [i.eq(y_end), j.eq(next_j),
+                                         x_end.eq(next_j), y_end.eq(y_end + 2 * run),
+                                         y_last.eq(y_last + 2 * run),
+                                         next_j.eq(next_j + 2 * run),
+                                         last_pair.eq(y_end + 2 * run == n)]
                 m.d.comb += [rx.addr.eq(Cat(rd_i[:ab], rd_half)),
                              ry.addr.eq(Cat(rd_j[:ab], rd_half))]
             with m.State("DRAIN"):
