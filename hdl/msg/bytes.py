@@ -5,6 +5,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from ..logic import kept
 from ..params import check_int
 from ..stream import AXIStreamSignature, keep_count, skid_buffer
 
@@ -44,15 +45,6 @@ class ChunkSignature(wiring.Signature):
 
     def __hash__(self):
         return hash((type(self), self._data_width))
-
-
-def kept(m, value, name):
-    """``value`` on a wire synthesis keeps (Yosys and Vivado ``keep``): the logic in front of
-    it is mapped on its own, so a late signal that chooses between such wires meets them in
-    the last LUT before the flip-flops instead of at the start of one merged cone."""
-    wire = Signal(len(value), name=name, attrs={"keep": 1})
-    m.d.comb += wire.eq(value)
-    return wire
 
 
 class ChunkRegisterSlice(wiring.Component):

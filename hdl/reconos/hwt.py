@@ -27,6 +27,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
+from ..logic import kept
 from ..params import check_int
 from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
 from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
@@ -367,7 +368,11 @@ class MemifEngine(wiring.Component):
         outstanding = Signal(range(self._credits + 1))
         add = Signal(range(self._credits + 1))
         pop = Signal()
-        m.d.sync += outstanding.eq(outstanding + add - pop)
+        # a pop is known late (the FIFO's level, the reader's ready): both successors are
+        # computed beforehand and the pop only chooses between them
+        after = kept(m, outstanding + add, "outstanding_after")
+        after_pop = kept(m, outstanding + add - 1, "outstanding_after_pop")
+        m.d.sync += outstanding.eq(Mux(pop, after_pop, after))
 
         # per read request: is its data for the user (0) or a fence word (1), and how many
         m.submodules.kinds = kinds = SyncFIFO(width=1 + 8, depth=8)
@@ -386,7 +391,11 @@ class MemifEngine(wiring.Component):
         # remaining length change, which costs a cycle only after a new command
         r_len = Signal(w)
         r_len_valid = Signal()
-        m.d.sync += [r_len.eq(chunk_len(r_addr, r_rem)), r_len_valid.eq(1)]
+        # and in words, in the credit counter's width: a chunk is at most MEMIF_CHUNK bytes,
+        # so the credit check is not a word-wide addition in front of the sequencer
+        r_len_words = Signal(range(self._credits + 1))
+        next_len = chunk_len(r_addr, r_rem)
+        m.d.sync += [r_len.eq(next_len), r_len_words.eq(next_len >> sh), r_len_valid.eq(1)]
         r_want = Signal()
         fence_want = Signal()
         fence_addr = Signal(w)
@@ -438,8 +447,8 @@ class MemifEngine(wiring.Component):
         seq_words = Signal(w)    # data words left of the current write chunk
         with m.FSM():
             with m.State("IDLE"):
-                r_ok = r_want & kinds.w_rdy & (outstanding + (r_len >> sh) <= self._credits)
-                f_ok = fence_want & kinds.w_rdy & (outstanding + 1 <= self._credits)
+                r_ok = r_want & kinds.w_rdy & (outstanding + r_len_words <= self._credits)
+                f_ok = fence_want & kinds.w_rdy & (outstanding != self._credits)
                 with m.If(w_ready):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
                                  seq_words.eq(w_len >> sh),
@@ -455,8 +464,8 @@ class MemifEngine(wiring.Component):
                                  r_words[1].eq(fence_addr), fence_want.eq(0)]
                     m.next = "R_CMD"
                 with m.Elif(r_ok):
-                    m.d.comb += [add.eq(r_len >> sh), kinds.w_en.eq(1),
-                                 kinds.w_data.eq(0 | ((r_len >> sh) << 1))]
+                    m.d.comb += [add.eq(r_len_words), kinds.w_en.eq(1),
+                                 kinds.w_data.eq(0 | (r_len_words << 1))]
                     m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | r_len),
                                  r_words[1].eq(r_addr),
                                  r_addr.eq(r_addr + r_len), r_rem.eq(r_rem - r_len),
