@@ -10,9 +10,8 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
-from .steps import (ChunkFacts, RuntimeStep, StepRemainder, chunk_facts, chunk_facts_value,
-                    count_chunks, count_step, next_element, pad_bytes, payload_bytes,
-                    send_count_chunk)
+from .steps import (RuntimeStep, StepRemainder, count_chunks, count_step, next_element,
+                    pad_bytes, payload_bytes, registered_facts, send_count_chunk)
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -365,14 +364,9 @@ class Deserializer(wiring.Component):
             length_next = Signal(length_width, name=f"length_next{v.index}")
             m.d.comb += length_next.eq(payload_bytes(v, nxt - nul)[:length_width])
             m.d.sync += length.eq(length_next)
-            facts = []
-            for name, value, reset in zip(ChunkFacts._fields, chunk_facts(length_next, B),
-                                          chunk_facts_value(init, B)):
-                fact = Signal(len(value), name=f"length_{name}{v.index}", init=reset)
-                m.d.sync += fact.eq(value)
-                facts.append(fact)
             lengths.append(length)
-            firsts.append(ChunkFacts(*facts))
+            firsts.append(registered_facts(m, length_next, B, name=f"length{v.index}",
+                                           init=init))
         return empty, bad, bad_code, lengths, firsts
 
     def _count(self, m, s, i, window, avail, ended, counts, count_next, step, taking, fail,

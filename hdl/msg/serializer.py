@@ -10,7 +10,7 @@ from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .steps import (RuntimeStep, StepRemainder, count_chunks, count_step, next_element,
-                    pad_bytes, payload_bytes, send_count_chunk)
+                    pad_bytes, payload_bytes, registered_facts, send_count_chunk)
 
 __all__ = ["Serializer", "SerializerError", "ErrorSignature", "payload_port"]
 
@@ -163,6 +163,30 @@ class Serializer(wiring.Component):
         lengths = {v.index: payload_bytes(v, counts[v.index]) for v in plan.variables
                    if not v.elements}
         empty = {var: count == 0 for var, count in counts.items()}
+        # the fields are held while valid (the stream rule) and step 0 is never a runtime
+        # step, so what the later steps derive from a field's count is kept in flip-flops:
+        # its bytes, their chunk facts, whether it is empty (not a word-wide test behind the
+        # fields' source)
+        held_lengths, held_firsts, held_empty = {}, {}, {}
+        for v in plan.variables:
+            if v.into is not None:
+                continue
+            held_empty[v.index] = Signal(name=f"field_empty{v.index}", init=1)
+            m.d.sync += held_empty[v.index].eq(empty[v.index])
+            if v.elements:
+                continue
+            now = Signal(32, name=f"field_bytes_now{v.index}")
+            held_lengths[v.index] = Signal(32, name=f"field_bytes{v.index}")
+            m.d.comb += now.eq(lengths[v.index])
+            m.d.sync += held_lengths[v.index].eq(now)
+            held_firsts[v.index] = registered_facts(m, now, B, name=f"field_bytes{v.index}")
+
+        def derived(i):
+            """(lengths, firsts, empty) as step ``i`` reads them: from flip-flops after
+            step 0."""
+            if i == 0:
+                return lengths, {}, empty
+            return {**lengths, **held_lengths}, held_firsts, {**empty, **held_empty}
         # a sequence of messages or strings: its packed elements are read through a window
         unpackers, reported = {}, {}
         for v in plan.streams:
@@ -283,6 +307,7 @@ class Serializer(wiring.Component):
                 for i, s in enumerate(steps):
                     last_op = i == len(steps) - 1
                     stream = stream_at[i]
+                    step_lengths, step_firsts, step_empty = derived(i)
                     with m.Case(i):
                         if s.kind == "run" and stream is not None:
                             self._element_run(m, s, i, chunk, step, read, unpackers[stream],
@@ -296,7 +321,7 @@ class Serializer(wiring.Component):
                         if s.kind == "loop":
                             top = plan.variables[s.var].into is None
                             exit_last = s.target == len(steps) - 1
-                            with m.If(counts[s.var] == 0):
+                            with m.If(step_empty[s.var]):
                                 if top:
                                     end_of_stream(s.var, True, exit_last,
                                                   lambda s=s: next_op(s.target))
@@ -334,10 +359,11 @@ class Serializer(wiring.Component):
                                             else:
                                                 m.d.sync += step.eq(j + 1)
                             continue
-                        length = pad_bytes(plan, s, pos, empty) if s.kind == "pad" \
-                            else lengths[s.var]
+                        length = pad_bytes(plan, s, pos, step_empty) if s.kind == "pad" \
+                            else step_lengths[s.var]
+                        first = None if s.kind == "pad" else step_firsts.get(s.var)
                         walk = RuntimeStep(m, i, B, step=step, remainder=remainder,
-                                           length=length, next_step=next_op)
+                                           length=length, next_step=next_op, first=first)
                         left, k, final, advance = walk.left, walk.k, walk.final, walk.advance
                         m.d.comb += chunk.len.eq(k)
 

@@ -74,6 +74,18 @@ def chunk_facts_value(left, bytes_per_beat):
                       int(left <= 2 * B))
 
 
+def registered_facts(m, value, bytes_per_beat, *, name, init=0):
+    """:class:`ChunkFacts` of ``value`` in flip-flops loaded every cycle (they follow it one
+    cycle later), with the reset values of ``init``; named ``<name>_k`` and so on."""
+    facts = []
+    for field, fact, reset in zip(ChunkFacts._fields, chunk_facts(value, bytes_per_beat),
+                                  chunk_facts_value(init, bytes_per_beat)):
+        held = Signal(len(fact), name=f"{name}_{field}", init=reset)
+        m.d.sync += held.eq(fact)
+        facts.append(held)
+    return ChunkFacts(*facts)
+
+
 class StepRemainder:
     """The bytes a runtime step has still to move after its first chunk, shared by the
     steps, with its chunk size and last-chunk test kept in flip-flops beside it: the chunk
