@@ -643,16 +643,20 @@ class MemCalls:
         per = self._w // ew
         restart = []
         if count is not None:
-            taken = Signal(32, name=f"{tag}_taken")
-            restart.append(taken.eq(0))
+            # elements still to take, and "none left" beside it in a flip-flop: ``count`` is
+            # arithmetic on the caller's registers, and a comparison with it would be a carry
+            # chain in the source's ready
+            left = Signal(32, name=f"{tag}_left")
+            full = Signal(name=f"{tag}_full")
+            restart += [left.eq(count), full.eq(count == 0)]
             with m.If(source.tvalid & source.tready):
-                m.d.sync += taken.eq(taken + 1)
+                m.d.sync += [left.eq(left - 1), full.eq(left == 1)]
         if per == 1:
             m.d.comb += [e.write_data.valid.eq(source.tvalid),
                          e.write_data.payload.eq(source.tdata),
                          source.tready.eq(e.write_data.ready)]
             if count is not None:
-                with m.If(taken >= count):
+                with m.If(full):
                     m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
             return restart
         lane = Signal(range(per), name=f"{tag}_lane")
@@ -668,7 +672,7 @@ class MemCalls:
                     with m.If(lane == k):
                         m.d.sync += low[k].eq(source.tdata)
         if count is not None:
-            with m.If(taken >= count):
+            with m.If(full):
                 m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
         with m.If(source.tvalid & source.tready):
             m.d.sync += lane.eq(Mux(lane == per - 1, 0, lane + 1))
