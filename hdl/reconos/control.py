@@ -177,7 +177,8 @@ class ProcControl(wiring.Component):
     pgd : Out(addr_bits)
         Page-table base (physical).
     tlb_flush : Out(1)
-        One-cycle pulse: invalidate the TLB (write to TLB_FLUSH or to PGD).
+        One-cycle pulse, registered (the cycle after the write): invalidate the TLB (write to
+        TLB_FLUSH or to PGD).
     mmu_pgf : In(1)
         The MMU waits in a page fault; ``mmu_fault_addr`` is the faulting VA.
     mmu_fault_addr : In(64)
@@ -278,6 +279,10 @@ class ProcControl(wiring.Component):
                         m.d.sync += status.eq(new_errors)
         m.d.comb += t.read_error.eq(~decoded)
 
+        # the flush is registered: the register decode does not reach into the MMU's request
+        # path (the pulse comes one cycle after the write, as if the write came a cycle later)
+        flush = Signal()
+        m.d.sync += self.tlb_flush.eq(flush)
         w_decoded = Signal()
         for r, index in index_of.items():
             with m.If(t.write_index == index):
@@ -285,7 +290,7 @@ class ProcControl(wiring.Component):
                 with m.If(t.write_en):
                     if r == R.PGD:
                         m.d.sync += self.pgd.eq(t.write_data)
-                        m.d.comb += self.tlb_flush.eq(1)
+                        m.d.comb += flush.eq(1)
                     elif r == R.FAULT_ADDR:
                         m.d.comb += self.mmu_retry.eq(1)
                     elif r == R.SYS_RESET:
@@ -295,11 +300,11 @@ class ProcControl(wiring.Component):
                     elif r == R.HWT_SIGNAL:
                         m.d.sync += self.hwt_signal.eq(t.write_data)
                     elif r == R.TLB_FLUSH:
-                        m.d.comb += self.tlb_flush.eq(1)
+                        m.d.comb += flush.eq(1)
                     elif r == R.FAULT_ABORT:
                         m.d.comb += self.mmu_abort.eq(1)
         m.d.comb += t.write_error.eq(~w_decoded)
         # The system reset also flushes (the TLB's valid bits are cleared by it anyway).
         with m.If(self.sys_reset):
-            m.d.comb += self.tlb_flush.eq(1)
+            m.d.comb += flush.eq(1)
         return m
