@@ -24,7 +24,7 @@ import enum
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.fifo import SyncFIFO, SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
 from ..logic import kept
@@ -374,8 +374,10 @@ class MemifEngine(wiring.Component):
         after_pop = kept(m, outstanding + add - 1, "outstanding_after_pop")
         m.d.sync += outstanding.eq(Mux(pop, after_pop, after))
 
-        # per read request: is its data for the user (0) or a fence word (1), and how many
-        m.submodules.kinds = kinds = SyncFIFO(width=1 + 8, depth=8)
+        # per read request: is its data for the user (0) or a fence word (1), and how many;
+        # its head comes from flip-flops (the data routing below decides on it in the cycle a
+        # word is taken), the extra cycle is hidden behind the memory's latency
+        m.submodules.kinds = kinds = SyncFIFOBuffered(width=1 + 8, depth=8)
 
         # ---- hwt2mem owner: read issuer (0) or write issuer (1) ----
         r_words = [Signal(w, name="r_cmd"), Signal(w, name="r_addr")]
