@@ -19,13 +19,17 @@ def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_paylo
     out = Signal(width, reset_less=True)
     skid_valid = Signal()
     m.d.comb += [i_ready.eq(~skid_valid), o_payload.eq(out)]
+    # The skid register follows the input while it is empty, so only ``skid_valid`` depends
+    # on the input's valid: a late valid does not drive the enable of every payload bit.
+    with m.If(~skid_valid):
+        m.d.sync += skid.eq(i_payload)
     with m.If(~o_valid | o_ready):
         with m.If(skid_valid):
             m.d.sync += [out.eq(skid), o_valid.eq(1), skid_valid.eq(0)]
         with m.Else():
             m.d.sync += [out.eq(i_payload), o_valid.eq(i_valid)]
     with m.Elif(i_valid & ~skid_valid):
-        m.d.sync += [skid.eq(i_payload), skid_valid.eq(1)]
+        m.d.sync += skid_valid.eq(1)
 
 
 class RegisterSlice(wiring.Component):
