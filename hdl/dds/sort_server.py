@@ -4,6 +4,7 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from ..logic import Countdown
 from ..kernels.sort import MergeSorter
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
@@ -53,9 +54,9 @@ class WordFeeder(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         s, out = self.s_axis, self.m_axis
-        left = Signal(32)            # words still to send
-        # left != 0 and left == 1 from flip-flops: the handshakes do not wait for 32-bit tests
-        some, one = Signal(), Signal()
+        # words still to send; the handshakes test its flags, not 32 bits
+        left = Countdown(32, "words")
+        some, one = ~left.none, left.last
         ended = Signal(init=1)       # the input packet's tlast was taken
         high = Signal()              # the low word of the held beat has been sent
         words = Mux(s.tkeep[7], 2, Mux(s.tkeep[3], 1, 0))
@@ -72,11 +73,10 @@ class WordFeeder(wiring.Component):
         ]
         taken = s.tvalid & s.tready
         with m.If(self.start):
-            m.d.sync += [left.eq(self.count), some.eq(self.count != 0),
-                         one.eq(self.count == 1), ended.eq(0), high.eq(0)]
+            m.d.sync += [*left.load(self.count), ended.eq(0), high.eq(0)]
         with m.Else():
             with m.If(sent):
-                m.d.sync += [left.eq(left - 1), some.eq(~one), one.eq(left == 2)]
+                m.d.sync += left.step()
             with m.If(taken):
                 m.d.sync += [high.eq(0), ended.eq(s.tlast)]
             with m.Elif(sent & from_input):

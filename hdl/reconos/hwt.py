@@ -27,8 +27,9 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.fifo import SyncFIFO, SyncFIFOBuffered
 from amaranth.lib.wiring import In, Out
 
-from ..logic import kept
+from ..logic import Countdown, kept
 from ..params import check_int
+from ..stream import PayloadRegisterSlice
 from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
 from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
                        arch as get_arch)
@@ -318,7 +319,9 @@ class MemifEngine(wiring.Component):
         ``addr`` (virtual) and ``length`` of a read; taken when the previous read's data has
         all been delivered.
     read_data : Out(stream.Signature(StructLayout{data, last}))
-        ``length/W`` words; ``last`` on the final one.
+        ``length/W`` words; ``last`` on the final one. From a register slice: the
+        reader's ready does not reach the mem2hwt FIFO's level or the request bookkeeping
+        in the same cycle (one cycle of latency per read).
     write_cmd : In(stream.Signature(memif_command_layout))
     write_data : In(stream.Signature(W*8))
         ``length/W`` words to write.
@@ -349,6 +352,10 @@ class MemifEngine(wiring.Component):
         sh = wb.bit_length() - 1
         cw = a.chunk_words
         out, inp = self.memif_hwt2mem, self.memif_mem2hwt
+        read_layout = self.read_data.payload.shape()
+        m.submodules.read_slice = read_slice = PayloadRegisterSlice(read_layout)
+        wiring.connect(m, read_slice.o, wiring.flipped(self.read_data))
+        read_data = read_slice.i
 
         def chunk_len(addr, remaining):
             # ``room`` is at most MEMIF_CHUNK: compare only the bits it can have (a full
@@ -419,9 +426,10 @@ class MemifEngine(wiring.Component):
 
         # ---- write buffer and issuer ----
         m.submodules.wbuf = wbuf = SyncFIFO(width=w, depth=2 * cw)
-        w_rem_in = Signal(w)     # words the user still has to supply for the command
-        w_open = Signal()        # w_rem_in != 0, from a flip-flop: the data path's ready does
-                                 # not wait for a word-wide zero test
+        # words the user still has to supply for the command ("none" from a flip-flop: the
+        # data path's ready does not wait for a word-wide zero test)
+        w_rem_in = Countdown(w, "w_in")
+        w_open = ~w_rem_in.none
         w_addr_cur = Signal(w)
         w_rem = Signal(w)        # bytes not yet issued
         w_len = Signal(w)
@@ -435,7 +443,7 @@ class MemifEngine(wiring.Component):
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
-                                 w_rem_in.eq(w_cmd_len >> sh), w_open.eq(1),
+                                 *w_rem_in.load(w_cmd_len >> sh),
                                  w_len_valid.eq(0)]
                 with m.Else():
                     m.d.comb += done_now.eq(1)
@@ -443,7 +451,7 @@ class MemifEngine(wiring.Component):
                      wbuf.w_en.eq(self.write_data.valid & w_open),
                      self.write_data.ready.eq(wbuf.w_rdy & w_open)]
         with m.If(self.write_data.valid & self.write_data.ready):
-            m.d.sync += [w_rem_in.eq(w_rem_in - 1), w_open.eq(w_rem_in != 1)]
+            m.d.sync += w_rem_in.step()
 
         # ---- the request sequencer (owns hwt2mem) ----
         seq_words = Signal(w)    # data words left of the current write chunk
@@ -513,13 +521,13 @@ class MemifEngine(wiring.Component):
                     m.d.sync += w_busy.eq(0)
             with m.Else():
                 m.d.comb += [
-                    self.read_data.valid.eq(~inp.empty),
-                    self.read_data.payload.data.eq(inp.data),
-                    self.read_data.payload.last.eq(r_total == 1),
-                    inp.re.eq(self.read_data.ready),
-                    pop.eq(~inp.empty & self.read_data.ready),
+                    read_data.valid.eq(~inp.empty),
+                    read_data.payload.data.eq(inp.data),
+                    read_data.payload.last.eq(r_total == 1),
+                    inp.re.eq(read_data.ready),
+                    pop.eq(~inp.empty & read_data.ready),
                 ]
-                with m.If(~inp.empty & self.read_data.ready):
+                with m.If(~inp.empty & read_data.ready):
                     m.d.sync += [got.eq(got + 1), r_total.eq(r_total - 1)]
                     with m.If(got + 1 == kind_words):
                         m.d.sync += got.eq(0)
@@ -616,48 +624,50 @@ class MemCalls:
     def _unpack(self, sink, count, tag):
         """Drive ``sink`` (a stream of ``tvalid``/``tready``/``tdata``/``tlast`` with
         elements of W/k bits) from the read data, low element of a word first; elements
-        past ``count`` are dropped. Returns the statements that restart it."""
+        past ``count`` (sampled when the read starts) are dropped. Returns the statements
+        that start it."""
         m, e = self._m, self.engine
         ew = len(sink.tdata)
         per = self._w // ew
         lane = Signal(range(max(2, per)), name=f"{tag}_lane")
-        idx = Signal(32, name=f"{tag}_idx")
+        # counted down from ``count``: it is arithmetic on the caller's registers, and a
+        # comparison with it would be a carry chain in the sink's handshake
+        left = Countdown(32, tag)
         data = e.read_data.payload.data
-        in_range = idx < count
         last_lane = lane == per - 1
         m.d.comb += [
             sink.tdata.eq(data.word_select(lane[:max(1, (per - 1).bit_length())], ew)
                           if per > 1 else data),
-            sink.tlast.eq(idx == count - 1),
-            sink.tvalid.eq(e.read_data.valid & in_range),
+            sink.tlast.eq(left.last),
+            sink.tvalid.eq(e.read_data.valid & ~left.none),
             # a word moves on after its last element, or at once past the count-th element
-            e.read_data.ready.eq(Mux(in_range, sink.tready & last_lane, 1)),
+            e.read_data.ready.eq(Mux(left.none, 1, sink.tready & last_lane)),
         ]
         with m.If(sink.tvalid & sink.tready):
-            m.d.sync += [idx.eq(idx + 1), lane.eq(Mux(last_lane, 0, lane + 1))]
-        return [idx.eq(0), lane.eq(0)]
+            m.d.sync += [*left.step(), lane.eq(Mux(last_lane, 0, lane + 1))]
+        return [*left.load(count), lane.eq(0)]
 
     def _pack(self, source, tag, count=None):
         """Drive the write data from ``source`` (elements of W/k bits, low element first),
-        taking at most ``count`` elements. Returns the statements that restart it."""
+        taking at most ``count`` elements (sampled when the write starts). Returns the
+        statements that start it."""
         m, e = self._m, self.engine
         ew = len(source.tdata)
         per = self._w // ew
         restart = []
+        full = None
         if count is not None:
-            # elements still to take, and "none left" beside it in a flip-flop: ``count`` is
-            # arithmetic on the caller's registers, and a comparison with it would be a carry
-            # chain in the source's ready
-            left = Signal(32, name=f"{tag}_left")
-            full = Signal(name=f"{tag}_full")
-            restart += [left.eq(count), full.eq(count == 0)]
+            # counted down, as in _unpack: no comparison with ``count`` in the source's ready
+            left = Countdown(32, tag)
+            restart += left.load(count)
+            full = left.none
             with m.If(source.tvalid & source.tready):
-                m.d.sync += [left.eq(left - 1), full.eq(left == 1)]
+                m.d.sync += left.step()
         if per == 1:
             m.d.comb += [e.write_data.valid.eq(source.tvalid),
                          e.write_data.payload.eq(source.tdata),
                          source.tready.eq(e.write_data.ready)]
-            if count is not None:
+            if full is not None:
                 with m.If(full):
                     m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
             return restart
@@ -673,7 +683,7 @@ class MemCalls:
                 for k in range(per - 1):
                     with m.If(lane == k):
                         m.d.sync += low[k].eq(source.tdata)
-        if count is not None:
+        if full is not None:
             with m.If(full):
                 m.d.comb += [e.write_data.valid.eq(0), source.tready.eq(0)]
         with m.If(source.tvalid & source.tready):
@@ -744,14 +754,12 @@ class MemCalls:
         main = Signal(w, name=f"{tag}_main")
         tail = Signal(range(wb), name=f"{tag}_tail")
         words_in = Signal(w, name=f"{tag}_words_in")
-        read_left = Signal(w, name=f"{tag}_read_left")
-        write_left = Signal(w, name=f"{tag}_write_left")
+        # words still to read and to write, with their flags in flip-flops: the stream
+        # handshakes do not wait for word-wide comparisons
+        read_left = Countdown(w, f"{tag}_read")
+        write_left = Countdown(w, f"{tag}_write")
         r_sent, w_sent = Signal(name=f"{tag}_r_sent"), Signal(name=f"{tag}_w_sent")
         written, tail_in = Signal(name=f"{tag}_written"), Signal(name=f"{tag}_tail_in")
-        # read_left == 1 and write_left != 0 from flip-flops: the stream handshakes do not
-        # wait for word-wide comparisons
-        read_final = Signal(name=f"{tag}_read_final")
-        write_more = Signal(name=f"{tag}_write_more")
         t_word = Signal(w, name=f"{tag}_t_word")
         d_word = Signal(w, name=f"{tag}_d_word")
         merged = Signal(w, name=f"{tag}_merged")
@@ -762,11 +770,10 @@ class MemCalls:
             m.d.comb += merged.word_select(b, 8).eq(
                 Mux(tail > b, t_word.word_select(b, 8), keep) if b < wb - 1 else keep)
         with m.State(name):
-            self._issue(e.read_cmd, src, words_in << sh, r_sent, read_left.eq(words_in),
-                        read_final.eq(words_in == 1))
-            self._issue(e.write_cmd, dst, main, w_sent, write_left.eq(main >> sh),
-                        write_more.eq((main >> sh) != 0), written.eq(0), tail_in.eq(tail == 0))
-            final = read_final
+            self._issue(e.read_cmd, src, words_in << sh, r_sent, *read_left.load(words_in))
+            self._issue(e.write_cmd, dst, main, w_sent, *write_left.load(main >> sh),
+                        written.eq(0), tail_in.eq(tail == 0))
+            final = read_left.last
             m.d.comb += [
                 sink.tdata.eq(e.read_data.payload.data),
                 sink.tlast.eq(final),
@@ -778,16 +785,16 @@ class MemCalls:
                 e.read_data.ready.eq(r_sent & sink.tready),
             ]
             with m.If(sink.tvalid & sink.tready):
-                m.d.sync += [read_left.eq(read_left - 1), read_final.eq(read_left == 2)]
-            to_memory = w_sent & write_more
+                m.d.sync += read_left.step()
+            to_memory = w_sent & ~write_left.none
             m.d.comb += [
                 e.write_data.valid.eq(to_memory & source.tvalid),
                 e.write_data.payload.eq(source.tdata),
                 source.tready.eq(Mux(to_memory, e.write_data.ready, w_sent & ~tail_in)),
             ]
             with m.If(e.write_data.valid & e.write_data.ready):
-                m.d.sync += [write_left.eq(write_left - 1), write_more.eq(write_left != 1)]
-            with m.If(w_sent & ~write_more & ~tail_in & source.tvalid):
+                m.d.sync += write_left.step()
+            with m.If(w_sent & write_left.none & ~tail_in & source.tvalid):
                 m.d.sync += [t_word.eq(source.tdata), tail_in.eq(1)]
             with m.If(e.write_done):
                 m.d.sync += written.eq(1)
