@@ -3,12 +3,14 @@ message as a rosidl C struct in memory) and a hardware-mapped topic (the message
 ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publishing or
 subscribing a hardware topic needs."""
 
-from amaranth import Cat, Const, Module, Mux, Signal
+from amaranth import Cat, Const, Module, Mux, ResetInserter, Signal
+from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
+from ..stream import RegisterSlice
 from .hwt import HardwareThread
 
 __all__ = ["TopicGatewayThread", "MemoryLayout"]
@@ -239,6 +241,11 @@ class _Transmitter:
                 count = self.struct[(at + WORD) * 8:(at + WORD) * 8 + 32]
                 nbytes = Signal(40, name=f"tx_bytes{var}")
                 m.d.comb += nbytes.eq(count * v.element_bytes)
+                # the stream's lengths from flip-flops (the struct is still from TX_VAR on):
+                # its handshakes do not wait for the multiplication and the rounding
+                nbytes_held = Signal(40, name=f"tx_bytes_held{var}")
+                words = Signal(37, name=f"tx_words{var}")
+                m.d.sync += [nbytes_held.eq(nbytes), words.eq((nbytes + WORD - 1) >> 3)]
                 port = getattr(ser, payload_port(v, "s"))
                 after = "TX_DONE" if k == len(t.order) - 1 else f"TX_VAR{t.order[k + 1]}"
                 # the serializer holds the fields until the message's last byte: payloads
@@ -253,8 +260,7 @@ class _Transmitter:
                         m.next = f"TX_STREAM{var}"
                 with m.State(f"TX_STREAM{var}"):
                     m.d.comb += [ser.fields.valid.eq(1), ser.fields.payload.eq(payload)]
-                    words = (nbytes + WORD - 1) >> 3
-                    sink = _WordSink(port, nbytes)
+                    sink = _WordSink(port, nbytes_held)
                     m.d.comb += sink.connect()
                     mem.read_stream(data_ptr, words << 3, sink, count=words, then=after)
             with m.State("TX_DONE"):
@@ -318,7 +324,8 @@ class _Receiver:
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
         self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
         self.counts = {v.index: Signal(32, name=f"rx_count{v.index}") for v in plan.variables}
-        self.sources = {v.index: _WordSource(getattr(des, payload_port(v, "m")))
+        self.sources = {v.index: _WordSource(self._sliced(payload_port(v, "m"),
+                                                          f"rx_slice{v.index}"))
                         for v in plan.variables}
         errors = Signal(16, name="rx_errors")
         #: between taking a message's first part and going back to waiting
@@ -352,6 +359,17 @@ class _Receiver:
             self.arriving = self.sources[thread.order[0]].port.tvalid & ~drain
         else:
             self.arriving = des.fields.valid & ~drain
+
+    def _sliced(self, member, name):
+        """The deserializer's port ``member`` through a register slice: the receiver's ready
+        (the MEMIF write's) does not reach the deserializer's input handshake. A message's
+        error empties the slice: after an error the receiver reads no more of the failed
+        message's fields, and the deserializer sends nothing of the next message before it."""
+        m, des = self.m, self.des
+        core = RegisterSlice(des.signature.members[member].signature)
+        m.submodules[name] = ResetInserter(des.error.valid)(core)
+        wiring.connect(m, getattr(des, member), core.s_axis)
+        return core.m_axis
 
     def _capacity(self, v):
         """Elements to allocate for ``v``: whole words, and room for a string's NUL."""
