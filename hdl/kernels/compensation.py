@@ -184,17 +184,21 @@ class ImageCompensation(wiring.Component):
         t2 = reg(Mux(shifted_a >= shifted_b, shifted_a - shifted_b, shifted_b - shifted_a),
                  "tab_sum")
         vm, vs = round_to_float32(m, t2, Const(0), "tab_v", stage=reg)
-        vm, vs = reg(vm, "tab_vm"), reg(vs, "tab_vs")
+        # the integer part's shift is registered beside the mantissa (frac_bits is constant
+        # while the table is built), so the last stage holds only the shift and the rounding
+        vm, k_shift = reg(vm, "tab_vm"), reg(frac_bits - vs, "tab_k")
         for k in range(TABLE_STAGES - 1):
             valid, addr = reg(valid, f"tab_v{k + 1}"), reg(addr, f"tab_x{k + 1}")
-        k_shift = Signal(range(-64, 128))
-        m.d.comb += k_shift.eq(frac_bits - vs)
         whole, first, rest = _shift_for_rounding(vm, k_shift[:7])
-        rounded = Signal(25)
-        m.d.comb += rounded.eq(whole + (first & (rest | whole[0])))
+        # the rounded value saturates at 255: its low byte and the carry out of it are
+        # enough, with "above 255" read from the high bits of the shifted value beside them
+        # (not a carry chain through all of them)
+        low = Signal(9)
+        m.d.comb += low.eq(whole[:8] + (first & (rest | whole[0])))
+        saturated = (k_shift <= 0) | (whole[8:] != 0) | low[8]
         with m.If(valid):
             m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(addr),
-                         lut_wr.data.eq(Mux((k_shift <= 0) | (rounded > 255), 255, rounded))]
+                         lut_wr.data.eq(Mux(saturated, 255, low[:8]))]
         in_flight = Signal(range(TABLE_STAGES + 1))
 
         with m.FSM():
