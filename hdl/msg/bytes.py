@@ -105,10 +105,17 @@ class BytePacker(wiring.Component):
         first = Signal(init=1)
         out, chunk = self.m_axis, self.chunk
 
-        m.d.comb += [
+        def beat_ready(count, final, first):
             # A full beat waits for one more byte (or the end of the message): the message's
             # last chunk may be empty, and tlast must still land on its last byte.
-            out.tvalid.eq((count > B) | (final & ((count != 0) | first))),
+            return (count > B) | (final & ((count != 0) | first))
+
+        # ``tvalid`` comes from a flip-flop holding ``beat_ready`` of the registers: its next
+        # value is built like the other next states below, so the consumer's ready meets
+        # registers only
+        valid = Signal()
+        m.d.comb += [
+            out.tvalid.eq(valid),
             out.tdata.eq(buf[:W]),
             out.tlast.eq(final & (count <= B)),
             out.tkeep.eq(Mux(count >= B, (1 << B) - 1,
@@ -131,13 +138,21 @@ class BytePacker(wiring.Component):
         buf_sent_in = kept(m, (shifted | (data << (left_sent * 8)))[:2 * W], "buf_sent_in")
         buf_sent = kept(m, shifted, "buf_sent")
         buf_in = kept(m, (buf | (data << (count * 8)))[:2 * W], "buf_in")
+        count_sent_in = Signal(range(3 * B + 1))
+        count_in = Signal(range(3 * B + 1))
+        m.d.comb += [count_sent_in.eq(left_sent + chunk.len), count_in.eq(count + chunk.len)]
+        valid_sent_in = kept(m, beat_ready(count_sent_in, chunk.last, out.tlast),
+                             "valid_sent_in")
+        valid_in = kept(m, beat_ready(count_in, chunk.last, first), "valid_in")
+        valid_sent = kept(m, beat_ready(left_sent, final & ~out.tlast, out.tlast), "valid_sent")
         with m.If(chunk.valid & chunk.ready):
             m.d.sync += [buf.eq(Mux(sent, buf_sent_in, buf_in)),
-                         count.eq(Mux(sent, left_sent, count) + chunk.len),
-                         final.eq(chunk.last)]
+                         count.eq(Mux(sent, count_sent_in, count_in)),
+                         final.eq(chunk.last),
+                         valid.eq(Mux(sent, valid_sent_in, valid_in))]
         with m.Elif(sent):
             m.d.sync += [buf.eq(buf_sent), count.eq(left_sent),
-                         final.eq(final & ~out.tlast)]
+                         final.eq(final & ~out.tlast), valid.eq(valid_sent)]
         return m
 
 
