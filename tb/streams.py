@@ -95,10 +95,14 @@ class _Pausable:
 
 class PacketSink(_Pausable):
     """Receives packets on an AXI4-Stream port ``<prefix>_t*`` with random backpressure
-    (every byte counts where the port has no ``tkeep``)."""
+    (every byte counts where the port has no ``tkeep``). While the top's ``aresetn`` is low
+    no beat is taken (AXI4-Stream: a handshake in reset is none) and a packet begun before
+    is dropped: a test that resets the top does not receive the tail of the last test's
+    packet."""
 
     def __init__(self, dut, prefix, clock):
         self.clock = clock
+        self.aresetn = getattr(dut, "aresetn", None)
         self.tdata = getattr(dut, f"{prefix}_tdata")
         self.tkeep = getattr(dut, f"{prefix}_tkeep", None)
         self.tlast = getattr(dut, f"{prefix}_tlast")
@@ -124,6 +128,9 @@ class PacketSink(_Pausable):
             self.tready.value = int(ready)
             await RisingEdge(self.clock)
             self.cycle += 1
+            if self.aresetn is not None and self.aresetn.value == 0:
+                self.current = Packet()
+                continue
             if ready and self.tvalid.value == 1:
                 keep = int(self.tkeep.value) if self.tkeep is not None else (1 << self.bytes) - 1
                 if not self.tdata.value.is_resolvable:
