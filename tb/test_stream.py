@@ -13,6 +13,7 @@ from hdl.stream import (
     AXIStreamSignature,
     MessageFIFO,
     PayloadRegisterSlice,
+    ReadyRegisterSlice,
     RegisterSlice,
     StreamDownsizer,
     StreamFIFO,
@@ -79,12 +80,13 @@ def test_register_slice_random(idle, backpressure):
 
 
 @pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.4, 0.6)])
-def test_payload_register_slice_random(idle, backpressure):
-    """The lib.stream slice under random idle and backpressure: every payload once, in order;
-    with neither, one transfer per cycle."""
+@pytest.mark.parametrize("cls,latency", [(PayloadRegisterSlice, 1), (ReadyRegisterSlice, 0)])
+def test_payload_register_slice_random(cls, latency, idle, backpressure):
+    """The lib.stream slices under random idle and backpressure: every payload once, in
+    order; with neither, one transfer per cycle, the first after the slice's latency."""
     from amaranth.lib import data
     layout = data.StructLayout({"addr": 20, "write": 1, "tag": 3})
-    dut = PayloadRegisterSlice(layout)
+    dut = cls(layout)
     rng = random.Random(int(idle * 10) * 7 + int(backpressure * 10))
     sent = [{"addr": rng.getrandbits(20), "write": rng.getrandbits(1), "tag": rng.getrandbits(3)}
             for _ in range(200)]
@@ -118,6 +120,7 @@ def test_payload_register_slice_random(idle, backpressure):
     simulate(dut, bench, background=[sink])
     assert got == sent
     if idle == backpressure == 0:
+        assert cycles[0] == 1 + latency
         assert cycles[-1] - cycles[0] + 1 == len(sent)
 
 

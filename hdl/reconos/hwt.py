@@ -29,7 +29,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..logic import Countdown, kept
 from ..params import check_int
-from ..stream import PayloadRegisterSlice
+from ..stream import ReadyRegisterSlice
 from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
 from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
                        arch as get_arch)
@@ -319,9 +319,10 @@ class MemifEngine(wiring.Component):
         ``addr`` (virtual) and ``length`` of a read; taken when the previous read's data has
         all been delivered.
     read_data : Out(stream.Signature(StructLayout{data, last}))
-        ``length/W`` words; ``last`` on the final one. From a register slice: the
-        reader's ready does not reach the mem2hwt FIFO's level or the request bookkeeping
-        in the same cycle (one cycle of latency per read).
+        ``length/W`` words; ``last`` on the final one. Through a
+        :class:`~hdl.stream.ReadyRegisterSlice`: the reader's ready does not reach the
+        mem2hwt FIFO and the request bookkeeping in the same cycle (no cycle of latency; a
+        word offered while the reader is not ready is popped and held).
     write_cmd : In(stream.Signature(memif_command_layout))
     write_data : In(stream.Signature(W*8))
         ``length/W`` words to write.
@@ -353,7 +354,7 @@ class MemifEngine(wiring.Component):
         cw = a.chunk_words
         out, inp = self.memif_hwt2mem, self.memif_mem2hwt
         read_layout = self.read_data.payload.shape()
-        m.submodules.read_slice = read_slice = PayloadRegisterSlice(read_layout)
+        m.submodules.read_slice = read_slice = ReadyRegisterSlice(read_layout)
         wiring.connect(m, read_slice.o, wiring.flipped(self.read_data))
         read_data = read_slice.i
 

@@ -1,13 +1,13 @@
 """Register slices: break every combinational path of an AXI4-Stream or an
-``amaranth.lib.stream`` link."""
+``amaranth.lib.stream`` link, or (:class:`ReadyRegisterSlice`) only the ready path."""
 
-from amaranth.hdl import Module, Shape, Signal
+from amaranth.hdl import Module, Mux, Shape, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from .signature import check_stream_signature
 
-__all__ = ["PayloadRegisterSlice", "RegisterSlice", "skid_buffer"]
+__all__ = ["PayloadRegisterSlice", "ReadyRegisterSlice", "RegisterSlice", "skid_buffer"]
 
 
 def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
@@ -19,17 +19,13 @@ def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_paylo
     out = Signal(width, reset_less=True)
     skid_valid = Signal()
     m.d.comb += [i_ready.eq(~skid_valid), o_payload.eq(out)]
-    # The skid register follows the input while it is empty, so only ``skid_valid`` depends
-    # on the input's valid: a late valid does not drive the enable of every payload bit.
-    with m.If(~skid_valid):
-        m.d.sync += skid.eq(i_payload)
     with m.If(~o_valid | o_ready):
         with m.If(skid_valid):
             m.d.sync += [out.eq(skid), o_valid.eq(1), skid_valid.eq(0)]
         with m.Else():
             m.d.sync += [out.eq(i_payload), o_valid.eq(i_valid)]
     with m.Elif(i_valid & ~skid_valid):
-        m.d.sync += skid_valid.eq(1)
+        m.d.sync += [skid.eq(i_payload), skid_valid.eq(1)]
 
 
 class RegisterSlice(wiring.Component):
@@ -94,4 +90,46 @@ class PayloadRegisterSlice(wiring.Component):
         width = Shape.cast(self._shape).width
         skid_buffer(m, width, self.i.valid, self.i.ready, self.i.payload.as_value(),
                      self.o.valid, self.o.ready, self.o.payload.as_value())
+        return m
+
+
+class ReadyRegisterSlice(wiring.Component):
+    """Half a register slice for an ``amaranth.lib.stream`` link: ``i.ready`` comes from a
+    flip-flop, ``o.valid`` and ``o.payload`` pass through while the slice is empty. No cycle
+    of latency; one transfer per cycle.
+
+    A payload offered while the consumer is not ready is taken into the slice (so the
+    producer's pop does not wait for the consumer's ready) and is offered from there until
+    taken; meanwhile ``i.ready`` is low.
+
+    Parameters
+    ----------
+    payload_shape : ShapeLike
+        Shape of the payload.
+
+    Members
+    -------
+    i : In(stream.Signature(payload_shape))
+    o : Out(stream.Signature(payload_shape))
+        The same payloads in the same order.
+    """
+
+    def __init__(self, payload_shape):
+        self._shape = payload_shape
+        super().__init__({"i": In(stream.Signature(payload_shape)),
+                          "o": Out(stream.Signature(payload_shape))})
+
+    def elaborate(self, platform):
+        m = Module()
+        width = Shape.cast(self._shape).width
+        held = Signal(width, reset_less=True)
+        held_valid = Signal()
+        m.d.comb += [self.i.ready.eq(~held_valid),
+                     self.o.valid.eq(held_valid | self.i.valid),
+                     self.o.payload.eq(Mux(held_valid, held, self.i.payload.as_value()))]
+        with m.If(held_valid):
+            with m.If(self.o.ready):
+                m.d.sync += held_valid.eq(0)
+        with m.Elif(self.i.valid & ~self.o.ready):
+            m.d.sync += [held.eq(self.i.payload.as_value()), held_valid.eq(1)]
         return m
