@@ -404,12 +404,17 @@ class MemifEngine(wiring.Component):
         # and in words, in the credit counter's width: a chunk is at most MEMIF_CHUNK bytes,
         # so the credit check is not a word-wide addition in front of the sequencer
         r_len_words = Signal(range(self._credits + 1))
-        next_len = chunk_len(r_addr, r_rem)
-        m.d.sync += [r_len.eq(next_len), r_len_words.eq(next_len >> sh), r_len_valid.eq(1)]
+        next_len = Signal(w)
+        m.d.comb += next_len.eq(chunk_len(r_addr, r_rem))
+        # and r_rem != 0 and "the next chunk is the last" in flip-flops (as for writes below)
+        r_more = Signal()
+        r_last = Signal()
+        m.d.sync += [r_len.eq(next_len), r_len_words.eq(next_len >> sh),
+                     r_last.eq(next_len == r_rem), r_len_valid.eq(1)]
         r_want = Signal()
         fence_want = Signal()
         fence_addr = Signal(w)
-        m.d.comb += r_want.eq((r_rem != 0) & r_len_valid)
+        m.d.comb += r_want.eq(r_more & r_len_valid)
 
         # command addresses and lengths with their low bits ignored (W-aligned)
         r_cmd_addr, r_cmd_len, w_cmd_addr, w_cmd_len = (Signal(w) for _ in range(4))
@@ -419,10 +424,11 @@ class MemifEngine(wiring.Component):
             w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
             w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
         ]
-        with m.If((r_total == 0) & (r_rem == 0)):
+        with m.If((r_total == 0) & ~r_more):
             m.d.comb += self.read_cmd.ready.eq(1)
             with m.If(self.read_cmd.valid):
                 m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
+                             r_more.eq(r_cmd_len != 0),
                              r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
 
         # ---- write buffer and issuer ----
@@ -433,17 +439,24 @@ class MemifEngine(wiring.Component):
         w_open = ~w_rem_in.none
         w_addr_cur = Signal(w)
         w_rem = Signal(w)        # bytes not yet issued
+        # w_rem != 0 and "the next chunk is the last" from flip-flops: the sequencer's
+        # priority between a write and a read does not wait for word-wide comparisons
+        w_more = Signal()
+        w_last = Signal()
         w_len = Signal(w)
         w_len_valid = Signal()
-        m.d.sync += [w_len.eq(chunk_len(w_addr_cur, w_rem)), w_len_valid.eq(1)]
+        w_next_len = Signal(w)
+        m.d.comb += w_next_len.eq(chunk_len(w_addr_cur, w_rem))
+        m.d.sync += [w_len.eq(w_next_len), w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
         w_ready = Signal()
-        m.d.comb += w_ready.eq((w_rem != 0) & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
+        m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
         w_busy = Signal()
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
+                                 w_more.eq(1),
                                  *w_rem_in.load(w_cmd_len >> sh),
                                  w_len_valid.eq(0)]
                 with m.Else():
@@ -464,9 +477,10 @@ class MemifEngine(wiring.Component):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
                                  seq_words.eq(w_len >> sh),
                                  w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len),
+                                 w_more.eq(~w_last),
                                  w_len_valid.eq(0)]
                     if self._fence:
-                        with m.If(w_rem == w_len):
+                        with m.If(w_last):
                             m.d.sync += [fence_want.eq(1), fence_addr.eq(w_addr_cur)]
                     m.next = "W_CMD"
                 with m.Elif(f_ok):
@@ -480,6 +494,7 @@ class MemifEngine(wiring.Component):
                     m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | r_len),
                                  r_words[1].eq(r_addr),
                                  r_addr.eq(r_addr + r_len), r_rem.eq(r_rem - r_len),
+                                 r_more.eq(~r_last),
                                  r_len_valid.eq(0)]
                     m.next = "R_CMD"
             with m.State("R_CMD"):
@@ -505,7 +520,7 @@ class MemifEngine(wiring.Component):
                     m.d.sync += seq_words.eq(seq_words - 1)
                     with m.If(seq_words == 1):
                         if not self._fence:
-                            with m.If(w_rem == 0):
+                            with m.If(~w_more):
                                 m.d.comb += done_now.eq(1)
                                 m.d.sync += w_busy.eq(0)
                         m.next = "IDLE"
