@@ -3,14 +3,12 @@ message as a rosidl C struct in memory) and a hardware-mapped topic (the message
 ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publishing or
 subscribing a hardware topic needs."""
 
-from amaranth import Cat, Const, Module, Mux, ResetInserter, Signal
-from amaranth.lib import wiring
+from amaranth import Cat, Const, Module, Mux, Signal
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
-from ..stream import RegisterSlice
 from .hwt import HardwareThread
 
 __all__ = ["TopicGatewayThread", "MemoryLayout"]
@@ -324,8 +322,7 @@ class _Receiver:
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
         self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
         self.counts = {v.index: Signal(32, name=f"rx_count{v.index}") for v in plan.variables}
-        self.sources = {v.index: _WordSource(self._sliced(payload_port(v, "m"),
-                                                          f"rx_slice{v.index}"))
+        self.sources = {v.index: _WordSource(getattr(des, payload_port(v, "m")))
                         for v in plan.variables}
         errors = Signal(16, name="rx_errors")
         #: between taking a message's first part and going back to waiting
@@ -359,17 +356,6 @@ class _Receiver:
             self.arriving = self.sources[thread.order[0]].port.tvalid & ~drain
         else:
             self.arriving = des.fields.valid & ~drain
-
-    def _sliced(self, member, name):
-        """The deserializer's port ``member`` through a register slice: the receiver's ready
-        (the MEMIF write's) does not reach the deserializer's input handshake. A message's
-        error empties the slice: after an error the receiver reads no more of the failed
-        message's fields, and the deserializer sends nothing of the next message before it."""
-        m, des = self.m, self.des
-        core = RegisterSlice(des.signature.members[member].signature)
-        m.submodules[name] = ResetInserter(des.error.valid)(core)
-        wiring.connect(m, getattr(des, member), core.s_axis)
-        return core.m_axis
 
     def _capacity(self, v):
         """Elements to allocate for ``v``: whole words, and room for a string's NUL."""
