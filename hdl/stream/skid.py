@@ -93,31 +93,15 @@ class PayloadRegisterSlice(wiring.Component):
         return m
 
 
-class ReadyRegisterSlice(wiring.Component):
-    """Half a register slice for an ``amaranth.lib.stream`` link: ``i.ready`` comes from a
-    flip-flop, ``o.valid`` and ``o.payload`` pass through while the slice is empty. No cycle
-    of latency; one transfer per cycle.
+class ReadyRegisterSlice(PayloadRegisterSlice):
+    """Half a :class:`PayloadRegisterSlice`: ``i.ready`` comes from a flip-flop, ``o.valid``
+    and ``o.payload`` pass through while the slice is empty. No cycle of latency; one transfer
+    per cycle. Parameters and members as :class:`PayloadRegisterSlice`.
 
     A payload offered while the consumer is not ready is taken into the slice (so the
     producer's pop does not wait for the consumer's ready) and is offered from there until
     taken; meanwhile ``i.ready`` is low.
-
-    Parameters
-    ----------
-    payload_shape : ShapeLike
-        Shape of the payload.
-
-    Members
-    -------
-    i : In(stream.Signature(payload_shape))
-    o : Out(stream.Signature(payload_shape))
-        The same payloads in the same order.
     """
-
-    def __init__(self, payload_shape):
-        self._shape = payload_shape
-        super().__init__({"i": In(stream.Signature(payload_shape)),
-                          "o": Out(stream.Signature(payload_shape))})
 
     def elaborate(self, platform):
         m = Module()
