@@ -6,6 +6,7 @@ from amaranth.lib.fifo import SyncFIFOBuffered
 from amaranth.lib.memory import Memory
 
 from ..params import ParameterError
+from ..stream import skid_buffer
 from .image import FrameGuard, check_image_params, image_kernel_members
 
 __all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32",
@@ -112,20 +113,27 @@ def stream_through_table(m, frame, reads, o, values):
     """Stream the frames of the buffer ``frame`` (``values`` bytes and a ``tlast`` bit per
     entry) out on ``o``, every byte through its table read port in ``reads``
     (:func:`byte_table`), once ``draining`` (returned) is set; ``draining`` clears at the
-    frame's last beat. ``tuser`` marks each frame's first beat."""
+    frame's last beat. ``tuser`` marks each frame's first beat.
+
+    The buffer's head passes a skid buffer, so its block RAMs' output multiplexers end in
+    flip-flops, not in the tables' addresses. The skid buffer fills while the table is built
+    (a frame is whole in the buffer before it drains), so it adds no cycle to a frame."""
     draining = Signal()
     o_valid, o_first = Signal(), Signal(init=1)
     adv = Signal()
-    m.d.comb += [adv.eq(~o_valid | o.tready), o.tvalid.eq(o_valid),
-                 frame.r_en.eq(adv & draining)]
+    head_valid = Signal()
+    head = Signal(len(frame.r_data))
+    skid_buffer(m, len(head), frame.r_rdy, frame.r_en, frame.r_data, head_valid,
+                adv & draining, head)
+    m.d.comb += [adv.eq(~o_valid | o.tready), o.tvalid.eq(o_valid)]
     for k, port in enumerate(reads[:values]):
-        m.d.comb += [port.addr.eq(frame.r_data.word_select(k, 8)), port.en.eq(adv),
+        m.d.comb += [port.addr.eq(head.word_select(k, 8)), port.en.eq(adv),
                      o.tdata.word_select(k, 8).eq(port.data)]
-    out_last = frame.r_data[8 * values]
+    out_last = head[8 * values]
     with m.If(adv):
-        m.d.sync += [o_valid.eq(draining & frame.r_rdy), o.tlast.eq(out_last),
+        m.d.sync += [o_valid.eq(draining & head_valid), o.tlast.eq(out_last),
                      o.tuser.eq(o_first)]
-        with m.If(draining & frame.r_rdy):
+        with m.If(draining & head_valid):
             m.d.sync += o_first.eq(out_last)
             with m.If(out_last):
                 m.d.sync += draining.eq(0)
