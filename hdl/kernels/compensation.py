@@ -187,15 +187,21 @@ class ImageCompensation(wiring.Component):
         # the integer part's shift is registered beside the mantissa (frac_bits is constant
         # while the table is built), so the last stage holds only the shift and the rounding
         vm, k_shift = reg(vm, "tab_vm"), reg(frac_bits - vs, "tab_k")
-        for k in range(TABLE_STAGES - 1):
+        # the shift, then the rounding: one stage more than TABLE_STAGES, which costs no
+        # cycle (FLUSH and DONE wait TABLE_STAGES + 2 cycles, and a table read sees a write
+        # from the cycle before)
+        for k in range(TABLE_STAGES):
             valid, addr = reg(valid, f"tab_v{k + 1}"), reg(addr, f"tab_x{k + 1}")
         whole, first, rest = _shift_for_rounding(vm, k_shift[:7])
+        whole, first, rest = reg(whole, "tab_whole"), reg(first, "tab_first"), \
+            reg(rest, "tab_rest")
+        no_fraction = reg(k_shift <= 0, "tab_no_fraction")
         # the rounded value saturates at 255: its low byte and the carry out of it are
         # enough, with "above 255" read from the high bits of the shifted value beside them
         # (not a carry chain through all of them)
         low = Signal(9)
         m.d.comb += low.eq(whole[:8] + (first & (rest | whole[0])))
-        saturated = (k_shift <= 0) | (whole[8:] != 0) | low[8]
+        saturated = no_fraction | (whole[8:] != 0) | low[8]
         with m.If(valid):
             m.d.comb += [lut_wr.en.eq(1), lut_wr.addr.eq(addr),
                          lut_wr.data.eq(Mux(saturated, 255, low[:8]))]
