@@ -132,9 +132,10 @@ class ImageCompensation(wiring.Component):
         draining = stream_through_table(m, frame, lut_reads, self.o, 3 * P)
 
         # the limits: one scan of the bins (clearing them)
-        # a bin's count (the banks' sum) and 20000 times it are registered the cycle after
-        # its read; the scan compares 20000 * the running count with the two limits, so its
-        # cycle holds one addition and two comparisons
+        # a bin's count (the banks' sum) is registered the cycle after its read, and it and
+        # 20000 times it the cycle after that (the multiplier and the histogram's block RAMs
+        # are not one cycle's routing apart); the scan compares 20000 * the running count
+        # with the two limits, so its cycle holds one addition and two comparisons
         j = Signal(9)
         lo, hi = Signal(range(-1, 256)), Signal(range(-1, 256))
         lo_found = Signal()
@@ -144,7 +145,9 @@ class ImageCompensation(wiring.Component):
         bin_count, bin_scaled = Signal(count_bits + 1), Signal(count_bits + 16)
         acc_scaled = Signal(count_bits + 16)          # 20000 * the bins' count so far
         m.d.comb += hist_sum.eq(sum(rd.data for _, rd in hists))
-        m.d.sync += [bin_count.eq(hist_sum), bin_scaled.eq(hist_sum * 20000)]
+        hist_sum_r = Signal.like(hist_sum)
+        m.d.sync += [hist_sum_r.eq(hist_sum), bin_count.eq(hist_sum_r),
+                     bin_scaled.eq(hist_sum_r * 20000)]
         # alpha and beta as the node computes them (float64) and OpenCV converts them (float32)
         R = Signal(9)                                   # |range|
         numer = Signal(SCALE_BITS + 8)
@@ -187,9 +190,11 @@ class ImageCompensation(wiring.Component):
         # the integer part's shift is registered beside the mantissa (frac_bits is constant
         # while the table is built), so the last stage holds only the shift and the rounding
         vm, k_shift = reg(vm, "tab_vm"), reg(frac_bits - vs, "tab_k")
-        # the shift, then the rounding: one stage more than TABLE_STAGES, which costs no
-        # cycle (FLUSH and DONE wait TABLE_STAGES + 2 cycles, and a table read sees a write
-        # from the cycle before)
+        # the shift, then the rounding: one stage more than TABLE_STAGES; FLUSH and DONE
+        # wait TABLE_STAGES + 1 cycles, and a table read sees a write from the cycle before,
+        # so the first beat is read from the finished table (the scan's extra cycle above is
+        # taken from the flush: a frame drains in the same cycle as with one stage less in
+        # each)
         for k in range(TABLE_STAGES):
             valid, addr = reg(valid, f"tab_v{k + 1}"), reg(addr, f"tab_x{k + 1}")
         whole, first, rest = _shift_for_rounding(vm, k_shift[:7])
@@ -217,12 +222,16 @@ class ImageCompensation(wiring.Component):
                         m.d.comb += rd.addr.eq(0)
                     m.next = "FIRST"
             with m.State("FIRST"):
-                # bin 0's count is registered; bin 1 is read
                 for _, rd in hists:
                     m.d.comb += rd.addr.eq(1)
+                m.next = "SECOND"
+            with m.State("SECOND"):
+                # bin 0's count is registered; bin 2 is read
+                for _, rd in hists:
+                    m.d.comb += rd.addr.eq(2)
                 m.next = "BIN"
             with m.State("BIN"):
-                # bin j's count is in bin_count; bin j + 2 is read
+                # bin j's count is in bin_count; bin j + 3 is read
                 for wr, _ in hists:
                     m.d.comb += [wr.en.eq(1), wr.addr.eq(j), wr.data.eq(0)]
                 new_acc = acc_scaled + bin_scaled
@@ -238,7 +247,7 @@ class ImageCompensation(wiring.Component):
                     with m.If(bin_count != 0):
                         m.d.sync += hi.eq(j)
                 for _, rd in hists:
-                    m.d.comb += rd.addr.eq(j + 2)
+                    m.d.comb += rd.addr.eq(j + 3)
                 m.d.sync += j.eq(j + 1)
                 with m.If(j == 255):
                     m.next = "RANGE"
@@ -275,7 +284,7 @@ class ImageCompensation(wiring.Component):
                 m.d.comb += scan_valid.eq(1)
                 m.d.sync += x.eq(x + 1)
                 with m.If(x == 255):
-                    m.d.sync += in_flight.eq(TABLE_STAGES)
+                    m.d.sync += in_flight.eq(TABLE_STAGES - 1)
                     m.next = "FLUSH"
             with m.State("FLUSH"):
                 m.d.sync += in_flight.eq(in_flight - 1)
