@@ -424,13 +424,11 @@ class MemifEngine(wiring.Component):
             w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
             w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
         ]
-        # while a command can be taken, the address and length registers follow the command
-        # port (nothing reads them then), so their enables do not wait for the thread's valid
         with m.If((r_total == 0) & ~r_more):
             m.d.comb += self.read_cmd.ready.eq(1)
-            m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len)]
             with m.If(self.read_cmd.valid):
-                m.d.sync += [r_more.eq(r_cmd_len != 0),
+                m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
+                             r_more.eq(r_cmd_len != 0),
                              r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
 
         # ---- write buffer and issuer ----
@@ -455,10 +453,10 @@ class MemifEngine(wiring.Component):
         w_busy = Signal()
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
-            m.d.sync += [w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len)]    # as for reads
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
-                    m.d.sync += [w_busy.eq(1), w_more.eq(1),
+                    m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
+                                 w_more.eq(1),
                                  *w_rem_in.load(w_cmd_len >> sh),
                                  w_len_valid.eq(0)]
                 with m.Else():
