@@ -150,7 +150,7 @@ async def full_rate_frame_time(dut):
             # and the table's pipelines and 256 entries
             latency += budget
             budget += 256 + 72 + 256 + compensation.CONSTANT_STAGES + \
-                compensation.TABLE_STAGES + 8
+                compensation.TABLE_STAGES + 7
         ends = [p.cycles[-1] - start for p in k.sink.packets]
         tb.log.info("%s: frame ends at cycles %s (budget %d per frame)", k.name, ends, budget)
         assert ends[1] - ends[0] <= budget + 5, (k.name, ends, budget)

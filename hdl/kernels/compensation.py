@@ -18,7 +18,7 @@ SCALE_BITS = 64
 #: cycles from the division's end to alpha and beta in float32 (roundings and the product)
 CONSTANT_STAGES = 4 * ROUND_STAGES + 6
 #: registers between an entry's x and its table value
-TABLE_STAGES = 3 + ROUND_STAGES
+TABLE_STAGES = 4 + ROUND_STAGES
 
 
 def clip_hundredths(clip_percent):
@@ -190,12 +190,8 @@ class ImageCompensation(wiring.Component):
         # the integer part's shift is registered beside the mantissa (frac_bits is constant
         # while the table is built), so the last stage holds only the shift and the rounding
         vm, k_shift = reg(vm, "tab_vm"), reg(frac_bits - vs, "tab_k")
-        # the shift, then the rounding: one stage more than TABLE_STAGES; FLUSH and DONE
-        # wait TABLE_STAGES + 1 cycles, and a table read sees a write from the cycle before,
-        # so the first beat is read from the finished table (the scan's extra cycle above is
-        # taken from the flush: a frame drains in the same cycle as with one stage less in
-        # each)
-        for k in range(TABLE_STAGES):
+        # the shift, then the rounding (two stages)
+        for k in range(TABLE_STAGES - 1):
             valid, addr = reg(valid, f"tab_v{k + 1}"), reg(addr, f"tab_x{k + 1}")
         whole, first, rest = _shift_for_rounding(vm, k_shift[:7])
         whole, first, rest = reg(whole, "tab_whole"), reg(first, "tab_first"), \
@@ -284,7 +280,9 @@ class ImageCompensation(wiring.Component):
                 m.d.comb += scan_valid.eq(1)
                 m.d.sync += x.eq(x + 1)
                 with m.If(x == 255):
-                    m.d.sync += in_flight.eq(TABLE_STAGES - 1)
+                    # FLUSH and DONE take TABLE_STAGES cycles: the last entry is written in
+                    # the last of them, and a table read sees a write from the cycle before
+                    m.d.sync += in_flight.eq(TABLE_STAGES - 2)
                     m.next = "FLUSH"
             with m.State("FLUSH"):
                 m.d.sync += in_flight.eq(in_flight - 1)
