@@ -17,11 +17,20 @@ SCALE_BITS = 48
 
 
 def _leading_one(m, value, name):
-    """Index of the highest set bit of ``value`` (0 for 0)."""
+    """Index of the highest set bit of ``value`` (0 for 0), found by a binary tree: log2 of
+    the width in multiplexers, not a priority chain as long as the value."""
     lead = Signal(range(len(value)), name=name)
-    for b in range(len(value)):
-        with m.If(value[b]):
-            m.d.comb += lead.eq(b)
+    width = 1 << max(1, (len(value) - 1).bit_length())
+    bits = value.as_unsigned() if len(value) == width else Cat(value, Const(0, width - len(value)))
+
+    def search(low, size):
+        if size == 2:
+            return bits[low] | bits[low + 1], bits[low + 1]
+        found_low, index_low = search(low, size // 2)
+        found_high, index_high = search(low + size // 2, size // 2)
+        return found_low | found_high, Cat(Mux(found_high, index_high, index_low), found_high)
+
+    m.d.comb += lead.eq(search(0, width)[1])
     return lead
 
 
