@@ -15,7 +15,9 @@ __all__ = ["ImageCompensation", "clip_hundredths"]
 
 #: alpha = 255 / range is computed as floor(255 * 2**SCALE_BITS / range) before rounding
 SCALE_BITS = 64
-#: cycles from the division's end to alpha and beta in float32 (roundings and the product)
+#: cycles the table waits after the division's end for alpha and beta in float32 and their
+#: exponents (the longest chain, three roundings, the product and five registers, takes
+#: 3 * ROUND_STAGES + 6)
 CONSTANT_STAGES = 4 * ROUND_STAGES + 6
 #: registers between an entry's x and its table value
 TABLE_STAGES = 4 + ROUND_STAGES
@@ -170,6 +172,13 @@ class ImageCompensation(wiring.Component):
         b24, b24_s = round_to_float32(m, reg(b53, "beta53_r"), Const(0), "beta24", stage=reg)
         b53_s = reg(reg(reg(b53_s, "beta53_s_r"), "beta53_s_r2"), "beta53_s_r3")
         a53_s_late = reg(reg(reg(a53_s, "alpha53_s_d1"), "alpha53_s_d2"), "alpha53_s_d3")
+        # the float32 constants registered, then beta's exponent and the smaller exponent
+        # each in a stage of its own: the rounding's last addition, the exponents' sum, their
+        # comparison and the table's shifts were one path into the table's registers
+        a24, a24_s = reg(a24, "alpha24_r"), reg(a24_s, "alpha24_s_r")
+        b24, b24_s = reg(b24, "beta24_r"), reg(b24_s, "beta24_s_r")
+        eb = reg(b24_s + b53_s, "eb")
+        e_min = reg(Mux((lo == 0) | (a24_s <= eb), a24_s, eb), "e_min")
         wait = Signal(range(CONSTANT_STAGES + 1))
         ma, mb = Signal(24), Signal(24)                  # |a| = ma 2**Ea, |b| = mb 2**Eb
         ea_sh, eb_sh = Signal(6), Signal(6)              # Ea + L, Eb + L
@@ -269,12 +278,11 @@ class ImageCompensation(wiring.Component):
                 m.d.sync += wait.eq(wait - 1)
                 with m.If(wait == 0):
                     # exponents relative to 2**-SCALE_BITS: Ea = a24_s + a53_s, Eb = b24_s +
-                    # b53_s + a53_s; L = -min(Ea, Eb) + SCALE_BITS
-                    eb = b24_s + b53_s
-                    low = Mux((lo == 0) | (a24_s <= eb), a24_s, eb)
+                    # b53_s + a53_s (eb above); L = -min(Ea, Eb) + SCALE_BITS (e_min above)
                     m.d.sync += [ma.eq(a24), mb.eq(Mux(lo == 0, 0, b24)),
-                                 ea_sh.eq(a24_s - low), eb_sh.eq(Mux(lo == 0, 0, eb - low)),
-                                 frac_bits.eq(SCALE_BITS - a53_s_late - low)]
+                                 ea_sh.eq(a24_s - e_min),
+                                 eb_sh.eq(Mux(lo == 0, 0, eb - e_min)),
+                                 frac_bits.eq(SCALE_BITS - a53_s_late - e_min)]
                     m.next = "TABLE"
             with m.State("TABLE"):
                 m.d.comb += scan_valid.eq(1)

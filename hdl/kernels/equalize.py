@@ -40,7 +40,10 @@ def _shift_for_rounding(value, shift):
     value is odd: ties to even)."""
     below = (shift - 1).as_unsigned()
     first = (shift != 0) & (value >> below)[0]
-    rest = (shift > 1) & (value & ((Const(1, len(value) + 1) << below) - 1)[:len(value)]).any()
+    # the bits below ``below`` by a comparison per bit with its constant index, not by the
+    # mask 2**below - 1 (a subtraction: a carry chain as long as the value)
+    under = Cat(below > i for i in range(len(value)))
+    rest = (shift > 1) & (value & under).any()
     return value >> shift, first, rest
 
 
