@@ -16,21 +16,29 @@ __all__ = ["EqualizeHist", "ROUND_STAGES", "TABLE_STAGES", "round_to_float32",
 SCALE_BITS = 48
 
 
-def _leading_one(m, value, name):
-    """Index of the highest set bit of ``value`` (0 for 0), found by a binary tree: log2 of
-    the width in multiplexers, not a priority chain as long as the value."""
-    lead = Signal(range(len(value)), name=name)
+def _set_bit_index(value, *, highest):
+    """Index of the highest (or lowest) set bit of ``value`` (0 for 0 when highest), found by
+    a binary tree: log2 of the width in multiplexers, not a priority chain as long as the
+    value."""
     width = 1 << max(1, (len(value) - 1).bit_length())
     bits = value.as_unsigned() if len(value) == width else Cat(value, Const(0, width - len(value)))
 
     def search(low, size):
         if size == 2:
-            return bits[low] | bits[low + 1], bits[low + 1]
+            return bits[low] | bits[low + 1], bits[low + 1] if highest else ~bits[low]
         found_low, index_low = search(low, size // 2)
         found_high, index_high = search(low + size // 2, size // 2)
-        return found_low | found_high, Cat(Mux(found_high, index_high, index_low), found_high)
+        if highest:
+            return found_low | found_high, Cat(Mux(found_high, index_high, index_low), found_high)
+        return found_low | found_high, Cat(Mux(found_low, index_low, index_high), ~found_low)
 
-    m.d.comb += lead.eq(search(0, width)[1])
+    return search(0, width)[1]
+
+
+def _leading_one(m, value, name):
+    """Index of the highest set bit of ``value`` (0 for 0)."""
+    lead = Signal(range(len(value)), name=name)
+    m.d.comb += lead.eq(_set_bit_index(value, highest=True))
     return lead
 
 
@@ -40,10 +48,9 @@ def _shift_for_rounding(value, shift):
     value is odd: ties to even)."""
     below = (shift - 1).as_unsigned()
     first = (shift != 0) & (value >> below)[0]
-    # the bits below ``below`` by a comparison per bit with its constant index, not by the
+    # a bit below ``below`` is set when the lowest set bit is: its index by a tree, not the
     # mask 2**below - 1 (a subtraction: a carry chain as long as the value)
-    under = Cat(below > i for i in range(len(value)))
-    rest = (shift > 1) & (value & under).any()
+    rest = (shift > 1) & value.any() & (_set_bit_index(value, highest=False) < below)
     return value >> shift, first, rest
 
 
