@@ -64,7 +64,7 @@ def run_topology(pubs, subs, width, cases, *, sim="verilator"):
     out.parent.mkdir(parents=True, exist_ok=True)
     run_bench("bench.hmt_bench", "topic_bench", config_id,
               {"pubs": pubs, "subs": subs, "data_width": width}, sim,
-              build=build_topic_bench_top,
+              build=build_topic_bench_top, optimise=True,
               extra_env={"ROSGATE_BENCH_CASES": json.dumps(cases),
                          "ROSGATE_BENCH_OUT": str(out)}, quiet=True)
     return json.loads(out.read_text())

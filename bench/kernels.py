@@ -68,7 +68,7 @@ def measure(log=print):
         out = SIM_BUILD / f"bench-kernels-{config}.json"
         log(f"  simulating {', '.join(kernels)} (Verilator)...")
         run_bench("bench.kernels_bench", "kernels", config, {"kernels": kernels}, "verilator",
-                  quiet=True, extra_env={"ROSGATE_BENCH_OUT": str(out)})
+                  quiet=True, optimise=True, extra_env={"ROSGATE_BENCH_OUT": str(out)})
         records.update(json.loads(out.read_text()))
     rows = []
     for name, (spec, label, paper, target) in {**IMAGE, **CONTROL, **MNIST}.items():

@@ -54,7 +54,7 @@ def run_case(label, typename, framing, width, values, *, sim="verilator"):
                   max_count=1 << 21)
     run_bench("bench.msg_bench", "msg_codec", config_id, params, sim,
               extra_env={"ROSGATE_BENCH_CASE": json.dumps({"set": values}),
-                         "ROSGATE_BENCH_OUT": str(out)}, quiet=True)
+                         "ROSGATE_BENCH_OUT": str(out)}, quiet=True, optimise=True)
     record = json.loads(out.read_text())
     limit = width // 8
     record.update(

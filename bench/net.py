@@ -45,6 +45,7 @@ def measure(log=print):
         out = SIM_BUILD / f"bench-net-{case}.json"
         log(f"  simulating {case}: {nbytes} bytes each way (Verilator)...")
         run_bench("bench.net_bench", "net_bench", case, top, "verilator", quiet=True,
+                  optimise=True,
                   build=build_net_bench_top, testcase="measure_tcp",
                   extra_env={"ROSGATE_BENCH_OUT": str(out),
                              "ROSGATE_BENCH_PCAP": str(RESULTS / f"net_{case}.pcap"),
@@ -53,7 +54,8 @@ def measure(log=print):
     out = SIM_BUILD / "bench-net-images.json"
     log("  simulating the TCPROS node: 1, 2 and 6 MB images, receive, send, round trip...")
     run_bench("bench.net_bench", "ros1_bench", "images", ROS1_BENCH_CONFIG,
-              "verilator", quiet=True, build=build_ros1_bench_top, testcase="measure_image",
+              "verilator", quiet=True, optimise=True, build=build_ros1_bench_top,
+              testcase="measure_image",
               extra_env={"ROSGATE_BENCH_OUT": str(out),
                          "ROSGATE_BENCH_PCAP": str(RESULTS / "net_tcpros_images.pcap"),
                          "ROSGATE_BENCH_CASE": json.dumps(dict(images=IMAGES))})

@@ -43,7 +43,7 @@ def measure_copies(arch, log=print):
     bursts = [n for n in BURSTS if n >= a.word_bytes]
     run_bench("bench.reconos_bench", "reconos", f"bench-memtest_{arch}",
               {"arch": arch, "threads": [{"kind": "memtest", "h_cmd": 0, "h_result": 1}]},
-              "verilator", quiet=True,
+              "verilator", quiet=True, optimise=True,
               extra_env={"ROSGATE_BENCH_CASE": json.dumps({"sizes": sizes, "bursts": bursts}),
                          "ROSGATE_BENCH_OUT": str(out)})
     measured = json.loads(out.read_text())

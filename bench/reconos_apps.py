@@ -33,7 +33,7 @@ def measure(log=print):
         out = SIM_BUILD / f"bench-reconos-apps-{arch}.json"
         log(f"  simulating the demo nodes on {arch} (Verilator)...")
         run_bench("bench.reconos_apps_bench", "reconos", f"apps_{arch}", params, "verilator",
-                  quiet=True, extra_env={"ROSGATE_BENCH_OUT": str(out)})
+                  quiet=True, optimise=True, extra_env={"ROSGATE_BENCH_OUT": str(out)})
         rec = json.loads(out.read_text())
         for key, label in LABELS.items():
             rows.append({"arch": arch, "case": key, "label": label, "cycles": rec[key],

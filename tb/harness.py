@@ -35,17 +35,27 @@ from host.simulator import (
     top_params,
 )
 
-__all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "cocotb_bench", "run_bench", "bench_params",
-           "bench_manifest", "export_bench_top", "environment_seed", "failed_seeds"]
+__all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "FULL", "amount", "cocotb_bench", "run_bench",
+           "bench_params", "bench_manifest", "export_bench_top", "environment_seed",
+           "failed_seeds"]
 
 #: the repository, and its simulator output folder
 ROOT = Path(__file__).resolve().parents[1]
 SIM_BUILD = ROOT / "sim_build"
 
-#: Tops whose Verilator model is compiled without optimisation (``OPT_FAST=-O0``): their C++
-#: is large and their benches simulate little, so the build dominates (ros1_node: 41 s for
-#: build and run at -O0 against 80 s at the default -Os, on 2 cores without ccache).
-QUICK_BUILD_TOPS = frozenset({"ros1_node", "finemb_node", "finemb_line"})
+#: ``make test-full`` sets ``ROSGATE_FULL=1``: the benches that draw random inputs draw the long
+#: matrix's amounts of them (messages, photographs at full size, servo periods); ``make test``
+#: and a bare pytest run the same cases with fewer draws
+FULL = os.environ.get("ROSGATE_FULL", "0") not in ("", "0")
+
+
+def amount(quick, full):
+    """``full`` in the long matrix (``ROSGATE_FULL=1``, ``make test-full``), else ``quick``.
+
+    The simulators inherit the environment, so a cocotb test module and the pytest test that
+    runs it agree."""
+    return full if FULL else quick
+
 
 bench_params = top_params
 bench_manifest = top_manifest
@@ -87,11 +97,16 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     (built without lint); ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the
     build folder; ``run_name`` keeps the results and log of one case of a parametrised test
     apart from the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
-    environment, else a new one) seeds cocotb. ``optimise`` compiles a top of
-    :data:`QUICK_BUILD_TOPS` optimised all the same, in a build folder of its own (long runs).
+    environment, else a new one) seeds cocotb.
+
+    A Verilator model is compiled without optimisation (``OPT_FAST=-O0``): cocotb's Python
+    side sets the pace of a test's simulation, so the C++ build is most of a bench's time
+    (topic 4x4_w512, ReconOS r64 calls and the ros1_w64 codec: 101 s built at Verilator's
+    default -Os, 58 s at -O0, on 2 cores). ``optimise`` keeps the default, in a build folder of
+    its own, for runs long enough to repay it (``make bench``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    quick = top in QUICK_BUILD_TOPS and not optimise
+    quick = not optimise
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     env = {
