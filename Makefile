@@ -66,7 +66,7 @@ test: setup
 	$(PY) -m pytest -m "not full" -n $(JOBS) -q
 
 test-full: setup
-	$(PY) -m pytest -n $(JOBS) -q
+	ROSGATE_FULL=1 $(PY) -m pytest -n $(JOBS) -q
 
 sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \

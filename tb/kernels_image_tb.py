@@ -11,12 +11,12 @@ from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
 from hdl.kernels.colour import TRAFFIC_DETECTION
-from tb.harness import bench_params
+from tb.harness import FULL, bench_params
 from tb.models import image as golden
 from tb.streams import StreamPort, count_pulses, reset_aresetn
 
 __all__ = ["CLOCK_NS", "MAX_W", "MAX_H", "_k", "RED_RANGES", "GREEN_RANGE", "MIN_PIXELS",
-           "bgr_bytes", "KernelPort", "KernelsTB", "traffic_scene"]
+           "bgr_bytes", "KernelPort", "KernelsTB", "photo", "traffic_scene"]
 
 
 CLOCK_NS = 10
@@ -239,6 +239,18 @@ class KernelsTB:
         await ClockCycles(self.dut.aclk, 50)
         for k in self.kernels.values():
             k.check()
+
+
+def photo(name):
+    """A photograph of ``examples/images`` as ``bgr8``: whole in ``make test-full``, at half its
+    width and height in ``make test`` (OpenCV's area resampling keeps it a photograph, with a
+    quarter of the pixels to simulate)."""
+    image = golden.load_image(name)
+    if FULL:
+        return image
+    import cv2
+    height, width = image.shape[:2]
+    return cv2.resize(image, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
 
 
 def traffic_scene(rng, width, height, colour):

@@ -1,7 +1,8 @@
 """Bench of the image kernels (hdl/kernels: Sobel, GaussianBlur, BgrToGray, BgrToHsv, InRange,
 TrafficLightDetector; docs/kernels.md, docs/reconos.md) in one ``kernels`` top.
 
-Every kernel gets real photographs (examples/images), random frames of random sizes and of the
+Every kernel gets real photographs (examples/images; at half size in make test, whole in
+make test-full), random frames of random sizes and of the
 corner sizes it accepts (narrowest, widest, fewest and most rows) under random idle at its
 input and random backpressure at its output, and each output frame is
 compared byte for byte with OpenCV (tb/models/image.py); ``tuser`` must mark exactly the first
@@ -22,7 +23,7 @@ from hdl.kernels.equalize import ROUND_STAGES, TABLE_STAGES
 from tb.harness import cocotb_bench
 from tb.models import image as golden
 
-from .kernels_image_tb import KernelsTB, _k, traffic_scene
+from .kernels_image_tb import KernelsTB, _k, photo, traffic_scene
 
 #: the kernels of the ``image`` configuration: every kind, every border, P in {1, 2, 4, 8}
 KERNELS = {
@@ -56,7 +57,7 @@ async def photos_and_random_frames_idle_backpressure(dut):
     tb = KernelsTB(dut)
     await tb.reset()
     tb.set_pauses(0.3, 0.3)
-    photos = [golden.load_image("chelsea_96x72.png")]
+    photos = [photo("chelsea_96x72.png")]
     rng = np.random.default_rng(tb.rng.randrange(1 << 30))
     frames = {}
     for name, k in tb.kernels.items():
@@ -125,12 +126,12 @@ async def smallest_and_largest_sizes(dut):
 
 @cocotb.test()
 async def full_rate_frame_time(dut):
-    """No idle, no backpressure, two 80x60 photographs back to back: the frame time meets
-    the budget of the spec (see the module docstring)."""
+    """No idle, no backpressure, two photographs back to back (80x60 in make test-full, 40x30 in
+    make test): the frame time meets the budget of the spec (see the module docstring)."""
     tb = KernelsTB(dut)
     await tb.reset()
     tb.set_pauses(0, 0)
-    image = golden.load_image("coffee_80x60.png")
+    image = photo("coffee_80x60.png")
     start = tb.cycle
     await tb.run_frames({n: [(image, {}), (image, {})] for n in tb.kernels},
                         timeout_cycles=50_000)

@@ -15,7 +15,7 @@ from cocotb.triggers import ClockCycles, with_timeout
 
 from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT, WireError, decode_cdr, default_value
 from hdl.msg import DeserializerError, SerializerError
-from tb.harness import cocotb_bench
+from tb.harness import amount, cocotb_bench
 from tb.models.messages import random_sequence
 from tb.models.msgstream import set_at, value_at
 
@@ -62,18 +62,21 @@ test_msg_codec = cocotb_bench("msg_codec", CONFIGS, long=LONG)
 #: by the tests above)
 NOT_ELEMENTS = PARAMS.get("type") != ELEMENTS
 
+#: random messages per direction: 2 big ones in make test, 6 in make test-full
+RANDOM_MESSAGES = amount(8, 24)
+
 
 @cocotb.test()
 async def serializer_random_messages(dut):
-    """Random messages (small, and big ones up to 1500 elements, 400 on 8-bit streams) under
-    random idle and backpressure
-    equal rosbags' bytes (CDR, ROS 1) or the ReconROS model, tuser included."""
+    """Random messages (``RANDOM_MESSAGES``: small, and every fourth a big one up to 1500
+    elements, 400 on 8-bit streams) under random idle and backpressure equal rosbags' bytes
+    (CDR, ROS 1) or the ReconROS model, tuser included."""
     tb = MsgCodecTB(dut)
     await tb.reset()
     tb.set_idle(0.3)
     tb.set_backpressure(0.35)
     values = [tb.random_message(big=tb.big_elements if i % 4 == 3 else 0)
-              for i in range(24)]
+              for i in range(RANDOM_MESSAGES)]
     values[1] = tb.empty_fields(values[1])   # the message ends with an empty field
     await tb.run_serializer(values)
     assert not tb.errors["ser"], tb.errors
@@ -88,7 +91,7 @@ async def deserializer_random_messages(dut):
     tb.set_idle(0.3)
     tb.set_backpressure(0.35)
     values = [tb.random_message(big=tb.big_elements if i % 4 == 3 else 0)
-              for i in range(24)]
+              for i in range(RANDOM_MESSAGES)]
     values[1] = tb.empty_fields(values[1])
     await tb.run_deserializer(values)
 

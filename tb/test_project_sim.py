@@ -24,7 +24,7 @@ from tb.models import inverse_kinematics as ik_model
 from tb.models.services import fibonacci
 from tb.models.ball_control import BallControlModel, leg_words, servo_pulse
 
-from .harness import ROOT
+from .harness import ROOT, amount
 from .models.image import IMAGES
 from .models.sobel import sobel_byte_lanes
 
@@ -284,11 +284,11 @@ def ball_loop_replica(periods, x, y, clock_hz):
 
 
 def test_ball_on_plate_loop_equals_the_models(tmp_path):
-    """examples/ball_on_plate on Icarus, 20 servo periods (the PWM counting at 250 kHz, 5,000
-    cycles a period): every touch sample and every period's six measured pulse widths equal
-    the replica built from the golden models; the chain answers a sample in under a
-    period."""
-    periods, clock_hz = 20, 250_000
+    """examples/ball_on_plate on Icarus, 8 servo periods (20 in make test-full; the PWM counting
+    at 250 kHz, 5,000 cycles a period): every touch sample and every period's six measured
+    pulse widths equal the replica built from the golden models; the chain answers a sample
+    in under a period."""
+    periods, clock_hz = amount(8, 20), 250_000
     results = run_project_sim(BALL / "build.cfg", "icarus", out=tmp_path / "out",
                               args={"periods": str(periods)},
                               thread_params=[f"Servo.pwm_clock_hz={clock_hz}"], limit_ms=5)
