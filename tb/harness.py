@@ -57,6 +57,11 @@ def amount(quick, full):
     return full if FULL else quick
 
 
+#: Tops whose tests simulate long enough to repay Verilator's default optimisation: the
+#: network stack's tests exchange megabytes with Linux and peer models (test_net[stack-verilator]
+#: 74 s built at -Os, 225 s at -O0)
+OPTIMISED_TOPS = frozenset({"net"})
+
 bench_params = top_params
 bench_manifest = top_manifest
 
@@ -102,11 +107,12 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     A Verilator model is compiled without optimisation (``OPT_FAST=-O0``): cocotb's Python
     side sets the pace of a test's simulation, so the C++ build is most of a bench's time
     (topic 4x4_w512, ReconOS r64 calls and the ros1_w64 codec: 101 s built at Verilator's
-    default -Os, 58 s at -O0, on 2 cores). ``optimise`` keeps the default, in a build folder of
-    its own, for runs long enough to repay it (``make bench``).
+    default -Os, 58 s at -O0, on 2 cores), except for :data:`OPTIMISED_TOPS`. ``optimise``
+    keeps the default, in a build folder of its own, for runs long enough to repay it
+    (``make bench``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    quick = not optimise
+    quick = not optimise and top not in OPTIMISED_TOPS
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     env = {
