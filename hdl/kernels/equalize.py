@@ -17,15 +17,15 @@ SCALE_BITS = 48
 
 
 def _set_bit_index(value, *, highest):
-    """Index of the highest (or lowest) set bit of ``value`` (0 for 0 when highest), found by
-    a binary tree: log2 of the width in multiplexers, not a priority chain as long as the
-    value."""
+    """Index of the highest (or lowest) set bit of ``value``, found by a binary tree: log2 of
+    the width in multiplexers, not a priority chain as long as the value. For 0 it is 0 when
+    ``highest``, else meaningless (test ``value.any()``)."""
     width = 1 << max(1, (len(value) - 1).bit_length())
-    bits = value.as_unsigned() if len(value) == width else Cat(value, Const(0, width - len(value)))
+    bits = Cat(value, Const(0, width - len(value)))
 
     def search(low, size):
         if size == 2:
-            return bits[low] | bits[low + 1], bits[low + 1] if highest else ~bits[low]
+            return bits[low] | bits[low + 1], (bits[low + 1] if highest else ~bits[low])
         found_low, index_low = search(low, size // 2)
         found_high, index_high = search(low + size // 2, size // 2)
         if highest:
