@@ -68,30 +68,37 @@ def test_equalize_matches_opencv(pixels_per_beat):
         assert lasts == [False] * (count - 1) + [True]
 
 
-def _float32_round(value, sticky):
+def _float_round(value, sticky, bits=24):
     """IEEE round to nearest, ties to even, of ``value`` (+ a non-zero remainder below it when
-    ``sticky``) to 24 significant bits, as ``mantissa * 2**shift``."""
-    shift = max(value.bit_length() - 24, 0)
+    ``sticky``) to ``bits`` significant bits (24: float32, 53: float64), as
+    ``mantissa * 2**shift``."""
+    shift = max(value.bit_length() - bits, 0)
     kept, rest = value >> shift, value & ((1 << shift) - 1)
     half = 1 << (shift - 1) if shift else 0
     up = shift and (rest > half or (rest == half and (sticky or kept & 1)))
     kept += bool(up)
-    if kept >> 24:
+    if kept >> bits:
         kept, shift = kept >> 1, shift + 1
     return kept, shift
 
 
+#: (value width, significant bits) as the kernels use the rounding: EqualizeHist's scale and
+#: ImageCompensation's alpha (a 72-bit quotient to float64) and its table sum
+ROUNDINGS = [(57, 24), (72, 53), (48, 24)]
+
+
 @pytest.mark.parametrize("registered", [False, True])
-def test_round_to_float32(registered):
+@pytest.mark.parametrize("width,bits", ROUNDINGS)
+def test_round_to_float32(registered, width, bits):
     """The rounding behind the exact table, unregistered and split by registers, against
-    numpy's float32 conversion (no sticky bit) and the IEEE rule (with one); ties, carries
-    into a new power of two and short values included."""
+    numpy's float32 conversion or Python's float64 one (no sticky bit) and the IEEE rule
+    (with one); ties, carries into a new power of two and short values included."""
     from amaranth.hdl import Module, Signal
 
     from hdl.kernels.equalize import ROUND_STAGES, round_to_float32
 
     m = Module()
-    value, sticky = Signal(57), Signal()
+    value, sticky = Signal(width), Signal()
     toggle = Signal()           # a sync domain for the simulator's clock either way
     m.d.sync += toggle.eq(~toggle)
 
@@ -101,15 +108,16 @@ def test_round_to_float32(registered):
         return r
 
     mant, shift = round_to_float32(m, value, sticky, "t", stage=reg if registered else
-                                   (lambda v, name: v))
+                                   (lambda v, name: v), bits=bits)
     rng = np.random.default_rng(5)
-    cases = [(0, 0), (1, 0), ((1 << 24) - 1, 0), (1 << 24, 0), ((1 << 24) + 1, 0),
-             ((1 << 25) - 1, 0), ((1 << 25) + 2, 0), ((1 << 25) + 6, 0), ((1 << 25) + 2, 1)]
+    top = 1 << bits
+    cases = [(0, 0), (1, 0), (top - 1, 0), (top, 0), (top + 1, 0), (2 * top - 1, 0),
+             (2 * top + 2, 0), (2 * top + 6, 0), (2 * top + 2, 1), ((1 << width) - 1, 0)]
+    cases = [(v & ((1 << width) - 1), st) for v, st in cases]
     for _ in range(300):
-        bits = int(rng.integers(1, 58))
-        v = int(rng.integers(0, 1 << min(bits, 62))) & ((1 << 57) - 1)
-        if rng.random() < 0.3 and v.bit_length() > 25:   # an exact tie
-            s = v.bit_length() - 24
+        v = int.from_bytes(rng.bytes(16), "little") >> (128 - int(rng.integers(1, width + 1)))
+        if rng.random() < 0.3 and v.bit_length() > bits + 1:   # an exact tie
+            s = v.bit_length() - bits
             v = (v >> s << s) | (1 << (s - 1))
         cases.append((v, int(rng.integers(0, 2))))
     got = []
@@ -125,6 +133,10 @@ def test_round_to_float32(registered):
 
     simulate(m, bench)
     for (v, st), (gm, gs) in zip(cases, got):
-        assert (gm, gs) == _float32_round(v, st), (v, st, gm, gs)
-        if not st and v < 1 << 53:      # numpy converts through float64 above
+        assert (gm, gs) == _float_round(v, st, bits), (v, st, gm, gs)
+        if st:
+            continue
+        if bits == 24 and v < 1 << 53:      # numpy converts through float64 above
             assert gm << gs == int(np.float32(v)), (v, gm, gs)
+        if bits == 53:
+            assert gm << gs == int(float(v)), (v, gm, gs)
