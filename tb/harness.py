@@ -35,7 +35,7 @@ from host.simulator import (
     top_params,
 )
 
-__all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "FULL", "amount", "cocotb_bench", "run_bench",
+__all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "amount", "cocotb_bench", "run_bench",
            "bench_params", "bench_manifest", "export_bench_top", "environment_seed",
            "failed_seeds"]
 
@@ -46,7 +46,7 @@ SIM_BUILD = ROOT / "sim_build"
 #: ``make test-full`` sets ``ROSGATE_FULL=1``: the benches that draw random inputs draw the long
 #: matrix's amounts of them (messages, photographs at full size, servo periods); ``make test``
 #: and a bare pytest run the same cases with fewer draws
-FULL = os.environ.get("ROSGATE_FULL", "0") not in ("", "0")
+_FULL = os.environ.get("ROSGATE_FULL", "0") not in ("", "0")
 
 
 def amount(quick, full):
@@ -54,7 +54,7 @@ def amount(quick, full):
 
     The simulators inherit the environment, so a cocotb test module and the pytest test that
     runs it agree."""
-    return full if FULL else quick
+    return full if _FULL else quick
 
 
 #: Tops whose tests simulate long enough to repay Verilator's default optimisation: the

@@ -11,7 +11,7 @@ from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
 from hdl.kernels.colour import TRAFFIC_DETECTION
-from tb.harness import FULL, bench_params
+from tb.harness import amount, bench_params
 from tb.models import image as golden
 from tb.streams import StreamPort, count_pulses, reset_aresetn
 
@@ -246,11 +246,13 @@ def photo(name):
     width and height in ``make test`` (OpenCV's area resampling keeps it a photograph, with a
     quarter of the pixels to simulate)."""
     image = golden.load_image(name)
-    if FULL:
+    divisor = amount(2, 1)
+    if divisor == 1:
         return image
     import cv2
     height, width = image.shape[:2]
-    return cv2.resize(image, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
+    return cv2.resize(image, (width // divisor, height // divisor),
+                      interpolation=cv2.INTER_AREA)
 
 
 def traffic_scene(rng, width, height, colour):

@@ -21,7 +21,6 @@ from hdl.kernels.colour import TRAFFIC_DETECTION
 from hdl.kernels import compensation
 from hdl.kernels.equalize import ROUND_STAGES, TABLE_STAGES
 from tb.harness import cocotb_bench
-from tb.models import image as golden
 
 from .kernels_image_tb import KernelsTB, _k, photo, traffic_scene
 
