@@ -179,26 +179,36 @@ class WindowFilter(wiring.Component):
         run = Signal()
         r0 = Signal(range(max_h + R + 1))
         c0 = Signal(range(max_wb + L + 1))
-        needs_input = (r0 < h) & (c0 < wb)
+        # "c0 < wb", "r0 < h" and the ends of a row and of the frame are kept in flip-flops
+        # beside the counters: the guard's ready (and through it the upstream handshake)
+        # does not wait for comparisons as long as the counters. The guard's minimum size
+        # makes wb and h at least 1, so both flags start a frame set.
+        col_in, row_in = Signal(), Signal()
+        wb_last, h_last = Signal.like(wb), Signal.like(h)
+        c0_end, r0_end = Signal.like(c0), Signal.like(r0)
+        needs_input = row_in & col_in
         go0 = Signal()
         m.d.comb += [go0.eq(run & adv & (~needs_input | guard.o.tvalid)),
                      guard.o.tready.eq(run & adv & needs_input),
-                     rd.addr.eq(Mux(c0 < wb, c0, 0)), rd.en.eq(adv)]
+                     rd.addr.eq(Mux(col_in, c0, 0)), rd.en.eq(adv)]
         v1, v1b, v2, v3 = Signal(), Signal(), Signal(), Signal()
         # the size registers serve the stages up to 3: a frame starts once the last one has
         # left them
         with m.If(~run & ~v1 & ~v1b & ~v2 & ~v3 & guard.o.tvalid):
-            m.d.sync += [wb.eq(guard.frame_width // P), h.eq(guard.frame_height),
-                         r0.eq(0), c0.eq(0), run.eq(1)]
+            beats = guard.frame_width // P
+            m.d.sync += [wb.eq(beats), h.eq(guard.frame_height),
+                         wb_last.eq(beats - 1), h_last.eq(guard.frame_height - 1),
+                         c0_end.eq(beats + L - 1), r0_end.eq(guard.frame_height + R - 1),
+                         r0.eq(0), c0.eq(0), col_in.eq(1), row_in.eq(1), run.eq(1)]
         with m.If(go0):
-            with m.If(c0 == wb + L - 1):
-                m.d.sync += c0.eq(0)
-                with m.If(r0 == h + R - 1):
+            with m.If(c0 == c0_end):
+                m.d.sync += [c0.eq(0), col_in.eq(1)]
+                with m.If(r0 == r0_end):
                     m.d.sync += run.eq(0)
                 with m.Else():
-                    m.d.sync += r0.eq(r0 + 1)
+                    m.d.sync += [r0.eq(r0 + 1), row_in.eq(row_in & (r0 != h_last))]
             with m.Else():
-                m.d.sync += c0.eq(c0 + 1)
+                m.d.sync += [c0.eq(c0 + 1), col_in.eq(col_in & (c0 != wb_last))]
 
         # stage 1: line buffer data; vertical border selection
         r1, c1, w1 = Signal.like(r0), Signal.like(c0), Signal()
@@ -309,7 +319,7 @@ class WindowFilter(wiring.Component):
         wb4, h4, last4, user4 = Signal.like(wb), Signal.like(h), Signal(), Signal()
         with m.If(adv):
             m.d.sync += [v4.eq(v3), row4.eq(row3), beat4.eq(beat3), wb4.eq(wb), h4.eq(h),
-                         last4.eq((row3 == h - 1) & (beat3 == wb - 1)),
+                         last4.eq((row3 == h_last) & (beat3 == wb_last)),
                          user4.eq((row3 == 0) & (beat3 == 0))]
         ctx = WindowContext(row4, beat4, wb4, h4, register)
         outputs = self.compute(m, pixel, ctx)
