@@ -10,9 +10,10 @@ takes words, on three subscriptions.
 """
 
 from amaranth.hdl import Cat, Const, Module, Signal
+from amaranth.lib import wiring
 
 from ..params import ParameterError, check_int
-from ..stream import StreamRepacker
+from ..stream import RegisterSlice, StreamRepacker
 from .hwt import HardwareThread
 from .threads import _image_offsets
 
@@ -162,22 +163,33 @@ class ImageNodeThread(HardwareThread):
                             (encoding[:32] == ENCODING_BGR8))
 
         m.submodules.to_pixels = to_pixels = StreamRepacker(wb, 3 * P)
+        # register slices on both sides of the kernel (as the Sobel service thread has): a
+        # kernel's ready reaches from its output to its input and enables its whole
+        # pipeline, and the memory copy's control drives both repackers
+        m.submodules.pixel_slice = pixel_slice = RegisterSlice(
+            to_pixels.signature.members["m_axis"].signature)
+        wiring.connect(m, to_pixels.m_axis, pixel_slice.s_axis)
+        pixels = pixel_slice.m_axis
         first = Signal()
         m.d.comb += [to_pixels.s_axis.tkeep.eq((1 << wb) - 1),
-                     kernel.i.tdata.eq(to_pixels.m_axis.tdata),
-                     kernel.i.tlast.eq(to_pixels.m_axis.tlast),
+                     kernel.i.tdata.eq(pixels.tdata),
+                     kernel.i.tlast.eq(pixels.tlast),
                      kernel.i.tuser.eq(first),
-                     kernel.i.tvalid.eq(to_pixels.m_axis.tvalid),
-                     to_pixels.m_axis.tready.eq(kernel.i.tready)]
+                     kernel.i.tvalid.eq(pixels.tvalid),
+                     pixels.tready.eq(kernel.i.tready)]
         with m.If(kernel.i.tvalid & kernel.i.tready):
             m.d.sync += first.eq(0)
         if self.out_size is not None:
             m.submodules.to_words = to_words = StreamRepacker(3 * P, wb)
-            m.d.comb += [to_words.s_axis.tdata.eq(kernel.o.tdata),
-                         to_words.s_axis.tkeep.eq((1 << (3 * P)) - 1),
-                         to_words.s_axis.tlast.eq(kernel.o.tlast),
-                         to_words.s_axis.tvalid.eq(kernel.o.tvalid),
-                         kernel.o.tready.eq(to_words.s_axis.tready)]
+            m.submodules.result_slice = result_slice = RegisterSlice(
+                to_words.signature.members["s_axis"].signature.flip())
+            wiring.connect(m, result_slice.m_axis, to_words.s_axis)
+            results = result_slice.s_axis
+            m.d.comb += [results.tdata.eq(kernel.o.tdata),
+                         results.tkeep.eq((1 << (3 * P)) - 1),
+                         results.tlast.eq(kernel.o.tlast),
+                         results.tvalid.eq(kernel.o.tvalid),
+                         kernel.o.tready.eq(results.tready)]
             out_w, out_h = self.out_size
             out_bytes = 3 * out_w * out_h
         result = Signal(64)
