@@ -374,8 +374,13 @@ class MemifEngine(wiring.Component):
 
         # ---- credits: words requested but not yet popped from mem2hwt ----
         outstanding = Signal(range(self._credits + 1))
-        add_read, add_fence = Signal(), Signal()
+        add = Signal(range(self._credits + 1))
         pop = Signal()
+        # a pop is known late (the FIFO's level, the reader's ready): both successors are
+        # computed beforehand and the pop only chooses between them
+        after = kept(m, outstanding + add, "outstanding_after")
+        after_pop = kept(m, outstanding + add - 1, "outstanding_after_pop")
+        m.d.sync += outstanding.eq(Mux(pop, after_pop, after))
 
         # per read request: is its data for the user (0) or a fence word (1), and how many;
         # its head comes from flip-flops (the data routing below decides on it in the cycle a
@@ -401,19 +406,6 @@ class MemifEngine(wiring.Component):
         r_len_words = Signal(range(self._credits + 1))
         next_len = Signal(w)
         m.d.comb += next_len.eq(chunk_len(r_addr, r_rem))
-        # the sequencer's choice (a read chunk, a fence word or nothing) and a pop are known
-        # late: every successor of the credit count is computed beforehand from flip-flops,
-        # and the two only choose between them
-        with_read = kept(m, outstanding + r_len_words, "outstanding_read")
-
-        def successor(count):
-            return Mux(pop, kept(m, count - 1, f"{count.name}_pop"), count)
-        with m.If(add_read):
-            m.d.sync += outstanding.eq(successor(with_read))
-        with m.Elif(add_fence):
-            m.d.sync += outstanding.eq(successor(kept(m, outstanding + 1, "outstanding_fence")))
-        with m.Else():
-            m.d.sync += outstanding.eq(successor(outstanding))
         # and r_rem != 0 and "the next chunk is the last" in flip-flops (as for writes below)
         r_more = Signal()
         r_last = Signal()
@@ -463,8 +455,7 @@ class MemifEngine(wiring.Component):
         m.d.sync += [w_len.eq(w_next_len), w_len_words.eq(w_next_len >> sh),
                      w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
         w_ready = Signal()
-        w_filled = Signal()
-        m.d.comb += w_ready.eq(w_more & w_len_valid & w_filled)
+        m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= w_len_words))
         w_busy = Signal()
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
@@ -484,17 +475,10 @@ class MemifEngine(wiring.Component):
 
         # ---- the request sequencer (owns hwt2mem) ----
         seq_words = Signal(range(cw + 1))    # data words left of the current write chunk
-        # its conditions from flip-flops, each computed the cycle before it is used, so its
-        # choice does not wait for comparisons: room for the next read chunk and for a fence
-        # word (credits are added only as the sequencer leaves IDLE, for at least two cycles,
-        # and a pop only makes room), and the write chunk's words are buffered (with a word
-        # to spare while W_DATA may take one). Each waits for a valid length, so a new command
-        # costs a cycle, a chunk none.
-        r_room, f_room = Signal(), Signal()
-        with m.FSM() as fsm:
+        with m.FSM():
             with m.State("IDLE"):
-                r_ok = r_want & kinds.w_rdy & r_room
-                f_ok = fence_want & kinds.w_rdy & f_room
+                r_ok = r_want & kinds.w_rdy & (outstanding + r_len_words <= self._credits)
+                f_ok = fence_want & kinds.w_rdy & (outstanding != self._credits)
                 with m.If(w_ready):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
                                  seq_words.eq(w_len_words),
@@ -506,13 +490,12 @@ class MemifEngine(wiring.Component):
                             m.d.sync += [fence_want.eq(1), fence_addr.eq(w_addr_cur)]
                     m.next = "W_CMD"
                 with m.Elif(f_ok):
-                    m.d.comb += [add_fence.eq(1), kinds.w_en.eq(1),
-                                 kinds.w_data.eq(1 | (1 << 1))]
+                    m.d.comb += [add.eq(1), kinds.w_en.eq(1), kinds.w_data.eq(1 | (1 << 1))]
                     m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | wb),
                                  r_words[1].eq(fence_addr), fence_want.eq(0)]
                     m.next = "R_CMD"
                 with m.Elif(r_ok):
-                    m.d.comb += [add_read.eq(1), kinds.w_en.eq(1),
+                    m.d.comb += [add.eq(r_len_words), kinds.w_en.eq(1),
                                  kinds.w_data.eq(0 | (r_len_words << 1))]
                     m.d.sync += [r_words[0].eq((MemifOp.READ << lb) | r_len),
                                  r_words[1].eq(r_addr),
@@ -547,10 +530,6 @@ class MemifEngine(wiring.Component):
                                 m.d.comb += done_now.eq(1)
                                 m.d.sync += w_busy.eq(0)
                         m.next = "IDLE"
-        m.d.sync += [r_room.eq(r_len_valid & (with_read <= self._credits)),
-                     f_room.eq(outstanding != self._credits),
-                     w_filled.eq(w_len_valid
-                                 & (wbuf.r_level >= w_len_words + fsm.ongoing("W_DATA")))]
 
         # ---- read data routing ----
         kind_fence = kinds.r_data[0]
