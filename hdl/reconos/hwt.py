@@ -424,13 +424,11 @@ class MemifEngine(wiring.Component):
             w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
             w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
         ]
-        # while a command can be taken, the address and length registers follow the command
-        # port (nothing reads them then), so their enables do not wait for the thread's valid
         with m.If((r_total == 0) & ~r_more):
             m.d.comb += self.read_cmd.ready.eq(1)
-            m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len)]
             with m.If(self.read_cmd.valid):
-                m.d.sync += [r_more.eq(r_cmd_len != 0),
+                m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
+                             r_more.eq(r_cmd_len != 0),
                              r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
 
         # ---- write buffer and issuer ----
@@ -447,22 +445,18 @@ class MemifEngine(wiring.Component):
         w_last = Signal()
         w_len = Signal(w)
         w_len_valid = Signal()
-        # and in words, in the write buffer's level's width (as ``r_len_words``): the chunk's
-        # "all its words are buffered" is then not a word-wide comparison
-        w_len_words = Signal(range(cw + 1))
         w_next_len = Signal(w)
         m.d.comb += w_next_len.eq(chunk_len(w_addr_cur, w_rem))
-        m.d.sync += [w_len.eq(w_next_len), w_len_words.eq(w_next_len >> sh),
-                     w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
+        m.d.sync += [w_len.eq(w_next_len), w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
         w_ready = Signal()
-        m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= w_len_words))
+        m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
         w_busy = Signal()
         with m.If(~w_busy):
             m.d.comb += self.write_cmd.ready.eq(1)
-            m.d.sync += [w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len)]    # as for reads
             with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
-                    m.d.sync += [w_busy.eq(1), w_more.eq(1),
+                    m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
+                                 w_more.eq(1),
                                  *w_rem_in.load(w_cmd_len >> sh),
                                  w_len_valid.eq(0)]
                 with m.Else():
@@ -474,14 +468,14 @@ class MemifEngine(wiring.Component):
             m.d.sync += w_rem_in.step()
 
         # ---- the request sequencer (owns hwt2mem) ----
-        seq_words = Signal(range(cw + 1))    # data words left of the current write chunk
+        seq_words = Signal(w)    # data words left of the current write chunk
         with m.FSM():
             with m.State("IDLE"):
                 r_ok = r_want & kinds.w_rdy & (outstanding + r_len_words <= self._credits)
                 f_ok = fence_want & kinds.w_rdy & (outstanding != self._credits)
                 with m.If(w_ready):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
-                                 seq_words.eq(w_len_words),
+                                 seq_words.eq(w_len >> sh),
                                  w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len),
                                  w_more.eq(~w_last),
                                  w_len_valid.eq(0)]
