@@ -2,7 +2,17 @@
 
 from amaranth.hdl import Signal
 
-__all__ = ["Countdown", "kept"]
+__all__ = ["Countdown", "adder_tree", "kept"]
+
+
+def adder_tree(values):
+    """The sum of ``values`` (a non-empty list) as a balanced tree of additions, depth log2 of
+    their number: Python's ``sum`` would chain them one after the other."""
+    values = list(values)
+    while len(values) > 1:
+        values = [values[k] + values[k + 1] if k + 1 < len(values) else values[k]
+                  for k in range(0, len(values), 2)]
+    return values[0]
 
 
 def kept(m, value, name):

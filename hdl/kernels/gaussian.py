@@ -2,6 +2,7 @@
 
 from amaranth.hdl import Cat, Value
 
+from ..logic import adder_tree
 from ..params import check_choice
 from .window import WindowFilter
 
@@ -17,12 +18,8 @@ def _weighted_sum(terms):
     weights, exact: one shifted copy of a value per set bit of its weight, added in a
     balanced tree. (A product with a constant would otherwise take a multiplier block, and
     Python's ``sum`` chains its additions one after the other.)"""
-    parts = [Value.cast(value) << bit for weight, value in terms
-             for bit in range(weight.bit_length()) if weight >> bit & 1]
-    while len(parts) > 1:
-        parts = [parts[i] + parts[i + 1] if i + 1 < len(parts) else parts[i]
-                 for i in range(0, len(parts), 2)]
-    return parts[0]
+    return adder_tree([Value.cast(value) << bit for weight, value in terms
+                       for bit in range(weight.bit_length()) if weight >> bit & 1])
 
 
 class GaussianBlur(WindowFilter):

@@ -5,6 +5,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from ..logic import adder_tree
+
 __all__ = ["InternetChecksum", "ones_complement_add", "ones_complement_fold", "word_sum_tree",
            "echo_reply_checksum"]
 
@@ -18,11 +20,7 @@ def ones_complement_add(a, b):
 def word_sum_tree(words):
     """Plain binary sum of 16-bit ``words`` as a balanced adder tree (depth log2 of their
     number); :func:`ones_complement_fold` turns it into their one's complement sum."""
-    words = list(words) or [Const(0, 16)]
-    while len(words) > 1:
-        words = [words[k] + words[k + 1] if k + 1 < len(words) else words[k]
-                 for k in range(0, len(words), 2)]
-    return words[0]
+    return adder_tree(list(words) or [Const(0, 16)])
 
 
 def ones_complement_fold(value):
