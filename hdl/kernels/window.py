@@ -6,7 +6,9 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import Out
 
 from ..params import ParameterError, check_choice
-from .image import BORDERS, FrameGuard, check_image_params, image_kernel_members
+from ..stream.fifo import StreamFIFO
+from .image import (BORDERS, FrameGuard, check_image_params, image_kernel_members,
+                    image_stream_signature)
 
 __all__ = ["WindowFilter", "border_index"]
 
@@ -59,12 +61,18 @@ class WindowFilter(wiring.Component):
 
     Timing: a frame of ``height`` rows of ``width / P`` beats takes
     ``(height + R) * (width / P + L)`` cycles (``R`` rows drain after the last input row,
-    ``L`` beats after each row) plus 5 between frames, when neither side stalls. A stall at
-    ``o`` stops the whole pipeline (one ``adv`` enable). The window's pixels are registered
-    after the border selection, and a subclass splits its arithmetic into
-    :attr:`compute_stages` registered stages (:meth:`WindowContext.register`), so that the
-    path between two registers stays short enough for the target clock; each stage adds a
-    cycle of latency, none of throughput.
+    ``L`` beats after each row) plus 5 between frames, when neither side stalls. The window's
+    pixels are registered after the border selection, and a subclass splits its arithmetic
+    into :attr:`compute_stages` registered stages (:meth:`WindowContext.register`), so that
+    the path between two registers stays short enough for the target clock; each stage adds
+    a cycle of latency, none of throughput.
+
+    The pipeline never stalls. Results enter a small output FIFO (:attr:`output_depth`
+    entries), and a step starts only while a FIFO entry is reserved for its result (one
+    credit per entry, returned when a result leaves at ``o`` or a step turns out to make
+    none). Backpressure at ``o`` therefore stops the input, not the pipeline: no enable
+    fans out from ``o.tready`` to the thousands of pipeline registers of a wide filter,
+    which is what kept the router from finishing such filters.
 
     Parameters
     ----------
@@ -129,6 +137,19 @@ class WindowFilter(wiring.Component):
     border = property(lambda self: self._border)
     min_width = property(lambda self: self._min_width)
 
+    @property
+    def output_depth(self):
+        """Entries of the output FIFO: enough credits to cover the round trip from a step's
+        start through the pipeline and the FIFO back to its credit, so that a frame flows
+        at one beat per cycle while ``o`` is ready."""
+        round_trip = self.pipeline_stages + 4
+        return max(16, 1 << (round_trip - 1).bit_length())
+
+    @property
+    def pipeline_stages(self):
+        """Registers between a step's start and the output FIFO's input."""
+        return 6 + self.compute_stages
+
     def cycles_per_frame(self, width, height):
         """Cycles between frames when neither side stalls (see the class docstring)."""
         return (height + self._r) * (width // self._p + self._l) + 5
@@ -166,12 +187,14 @@ class WindowFilter(wiring.Component):
         rd = lines.read_port()
         wr = lines.write_port()
 
-        o_valid, o_last, o_user = Signal(), Signal(), Signal()
-        o_data = Signal(8 * self._oc * P)
-        adv = Signal()
-        m.d.comb += [adv.eq(~o_valid | self.o.tready),
-                     self.o.tvalid.eq(o_valid), self.o.tdata.eq(o_data),
-                     self.o.tlast.eq(o_last), self.o.tuser.eq(o_user)]
+        depth = self.output_depth
+        m.submodules.out_fifo = out_fifo = StreamFIFO(image_stream_signature(self._oc, P), depth)
+        wiring.connect(m, out_fifo.m_axis, wiring.flipped(self.o))
+        # credits: FIFO entries not reserved by a step in the pipeline or a result in the FIFO
+        credits = Signal(range(depth + 1), init=depth)
+        drop = Signal()
+        pop = Signal()
+        m.d.comb += pop.eq(self.o.tvalid & self.o.tready)
 
         # stage 0: the step counters; one step per column beat, L flush steps per row
         wb = Signal(range(max_wb + 1))
@@ -188,9 +211,11 @@ class WindowFilter(wiring.Component):
         c0_end, r0_end = Signal.like(c0), Signal.like(r0)
         needs_input = row_in & col_in
         go0 = Signal()
-        m.d.comb += [go0.eq(run & adv & (~needs_input | guard.o.tvalid)),
-                     guard.o.tready.eq(run & adv & needs_input),
-                     rd.addr.eq(Mux(col_in, c0, 0)), rd.en.eq(adv)]
+        room = credits != 0
+        m.d.comb += [go0.eq(run & room & (~needs_input | guard.o.tvalid)),
+                     guard.o.tready.eq(run & room & needs_input),
+                     rd.addr.eq(Mux(col_in, c0, 0))]
+        m.d.sync += credits.eq(credits - go0 + pop + drop)
         v1, v1b, v2, v3 = Signal(), Signal(), Signal(), Signal()
         # the size registers serve the stages up to 3: a frame starts once the last one has
         # left them
@@ -213,17 +238,15 @@ class WindowFilter(wiring.Component):
         # stage 1: line buffer data; vertical border selection
         r1, c1, w1 = Signal.like(r0), Signal.like(c0), Signal()
         d1 = Signal(beat_bits)
-        with m.If(adv):
-            m.d.sync += [v1.eq(go0), r1.eq(r0), c1.eq(c0), w1.eq(needs_input),
-                         d1.eq(guard.o.tdata)]
-        m.d.comb += [wr.addr.eq(c1), wr.en.eq(adv & v1 & w1),
+        m.d.sync += [v1.eq(go0), r1.eq(r0), c1.eq(c0), w1.eq(needs_input),
+                     d1.eq(guard.o.tdata)]
+        m.d.comb += [wr.addr.eq(c1), wr.en.eq(v1 & w1),
                      wr.data.eq(Cat(d1, rd.data[:(k - 2) * beat_bits]))]
         # the line buffer's output registered before the vertical selection (the block RAM's
         # output and the selection do not fit one 100 MHz period together at 4 pixels/clock)
         r1b, c1b = Signal.like(r0), Signal.like(c0)
         d1b, q1b = Signal(beat_bits), Signal((k - 1) * beat_bits)
-        with m.If(adv):
-            m.d.sync += [v1b.eq(v1), r1b.eq(r1), c1b.eq(c1), d1b.eq(d1), q1b.eq(rd.data)]
+        m.d.sync += [v1b.eq(v1), r1b.eq(r1), c1b.eq(c1), d1b.eq(d1), q1b.eq(rd.data)]
         sources = [d1b] + [q1b.word_select(i, beat_bits) for i in range(k - 1)]
         # which source each window row takes is worked out in stage 1 and registered beside
         # the data, so stage 1b is a plain multiplexer
@@ -245,8 +268,7 @@ class WindowFilter(wiring.Component):
             zero, zero_b = Signal(name=f"vzero{t}"), Signal(name=f"vzero_b{t}")
             m.d.comb += [sel.eq(rows_in - src_row),
                          zero.eq((n < 0) | (n > hs - 1) if self._border == "constant" else 0)]
-            with m.If(adv):
-                m.d.sync += [sel_b.eq(sel), zero_b.eq(zero)]
+            m.d.sync += [sel_b.eq(sel), zero_b.eq(zero)]
             tap = Signal(beat_bits, name=f"vtap{t}")
             with m.Switch(sel_b):
                 for s in range(k):
@@ -257,20 +279,20 @@ class WindowFilter(wiring.Component):
 
         r2, c2 = Signal.like(r0), Signal.like(c0)
         taps2 = [Signal(beat_bits, name=f"taps2_{t}") for t in range(k)]
-        with m.If(adv):
-            m.d.sync += [v2.eq(v1b), r2.eq(r1b), c2.eq(c1b)]
-            m.d.sync += [t2.eq(Mux(z, 0, t1)) for t1, t2, z in zip(taps1, taps2, zero1)]
+        m.d.sync += [v2.eq(v1b), r2.eq(r1b), c2.eq(c1b)]
+        m.d.sync += [t2.eq(Mux(z, 0, t1)) for t1, t2, z in zip(taps1, taps2, zero1)]
 
         # stage 2: horizontal register of 2L + 1 beats (oldest first)
         hreg = [[Signal(beat_bits, name=f"hreg{b}_{t}") for t in range(k)]
                 for b in range(2 * L + 1)]
         row3, beat3 = Signal(range(max_h)), Signal(range(max_wb + L + 1))
-        with m.If(adv):
-            m.d.sync += [v3.eq(v2 & (r2 >= R) & (c2 >= L)), row3.eq(r2 - R), beat3.eq(c2 - L)]
-            with m.If(v2):
-                for b in range(2 * L):
-                    m.d.sync += [hreg[b][t].eq(hreg[b + 1][t]) for t in range(k)]
-                m.d.sync += [hreg[2 * L][t].eq(taps2[t]) for t in range(k)]
+        makes_output = (r2 >= R) & (c2 >= L)
+        m.d.comb += drop.eq(v2 & ~makes_output)
+        m.d.sync += [v3.eq(v2 & makes_output), row3.eq(r2 - R), beat3.eq(c2 - L)]
+        with m.If(v2):
+            for b in range(2 * L):
+                m.d.sync += [hreg[b][t].eq(hreg[b + 1][t]) for t in range(k)]
+            m.d.sync += [hreg[2 * L][t].eq(taps2[t]) for t in range(k)]
 
         # stage 3: horizontal border selection
         flat = [[hreg[f // P][t].word_select(f % P, pix_bits) for t in range(k)]
@@ -302,25 +324,22 @@ class WindowFilter(wiring.Component):
                         alt = flat[(e + L) * P - 2 - x_rel][dy]
                     value = Mux(right[e - 1], alt, value)
             sig = Signal(pix_bits, name=f"win_p{p}_y{dy}_x{dx}")
-            with m.If(adv):
-                m.d.sync += sig.eq(value)
+            m.d.sync += sig.eq(value)
             cache[key] = sig
             return sig
 
         def register(value, name):
             value = Value.cast(value)
             reg = Signal(value.shape(), name=name)
-            with m.If(adv):
-                m.d.sync += reg.eq(value)
+            m.d.sync += reg.eq(value)
             return reg
 
         # stage 4: the window registered; the compute stages follow
         v4, row4, beat4 = Signal(), Signal.like(row3), Signal.like(beat3)
         wb4, h4, last4, user4 = Signal.like(wb), Signal.like(h), Signal(), Signal()
-        with m.If(adv):
-            m.d.sync += [v4.eq(v3), row4.eq(row3), beat4.eq(beat3), wb4.eq(wb), h4.eq(h),
-                         last4.eq((row3 == h_last) & (beat3 == wb_last)),
-                         user4.eq((row3 == 0) & (beat3 == 0))]
+        m.d.sync += [v4.eq(v3), row4.eq(row3), beat4.eq(beat3), wb4.eq(wb), h4.eq(h),
+                     last4.eq((row3 == h_last) & (beat3 == wb_last)),
+                     user4.eq((row3 == 0) & (beat3 == 0))]
         ctx = WindowContext(row4, beat4, wb4, h4, register)
         outputs = self.compute(m, pixel, ctx)
         valid, last, user = v4, last4, user4
@@ -329,8 +348,10 @@ class WindowFilter(wiring.Component):
             valid = register(valid, f"v_compute{n}")
             last, user = register(last, f"last_compute{n}"), register(user, f"user_compute{n}")
             stage_valids.append(valid)
-        with m.If(adv):
-            m.d.sync += [o_valid.eq(valid), o_data.eq(Cat(*outputs)), o_last.eq(last),
-                         o_user.eq(user)]
-        m.d.comb += self.busy.eq(run | v1 | v1b | v2 | v3 | o_valid | Cat(*stage_valids).any())
+        # the results registered once more before the FIFO's memory: a credit guarantees room
+        fifo_in = out_fifo.s_axis
+        m.d.sync += [fifo_in.tvalid.eq(valid), fifo_in.tdata.eq(Cat(*outputs)),
+                     fifo_in.tlast.eq(last), fifo_in.tuser.eq(user)]
+        m.d.comb += self.busy.eq(run | v1 | v1b | v2 | v3 | fifo_in.tvalid |
+                                 Cat(*stage_valids).any() | (out_fifo.level != 0))
         return m
