@@ -4,13 +4,11 @@ ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publ
 subscribing a hardware topic needs."""
 
 from amaranth import Cat, Const, Module, Mux, Signal
-from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
-from ..stream import AXIStreamSignature, RegisterSlice
 from .hwt import HardwareThread
 
 __all__ = ["TopicGatewayThread", "MemoryLayout"]
@@ -318,11 +316,7 @@ class _Receiver:
         plan = thread.plan
         m.submodules.deserializer = self.des = des = Deserializer(
             plan, 64, max_count=thread.max_count)
-        # a register slice between the filter and the deserializer: the filter's verdict
-        # does not sit between the deserializer's ready and its unpacker's take
-        m.submodules.echo_slice = echo_slice = RegisterSlice(AXIStreamSignature(64))
-        wiring.connect(m, echo_slice.m_axis, des.s_axis)
-        _EchoFilter(m, getattr(thread, thread.in_port), echo_slice.s_axis, thread.publisher_id,
+        _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis, thread.publisher_id,
                     plan.publisher_offset)
         self.msg = Signal(64, name="rx_msg")
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]

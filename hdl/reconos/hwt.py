@@ -29,7 +29,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..logic import Countdown, kept
 from ..params import check_int
-from ..stream import PayloadRegisterSlice, ReadyRegisterSlice
+from ..stream import ReadyRegisterSlice
 from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
 from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
                        arch as get_arch)
@@ -314,14 +314,10 @@ class MemifEngine(wiring.Component):
     Members
     -------
     memif_hwt2mem, memif_mem2hwt :
-        As in :func:`ThreadSignature`. ``memif_hwt2mem`` is driven from flip-flops (a
-        register slice: a cycle of latency per request, none of throughput).
+        As in :func:`ThreadSignature`.
     read_cmd : In(stream.Signature(memif_command_layout))
-        ``addr`` (virtual) and ``length`` of a read; started when the previous read's data
-        has all been delivered. Commands (of both kinds) pass a
-        :class:`~hdl.stream.PayloadRegisterSlice`: the issuing state machine's decisions do
-        not reach the engine's address and length registers in the same cycle. That costs a
-        cycle per command; one command of each kind may wait in the slice.
+        ``addr`` (virtual) and ``length`` of a read; taken when the previous read's data has
+        all been delivered.
     read_data : Out(stream.Signature(StructLayout{data, last}))
         ``length/W`` words; ``last`` on the final one. Through a
         :class:`~hdl.stream.ReadyRegisterSlice`: the reader's ready does not reach the
@@ -329,10 +325,7 @@ class MemifEngine(wiring.Component):
         word offered while the reader is not ready is popped and held).
     write_cmd : In(stream.Signature(memif_command_layout))
     write_data : In(stream.Signature(W*8))
-        ``length/W`` words to write. Through a :class:`~hdl.stream.ReadyRegisterSlice`
-        (``ready`` from a flip-flop, no cycle of latency): a writer whose data and ``valid``
-        are long functions of its own state does not see the write buffer's level and the
-        command's word count in its ``ready``.
+        ``length/W`` words to write.
     write_done : Out(1)
         One-cycle pulse when a write command has completed (see ``fence``), the cycle after
         the engine sees it.
@@ -359,31 +352,11 @@ class MemifEngine(wiring.Component):
         w, wb, lb = a.word_bits, a.word_bytes, a.length_bits
         sh = wb.bit_length() - 1
         cw = a.chunk_words
-        inp = self.memif_mem2hwt
-        # the words for the hwt2mem FIFO leave through a register slice: the sequencer's
-        # decisions (and the FIFO's fill level behind its ``full``) do not reach the FIFO
-        # memory's write enables in the same cycle
-        m.submodules.hwt2mem_slice = hwt2mem_slice = PayloadRegisterSlice(w)
-        out = FifoWriteSignature(w).create(path=("hwt2mem_next",))
-        m.d.comb += [hwt2mem_slice.i.valid.eq(out.we), hwt2mem_slice.i.payload.eq(out.data),
-                     out.full.eq(~hwt2mem_slice.i.ready),
-                     self.memif_hwt2mem.we.eq(hwt2mem_slice.o.valid),
-                     self.memif_hwt2mem.data.eq(hwt2mem_slice.o.payload),
-                     hwt2mem_slice.o.ready.eq(~self.memif_hwt2mem.full)]
+        out, inp = self.memif_hwt2mem, self.memif_mem2hwt
         read_layout = self.read_data.payload.shape()
         m.submodules.read_slice = read_slice = ReadyRegisterSlice(read_layout)
         wiring.connect(m, read_slice.o, wiring.flipped(self.read_data))
         read_data = read_slice.i
-        m.submodules.read_cmd_slice = read_cmd_slice = PayloadRegisterSlice(
-            memif_command_layout(a))
-        m.submodules.write_cmd_slice = write_cmd_slice = PayloadRegisterSlice(
-            memif_command_layout(a))
-        m.submodules.write_data_slice = write_data_slice = ReadyRegisterSlice(w)
-        wiring.connect(m, wiring.flipped(self.read_cmd), read_cmd_slice.i)
-        wiring.connect(m, wiring.flipped(self.write_cmd), write_cmd_slice.i)
-        wiring.connect(m, wiring.flipped(self.write_data), write_data_slice.i)
-        read_cmd, write_cmd = read_cmd_slice.o, write_cmd_slice.o
-        write_data = write_data_slice.o
 
         def chunk_len(addr, remaining):
             # ``room`` is at most MEMIF_CHUNK: compare only the bits it can have (a full
@@ -446,14 +419,14 @@ class MemifEngine(wiring.Component):
         # command addresses and lengths with their low bits ignored (W-aligned)
         r_cmd_addr, r_cmd_len, w_cmd_addr, w_cmd_len = (Signal(w) for _ in range(4))
         m.d.comb += [
-            r_cmd_addr.eq(read_cmd.payload.addr >> sh << sh),
-            r_cmd_len.eq(read_cmd.payload.length >> sh << sh),
-            w_cmd_addr.eq(write_cmd.payload.addr >> sh << sh),
-            w_cmd_len.eq(write_cmd.payload.length >> sh << sh),
+            r_cmd_addr.eq(self.read_cmd.payload.addr >> sh << sh),
+            r_cmd_len.eq(self.read_cmd.payload.length >> sh << sh),
+            w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
+            w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
         ]
         with m.If((r_total == 0) & ~r_more):
-            m.d.comb += read_cmd.ready.eq(1)
-            with m.If(read_cmd.valid):
+            m.d.comb += self.read_cmd.ready.eq(1)
+            with m.If(self.read_cmd.valid):
                 m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
                              r_more.eq(r_cmd_len != 0),
                              r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
@@ -479,8 +452,8 @@ class MemifEngine(wiring.Component):
         m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
         w_busy = Signal()
         with m.If(~w_busy):
-            m.d.comb += write_cmd.ready.eq(1)
-            with m.If(write_cmd.valid):
+            m.d.comb += self.write_cmd.ready.eq(1)
+            with m.If(self.write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
                                  w_more.eq(1),
@@ -488,10 +461,10 @@ class MemifEngine(wiring.Component):
                                  w_len_valid.eq(0)]
                 with m.Else():
                     m.d.comb += done_now.eq(1)
-        m.d.comb += [wbuf.w_data.eq(write_data.payload),
-                     wbuf.w_en.eq(write_data.valid & w_open),
-                     write_data.ready.eq(wbuf.w_rdy & w_open)]
-        with m.If(write_data.valid & write_data.ready):
+        m.d.comb += [wbuf.w_data.eq(self.write_data.payload),
+                     wbuf.w_en.eq(self.write_data.valid & w_open),
+                     self.write_data.ready.eq(wbuf.w_rdy & w_open)]
+        with m.If(self.write_data.valid & self.write_data.ready):
             m.d.sync += w_rem_in.step()
 
         # ---- the request sequencer (owns hwt2mem) ----

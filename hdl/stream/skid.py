@@ -1,7 +1,7 @@
 """Register slices: break every combinational path of an AXI4-Stream or an
 ``amaranth.lib.stream`` link, or (:class:`ReadyRegisterSlice`) only the ready path."""
 
-from amaranth.hdl import Module, Mux, Shape, Signal, Value
+from amaranth.hdl import Module, Mux, Shape, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -88,8 +88,8 @@ class PayloadRegisterSlice(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         width = Shape.cast(self._shape).width
-        skid_buffer(m, width, self.i.valid, self.i.ready, Value.cast(self.i.payload),
-                     self.o.valid, self.o.ready, Value.cast(self.o.payload))
+        skid_buffer(m, width, self.i.valid, self.i.ready, self.i.payload.as_value(),
+                     self.o.valid, self.o.ready, self.o.payload.as_value())
         return m
 
 
@@ -110,10 +110,10 @@ class ReadyRegisterSlice(PayloadRegisterSlice):
         held_valid = Signal()
         m.d.comb += [self.i.ready.eq(~held_valid),
                      self.o.valid.eq(held_valid | self.i.valid),
-                     self.o.payload.eq(Mux(held_valid, held, Value.cast(self.i.payload)))]
+                     self.o.payload.eq(Mux(held_valid, held, self.i.payload.as_value()))]
         with m.If(held_valid):
             with m.If(self.o.ready):
                 m.d.sync += held_valid.eq(0)
         with m.Elif(self.i.valid & ~self.o.ready):
-            m.d.sync += [held.eq(Value.cast(self.i.payload)), held_valid.eq(1)]
+            m.d.sync += [held.eq(self.i.payload.as_value()), held_valid.eq(1)]
         return m
