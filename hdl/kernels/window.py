@@ -163,8 +163,8 @@ class WindowFilter(wiring.Component):
         ``pixel(p, dy, dx)`` is the input pixel at row ``row + dy - R`` and column
         ``beat * P + p + dx - R`` (``dy, dx`` in ``0..k-1``), border applied; ``ctx`` is a
         :class:`WindowContext`. Every path from a pixel to a result passes
-        :attr:`compute_stages` times through ``ctx.register``; the result is registered at
-        ``o``.
+        :attr:`compute_stages` times through ``ctx.register``; the result is registered once
+        more in front of the output FIFO.
         """
         raise NotImplementedError
 
