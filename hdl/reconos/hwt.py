@@ -29,7 +29,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..logic import Countdown, kept
 from ..params import check_int
-from ..stream import ReadyRegisterSlice
+from ..stream import PayloadRegisterSlice, ReadyRegisterSlice
 from .fifo import MEMIF_FIFO_DEPTH, FifoReadSignature, FifoWriteSignature
 from .protocol import (CALLS, INTERRUPTED_REPLY, MEMIF_CHUNK, Command, MemifOp,
                        arch as get_arch)
@@ -316,8 +316,12 @@ class MemifEngine(wiring.Component):
     memif_hwt2mem, memif_mem2hwt :
         As in :func:`ThreadSignature`.
     read_cmd : In(stream.Signature(memif_command_layout))
-        ``addr`` (virtual) and ``length`` of a read; taken when the previous read's data has
-        all been delivered.
+        ``addr`` (virtual) and ``length`` of a read; started when the previous read's data
+        has all been delivered. Commands of both kinds pass a
+        :class:`~hdl.stream.PayloadRegisterSlice`: the issuing state machine's choice of
+        address and length (often arithmetic on its registers) does not reach the engine's
+        address and length registers and their tests in the same cycle. That costs a cycle
+        per command; one command of each kind may wait in its slice.
     read_data : Out(stream.Signature(StructLayout{data, last}))
         ``length/W`` words; ``last`` on the final one. Through a
         :class:`~hdl.stream.ReadyRegisterSlice`: the reader's ready does not reach the
@@ -357,6 +361,13 @@ class MemifEngine(wiring.Component):
         m.submodules.read_slice = read_slice = ReadyRegisterSlice(read_layout)
         wiring.connect(m, read_slice.o, wiring.flipped(self.read_data))
         read_data = read_slice.i
+        m.submodules.read_cmd_slice = read_cmd_slice = PayloadRegisterSlice(
+            memif_command_layout(a))
+        m.submodules.write_cmd_slice = write_cmd_slice = PayloadRegisterSlice(
+            memif_command_layout(a))
+        wiring.connect(m, wiring.flipped(self.read_cmd), read_cmd_slice.i)
+        wiring.connect(m, wiring.flipped(self.write_cmd), write_cmd_slice.i)
+        read_cmd, write_cmd = read_cmd_slice.o, write_cmd_slice.o
 
         def chunk_len(addr, remaining):
             # ``room`` is at most MEMIF_CHUNK: compare only the bits it can have (a full
@@ -419,14 +430,14 @@ class MemifEngine(wiring.Component):
         # command addresses and lengths with their low bits ignored (W-aligned)
         r_cmd_addr, r_cmd_len, w_cmd_addr, w_cmd_len = (Signal(w) for _ in range(4))
         m.d.comb += [
-            r_cmd_addr.eq(self.read_cmd.payload.addr >> sh << sh),
-            r_cmd_len.eq(self.read_cmd.payload.length >> sh << sh),
-            w_cmd_addr.eq(self.write_cmd.payload.addr >> sh << sh),
-            w_cmd_len.eq(self.write_cmd.payload.length >> sh << sh),
+            r_cmd_addr.eq(read_cmd.payload.addr >> sh << sh),
+            r_cmd_len.eq(read_cmd.payload.length >> sh << sh),
+            w_cmd_addr.eq(write_cmd.payload.addr >> sh << sh),
+            w_cmd_len.eq(write_cmd.payload.length >> sh << sh),
         ]
         with m.If((r_total == 0) & ~r_more):
-            m.d.comb += self.read_cmd.ready.eq(1)
-            with m.If(self.read_cmd.valid):
+            m.d.comb += read_cmd.ready.eq(1)
+            with m.If(read_cmd.valid):
                 m.d.sync += [r_addr.eq(r_cmd_addr), r_rem.eq(r_cmd_len),
                              r_more.eq(r_cmd_len != 0),
                              r_total.eq(r_cmd_len >> sh), r_len_valid.eq(0)]
@@ -444,16 +455,20 @@ class MemifEngine(wiring.Component):
         w_more = Signal()
         w_last = Signal()
         w_len = Signal(w)
+        w_len_words = Signal(range(cw + 1))
         w_len_valid = Signal()
         w_next_len = Signal(w)
         m.d.comb += w_next_len.eq(chunk_len(w_addr_cur, w_rem))
-        m.d.sync += [w_len.eq(w_next_len), w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
-        w_ready = Signal()
-        m.d.comb += w_ready.eq(w_more & w_len_valid & (wbuf.r_level >= (w_len >> sh)))
+        m.d.sync += [w_len.eq(w_next_len), w_len_words.eq(w_next_len >> sh),
+                     w_last.eq(w_next_len == w_rem), w_len_valid.eq(1)]
+        # "the next chunk is buffered", "a fence read may go", "the next read chunk may go",
+        # from flip-flops (set below): the sequencer's priority does not wait for the
+        # buffer's level and the credits to be compared
+        w_ready, f_ok, r_ok = Signal(), Signal(), Signal()
         w_busy = Signal()
         with m.If(~w_busy):
-            m.d.comb += self.write_cmd.ready.eq(1)
-            with m.If(self.write_cmd.valid):
+            m.d.comb += write_cmd.ready.eq(1)
+            with m.If(write_cmd.valid):
                 with m.If(w_cmd_len != 0):
                     m.d.sync += [w_busy.eq(1), w_addr_cur.eq(w_cmd_addr), w_rem.eq(w_cmd_len),
                                  w_more.eq(1),
@@ -468,14 +483,12 @@ class MemifEngine(wiring.Component):
             m.d.sync += w_rem_in.step()
 
         # ---- the request sequencer (owns hwt2mem) ----
-        seq_words = Signal(w)    # data words left of the current write chunk
-        with m.FSM():
+        seq_words = Signal(range(cw + 1))    # data words left of the current write chunk
+        with m.FSM() as seq:
             with m.State("IDLE"):
-                r_ok = r_want & kinds.w_rdy & (outstanding + r_len_words <= self._credits)
-                f_ok = fence_want & kinds.w_rdy & (outstanding != self._credits)
                 with m.If(w_ready):
                     m.d.sync += [w_cmd.eq((MemifOp.WRITE << lb) | w_len), w_addr.eq(w_addr_cur),
-                                 seq_words.eq(w_len >> sh),
+                                 seq_words.eq(w_len_words),
                                  w_addr_cur.eq(w_addr_cur + w_len), w_rem.eq(w_rem - w_len),
                                  w_more.eq(~w_last),
                                  w_len_valid.eq(0)]
@@ -524,6 +537,26 @@ class MemifEngine(wiring.Component):
                                 m.d.comb += done_now.eq(1)
                                 m.d.sync += w_busy.eq(0)
                         m.next = "IDLE"
+
+        # The sequencer's three conditions are flip-flops, computed a cycle ahead: between
+        # two requests, the words buffered beyond the chunk being sent (``seq_words``, 0
+        # outside W_*) only grow, and so do the free credits and the room in ``kinds``; the
+        # next chunk's length changes only when a request issues or a command loads. So a
+        # condition can be a cycle late but never early, as long as the cycle in which a
+        # request issues clears them all (the sequencer then spends at least two cycles in
+        # R_*/W_* states, in which they are computed again). Early would be wrong: a write
+        # chunk holding hwt2mem for words not yet buffered deadlocks a streaming copy whose
+        # read waits behind it, and a read without credits overflows mem2hwt. The write
+        # condition is computed during the last data word of a chunk, so the chunks of a
+        # long write follow without a gap.
+        issue = seq.ongoing("IDLE") & (w_ready | f_ok | r_ok)
+        m.d.sync += [
+            w_ready.eq(w_more & w_len_valid & ~issue &
+                       (wbuf.r_level >= seq_words + w_len_words)),
+            f_ok.eq(fence_want & kinds.w_rdy & (outstanding != self._credits) & ~issue),
+            r_ok.eq(r_want & kinds.w_rdy & (outstanding + r_len_words <= self._credits) &
+                    ~issue),
+        ]
 
         # ---- read data routing ----
         kind_fence = kinds.r_data[0]
