@@ -1,8 +1,9 @@
 """ReconOS FIFO interfaces and the OSIF/MEMIF FIFO (docs/reconos.md)."""
 
-from amaranth.hdl import Module, ResetInserter
+from amaranth.hdl import DomainRenamer, Elaboratable, Module, ResetInserter, Signal
 from amaranth.lib import wiring
-from amaranth.lib.fifo import AsyncFIFO, SyncFIFO
+from amaranth.lib.fifo import AsyncFIFO
+from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_int, check_power_of_two
@@ -69,11 +70,59 @@ class FifoReadSignature(wiring.Signature):
         return hash((type(self), self.width))
 
 
+class _SyncFifoCore(Elaboratable):
+    """The synchronous ReconOS FIFO: distributed RAM read combinationally, with ``full`` and
+    ``empty`` held in flip-flops.
+
+    :class:`amaranth.lib.fifo.SyncFIFO` derives both flags from its level by comparison, so a
+    writer's decision and the RAM's write enables wait for that comparator; here the flags
+    are computed a cycle ahead from the level and the cycle's push and pop.
+    """
+
+    def __init__(self, width, depth):
+        self.width, self.depth = width, depth
+        self.w_data = Signal(width)
+        self.w_en = Signal()
+        self.full = Signal()
+        self.r_data = Signal(width)
+        self.r_en = Signal()
+        self.empty = Signal(init=1)
+        self.level = Signal(range(depth + 1))
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.storage = storage = Memory(shape=self.width, depth=self.depth, init=[])
+        w_port = storage.write_port()
+        r_port = storage.read_port(domain="comb")
+        w_ptr = Signal(range(self.depth))
+        r_ptr = Signal(range(self.depth))
+        push = Signal()
+        pop = Signal()
+        m.d.comb += [
+            push.eq(self.w_en & ~self.full),
+            pop.eq(self.r_en & ~self.empty),
+            w_port.addr.eq(w_ptr), w_port.data.eq(self.w_data), w_port.en.eq(push),
+            r_port.addr.eq(r_ptr), self.r_data.eq(r_port.data),
+        ]
+        with m.If(push):
+            m.d.sync += w_ptr.eq(w_ptr + 1)
+        with m.If(pop):
+            m.d.sync += r_ptr.eq(r_ptr + 1)
+        with m.If(push & ~pop):
+            m.d.sync += [self.level.eq(self.level + 1), self.empty.eq(0),
+                         self.full.eq(self.level == self.depth - 1)]
+        with m.Elif(pop & ~push):
+            m.d.sync += [self.level.eq(self.level - 1), self.full.eq(0),
+                         self.empty.eq(self.level == 1)]
+        return m
+
+
 class ReconosFifo(wiring.Component):
     """A first-word-fall-through FIFO with ReconOS ports (``reconos_fifo(64)_sync/_async``).
 
     Storage is distributed RAM read combinationally, as in ReconOS: a word pushed in cycle t
-    is at the read side in cycle t+1 (synchronous version).
+    is at the read side in cycle t+1 (synchronous version). In the synchronous version
+    ``full`` and ``empty`` come straight from flip-flops.
 
     Parameters
     ----------
@@ -123,15 +172,26 @@ class ReconosFifo(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         if self._w_domain == self._r_domain:
-            fifo = SyncFIFO(width=self._width, depth=self._depth)
-            fifo = ResetInserter({"sync": self.rst})(fifo)
+            core = _SyncFifoCore(self._width, self._depth)
+            fifo = ResetInserter({"sync": self.rst})(core)
             if self._w_domain != "sync":
-                from amaranth.hdl import DomainRenamer
                 fifo = DomainRenamer(self._w_domain)(fifo)
-        else:
-            fifo = AsyncFIFO(width=self._width, depth=self._depth,
-                             r_domain=self._r_domain, w_domain=self._w_domain)
-            fifo = ResetInserter({self._w_domain: self.rst})(fifo)
+            m.submodules.fifo = fifo
+            m.d.comb += [
+                core.w_data.eq(self.w.data),
+                core.w_en.eq(self.w.we),
+                self.w.full.eq(core.full),
+                self.r.data.eq(core.r_data),
+                self.r.empty.eq(core.empty),
+                core.r_en.eq(self.r.re),
+                self.has_data.eq(~core.empty),
+                self.r_fill.eq(core.level),
+                self.w_free.eq(self._depth - core.level),
+            ]
+            return m
+        fifo = AsyncFIFO(width=self._width, depth=self._depth,
+                         r_domain=self._r_domain, w_domain=self._w_domain)
+        fifo = ResetInserter({self._w_domain: self.rst})(fifo)
         m.submodules.fifo = fifo
         m.d.comb += [
             fifo.w_data.eq(self.w.data),
