@@ -128,16 +128,19 @@ class BytePacker(wiring.Component):
         sent = out.tvalid & out.tready
         with m.If(sent):
             m.d.sync += first.eq(out.tlast)
-        beat_bytes = Mux(count >= B, B, count)
-        left_sent = Signal(range(2 * B + 1))
-        m.d.comb += [left_sent.eq(count - beat_bytes),
-                     chunk.ready.eq(Mux(sent, (left_sent <= B) & ~(final & ~out.tlast),
-                                        (count <= B) & ~final))]
+        # Bytes of ``buf`` at ``count`` and above are zero. A beat that is not its message's
+        # last leaves only with more than B bytes buffered, so it takes exactly B of them and
+        # at most B stay; the last beat takes all. The bytes left after a beat are therefore
+        # ``buf``'s upper half or nothing: no shifter by a byte count is needed.
+        left_sent = Signal(range(B + 1))
+        m.d.comb += [left_sent.eq(Mux(out.tlast, 0, count - B)),
+                     chunk.ready.eq(Mux(sent, out.tlast | ~final, (count <= B) & ~final))]
         data = Cat(byte_mask(chunk.data, B, chunk.len), Const(0, W))
-        shifted = buf >> (beat_bytes * 8)
+        shifted = Cat(Mux(out.tlast, 0, buf[W:]), Const(0, W))
         buf_sent_in = kept(m, (shifted | (data << (left_sent * 8)))[:2 * W], "buf_sent_in")
         buf_sent = kept(m, shifted, "buf_sent")
-        buf_in = kept(m, (buf | (data << (count * 8)))[:2 * W], "buf_in")
+        # a chunk comes in without a beat leaving only while at most B bytes are buffered
+        buf_in = kept(m, (buf | (data << (count[:len(left_sent)] * 8)))[:2 * W], "buf_in")
         count_sent_in = Signal(range(3 * B + 1))
         count_in = Signal(range(3 * B + 1))
         m.d.comb += [count_sent_in.eq(left_sent + chunk.len), count_in.eq(count + chunk.len)]

@@ -1,0 +1,117 @@
+"""Unit tests of hdl.msg.bytes (amaranth.sim): the byte packer under random chunk sizes,
+random idle and random backpressure, against a model of its output written from its contract
+(every beat full except a message's last; a message of no bytes is one beat with tkeep 0)."""
+
+import random
+
+import pytest
+
+from hdl.msg.bytes import BytePacker
+from tb.streamsim import simulate
+
+
+def packed_beats(messages, nbytes):
+    """The beats ``(data, last, keep, first)`` a packer of ``nbytes``-byte beats gives."""
+    beats = []
+    for msg in messages:
+        if not msg:
+            beats.append((0, 1, 0, 1))
+            continue
+        for start in range(0, len(msg), nbytes):
+            part = msg[start:start + nbytes]
+            beats.append((int.from_bytes(bytes(part), "little"),
+                          int(start + nbytes >= len(msg)), (1 << len(part)) - 1,
+                          int(start == 0)))
+    return beats
+
+
+def random_chunks(rng, nbytes, count):
+    """``count`` messages as chunk lists ``(bytes, last)``, with empty chunks anywhere
+    (a message may end with one, or consist of empty chunks only)."""
+    messages, chunks = [], []
+    for _ in range(count):
+        msg = []
+        parts = rng.choice([0, 1, rng.randint(1, 12)])
+        for k in range(parts + 1):
+            n = rng.choice([0, nbytes, rng.randint(0, nbytes)])
+            part = [rng.getrandbits(8) for _ in range(n)]
+            msg += part
+            chunks.append((part, int(k == parts)))
+        messages.append(msg)
+    return messages, chunks
+
+
+def run_packer(nbytes, chunks, *, idle, backpressure, seed, limit):
+    dut = BytePacker(8 * nbytes)
+    rng = random.Random(seed)
+    got = []
+    cycles = {}
+
+    async def source(ctx):
+        ch = dut.chunk
+        for part, last in chunks:
+            while rng.random() < idle:
+                ctx.set(ch.valid, 0)
+                await ctx.tick()
+            # bytes beyond ``len`` are noise the packer must ignore
+            noise = rng.getrandbits(8 * nbytes) << 8 * len(part)
+            ctx.set(ch.data, (int.from_bytes(bytes(part), "little") | noise)
+                    & ((1 << 8 * nbytes) - 1))
+            ctx.set(ch.len, len(part))
+            ctx.set(ch.last, last)
+            ctx.set(ch.valid, 1)
+            await ctx.tick().until(ch.ready)
+        ctx.set(ch.valid, 0)
+        for _ in range(limit):
+            if len(got) >= cycles["want"]:
+                break
+            await ctx.tick()
+
+    async def sink(ctx):
+        out = dut.m_axis
+        cycle = 0
+        sink_rng = random.Random(seed + 1)
+        while True:
+            ready = sink_rng.random() >= backpressure
+            ctx.set(out.tready, ready)
+            *_, valid, data, last, keep, first = await ctx.tick().sample(
+                out.tvalid, out.tdata, out.tlast, out.tkeep, dut.first)
+            cycle += 1
+            if ready and valid:
+                got.append((data, last, keep, first))
+                cycles.setdefault("first", cycle)
+                cycles["last"] = cycle
+
+    return dut, got, cycles, source, sink
+
+
+@pytest.mark.parametrize("nbytes", [1, 2, 8])
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.4, 0.0), (0.0, 0.5), (0.3, 0.6)])
+def test_packer_random(nbytes, idle, backpressure):
+    """Every byte once, in order, in full beats except each message's last; ``first`` on
+    each message's first beat; empty chunks and all-empty messages included."""
+    rng = random.Random(nbytes * 100 + int(10 * idle) + int(100 * backpressure))
+    messages, chunks = random_chunks(rng, nbytes, 60)
+    want = packed_beats(messages, nbytes)
+    dut, got, cycles, source, sink = run_packer(nbytes, chunks, idle=idle,
+                                                backpressure=backpressure, seed=7, limit=5000)
+    cycles["want"] = len(want)
+    simulate(dut, source, background=[sink])
+    assert got == want
+
+
+@pytest.mark.parametrize("nbytes", [1, 8])
+def test_packer_moves_a_beat_per_cycle(nbytes):
+    """Full chunks without pauses: one beat per cycle within a message, and one cycle between
+    messages (a message's first chunk waits until the previous message's last beat leaves)."""
+    rng = random.Random(nbytes)
+    messages = [[rng.getrandbits(8) for _ in range(nbytes * 40)] for _ in range(3)]
+    chunks = [(msg[i:i + nbytes], int(i + nbytes >= len(msg)))
+              for msg in messages for i in range(0, len(msg), nbytes)]
+    want = packed_beats(messages, nbytes)
+    dut, got, cycles, source, sink = run_packer(nbytes, chunks, idle=0.0, backpressure=0.0,
+                                                seed=3, limit=1000)
+    cycles["want"] = len(want)
+    simulate(dut, source, background=[sink])
+    assert got == want
+    assert cycles["last"] - cycles["first"] + 1 == len(want) + len(messages) - 1
