@@ -1,13 +1,14 @@
 """Unit tests of hdl.msg.bytes (amaranth.sim): the byte packer under random chunk sizes,
 random idle and random backpressure, against a model of its output written from its contract
-(every beat full except a message's last; a message of no bytes is one beat with tkeep 0)."""
+(every beat full except a message's last; a message of no bytes is one beat with tkeep 0); the
+byte unpacker under random takes and flushes against the messages' bytes."""
 
 import random
 
 import pytest
 
-from hdl.msg.bytes import BytePacker
-from tb.streamsim import simulate
+from hdl.msg.bytes import BytePacker, ByteUnpacker
+from tb.streamsim import StreamSource, simulate
 
 
 def packed_beats(messages, nbytes):
@@ -115,3 +116,46 @@ def test_packer_moves_a_beat_per_cycle(nbytes):
     simulate(dut, source, background=[sink])
     assert got == want
     assert cycles["last"] - cycles["first"] + 1 == len(want) + len(messages) - 1
+
+
+@pytest.mark.parametrize("nbytes", [1, 8])
+@pytest.mark.parametrize("idle", [0.0, 0.4])
+def test_unpacker_random_takes_and_flushes(nbytes, idle):
+    """The consumer takes random amounts (0..min(avail, B)) at random: the bytes taken are
+    each message's bytes in order; a flush in mid-message drops the rest of that message and
+    the next message starts whole; ``ended`` comes once the last beat is absorbed."""
+    rng = random.Random(nbytes * 10 + int(10 * idle))
+    messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
+                for _ in range(50)]
+    cut = {k: rng.randint(0, len(msg) - 1) for k, msg in enumerate(messages) if k % 5 == 3}
+    beats = [(int.from_bytes(bytes(msg[i:i + nbytes]), "little"), int(i + nbytes >= len(msg)),
+              (1 << len(msg[i:i + nbytes])) - 1)
+             for msg in messages for i in range(0, len(msg), nbytes)]
+    dut = ByteUnpacker(8 * nbytes)
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
+    got = []
+
+    async def consumer(ctx):
+        for k, msg in enumerate(messages):
+            taken = []
+            while True:
+                avail, ended, window = ctx.get(dut.avail), ctx.get(dut.ended), ctx.get(dut.window)
+                assert avail <= 2 * nbytes
+                if (ended and avail == 0) or len(taken) == cut.get(k, -1):
+                    ctx.set(dut.flush, 1)
+                    ctx.set(dut.take, 0)
+                    await ctx.tick()
+                    ctx.set(dut.flush, 0)
+                    break
+                room = cut[k] - len(taken) if k in cut else nbytes
+                amount = rng.randint(0, min(avail, nbytes, room))
+                take = rng.random() < 0.7
+                ctx.set(dut.amount, amount)
+                ctx.set(dut.take, take)
+                if take:
+                    taken += list(window.to_bytes(nbytes, "little")[:amount])
+                await ctx.tick()
+            got.append(taken)
+
+    simulate(dut, consumer, background=[source.run])
+    assert got == [msg[:cut.get(k, len(msg))] for k, msg in enumerate(messages)]

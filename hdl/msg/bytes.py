@@ -220,10 +220,13 @@ class ByteUnpacker(wiring.Component):
         room_taken = ~ended & (left <= B)
         room_kept = ~ended & (count <= B)
         shifted = buf >> (self.amount * 8)
+        # A beat enters only at a byte offset of at most B (``room_*``), so the shifts take
+        # the offsets' low bits: a shifter of B + 1 positions, not 2B + 1.
+        nb = len(self.amount)
         # each next state on a kept wire: ``take`` and ``flush`` only choose
-        buf_taken = kept(m, Mux(s.tvalid & room_taken, shifted | (beat << (left * 8)),
+        buf_taken = kept(m, Mux(s.tvalid & room_taken, shifted | (beat << (left[:nb] * 8)),
                                 shifted)[:2 * W], "buf_taken")
-        buf_kept = kept(m, Mux(s.tvalid & room_kept, buf | (beat << (count * 8)),
+        buf_kept = kept(m, Mux(s.tvalid & room_kept, buf | (beat << (count[:nb] * 8)),
                                buf)[:2 * W], "buf_kept")
 
         with m.If(dropping):
