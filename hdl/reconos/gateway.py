@@ -4,11 +4,13 @@ ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publ
 subscribing a hardware topic needs."""
 
 from amaranth import Cat, Const, Module, Mux, Signal
+from amaranth.lib import data
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
+from ..stream import ReadyRegisterSlice
 from .hwt import HardwareThread
 
 __all__ = ["TopicGatewayThread", "MemoryLayout"]
@@ -289,16 +291,25 @@ class _WordSink:
 
 class _EchoFilter:
     """Drops whole messages whose beat 0 carries ``publisher_id`` + ``offset`` (this
-    thread's own publications) between the topic port and the deserializer."""
+    thread's own publications) between the topic port and the deserializer.
+
+    The beats it passes go through a :class:`~hdl.stream.ReadyRegisterSlice`: the
+    deserializer's ready (its decision to take bytes) reaches the slice's flip-flops, not the
+    filter's state and the topic port's ready, and no cycle is added."""
 
     def __init__(self, m, inp, out, publisher_id, offset):
+        m.submodules.echo_slice = passed = ReadyRegisterSlice(data.StructLayout({
+            "tdata": len(out.tdata), "tkeep": len(out.tkeep), "tlast": 1}))
+        m.d.comb += [out.tdata.eq(passed.o.payload.tdata), out.tkeep.eq(passed.o.payload.tkeep),
+                     out.tlast.eq(passed.o.payload.tlast), out.tvalid.eq(passed.o.valid),
+                     passed.o.ready.eq(out.tready)]
         first = Signal(init=1, name="echo_first")
         dropping = Signal(name="echo_dropping")
         own = first & (inp.tdata[:32] == publisher_id + offset)
         drop = dropping | own
-        m.d.comb += [out.tdata.eq(inp.tdata), out.tkeep.eq(inp.tkeep), out.tlast.eq(inp.tlast),
-                     out.tvalid.eq(inp.tvalid & ~drop),
-                     inp.tready.eq(Mux(drop, 1, out.tready))]
+        m.d.comb += [passed.i.payload.tdata.eq(inp.tdata), passed.i.payload.tkeep.eq(inp.tkeep),
+                     passed.i.payload.tlast.eq(inp.tlast), passed.i.valid.eq(inp.tvalid & ~drop),
+                     inp.tready.eq(Mux(drop, 1, passed.i.ready))]
         with m.If(inp.tvalid & inp.tready):
             m.d.sync += first.eq(inp.tlast)
             with m.If(own & ~inp.tlast):
