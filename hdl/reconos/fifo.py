@@ -71,23 +71,23 @@ class FifoReadSignature(wiring.Signature):
 
 
 class _SyncFifoCore(Elaboratable):
-    """The synchronous ReconOS FIFO: distributed RAM read combinationally, with ``full`` and
-    ``empty`` held in flip-flops.
+    """The synchronous ReconOS FIFO: distributed RAM read combinationally, with the ports of
+    :class:`amaranth.lib.fifo.SyncFIFO` but ``w_rdy`` and ``r_rdy`` held in flip-flops.
 
-    :class:`amaranth.lib.fifo.SyncFIFO` derives both flags from its level by comparison, so a
-    writer's decision and the RAM's write enables wait for that comparator; here the flags
-    are computed a cycle ahead from the level and the cycle's push and pop.
+    ``SyncFIFO`` derives both from its level by comparison, so a writer's decision and the
+    RAM's write enables wait for that comparator; here they are computed a cycle ahead from
+    the level and the cycle's push and pop.
     """
 
     def __init__(self, width, depth):
         self.width, self.depth = width, depth
         self.w_data = Signal(width)
         self.w_en = Signal()
-        self.full = Signal()
+        self.w_rdy = Signal(init=1)
         self.r_data = Signal(width)
         self.r_en = Signal()
-        self.empty = Signal(init=1)
-        self.level = Signal(range(depth + 1))
+        self.r_rdy = Signal()
+        self.level = self.r_level = self.w_level = Signal(range(depth + 1))
 
     def elaborate(self, platform):
         m = Module()
@@ -99,8 +99,8 @@ class _SyncFifoCore(Elaboratable):
         push = Signal()
         pop = Signal()
         m.d.comb += [
-            push.eq(self.w_en & ~self.full),
-            pop.eq(self.r_en & ~self.empty),
+            push.eq(self.w_en & self.w_rdy),
+            pop.eq(self.r_en & self.r_rdy),
             w_port.addr.eq(w_ptr), w_port.data.eq(self.w_data), w_port.en.eq(push),
             r_port.addr.eq(r_ptr), self.r_data.eq(r_port.data),
         ]
@@ -109,11 +109,11 @@ class _SyncFifoCore(Elaboratable):
         with m.If(pop):
             m.d.sync += r_ptr.eq(r_ptr + 1)
         with m.If(push & ~pop):
-            m.d.sync += [self.level.eq(self.level + 1), self.empty.eq(0),
-                         self.full.eq(self.level == self.depth - 1)]
+            m.d.sync += [self.level.eq(self.level + 1), self.r_rdy.eq(1),
+                         self.w_rdy.eq(self.level != self.depth - 1)]
         with m.Elif(pop & ~push):
-            m.d.sync += [self.level.eq(self.level - 1), self.full.eq(0),
-                         self.empty.eq(self.level == 1)]
+            m.d.sync += [self.level.eq(self.level - 1), self.w_rdy.eq(1),
+                         self.r_rdy.eq(self.level != 1)]
         return m
 
 
@@ -172,26 +172,13 @@ class ReconosFifo(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         if self._w_domain == self._r_domain:
-            core = _SyncFifoCore(self._width, self._depth)
-            fifo = ResetInserter({"sync": self.rst})(core)
+            fifo = ResetInserter({"sync": self.rst})(_SyncFifoCore(self._width, self._depth))
             if self._w_domain != "sync":
                 fifo = DomainRenamer(self._w_domain)(fifo)
-            m.submodules.fifo = fifo
-            m.d.comb += [
-                core.w_data.eq(self.w.data),
-                core.w_en.eq(self.w.we),
-                self.w.full.eq(core.full),
-                self.r.data.eq(core.r_data),
-                self.r.empty.eq(core.empty),
-                core.r_en.eq(self.r.re),
-                self.has_data.eq(~core.empty),
-                self.r_fill.eq(core.level),
-                self.w_free.eq(self._depth - core.level),
-            ]
-            return m
-        fifo = AsyncFIFO(width=self._width, depth=self._depth,
-                         r_domain=self._r_domain, w_domain=self._w_domain)
-        fifo = ResetInserter({self._w_domain: self.rst})(fifo)
+        else:
+            fifo = AsyncFIFO(width=self._width, depth=self._depth,
+                             r_domain=self._r_domain, w_domain=self._w_domain)
+            fifo = ResetInserter({self._w_domain: self.rst})(fifo)
         m.submodules.fifo = fifo
         m.d.comb += [
             fifo.w_data.eq(self.w.data),
