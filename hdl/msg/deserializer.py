@@ -10,8 +10,9 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
-from .steps import (RuntimeStep, StepRemainder, count_chunks, count_step, next_element,
-                    pad_bytes, payload_bytes, registered_facts, send_count_chunk)
+from .steps import (RuntimeStep, StepRemainder, chunk_facts, count_chunk_bytes, count_chunks,
+                    count_step, next_element, pad_bytes, payload_bytes, registered_facts,
+                    run_chunk_bytes, send_count_chunk)
 
 __all__ = ["Deserializer", "DeserializerError"]
 
@@ -29,6 +30,52 @@ class DeserializerError(enum.IntEnum):
     #: malformed framing: CDR encapsulation not little-endian CDR, a CDR string count of 0 or a
     #: missing NUL, a ROS 1 length prefix that disagrees with the body
     FORMAT = 5
+
+
+class _Offer:
+    """The bytes the deserializer takes when it takes at its position in the plan (``op``,
+    ``step``), chosen by flip-flops that every move writes with the new position's facts.
+
+    The byte window's shift and room test start from these flip-flops instead of the decode
+    of the position (a choice among every step's chunk sizes). A chunk of a run or of a count
+    offers a constant; a runtime step (``pad``, payload) offers its chunk size, from the
+    registers it keeps (its first chunk's facts, then the shared remainder's)."""
+
+    def __init__(self, steps, bytes_per_beat):
+        B = bytes_per_beat
+        self._const, self._runtime = {}, {}
+        for i, s in enumerate(steps):
+            if s.kind == "run":
+                sizes = run_chunk_bytes(s.nbytes, B)
+            elif s.kind == "count":
+                sizes = count_chunk_bytes(B)
+            elif s.kind in ("loop", "next"):
+                sizes = []
+            else:
+                sizes = []
+                self._runtime[i] = len(self._runtime)
+            self._const.update({(i, j): k for j, k in enumerate(sizes)})
+        const, runtime = self._facts(0, 0)
+        self.const = Signal(range(B + 1), name="offer_const", init=const)
+        self.runtime = Signal(max(1, len(self._runtime)), name="offer_runtime", init=runtime)
+        self.in_runtime = Signal(name="offer_in_runtime", init=runtime != 0)
+
+    def _facts(self, op, step):
+        r = self._runtime.get(op)
+        return self._const.get((op, step), 0), 0 if r is None else 1 << r
+
+    def move(self, op, step=0):
+        """The writes (sync domain) of a move to chunk ``step`` of step ``op``."""
+        const, runtime = self._facts(op, step)
+        return [self.const.eq(const), self.runtime.eq(runtime), self.in_runtime.eq(runtime != 0)]
+
+    def amount(self, first_k, later, remainder_k):
+        """The offered bytes: ``first_k[i]`` is runtime step ``i``'s first chunk size,
+        ``later`` says a runtime step is past its first chunk (``remainder_k`` then)."""
+        first = Const(0, len(self.const))
+        for i, r in self._runtime.items():
+            first = first | Mux(self.runtime[r], first_k[i], 0)
+        return self.const | Mux(later & self.in_runtime, remainder_k, first)
 
 
 class Deserializer(wiring.Component):
@@ -165,22 +212,34 @@ class Deserializer(wiring.Component):
 
         count_errors(m, self.error)
 
+        offer = _Offer(steps, B)
+        first_k = {}
+        for i, s in enumerate(steps):
+            if s.kind == "pad":
+                pad = Signal(len(remainder.value), name=f"pad_bytes{i}")
+                m.d.comb += pad.eq(pad_bytes(plan, s, pos, empty))
+                first_k[i] = chunk_facts(pad, B).k
+            elif s.kind not in ("run", "count", "loop", "next"):
+                first_k[i] = firsts[s.var].k
+        m.d.comb += unpacker.amount.eq(offer.amount(first_k, step != 0, remainder.k))
+
+        def go(i, j=0):
+            """Move to chunk ``j`` of step ``i``."""
+            m.d.sync += [op.eq(i), step.eq(j), *offer.move(i, j)]
+
         def fail(code):
             m.d.comb += [self.error.valid.eq(1), code_now.eq(code), unpacker.flush.eq(1)]
-            m.d.sync += [error_code.eq(code), op.eq(WAIT), step.eq(0)]
+            m.d.sync += error_code.eq(code)
+            go(WAIT)
 
         def take(n):
-            """Take ``n`` bytes, the amount this step offers, in the cycle its condition holds.
-            The amount is given to the unpacker outside the condition (it comes from
-            registers), so the unpacker's shift is not behind the step's decision."""
+            """Take ``n`` bytes, the amount this position offers (``_Offer``), in the cycle
+            its condition holds."""
             m.d.comb += unpacker.take.eq(1)
             m.d.sync += pos.eq(pos + n)
 
-        def offer(n):
-            m.d.comb += unpacker.amount.eq(n)
-
         def next_op(i):
-            m.d.sync += [op.eq(i + 1), step.eq(0)]
+            go(i + 1)
             if i == last_writer:
                 m.d.sync += offered.eq(1)
 
@@ -206,11 +265,11 @@ class Deserializer(wiring.Component):
                     chunk = chunks.get(stream_at[i])
                     if s.kind == "run":
                         self._run(m, s, i, window, avail, ended, fields, count_next,
-                                  length_prefix, step, (offer, take), fail, next_op, chunk)
+                                  length_prefix, step, take, go, fail, next_op, chunk)
                         continue
                     if s.kind == "count":
                         self._count(m, s, i, window, avail, ended, counts, count_next, step,
-                                    (offer, take), fail, next_op, chunk, count_error)
+                                    take, go, fail, next_op, chunk, count_error)
                         continue
                     if s.kind == "loop":
                         top = plan.variables[s.var].into is None
@@ -235,7 +294,8 @@ class Deserializer(wiring.Component):
                         else:
                             def done(i=i):
                                 next_op(i)
-                        next_element(m, s, elements_left[s.var], op, step, done=done)
+                        next_element(m, s, elements_left[s.var], op, step, done=done,
+                                     to_op=go)
                         continue
                     if s.kind == "pad":
                         length, first = pad_bytes(plan, s, pos, empty), None
@@ -248,7 +308,6 @@ class Deserializer(wiring.Component):
                     short = ~have & ended
                     # a payload that ends early ends the message: what it takes then does not
                     # matter (the window is flushed), so the unpacker is offered k
-                    offer(k)
 
                     if s.kind == "pad":
                         # a bad count of the sequence this padding aligns is reported as
@@ -308,7 +367,7 @@ class Deserializer(wiring.Component):
                     ok = ok & (pos - 4 == length_prefix)
                 with m.If(ok):
                     m.d.comb += [unpacker.flush.eq(1), self.done.eq(1)]
-                    m.d.sync += op.eq(WAIT)
+                    go(WAIT)
                     if last_writer < 0:
                         m.d.sync += offered.eq(1)
                 with m.Elif(ended & (avail == 0)):
@@ -321,7 +380,8 @@ class Deserializer(wiring.Component):
                         close(var, lambda: None)
                 with m.If(~unpacker.dropping & (~offered | self.fields.ready)
                           & ~Cat(Const(0, 1), *opened.values()).any()):
-                    m.d.sync += [op.eq(0), step.eq(0), pos.eq(0)]
+                    m.d.sync += pos.eq(0)
+                    go(0)
         return m
 
     def _count_facts(self, m, counts, count_next):
@@ -369,7 +429,7 @@ class Deserializer(wiring.Component):
                                            init=init))
         return empty, bad, bad_code, lengths, firsts
 
-    def _count(self, m, s, i, window, avail, ended, counts, count_next, step, taking, fail,
+    def _count(self, m, s, i, window, avail, ended, counts, count_next, step, take, go, fail,
                next_op, chunk, count_error):
         """The count of an inner variable: read into its register, checked, then written to
         the stream as an element count."""
@@ -379,10 +439,7 @@ class Deserializer(wiring.Component):
         value = (count[:32] - int(v.nul))[:32]
         bad_count, bad_code = count_error(s.var)
 
-        offer, take = taking
-
         def read(j, offset, k, moved):
-            offer(k)
             with m.If(avail >= k):
                 m.d.comb += [count_next[s.var].word_select(offset + x, 8)
                              .eq(window.word_select(x, 8)) for x in range(k)]
@@ -397,20 +454,18 @@ class Deserializer(wiring.Component):
             with m.Else():
                 send_count_chunk(m, chunk, value, offset, k, moved)
 
-        count_step(m, step, B, read, write, then=lambda: next_op(i))
+        count_step(m, step, B, read, write, then=lambda: next_op(i), to_step=lambda j: go(i, j))
 
     def _run(self, m, s, i, window, avail, ended, fields, count_next, length_prefix, step,
-             taking, fail, next_op, chunk=None):
+             take, go, fail, next_op, chunk=None):
         """One ``run`` step: static byte ranges land in fixed registers, checks per byte;
         inside a loop, element bytes go to the stream's ``chunk``."""
         B = self._width // 8
-        offer, take = taking
-        nsteps = -(-s.nbytes // B)
+        sizes = run_chunk_bytes(s.nbytes, B)
+        nsteps = len(sizes)
         with m.Switch(step):
-            for j in range(nsteps):
-                k = min(B, s.nbytes - j * B)
+            for j, k in enumerate(sizes):
                 with m.Case(j):
-                    offer(k)
                     bad_padding, bad_format = [], []
                     writes, count_writes, emitted = [], [], []
                     start = 0
@@ -458,6 +513,6 @@ class Deserializer(wiring.Component):
                                 if j == nsteps - 1:
                                     next_op(i)
                                 else:
-                                    m.d.sync += step.eq(j + 1)
+                                    go(i, j + 1)
                     with m.Elif(ended):
                         fail(DeserializerError.EARLY_END)

@@ -7,8 +7,8 @@ from amaranth.hdl import Const, Mux, Signal, Value
 
 __all__ = ["payload_bytes", "pad_bytes", "chunk_bytes", "last_chunk", "ChunkFacts",
            "chunk_facts", "chunk_facts_value", "StepRemainder",
-           "RuntimeStep", "COUNT_BYTES", "count_chunks",
-           "count_chunk_cases", "count_step", "send_count_chunk", "next_element"]
+           "RuntimeStep", "COUNT_BYTES", "count_chunks", "run_chunk_bytes",
+           "count_chunk_bytes", "count_chunk_cases", "count_step", "send_count_chunk", "next_element"]
 
 #: bytes of an element count on the wire and in a packed element (``uint32``)
 COUNT_BYTES = 4
@@ -195,35 +195,57 @@ def count_chunks(bytes_per_beat):
     return -(-COUNT_BYTES // bytes_per_beat)
 
 
-def count_chunk_cases(m, step, bytes_per_beat, first, chunk_case, *, then):
+def count_chunk_bytes(bytes_per_beat):
+    """Bytes of each chunk of an element count, in order."""
+    return run_chunk_bytes(COUNT_BYTES, bytes_per_beat)
+
+
+def run_chunk_bytes(nbytes, bytes_per_beat):
+    """Bytes of each chunk of a static run of ``nbytes`` bytes: full chunks, then the rest."""
+    B = bytes_per_beat
+    return [min(B, nbytes - j * B) for j in range(-(-nbytes // B))]
+
+
+def _step_writer(m, step, to_step):
+    if to_step is not None:
+        return to_step
+
+    def write(j):
+        m.d.sync += step.eq(j)
+    return write
+
+
+def count_chunk_cases(m, step, bytes_per_beat, first, chunk_case, *, then, to_step=None):
     """Cases ``first`` .. ``first + count_chunks() - 1`` of ``step``, one per chunk of an
     element count: ``chunk_case(j, offset, k, moved)`` writes the logic of chunk ``j``
     (``k`` bytes from byte ``offset``) and calls ``moved()`` in the cycle the chunk moves,
-    which goes to the next case and after the last one to ``then()``."""
+    which goes to the next case (``to_step(case)``, default: write ``step``) and after the
+    last one to ``then()``."""
     B = bytes_per_beat
-    n = count_chunks(B)
-    for j in range(n):
+    to_step = _step_writer(m, step, to_step)
+    sizes = count_chunk_bytes(B)
+    for j, k in enumerate(sizes):
         with m.Case(first + j):
             def moved(j=j):
-                if j == n - 1:
+                if j == len(sizes) - 1:
                     then()
                 else:
-                    m.d.sync += step.eq(first + j + 1)
-            chunk_case(j, j * B, min(B, COUNT_BYTES - j * B), moved)
+                    to_step(first + j + 1)
+            chunk_case(j, j * B, k, moved)
 
 
-def count_step(m, step, bytes_per_beat, read, write, *, then):
+def count_step(m, step, bytes_per_beat, read, write, *, then, to_step=None):
     """The cases of a ``count`` step on ``step``: the count is read in chunks (``read``), then
     written in chunks (``write``; both as ``chunk_case`` of :func:`count_chunk_cases`), then
-    ``then()``."""
+    ``then()``. ``to_step(case)`` moves to another case of ``step`` (default: writes
+    ``step``)."""
     n = count_chunks(bytes_per_beat)
-
-    def to_write():
-        m.d.sync += step.eq(n)
+    to_step = _step_writer(m, step, to_step)
 
     with m.Switch(step):
-        count_chunk_cases(m, step, bytes_per_beat, 0, read, then=to_write)
-        count_chunk_cases(m, step, bytes_per_beat, n, write, then=then)
+        count_chunk_cases(m, step, bytes_per_beat, 0, read, then=lambda: to_step(n),
+                          to_step=to_step)
+        count_chunk_cases(m, step, bytes_per_beat, n, write, then=then, to_step=to_step)
 
 
 def send_count_chunk(m, chunk, value, offset, k, moved):
@@ -235,11 +257,15 @@ def send_count_chunk(m, chunk, value, offset, k, moved):
         moved()
 
 
-def next_element(m, step_desc, elements_left, op, step, *, done):
+def next_element(m, step_desc, elements_left, op, step, *, done, to_op=None):
     """A ``next`` step: back to the first step of the loop body while elements are left,
-    ``done()`` after the last one."""
+    ``done()`` after the last one. ``to_op(index)`` moves to the body's first step (default:
+    writes ``op`` and ``step``)."""
     with m.If(elements_left == 1):
         done()
     with m.Else():
-        m.d.sync += [elements_left.eq(elements_left - 1), op.eq(step_desc.target + 1),
-                     step.eq(0)]
+        m.d.sync += elements_left.eq(elements_left - 1)
+        if to_op is None:
+            m.d.sync += [op.eq(step_desc.target + 1), step.eq(0)]
+        else:
+            to_op(step_desc.target + 1)
