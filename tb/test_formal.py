@@ -66,8 +66,11 @@ class LosslessProperty(Elaboratable):
 SIG = AXIStreamSignature(8, keep=False)
 
 
-def test_register_slice_is_lossless():
-    run_sby("register_slice", LosslessProperty(RegisterSlice(SIG), capacity=2), DEPTH)
+@pytest.mark.parametrize("ready_only,capacity", [(False, 2), (True, 1)],
+                         ids=["full", "ready_only"])
+def test_register_slice_is_lossless(ready_only, capacity):
+    run_sby(f"register_slice{'_ready_only' * ready_only}",
+            LosslessProperty(RegisterSlice(SIG, ready_only=ready_only), capacity=capacity), DEPTH)
 
 
 @pytest.mark.parametrize("depth", FIFO_DEPTHS)

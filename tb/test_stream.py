@@ -73,10 +73,11 @@ def run_lossless(dut, messages, *, idle, backpressure, seed):
 
 
 @pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.4, 0.6)])
-def test_register_slice_random(idle, backpressure):
+@pytest.mark.parametrize("ready_only", [False, True], ids=["full", "ready_only"])
+def test_register_slice_random(ready_only, idle, backpressure):
     rng = random.Random(3)
-    run_lossless(RegisterSlice(AXIStreamSignature(8)), random_messages(rng, 40),
-                 idle=idle, backpressure=backpressure, seed=11)
+    run_lossless(RegisterSlice(AXIStreamSignature(8), ready_only=ready_only),
+                 random_messages(rng, 40), idle=idle, backpressure=backpressure, seed=11)
 
 
 @pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.4, 0.6)])

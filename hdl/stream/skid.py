@@ -7,7 +7,8 @@ from amaranth.lib.wiring import In, Out
 
 from .signature import check_stream_signature
 
-__all__ = ["PayloadRegisterSlice", "ReadyRegisterSlice", "RegisterSlice", "skid_buffer"]
+__all__ = ["PayloadRegisterSlice", "ReadyRegisterSlice", "RegisterSlice", "skid_buffer",
+           "ready_skid"]
 
 
 def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
@@ -28,6 +29,22 @@ def skid_buffer(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_paylo
         m.d.sync += [skid.eq(i_payload), skid_valid.eq(1)]
 
 
+def ready_skid(m, width, i_valid, i_ready, i_payload, o_valid, o_ready, o_payload):
+    """Add to ``m`` half a skid buffer: ``i_ready`` comes from a flip-flop, ``o_valid`` and
+    ``o_payload`` pass through while it is empty (no cycle of latency). A payload offered
+    while the output is not ready is held and offered from there until taken; meanwhile
+    ``i_ready`` is low."""
+    held = Signal(width, reset_less=True)
+    held_valid = Signal()
+    m.d.comb += [i_ready.eq(~held_valid), o_valid.eq(held_valid | i_valid),
+                 o_payload.eq(Mux(held_valid, held, i_payload))]
+    with m.If(held_valid):
+        with m.If(o_ready):
+            m.d.sync += held_valid.eq(0)
+    with m.Elif(i_valid & ~o_ready):
+        m.d.sync += [held.eq(i_payload), held_valid.eq(1)]
+
+
 class RegisterSlice(wiring.Component):
     """Full-throughput AXI4-Stream register slice (skid buffer).
 
@@ -35,10 +52,16 @@ class RegisterSlice(wiring.Component):
     no combinational path crosses the slice. It moves one beat per cycle in steady state, adds
     one cycle of latency, and holds at most two beats.
 
+    With ``ready_only``, only ``s_axis.tready`` comes from a flip-flop (as
+    :class:`ReadyRegisterSlice`): beats pass straight through while the slice is empty, no
+    cycle of latency; the consumer's ready reaches only the slice.
+
     Parameters
     ----------
     signature : AXIStreamSignature
         Stream format of both ports.
+    ready_only : bool
+        Break only the ready path.
 
     Members
     -------
@@ -48,9 +71,10 @@ class RegisterSlice(wiring.Component):
         Output stream, the same beats in the same order.
     """
 
-    def __init__(self, signature):
+    def __init__(self, signature, *, ready_only=False):
         check_stream_signature(signature)
         self._stream = signature
+        self._ready_only = bool(ready_only)
         super().__init__({"s_axis": In(signature), "m_axis": Out(signature)})
 
     def elaborate(self, platform):
@@ -58,8 +82,9 @@ class RegisterSlice(wiring.Component):
         sig = self._stream
         out = Signal(sig.payload_width)
         m.d.comb += sig.unpack(self.m_axis, out)
-        skid_buffer(m, sig.payload_width, self.s_axis.tvalid, self.s_axis.tready,
-                     sig.pack(self.s_axis), self.m_axis.tvalid, self.m_axis.tready, out)
+        (ready_skid if self._ready_only else skid_buffer)(
+            m, sig.payload_width, self.s_axis.tvalid, self.s_axis.tready,
+            sig.pack(self.s_axis), self.m_axis.tvalid, self.m_axis.tready, out)
         return m
 
 
@@ -105,15 +130,7 @@ class ReadyRegisterSlice(PayloadRegisterSlice):
 
     def elaborate(self, platform):
         m = Module()
-        width = Shape.cast(self._shape).width
-        held = Signal(width, reset_less=True)
-        held_valid = Signal()
-        m.d.comb += [self.i.ready.eq(~held_valid),
-                     self.o.valid.eq(held_valid | self.i.valid),
-                     self.o.payload.eq(Mux(held_valid, held, self.i.payload.as_value()))]
-        with m.If(held_valid):
-            with m.If(self.o.ready):
-                m.d.sync += held_valid.eq(0)
-        with m.Elif(self.i.valid & ~self.o.ready):
-            m.d.sync += [held.eq(self.i.payload.as_value()), held_valid.eq(1)]
+        ready_skid(m, Shape.cast(self._shape).width, self.i.valid, self.i.ready,
+                   self.i.payload.as_value(), self.o.valid, self.o.ready,
+                   self.o.payload.as_value())
         return m
