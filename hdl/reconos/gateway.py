@@ -3,14 +3,14 @@ message as a rosidl C struct in memory) and a hardware-mapped topic (the message
 ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publishing or
 subscribing a hardware topic needs."""
 
-from amaranth import Cat, Const, Module, Mux, Signal
-from amaranth.lib import data
+from amaranth import Cat, Const, Module, Mux, ResetInserter, Signal
+from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
 from ..msg.serializer import payload_port
-from ..stream import ReadyRegisterSlice
+from ..stream import RegisterSlice
 from .hwt import HardwareThread
 
 __all__ = ["TopicGatewayThread", "MemoryLayout"]
@@ -293,23 +293,20 @@ class _EchoFilter:
     """Drops whole messages whose beat 0 carries ``publisher_id`` + ``offset`` (this
     thread's own publications) between the topic port and the deserializer.
 
-    The beats it passes go through a :class:`~hdl.stream.ReadyRegisterSlice`: the
+    The beats it passes go through a ready-only :class:`~hdl.stream.RegisterSlice`: the
     deserializer's ready (its decision to take bytes) reaches the slice's flip-flops, not the
     filter's state and the topic port's ready, and no cycle is added."""
 
-    def __init__(self, m, inp, out, publisher_id, offset):
-        m.submodules.echo_slice = passed = ReadyRegisterSlice(data.StructLayout({
-            "tdata": len(out.tdata), "tkeep": len(out.tkeep), "tlast": 1}))
-        m.d.comb += [out.tdata.eq(passed.o.payload.tdata), out.tkeep.eq(passed.o.payload.tkeep),
-                     out.tlast.eq(passed.o.payload.tlast), out.tvalid.eq(passed.o.valid),
-                     passed.o.ready.eq(out.tready)]
+    def __init__(self, m, inp, out, signature, publisher_id, offset):
+        m.submodules.echo_slice = passed = RegisterSlice(signature, ready_only=True)
+        wiring.connect(m, passed.m_axis, out)
         first = Signal(init=1, name="echo_first")
         dropping = Signal(name="echo_dropping")
         own = first & (inp.tdata[:32] == publisher_id + offset)
         drop = dropping | own
-        m.d.comb += [passed.i.payload.tdata.eq(inp.tdata), passed.i.payload.tkeep.eq(inp.tkeep),
-                     passed.i.payload.tlast.eq(inp.tlast), passed.i.valid.eq(inp.tvalid & ~drop),
-                     inp.tready.eq(Mux(drop, 1, passed.i.ready))]
+        m.d.comb += [*signature.copy_payload(passed.s_axis, inp),
+                     passed.s_axis.tvalid.eq(inp.tvalid & ~drop),
+                     inp.tready.eq(Mux(drop, 1, passed.s_axis.tready))]
         with m.If(inp.tvalid & inp.tready):
             m.d.sync += first.eq(inp.tlast)
             with m.If(own & ~inp.tlast):
@@ -327,14 +324,24 @@ class _Receiver:
         plan = thread.plan
         m.submodules.deserializer = self.des = des = Deserializer(
             plan, 64, max_count=thread.max_count)
-        _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis, thread.publisher_id,
+        _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis,
+                    des.signature.members["s_axis"].signature.flip(), thread.publisher_id,
                     plan.publisher_offset)
         self.msg = Signal(64, name="rx_msg")
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
         self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
         self.counts = {v.index: Signal(32, name=f"rx_count{v.index}") for v in plan.variables}
-        self.sources = {v.index: _WordSource(getattr(des, payload_port(v, "m")))
-                        for v in plan.variables}
+        # each payload port through a ready-only slice: the MEMIF write's decision to take a
+        # word reaches the slice's flip-flops, not the deserializer's decision to take bytes.
+        # An error empties the slices: what they hold belongs to the failed message, whose
+        # buffers are completed with zeros and which is not published.
+        self.sources = {}
+        for v in plan.variables:
+            name = payload_port(v, "m")
+            passed = m.submodules[f"rx_slice{v.index}"] = ResetInserter(des.error.valid)(
+                RegisterSlice(des.signature.members[name].signature, ready_only=True))
+            wiring.connect(m, getattr(des, name), passed.s_axis)
+            self.sources[v.index] = _WordSource(passed.m_axis)
         errors = Signal(16, name="rx_errors")
         #: between taking a message's first part and going back to waiting
         self.active = Signal(name="rx_active")
