@@ -202,8 +202,15 @@ def _place(core, entry, seeds, log):
         try:
             result = time_verilog(vfile, entry["top"], clocks, folder, seeds=seeds)
         except TimingError as error:
-            if "did not finish" not in str(error) or k == len(entry["configs"]) - 1:
+            if "did not finish" not in str(error):
                 raise
+            if k == len(entry["configs"]) - 1:
+                # the smallest configuration: the row says which it was and how large
+                size = ", ".join(f"{cells.get(c, 0)} {c}" for c in
+                                 ("LUT4", "CCU2C", "TRELLIS_FF", "DP16KD", "MULT18X18D"))
+                larger = f"; {full['full_config']}: {full['full_does_not_fit']}" if k else ""
+                raise TimingError(f"{label} ({size} after synthesis): {error}{larger}") \
+                    from None
             # it fits, but the router gives up on it: congested, the next one is tried
             why = f"{cells.get('MULT18X18D', 0)} MULT18 fit, but routing took over " \
                   f"{PNR_TIMEOUT_S // 60} min"

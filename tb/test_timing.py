@@ -153,3 +153,31 @@ def test_parts_are_counted_per_instance(tmp_path):
     # three adders take more carry cells than one
     assert parts["core.long"]["lut4"] > parts["core.short"]["lut4"] > 0
     assert parts[""]["lut4"] >= parts["core.short"]["lut4"] + parts["core.long"]["lut4"]
+
+
+def test_a_core_whose_smallest_configuration_does_not_route_names_it(tmp_path, monkeypatch):
+    """bench/timing.py's fallbacks: the full configuration is over the device's block RAM, the
+    smaller one fits but its placement runs out of time; the error names the smaller one, its
+    size after synthesis and why the full one was not placed (the tools are replaced: what
+    is checked is the report, not the flow)."""
+    from bench import timing as bench_timing
+
+    cells = {"full": {"LUT4": 90000, "CCU2C": 100, "TRELLIS_FF": 9, "DP16KD": 483},
+             "small": {"LUT4": 36597, "CCU2C": 14763, "TRELLIS_FF": 42830, "DP16KD": 83,
+                       "MULT18X18D": 112}}
+    monkeypatch.setattr(bench_timing, "FOLDER", tmp_path)
+    monkeypatch.setattr(bench_timing, "synthesise",
+                        lambda vfile, top, folder: (None, cells[vfile.read_text()]))
+
+    def no_time(*args, **kwargs):
+        raise TimingError("nextpnr (seed 1) did not finish within 20 min (log x.log)")
+    monkeypatch.setattr(bench_timing, "time_verilog", no_time)
+    entry = {"top": "t", "clock_mhz": 100,
+             "configs": [("big one", lambda: ("full", {"clk": 100})),
+                         ("small one", lambda: ("small", {"clk": 100}))]}
+    with pytest.raises(TimingError) as raised:
+        bench_timing._place("core", entry, (1,), lambda _: None)
+    assert str(raised.value) == (
+        "small one (36597 LUT4, 14763 CCU2C, 42830 TRELLIS_FF, 83 DP16KD, 112 MULT18X18D "
+        "after synthesis): nextpnr (seed 1) did not finish within 20 min (log x.log); "
+        "big one: 483 of 208 DP16KD")
