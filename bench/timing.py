@@ -14,8 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
 from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, synthesise,
-                         synthesise_parts,
-                         time_verilog)
+                         synthesise_parts, time_verilog, unplaced_reason)
 from tb.harness import ROOT, SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -206,11 +205,8 @@ def _place(core, entry, seeds, log):
                 raise
             if k == len(entry["configs"]) - 1:
                 # the smallest configuration: the row says which it was and how large
-                size = ", ".join(f"{cells.get(c, 0)} {c}" for c in
-                                 ("LUT4", "CCU2C", "TRELLIS_FF", "DP16KD", "MULT18X18D"))
-                larger = f"; {full['full_config']}: {full['full_does_not_fit']}" if k else ""
-                raise TimingError(f"{label} ({size} after synthesis): {error}{larger}") \
-                    from None
+                larger = (full["full_config"], full["full_does_not_fit"]) if k else None
+                raise TimingError(unplaced_reason(label, cells, error, larger)) from None
             # it fits, but the router gives up on it: congested, the next one is tried
             why = f"{cells.get('MULT18X18D', 0)} MULT18 fit, but routing took over " \
                   f"{PNR_TIMEOUT_S // 60} min"

@@ -15,7 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 __all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "place_and_route", "readable_cell",
-           "synthesise", "synthesise_parts", "time_verilog"]
+           "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
@@ -154,6 +154,16 @@ def _critical_path(report, clock):
                 return {"from": readable_cell(steps[0]["from"]["cell"]),
                         "to": readable_cell(steps[-1]["to"]["cell"])}
     return None
+
+
+def unplaced_reason(label, cells, error, larger=None):
+    """Why the configuration ``label`` has no Fmax: its size after synthesis (``cells``, Yosys'
+    cell counts), the flow's ``error``, and ``larger`` = (label, reason) of the configuration
+    tried before it, if any."""
+    size = ", ".join(f"{cells.get(c, 0)} {c}"
+                     for c in ("LUT4", "CCU2C", "TRELLIS_FF", "DP16KD", "MULT18X18D"))
+    before = f"; {larger[0]}: {larger[1]}" if larger else ""
+    return f"{label} ({size} after synthesis): {error}{before}"
 
 
 def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=print):

@@ -10,7 +10,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog
-from host.timing import MARGIN, TimingError, readable_cell, synthesise_parts, time_verilog
+from host.timing import (MARGIN, TimingError, readable_cell, synthesise_parts, time_verilog,
+                         unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -155,29 +156,18 @@ def test_parts_are_counted_per_instance(tmp_path):
     assert parts[""]["lut4"] >= parts["core.short"]["lut4"] + parts["core.long"]["lut4"]
 
 
-def test_a_core_whose_smallest_configuration_does_not_route_names_it(tmp_path, monkeypatch):
-    """bench/timing.py's fallbacks: the full configuration is over the device's block RAM, the
-    smaller one fits but its placement runs out of time; the error names the smaller one, its
-    size after synthesis and why the full one was not placed (the tools are replaced: what
-    is checked is the report, not the flow)."""
-    from bench import timing as bench_timing
 
-    cells = {"full": {"LUT4": 90000, "CCU2C": 100, "TRELLIS_FF": 9, "DP16KD": 483},
-             "small": {"LUT4": 36597, "CCU2C": 14763, "TRELLIS_FF": 42830, "DP16KD": 83,
-                       "MULT18X18D": 112}}
-    monkeypatch.setattr(bench_timing, "FOLDER", tmp_path)
-    monkeypatch.setattr(bench_timing, "synthesise",
-                        lambda vfile, top, folder: (None, cells[vfile.read_text()]))
-
-    def no_time(*args, **kwargs):
-        raise TimingError("nextpnr (seed 1) did not finish within 20 min (log x.log)")
-    monkeypatch.setattr(bench_timing, "time_verilog", no_time)
-    entry = {"top": "t", "clock_mhz": 100,
-             "configs": [("big one", lambda: ("full", {"clk": 100})),
-                         ("small one", lambda: ("small", {"clk": 100}))]}
-    with pytest.raises(TimingError) as raised:
-        bench_timing._place("core", entry, (1,), lambda _: None)
-    assert str(raised.value) == (
+def test_unplaced_reason_names_the_configuration_its_size_and_the_larger_one():
+    """The row of a core whose smallest configuration is not placed (bench/timing.py's
+    fallbacks) says which configuration it was, its size after synthesis and why the one
+    before it was not placed."""
+    cells = {"LUT4": 36597, "CCU2C": 14763, "TRELLIS_FF": 42830, "DP16KD": 83,
+             "MULT18X18D": 112}
+    error = TimingError("nextpnr (seed 1) did not finish within 20 min (log x.log)")
+    assert unplaced_reason("small one", cells, error, ("big one", "483 of 208 DP16KD")) == (
         "small one (36597 LUT4, 14763 CCU2C, 42830 TRELLIS_FF, 83 DP16KD, 112 MULT18X18D "
         "after synthesis): nextpnr (seed 1) did not finish within 20 min (log x.log); "
         "big one: 483 of 208 DP16KD")
+    assert unplaced_reason("only", {"LUT4": 5}, "timed out") == (
+        "only (5 LUT4, 0 CCU2C, 0 TRELLIS_FF, 0 DP16KD, 0 MULT18X18D after synthesis): "
+        "timed out")
