@@ -60,6 +60,11 @@ class _Offer:
         self.runtime = Signal(max(1, len(self._runtime)), name="offer_runtime", init=runtime)
         self.in_runtime = Signal(name="offer_in_runtime", init=runtime != 0)
 
+    @property
+    def runtime_steps(self):
+        """Indices of the runtime steps (pad, payload), in plan order."""
+        return list(self._runtime)
+
     def _facts(self, op, step):
         r = self._runtime.get(op)
         return self._const.get((op, step), 0), 0 if r is None else 1 << r
@@ -213,15 +218,17 @@ class Deserializer(wiring.Component):
         count_errors(m, self.error)
 
         offer = _Offer(steps, B)
-        first_k = {}
-        for i, s in enumerate(steps):
-            if s.kind == "pad":
+        # each runtime step's first chunk facts, once: the offer and the step both read them
+        first_facts = {}
+        for i in offer.runtime_steps:
+            if steps[i].kind == "pad":
                 pad = Signal(len(remainder.value), name=f"pad_bytes{i}")
-                m.d.comb += pad.eq(pad_bytes(plan, s, pos, empty))
-                first_k[i] = chunk_facts(pad, B).k
-            elif s.kind not in ("run", "count", "loop", "next"):
-                first_k[i] = firsts[s.var].k
-        m.d.comb += unpacker.amount.eq(offer.amount(first_k, step != 0, remainder.k))
+                m.d.comb += pad.eq(pad_bytes(plan, steps[i], pos, empty))
+                first_facts[i] = chunk_facts(pad, B)
+            else:
+                first_facts[i] = firsts[steps[i].var]
+        m.d.comb += unpacker.amount.eq(offer.amount(
+            {i: f.k for i, f in first_facts.items()}, step != 0, remainder.k))
 
         def go(i, j=0):
             """Move to chunk ``j`` of step ``i``."""
@@ -297,17 +304,15 @@ class Deserializer(wiring.Component):
                         next_element(m, s, elements_left[s.var], op, step, done=done,
                                      to_op=go)
                         continue
-                    if s.kind == "pad":
-                        length, first = pad_bytes(plan, s, pos, empty), None
-                    else:
-                        length, first = lengths[s.var], firsts[s.var]
+                    first = first_facts[i]
+                    length = pad_bytes(plan, s, pos, empty) if s.kind == "pad" else lengths[s.var]
                     walk = RuntimeStep(m, i, B, step=step, remainder=remainder, length=length,
                                        next_step=next_op, first=first)
                     k, final, advance = walk.k, walk.final, walk.advance
                     have = avail >= k
                     short = ~have & ended
                     # a payload that ends early ends the message: what it takes then does not
-                    # matter (the window is flushed), so the unpacker is offered k
+                    # matter (the window is flushed), so the offer stays k
 
                     if s.kind == "pad":
                         # a bad count of the sequence this padding aligns is reported as
