@@ -1,0 +1,90 @@
+"""``host.simulator.run_top`` on Verilator: the model shows the cocotb side the exported top
+module's signals only (its ports), so Verilator may optimise the component below them;
+``internals=True`` shows every signal. Both models compute the same thing. The cocotb test
+below runs only when the pytest tests of this module start it."""
+
+import json
+import os
+from pathlib import Path
+
+import cocotb
+import pytest
+from amaranth import Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+from cocotb.clock import Clock
+from cocotb.triggers import ClockCycles, RisingEdge
+
+from host.simulator import run_top
+
+
+class _Accumulator(wiring.Component):
+    """Adds ``amount`` into ``total`` on every clock with ``add`` high."""
+
+    add: In(1)
+    amount: In(8)
+    total: Out(16)
+
+    def elaborate(self, platform):
+        m = Module()
+        with m.If(self.add):
+            m.d.sync += self.total.eq(self.total + self.amount)
+        return m
+
+
+class _Top(wiring.Component):
+    """An accumulator in a submodule, its sum on ``total``; ``seen`` is a wire of this
+    component (inside the exported top's ``core``)."""
+
+    add: In(1)
+    amount: In(8)
+    total: Out(16)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.inner = inner = _Accumulator()
+        seen = Signal(8, name="seen")
+        m.d.comb += [inner.add.eq(self.add), inner.amount.eq(self.amount),
+                     self.total.eq(inner.total), seen.eq(self.amount)]
+        return m
+
+
+@cocotb.test()
+async def sums_and_reports_what_it_sees(dut):
+    """Adds 1..10 through the ports; writes the sum and which handles exist to
+    ``ROSGATE_SEEN``."""
+    cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+    dut.aresetn.value = 0
+    dut.add.value = 0
+    await ClockCycles(dut.aclk, 2)
+    dut.aresetn.value = 1
+    for n in range(1, 11):
+        dut.add.value, dut.amount.value = 1, n
+        await RisingEdge(dut.aclk)
+    dut.add.value = 0
+    await ClockCycles(dut.aclk, 2)
+
+    def visible(*path):
+        handle = dut
+        try:
+            for name in path:
+                handle = getattr(handle, name)
+            return True
+        except AttributeError:
+            return False
+    Path(os.environ["ROSGATE_SEEN"]).write_text(json.dumps({
+        "total": int(dut.total.value), "port": visible("amount"),
+        "seen": visible("core", "seen"), "inner": visible("core", "inner", "total")}))
+
+
+@pytest.mark.parametrize("internals", [False, True], ids=["top_only", "internals"])
+def test_verilator_model_shows_the_top_module(tmp_path, internals):
+    seen = tmp_path / "seen.json"
+    run_top(__name__, "accumulator_top", _Top(), "verilator", tmp_path / "build",
+            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, quick=True,
+            log_file=tmp_path / "sim.log", internals=internals)
+    report = json.loads(seen.read_text())
+    assert report["total"] == sum(range(1, 11))
+    assert report["port"] is True
+    assert report["seen"] is internals and report["inner"] is internals
+    assert (tmp_path / "build" / "accumulator_top.vlt").exists() is not internals
