@@ -11,7 +11,8 @@ next frame is right; a map to infinity is refused."""
 import numpy as np
 import pytest
 
-from hdl.kernels.warp import PerspectiveWarp
+from hdl.kernels.warp import (COORD_FRACTION_BITS, QUOTIENT_BITS, CoordinateDivider,
+                             PerspectiveWarp)
 from hdl.params import ParameterError
 from tb.models import image as golden
 
@@ -112,3 +113,60 @@ def test_map_to_infinity_refused():
     with pytest.raises(ParameterError, match="3 rows of 3"):
         PerspectiveWarp([[1, 0], [0, 1]], src_width=SW, src_height=SH, dst_width=DW,
                         dst_height=DH)
+
+
+def divide_model(n, w):
+    """``floor(2**16 n / w)`` as the divider defines it, and whether its magnitude reaches
+    ``2**QUOTIENT_BITS`` (outside)."""
+    mag = (abs(n) << COORD_FRACTION_BITS) // w
+    exact = (abs(n) << COORD_FRACTION_BITS) % w == 0
+    q = mag if n >= 0 else -mag - (0 if exact else 1)
+    return q, mag >= 1 << QUOTIENT_BITS
+
+
+def test_coordinate_divider_shares_its_denominator():
+    """Pairs of numerators over one denominator, a new set every cycle: both quotients equal
+    exact integer division (floor, negative numerators included), ``outside`` where the
+    quotient's magnitude does not fit, each ``QUOTIENT_BITS + 1`` cycles after its inputs."""
+    width = 40
+    dut = CoordinateDivider(width, 2)
+    rng = np.random.default_rng(11)
+    cases = []
+    for _ in range(120):
+        w = int(rng.integers(1, 1 << int(rng.integers(1, width - 1))))
+        ns = [int(rng.integers(-(1 << (width - 2)), 1 << (width - 2))) for _ in range(2)]
+        cases.append((ns, w))
+    cases += [([w * 5, -w * 5], w) for w in (1, 3, 1 << 20)]            # exact quotients
+    cases += [([(1 << 30) - 1, -(1 << 30)], 1 << 18)]                    # near the limit
+    got = []
+
+    async def drive(ctx):
+        for ns, w in cases:
+            ctx.set(dut.n[0], ns[0])
+            ctx.set(dut.n[1], ns[1])
+            ctx.set(dut.w, w)
+            ctx.set(dut.valid, 1)
+            await ctx.tick()
+        ctx.set(dut.valid, 0)
+        await ctx.tick().repeat(QUOTIENT_BITS + 3)
+
+    async def watch(ctx):
+        async for _, _, valid, q0, q1, o0, o1 in ctx.tick().sample(
+                dut.q_valid, dut.q[0], dut.q[1], dut.outside[0], dut.outside[1]):
+            if valid:
+                got.append(((q0, o0), (q1, o1)))
+
+    simulate(dut, drive, background=[watch])
+    assert len(got) == len(cases)
+    for (ns, w), answer in zip(cases, got):
+        for n, (q, outside) in zip(ns, answer):
+            want, want_outside = divide_model(n, w)
+            assert bool(outside) == want_outside, (n, w)
+            if not want_outside:
+                assert q == want, (n, w, q, want)
+
+
+@pytest.mark.parametrize("width, count", [(1, 2), (40, 0), (40, "2")])
+def test_coordinate_divider_refuses_bad_parameters(width, count):
+    with pytest.raises(ParameterError, match="width|count"):
+        CoordinateDivider(width, count)

@@ -12,7 +12,8 @@ from ..params import ParameterError, check_int
 from ..stream import StreamFIFO
 from .image import FrameGuard, check_image_params, image_stream_signature
 
-__all__ = ["PerspectiveWarp", "CoordinateDivider", "MATRIX_FRACTION_BITS", "COORD_FRACTION_BITS"]
+__all__ = ["PerspectiveWarp", "CoordinateDivider", "MATRIX_FRACTION_BITS", "COORD_FRACTION_BITS",
+           "QUOTIENT_BITS"]
 
 #: fraction bits of the matrix entries (each double is rounded to a multiple of 2**-64)
 MATRIX_FRACTION_BITS = 64
@@ -34,43 +35,75 @@ def _fixed(value, what):
 
 
 class CoordinateDivider(wiring.Component):
-    """``floor(2**16 n / w)`` for ``w > 0``, pipelined, one division per cycle: restoring
-    division of ``|n| 2**16`` by ``w``, one quotient bit per stage, the sign after.
-    ``outside`` when the magnitude reaches ``2**QUOTIENT_BITS``. A
-    :class:`PerspectiveWarp` has two per pixel lane (its ``div_x<p>`` and ``div_y<p>``).
+    """``floor(2**16 n / w)`` for each of ``count`` numerators over one ``w > 0``, pipelined,
+    one set of divisions per cycle: restoring division of ``|n| 2**16`` by ``w``, one quotient
+    bit per stage, the sign after. ``outside[i]`` when the magnitude of quotient ``i``
+    reaches ``2**QUOTIENT_BITS``. A :class:`PerspectiveWarp` has one per pixel lane (its
+    ``div<p>``), for the lane's x and y over their common denominator: the denominator's
+    pipeline registers serve both.
 
     Parameters
     ----------
     width : int
-        Bits of ``n`` (signed) and ``w``.
+        Bits of each ``n`` (signed) and of ``w``.
+    count : int
+        Numerators sharing the denominator.
+
+    Members
+    -------
+    n : In(signed(width)).array(count)
+        Numerators, taken with ``w`` while ``valid``.
+    w : In(width)
+        The denominator, positive.
+    valid : In(1)
+    q : Out(signed(QUOTIENT_BITS + 1)).array(count)
+        Quotients, ``QUOTIENT_BITS + 1`` cycles after their inputs.
+    outside : Out(1).array(count)
+    q_valid : Out(1)
+        ``valid``, delayed with the quotients.
     """
 
-    def __init__(self, width):
+    def __init__(self, width, count=2):
+        check_int("width", width, 2, 1 << 12)
+        check_int("count", count, 1, 16)
         self._width = width
-        super().__init__({"n": In(signed(width)), "w": In(width), "valid": In(1),
-                          "q": Out(signed(QUOTIENT_BITS + 1)), "outside": Out(1),
-                          "q_valid": Out(1)})
+        self._count = count
+        super().__init__({"n": In(signed(width)).array(count), "w": In(width),
+                          "valid": In(1), "q": Out(signed(QUOTIENT_BITS + 1)).array(count),
+                          "outside": Out(1).array(count), "q_valid": Out(1)})
 
     def elaborate(self, platform):
         m = Module()
         W, Q, F = self._width, QUOTIENT_BITS, COORD_FRACTION_BITS
-        neg = self.n < 0
-        mag = Signal(W + F)
-        m.d.comb += mag.eq(Mux(neg, -self.n, self.n) << F)
-        rem, den = Signal(W + F), Signal(W)
-        quo, sign, out, v = Signal(Q), Signal(), Signal(), Signal()
-        m.d.sync += [rem.eq(mag), den.eq(self.w), sign.eq(neg), v.eq(self.valid),
-                     out.eq(mag >= (self.w << Q))]
+        den, v = Signal(W), Signal()
+        m.d.sync += [den.eq(self.w), v.eq(self.valid)]
+        # per numerator: remainder, quotient so far, sign, outside
+        lanes = []
+        for i in range(self._count):
+            neg = self.n[i] < 0
+            mag = Signal(W + F, name=f"mag{i}")
+            m.d.comb += mag.eq(Mux(neg, -self.n[i], self.n[i]) << F)
+            rem, quo, sign, out = (Signal(W + F, name=f"rem{i}"), Signal(Q, name=f"quo{i}"),
+                                   Signal(name=f"sign{i}"), Signal(name=f"out{i}"))
+            m.d.sync += [rem.eq(mag), sign.eq(neg), out.eq(mag >= (self.w << Q))]
+            lanes.append((rem, quo, sign, out))
         for k in reversed(range(Q)):
             shifted = den << k
-            ge = rem >= shifted
-            rem_n, den_n, quo_n = Signal(W + F), Signal(W), Signal(Q)
-            sign_n, out_n, v_n = Signal(), Signal(), Signal()
-            m.d.sync += [rem_n.eq(Mux(ge, rem - shifted, rem)), den_n.eq(den),
-                         quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out), v_n.eq(v)]
-            rem, den, quo, sign, out, v = rem_n, den_n, quo_n, sign_n, out_n, v_n
-        m.d.comb += [self.q.eq(Mux(sign, -quo - (rem != 0), quo)), self.outside.eq(out),
-                     self.q_valid.eq(v)]
+            den_n, v_n = Signal(W), Signal()
+            m.d.sync += [den_n.eq(den), v_n.eq(v)]
+            stepped = []
+            for i, (rem, quo, sign, out) in enumerate(lanes):
+                ge = rem >= shifted
+                rem_n, quo_n = Signal(W + F), Signal(Q)
+                sign_n, out_n = Signal(), Signal()
+                m.d.sync += [rem_n.eq(Mux(ge, rem - shifted, rem)),
+                             quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out)]
+                stepped.append((rem_n, quo_n, sign_n, out_n))
+            den, v, lanes = den_n, v_n, stepped
+        for i, (rem, quo, sign, out) in enumerate(lanes):
+            m.d.comb += [self.q[i].eq(Mux(sign, -quo - (rem != 0), quo)),
+                         self.outside[i].eq(out)]
+        m.d.comb += self.q_valid.eq(v)
         return m
 
 
@@ -83,9 +116,9 @@ class PerspectiveWarp(wiring.Component):
     per beat. Each destination pixel's source position is ``((m0 x + m1 y + m2) / (m6 x + m7
     y + m8), (m3 x + m4 y + m5) / (...))``, computed exactly with the inverse matrix's entries
     as multiples of ``2**-64`` and truncated to ``2**-16`` pixel (a pipelined divider per
-    coordinate and lane). The value is the bilinear mix of the four neighbours with the
-    fractions' products as weights (they sum to ``2**32``), rounded to nearest; neighbours
-    outside the source count as 0.
+    lane, for x and y over their common denominator). The value is the bilinear mix of the
+    four neighbours with the fractions' products as weights (they sum to ``2**32``), rounded
+    to nearest; neighbours outside the source count as 0.
 
     OpenCV (5.x) computes the position and the mix in float32 and rounds the result, so the
     two differ by at most 1, and only in a pixel whose value lies within float32's error of a
@@ -161,17 +194,17 @@ class PerspectiveWarp(wiring.Component):
         # a numerator m x + m' y + m'' with x, y < 2**13
         return max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
 
-    #: the names of the :class:`CoordinateDivider` submodules, ``div_x<p>`` and ``div_y<p>``
-    #: (a regular expression over a hierarchical module name)
-    DIVIDER_SUBMODULES = r"\.div_[xy]\d+$"
+    #: the names of the :class:`CoordinateDivider` submodules, ``div<p>`` (a regular
+    #: expression over a hierarchical module name)
+    DIVIDER_SUBMODULES = r"\.div\d+$"
 
     def coordinate_divider(self):
         """A new :class:`CoordinateDivider` as this warp instantiates it
-        :attr:`coordinate_divider_count` times (one per coordinate and pixel lane): resource
+        :attr:`coordinate_divider_count` times (one per pixel lane, for x and y): resource
         estimates synthesise it once."""
-        return CoordinateDivider(self._divider_width)
+        return CoordinateDivider(self._divider_width, 2)
 
-    coordinate_divider_count = property(lambda self: 2 * self._p)
+    coordinate_divider_count = property(lambda self: self._p)
 
     def elaborate(self, platform):
         m = Module()
@@ -246,11 +279,10 @@ class PerspectiveWarp(wiring.Component):
 
         divs = []
         for p in range(P):
-            pair = [self.coordinate_divider(), self.coordinate_divider()]
-            m.submodules[f"div_x{p}"], m.submodules[f"div_y{p}"] = pair
-            for k, d in enumerate(pair):
-                m.d.comb += [d.n.eq(x_lane[p][k]), d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
-            divs.append(pair)
+            m.submodules[f"div{p}"] = d = self.coordinate_divider()
+            m.d.comb += [d.n[0].eq(x_lane[p][0]), d.n[1].eq(x_lane[p][1]),
+                         d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
+            divs.append(d)
         with m.If(issue):
             with m.If(dx + P == dw):
                 m.d.sync += [dx.eq(0), dy.eq(dy + 1)]
@@ -277,17 +309,17 @@ class PerspectiveWarp(wiring.Component):
 
         # stage A: pixel, weights, bank addresses and which neighbours are inside
         a_valid = Signal()
-        m.d.sync += a_valid.eq(divs[0][0].q_valid)
+        m.d.sync += a_valid.eq(divs[0].q_valid)
         lanes = []
         for p in range(P):
-            qx, qy = divs[p][0], divs[p][1]
+            d = divs[p]
             sx, sy = Signal(signed(QUOTIENT_BITS), name=f"sx{p}"), \
                 Signal(signed(QUOTIENT_BITS), name=f"sy{p}")
             F = COORD_FRACTION_BITS
             ax, ay = Signal(F, name=f"ax{p}"), Signal(F, name=f"ay{p}")
             away = Signal(name=f"away{p}")
-            m.d.sync += [sx.eq(qx.q >> F), sy.eq(qy.q >> F), ax.eq(qx.q[:F]), ay.eq(qy.q[:F]),
-                         away.eq(qx.outside | qy.outside)]
+            m.d.sync += [sx.eq(d.q[0] >> F), sy.eq(d.q[1] >> F), ax.eq(d.q[0][:F]),
+                         ay.eq(d.q[1][:F]), away.eq(d.outside[0] | d.outside[1])]
             lanes.append((sx, sy, ax, ay, away))
         flags_a = Signal(2)
         m.d.sync += flags_a.eq(flags)
