@@ -242,7 +242,8 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     # processes, and each module gets its own results file
     lock = open(build_dir / ".build.lock", "w")
     fcntl.flock(lock, fcntl.LOCK_EX)
-    runner = _top_only_runner() if sim == "verilator" and not internals else get_runner(sim)
+    top_only = sim == "verilator" and not internals
+    runner = _top_only_runner() if top_only else get_runner(sim)
     build_args, test_args, plusargs = [], [], []
     fst = build_dir / f"{top}.fst"
     # waveform builds get their own object folder, so switching waves never reuses the other
@@ -257,7 +258,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     try:
         vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus")
         sources = [vfile]
-        if sim == "verilator" and not internals:
+        if top_only:
             from cocotb_tools.runner import VerilatorControlFile
             control = build_dir / f"{top}.vlt"
             write_if_changed(control, verilator_public_config(top))
