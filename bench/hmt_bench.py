@@ -5,9 +5,9 @@ import json
 import os
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, Timer
 
+from host.simulator import start_clock
 from tb.harness import bench_params
 
 CLOCK_NS = 10
@@ -23,7 +23,7 @@ async def measure(dut):
     params = bench_params()
     pubs, subs = params["pubs"], params["subs"]
     cases = json.loads(os.environ["ROSGATE_BENCH_CASES"])
-    cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+    start_clock(dut.aclk, CLOCK_NS)
     dut.start.value = 0
     for i in range(pubs):
         getattr(dut, f"beats{i}").value = 1

@@ -13,7 +13,6 @@ import zlib
 from pathlib import Path
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 
 from hdl.net.frames import (
@@ -31,6 +30,7 @@ from hdl.net.frames import (
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1.registers import PHASES
 from host.ros1.rbcp import RbcpClient, rbcp_reply_ok
+from host.simulator import start_clock
 from tb.models.tcp_peer import TcpPeerModel, udp_frame
 from tb.net_bench_tops import WORD_BYTES, pattern_bytes
 from host.pcap import SimCapture
@@ -200,7 +200,7 @@ class LinkRbcp(RbcpClient):
 
 
 async def setup(dut):
-    cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+    start_clock(dut.aclk, CLOCK_NS)
     peer = BenchPeer(dut)
     await reset_aresetn(dut)
     cocotb.start_soon(peer.link.run())

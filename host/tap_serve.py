@@ -10,11 +10,10 @@ import time
 from pathlib import Path
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles
 from cocotbext.eth import GmiiSink, GmiiSource
 
-from host.simulator import top_params
+from host.simulator import start_clock, top_params
 from host.tap import TapBridge
 
 #: cycles between looks at the stop file and status updates
@@ -26,7 +25,7 @@ async def serve(dut):
     """Run the design on the TAP device until the stop file appears."""
     params = top_params()
     port = params["port"]
-    cocotb.start_soon(Clock(dut.aclk, 8, unit="ns").start())
+    start_clock(dut.aclk, 8)
 
     def pin(name):
         return getattr(dut, f"{port}_{name}")

@@ -9,13 +9,13 @@ import sys
 
 import cocotb
 import numpy as np
-from cocotb.clock import Clock
 from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
 from gen.av_chain import scaled_params
 from gen.tops import build_av_chain
 from host import autorace
+from host.simulator import start_clock
 from tb.harness import ROOT, bench_params
 from tb.streams import PacketSink, bursty_pauses, random_pauses, reset_aresetn
 
@@ -41,7 +41,7 @@ class AvChainTB:
         self.camera_size, self.bev_size = tuple(self.params["camera"]), tuple(self.params["bev"])
         self.rng = random.Random(cocotb.RANDOM_SEED)
         self.log = logging.getLogger("cocotb.tb")
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.frame_in = []           # cycle of each camera frame's last beat
         self.cycle = 0
         self._start_sinks()

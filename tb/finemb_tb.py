@@ -5,7 +5,6 @@ import logging
 import struct
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 from cocotbext.eth import GmiiFrame, GmiiSink, GmiiSource
 from scapy.layers.inet import IP
@@ -18,6 +17,7 @@ from hdl.finemb.protocol import (
     ReinitReason,
 )
 from hdl.net.frames import int_to_mac, mac_to_int
+from host.simulator import start_clock
 
 from .harness import ROOT, bench_params
 from .models.finemb import body_of, finemb_frame, parse_finemb
@@ -77,7 +77,7 @@ class NodeTB:
         self.dut = dut
         self.params = bench_params()
         self.io = load_io_description(self.params["io"])
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.ports = [Port(dut, "port0"), Port(dut, "port1")]
         dut.counter_index.value = 0
         self.cycle = 0
@@ -204,7 +204,7 @@ class LineMaster:
         self.dut = dut
         self.n = nodes
         self.io = load_io_description(io)
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.port = Port(dut, "port0")
         self.seq = 0
         self.nodes = {}           # node id -> {"mac", "ip", "model", "serial"}

@@ -4,11 +4,11 @@ port models, the word formats of their inputs and the runs the tests share."""
 import random
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamFrame
 
 from hdl.kernels.pid import PID_INPUT
+from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.streams import StreamPort, count_pulses, reset_aresetn
 
@@ -23,7 +23,7 @@ class ControlTB:
         self.dut = dut
         self.params = bench_params()
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.ports = {name: StreamPort(dut, name, random.Random(self.rng.random()))
                       for name, spec in self.params["kernels"].items()
                       if spec["kind"] != "servo_pwm"}     # PWM pins, no output stream

@@ -6,11 +6,11 @@ import random
 
 import cocotb
 import numpy as np
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
 from hdl.kernels.colour import TRAFFIC_DETECTION
+from host.simulator import start_clock
 from tb.harness import amount, bench_params
 from tb.models import image as golden
 from tb.streams import StreamPort, count_pulses, reset_aresetn
@@ -191,7 +191,7 @@ class KernelsTB:
         self.params = bench_params()
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         self.log = logging.getLogger("cocotb.tb")
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.kernels = {name: KernelPort(self, name, spec)
                         for name, spec in self.params["kernels"].items()}
         self.cycle = 0

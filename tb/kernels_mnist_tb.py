@@ -4,12 +4,12 @@ held-out digits of gen.mnist."""
 import random
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamFrame
 
 from gen import mnist
 from hdl.kernels.mnist import MNIST_RESULT
+from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.streams import StreamPort, count_pulses, reset_aresetn
 
@@ -30,7 +30,7 @@ class MnistTB:
         self.dut = dut
         self.params = bench_params()
         self.rng = random.Random(cocotb.RANDOM_SEED)
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.port = StreamPort(dut, "cnn", self.rng)
         self.source, self.sink = self.port.source, self.port.sink
         self.errors = {"short": 0, "long": 0}

@@ -6,13 +6,13 @@ import os
 import random
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
 from gen.msg import MessageLibrary
 from gen.tops import message_plan
 from hdl.msg import payload_port
+from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.models.messages import golden_store, random_sequence, random_value, to_rosbags
 from tb.models.msgstream import (
@@ -79,7 +79,7 @@ class MsgCodecTB:
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         self.log = logging.getLogger("cocotb.tb")
         clock = dut.aclk
-        cocotb.start_soon(Clock(clock, CLOCK_NS, unit="ns").start())
+        start_clock(clock, CLOCK_NS)
 
         def source(prefix):
             port = AxiStreamSource(AxiStreamBus.from_prefix(dut, prefix), clock, dut.aresetn,

@@ -4,7 +4,6 @@ cocotbext-eth, scapy frames, an RBCP register-bus model and counter decoding."""
 import logging
 
 import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, First, RisingEdge, Timer
 from cocotbext.eth import GmiiFrame, GmiiSink, GmiiSource
 from scapy.layers.inet import ICMP, IP, TCP, UDP
@@ -14,6 +13,7 @@ from scapy.packet import Raw
 from hdl.net.frames import DEFAULT_RBCP_PORT, int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
+from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
@@ -95,7 +95,7 @@ class NetTB:
     def __init__(self, dut):
         self.dut = dut
         self.params = bench_params()
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.source = GmiiSource(dut.gmii_rxd, dut.gmii_rx_er, dut.gmii_rx_dv, dut.aclk,
                                  dut.aresetn, reset_active_level=False)
         self.sink = GmiiSink(dut.gmii_txd, dut.gmii_tx_er, dut.gmii_tx_en, dut.aclk,

@@ -8,10 +8,10 @@ import random
 
 import cocotb
 import numpy as np
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
+from host.simulator import start_clock
 from tb.harness import ROOT, bench_params
 from tb.models.messages import golden_store
 from tb.models.services import parse_header
@@ -41,7 +41,7 @@ class ServicesTB:
         self.golden = golden_store("ros2_humble", [ROOT / d for d in self.params["msg_dirs"]])
         self.interface = self.params["interface"]
         clock = dut.aclk
-        cocotb.start_soon(Clock(clock, CLOCK_NS, unit="ns").start())
+        start_clock(clock, CLOCK_NS)
         self.service = self.params["server"] == "sort"
         body_in = ("request",) if self.service else ("goal",)
         body_out = ("reply",) if self.service else ("feedback", "result")

@@ -123,10 +123,14 @@ class PacketSink(_Pausable):
         self.tready.value = ready
 
     async def _run(self):
+        driven = None
+        edge = RisingEdge(self.clock)
         while True:
             ready = not self.paused()
-            self.tready.value = int(ready)
-            await RisingEdge(self.clock)
+            if ready != driven:
+                self.tready.value = int(ready)
+                driven = ready
+            await edge
             self.cycle += 1
             if self.aresetn is not None and self.aresetn.value == 0:
                 self.current = Packet()

@@ -11,10 +11,10 @@ import random
 
 import cocotb
 import pytest
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, Combine, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
+from host.simulator import start_clock
 from .harness import bench_params, run_bench
 from .projects import external_threads_project
 from .streams import random_pauses
@@ -27,7 +27,7 @@ class TopicPortsTB:
     def __init__(self, dut, seed):
         self.dut = dut
         self.rng = random.Random(seed)
-        cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+        start_clock(dut.aclk, 10)
         for name in bench_params()["idle_inputs"]:
             getattr(dut, name).value = 0
         self.sources = {k: AxiStreamSource(AxiStreamBus.from_prefix(dut, p), dut.aclk,

@@ -12,10 +12,9 @@ import pytest
 from amaranth import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from host.simulator import run_top
+from host.simulator import run_top, start_clock
 
 
 class _Accumulator(wiring.Component):
@@ -53,7 +52,7 @@ class _Top(wiring.Component):
 async def sums_and_reports_what_it_sees(dut):
     """Adds 1..10 through the ports; writes the sum and which handles exist to
     ``ROSGATE_SEEN``."""
-    cocotb.start_soon(Clock(dut.aclk, 10, unit="ns").start())
+    start_clock(dut.aclk, 10)
     dut.aresetn.value = 0
     dut.add.value = 0
     await ClockCycles(dut.aclk, 2)

@@ -7,10 +7,10 @@ import random
 
 import cocotb
 import pytest
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles, RisingEdge, gather, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
+from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.models.topic import TopicScoreboard, random_lengths, tagged_message
 
@@ -104,7 +104,7 @@ class TopicTB:
         self.monitor = self.params.get("monitor", True)
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         self.log = logging.getLogger("cocotb.tb")
-        cocotb.start_soon(Clock(dut.aclk, CLOCK_NS, unit="ns").start())
+        start_clock(dut.aclk, CLOCK_NS)
         self.sources = [AxiStreamSource(AxiStreamBus.from_prefix(dut, f"s{i}_axis"), dut.aclk,
                                         dut.aresetn, reset_active_level=False)
                         for i in range(self.pubs)]

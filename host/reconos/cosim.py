@@ -3,12 +3,11 @@ AXI4-Lite masters of the CPU, the process memory behind the AXI4 port, and the r
 
 import logging
 
-import cocotb
-from cocotb.clock import Clock
 from cocotb.triggers import ClockCycles
 from cocotbext.axi import AxiBus, AxiLiteBus, AxiLiteMaster, AxiRam
 
 from hdl.reconos.protocol import arch as get_arch
+from host.simulator import start_clock
 
 from .broker import Broker
 from .memory import ProcessMemory
@@ -48,9 +47,9 @@ class ReconosCosim:
         self.dut = dut
         self.arch = get_arch(arch)
         self.num_hwts = num_hwts
-        cocotb.start_soon(Clock(dut.aclk, clock_ns, unit="ns").start())
+        start_clock(dut.aclk, clock_ns)
         for i, period in (slot_clocks or {}).items():
-            cocotb.start_soon(Clock(getattr(dut, f"slot{i}_clk"), period, unit="ns").start())
+            start_clock(getattr(dut, f"slot{i}_clk"), period)
         self.osif, self.intc, self.proc = (
             AxiLiteMaster(AxiLiteBus.from_prefix(dut, f"s_axi_{name}"), dut.aclk, dut.aresetn,
                           reset_active_level=False) for name in ("osif", "intc", "proc"))
