@@ -16,7 +16,7 @@ import cocotb
 from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamFrame
 
-from tb.harness import cocotb_bench
+from tb.harness import amount, cocotb_bench
 from tb.models import inverse_kinematics as ik_model
 from tb.models.ball_control import (BallControlModel, RollingBall, leg_words, servo_pulse,
                                     tilt_radians, word_tilts)
@@ -52,12 +52,16 @@ async def all_kernels_under_idle_and_backpressure(dut):
     tb.set_pauses(0.3, 0.3)
     await tb.load_pid(256, 64, 32)
     rng = tb.rng
-    blocks = [[rng.randrange(1 << 32) for _ in range(2048)],
-              [rng.choice([0, 7, 0xFFFFFFFF]) for _ in range(2048)]]
+    # one block of random values mixed with repeats of 0, 7 and 0xFFFFFFFF; make test-full
+    # also sorts an all-random and an all-duplicates block
+    mixed = [rng.randrange(1 << 32) if rng.random() < 0.5 else rng.choice([0, 7, 0xFFFFFFFF])
+             for _ in range(2048)]
+    blocks = [mixed] + amount([], [[rng.randrange(1 << 32) for _ in range(2048)],
+                                   [rng.choice([0, 7, 0xFFFFFFFF]) for _ in range(2048)]])
     vector = [(1000, pv) for pv in (0, 100, 250, 400, 600, 800, 950, 1000, 1020, 1000)]
     pairs = vector + [(rng.randrange(-2000, 2000), rng.randrange(-2000, 2000))
                       for _ in range(300)]
-    count = 60 if SIM == "icarus" else 1000
+    count = amount(24, 60) if SIM == "icarus" else amount(200, 1000)
     ik_words = [w for w in (ik_model.client_word(i) for i in range(count)) if w & 7 < 6]
     twenty = round(20 * 256)
     ik_words += [ik_model.encode_input(a, b, leg) for leg in range(6)

@@ -11,7 +11,7 @@ from hdl.reconos.protocol import MemStatus
 from hdl.reconos.protocol import ProcControlRegister as R
 from host.reconos import PAGE
 
-from .harness import cocotb_bench
+from .harness import amount, cocotb_bench
 from .reconos_memory_tb import COPY, READ, WRITE, MemoryTB, run_copies
 from .reconos_tb import system_configs
 
@@ -19,10 +19,11 @@ from .reconos_tb import system_configs
 @cocotb.test()
 async def copies_in_contending_slots(dut):
     """Both slots copy at the same time (round-robin arbitration); every byte arrives, none
-    past the end is touched."""
+    past the end is touched. The largest copy is 16 KiB in make test (four pages), 64 KiB in
+    make test-full."""
     tb = MemoryTB(dut)
     rt = await tb.setup()
-    sizes = [tb.arch.word_bytes, 256, 8192 + 8 * tb.arch.word_bytes, 65536]
+    sizes = [tb.arch.word_bytes, 256, 8192 + 8 * tb.arch.word_bytes, amount(16384, 65536)]
     t0 = cocotb.start_soon(run_copies(tb, 0, sizes, 1))
     t1 = cocotb.start_soon(run_copies(tb, 1, sizes[::-1], 2))
     await t0
