@@ -161,8 +161,8 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), t
         Dotted name of the cocotb test module; default: the calling module.
     long : iterable of (config id, simulator)
         Cases that run only in the long matrix (``make test-full``), to keep ``make test``
-        under 10 minutes on a fresh 2-core machine; each such configuration still runs on
-        the other simulator in ``make test``.
+        short on a fresh 2-core machine; each such configuration still runs on the other
+        simulator in ``make test``.
     testcases : list of str or None
         Run only these cocotb tests of the module (for configurations that exist for one
         behaviour); default: all.

@@ -43,7 +43,7 @@ KERNELS = {
 
 CONFIGS = {"image": dict(kernels=KERNELS)}
 
-# Verilator runs it in make test-full (make test stays under 10 minutes on 2 cores)
+# Verilator runs it in make test-full only (its build and run would add minutes to make test)
 test_kernels = cocotb_bench("kernels", CONFIGS, long=[("image", "verilator")])
 
 

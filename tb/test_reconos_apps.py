@@ -142,7 +142,7 @@ async def sobel_service_pair_on_a_photograph(dut):
 
 
 CONFIGS = apps_configs()
-#: all in the long matrix (a fresh 2-core ``make test`` stays under 10 minutes; the
+#: all in the long matrix (to keep a fresh 2-core ``make test`` short; the
 #: ``reconos`` top itself runs on both simulators and both architectures in ``make test``
 #: through the system benches, and the example projects run the sort service, the sort
 #: action and the Sobel pair there)
