@@ -23,7 +23,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from gen.export.verilog import export_verilog, write_if_changed, write_manifest
-from host.toolchain import put_verilator_on_path
+from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
 
@@ -97,13 +97,12 @@ def export_top(component, top, build_dir, *, icarus=False):
 
 def ccache_dir():
     """The ccache folder Verilator builds share: ``CCACHE_DIR`` when the environment sets it,
-    else ``rosgate/ccache`` in the user's cache folder (``XDG_CACHE_HOME``, default
-    ``~/.cache``), so that every top, every project and every test's temporary build reuses
-    the Verilator runtime's objects compiled once."""
+    else ``ccache`` in rosgate's per-user cache (:func:`host.toolchain.cache_dir`), so that
+    every top, every project and every test's temporary build reuses the Verilator runtime's
+    objects compiled once."""
     if os.environ.get("CCACHE_DIR"):
         return Path(os.environ["CCACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "rosgate" / "ccache"
+    return cache_dir() / "ccache"
 
 
 @contextlib.contextmanager
