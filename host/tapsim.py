@@ -97,7 +97,7 @@ class TapSimulation:
                             "stop_file": str(self._files["stop"]),
                             "status_file": str(self._files["status"]), "watch": self.watch},
                     log_file=self.log_file, lint=True, progress=self.progress,
-                    run_name=self.namespace, quick=True)
+                    run_name=self.namespace, cxx_opt="-O0")
         except BaseException as exc:        # reported by __enter__ or stop()
             self._error = exc
 

@@ -25,6 +25,7 @@ import pytest
 
 from gen.tops import build_top
 from host.simulator import (
+    DEFAULT_CXX_OPT,
     SIMULATORS,
     SimulationFailed,
     environment_seed,
@@ -57,7 +58,7 @@ def amount(quick, full):
     return full if _FULL else quick
 
 
-#: Tops whose tests simulate long enough to repay Verilator's default optimisation: the
+#: Tops whose tests simulate long enough to repay an optimised C++ build: the
 #: network stack's tests exchange megabytes with Linux and peer models (test_net[stack-verilator]
 #: 74 s built at -Os, 225 s at -O0)
 OPTIMISED_TOPS = frozenset({"net"})
@@ -107,12 +108,12 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     A Verilator model is compiled without optimisation (``OPT_FAST=-O0``): cocotb's Python
     side sets the pace of a test's simulation, so the C++ build is most of a bench's time
     (topic 4x4_w512, ReconOS r64 calls and the ros1_w64 codec: 101 s built at Verilator's
-    default -Os, 58 s at -O0, on 2 cores), except for :data:`OPTIMISED_TOPS`. ``optimise``
-    keeps the default, in a build folder of its own, for runs long enough to repay it
-    (``make bench``).
+    default -Os, 58 s at -O0, on 2 cores), except for :data:`OPTIMISED_TOPS`, compiled at
+    :data:`host.simulator.DEFAULT_CXX_OPT`. ``optimise`` keeps Verilator's own -Os, in a
+    build folder of its own, for runs long enough to repay it (``make bench``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    quick = not optimise and top not in OPTIMISED_TOPS
+    cxx_opt = None if optimise else DEFAULT_CXX_OPT if top in OPTIMISED_TOPS else "-O0"
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     env = {
@@ -127,7 +128,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         return run_top(module, top, component, sim, build_dir, params=params,
                        testcase=testcase, seed=seed, extra_env=env,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
-                       run_name=run_name, lint=build is None, quick=quick,
+                       run_name=run_name, lint=build is None, cxx_opt=cxx_opt,
                        waves=_waves())
     except SimulationFailed as exc:
         seeds = sorted({s for s in exc.failed.values() if s is not None})

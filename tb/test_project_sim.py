@@ -12,7 +12,6 @@ service demo with two slots on their own clock (both simulators).
 import json
 import random
 import shutil
-import time
 
 import cv2
 import numpy as np
@@ -121,7 +120,6 @@ def test_sobel_dip_refuses_bad_images_before_building(tmp_path, capsys, make, wo
     bad = tmp_path / "bad.png"
     make(bad)
     cache = tmp_path / "cache"
-    start = time.monotonic()
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("ROSGATE_CACHE", str(cache))
         assert rosgate(["sim", str(SOBEL_DIP), "--arg", f"images=coffee_80x60.png,{bad}",
@@ -131,7 +129,6 @@ def test_sobel_dip_refuses_bad_images_before_building(tmp_path, capsys, make, wo
     for word in words:
         assert word in err, err
     assert not list(cache.glob("sim/*/obj")), "a simulator was built for a refused run"
-    assert time.monotonic() - start < 30
 
 
 def broken_project(tmp_path, node_source):

@@ -80,7 +80,7 @@ async def sums_and_reports_what_it_sees(dut):
 def test_verilator_model_shows_the_top_module(tmp_path, internals):
     seen = tmp_path / "seen.json"
     run_top(__name__, "accumulator_top", _Top(), "verilator", tmp_path / "build",
-            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, quick=True,
+            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, cxx_opt="-O0",
             log_file=tmp_path / "sim.log", internals=internals)
     report = json.loads(seen.read_text())
     assert report["total"] == sum(range(1, 11))
