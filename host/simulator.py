@@ -195,8 +195,8 @@ def environment_seed():
 
 
 def run_top(module, top, component, sim, build_dir, *, params=None, testcase=None, seed=None,
-            extra_env=None, log_file=None, run_name=None, lint=True, cxx_opt=DEFAULT_CXX_OPT, waves=False,
-            progress=None, exported=None, internals=False):
+            extra_env=None, log_file=None, run_name=None, lint=True, cxx_opt=DEFAULT_CXX_OPT,
+            waves=False, progress=None, exported=None, internals=False):
     """Export ``component`` as ``top``, build it for ``sim`` and run the cocotb tests of
     ``module`` against it; return the results file.
 
