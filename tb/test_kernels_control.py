@@ -44,9 +44,10 @@ SIM = os.environ.get("ROSGATE_SIM", "")
 
 @cocotb.test()
 async def all_kernels_under_idle_and_backpressure(dut):
-    """Sort blocks (random, duplicates), a PID sequence (the spec's vectors, then random
-    pairs) and inverse-kinematics requests (the ReconROS client's, tilts of +-20 degrees)
-    concurrently, 30 % idle, 30 % backpressure; every output equals its golden model."""
+    """Sort blocks (random values mixed with repeats; make test-full adds an all-random and
+    an all-duplicates block), a PID sequence (the spec's vectors, then random pairs) and
+    inverse-kinematics requests (the ReconROS client's, tilts of +-20 degrees) concurrently,
+    30 % idle, 30 % backpressure; every output equals its golden model."""
     tb = ControlTB(dut)
     await tb.reset()
     tb.set_pauses(0.3, 0.3)
