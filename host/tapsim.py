@@ -15,7 +15,7 @@ import threading
 import time
 from pathlib import Path
 
-from .simulator import run_top
+from .simulator import QUICK_CXX_OPT, run_top
 from .tap import KERNEL_IP, TAP_NAME, namespace_unavailable, network_namespace
 
 __all__ = ["TapSimulation", "TapSimulationError"]
@@ -97,7 +97,7 @@ class TapSimulation:
                             "stop_file": str(self._files["stop"]),
                             "status_file": str(self._files["status"]), "watch": self.watch},
                     log_file=self.log_file, lint=True, progress=self.progress,
-                    run_name=self.namespace, cxx_opt="-O0")
+                    run_name=self.namespace, cxx_opt=QUICK_CXX_OPT)
         except BaseException as exc:        # reported by __enter__ or stop()
             self._error = exc
 

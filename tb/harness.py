@@ -26,6 +26,7 @@ import pytest
 from gen.tops import build_top
 from host.simulator import (
     DEFAULT_CXX_OPT,
+    QUICK_CXX_OPT,
     SIMULATORS,
     SimulationFailed,
     environment_seed,
@@ -113,7 +114,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     build folder of its own, for runs long enough to repay it (``make bench``).
     """
     component = (build or (lambda **p: build_top(top, **p)))(**params)
-    cxx_opt = None if optimise else DEFAULT_CXX_OPT if top in OPTIMISED_TOPS else "-O0"
+    cxx_opt = None if optimise else DEFAULT_CXX_OPT if top in OPTIMISED_TOPS else QUICK_CXX_OPT
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     env = {

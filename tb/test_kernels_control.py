@@ -55,10 +55,11 @@ async def all_kernels_under_idle_and_backpressure(dut):
     rng = tb.rng
     # one block of random values mixed with repeats of 0, 7 and 0xFFFFFFFF; make test-full
     # also sorts an all-random and an all-duplicates block
-    mixed = [rng.randrange(1 << 32) if rng.random() < 0.5 else rng.choice([0, 7, 0xFFFFFFFF])
+    repeats = (0, 7, 0xFFFFFFFF)
+    mixed = [rng.randrange(1 << 32) if rng.random() < 0.5 else rng.choice(repeats)
              for _ in range(2048)]
     blocks = [mixed] + amount([], [[rng.randrange(1 << 32) for _ in range(2048)],
-                                   [rng.choice([0, 7, 0xFFFFFFFF]) for _ in range(2048)]])
+                                   [rng.choice(repeats) for _ in range(2048)]])
     vector = [(1000, pv) for pv in (0, 100, 250, 400, 600, 800, 950, 1000, 1020, 1000)]
     pairs = vector + [(rng.randrange(-2000, 2000), rng.randrange(-2000, 2000))
                       for _ in range(300)]

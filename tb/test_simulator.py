@@ -14,7 +14,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from host.simulator import run_top, start_clock
+from host.simulator import QUICK_CXX_OPT, run_top, start_clock
 
 
 class _Accumulator(wiring.Component):
@@ -80,7 +80,7 @@ async def sums_and_reports_what_it_sees(dut):
 def test_verilator_model_shows_the_top_module(tmp_path, internals):
     seen = tmp_path / "seen.json"
     run_top(__name__, "accumulator_top", _Top(), "verilator", tmp_path / "build",
-            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, cxx_opt="-O0",
+            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, cxx_opt=QUICK_CXX_OPT,
             log_file=tmp_path / "sim.log", internals=internals)
     report = json.loads(seen.read_text())
     assert report["total"] == sum(range(1, 11))
