@@ -350,22 +350,27 @@ class _Receiver:
         #: publish nothing) or it was read to its end
         self.failed = Signal(name="rx_failed")
         self.good = Signal(name="rx_good")
-        #: a message that failed before it was taken left its fields offered
+        #: a failed message left its fields offered: they are taken here, whatever state the
+        #: receiver is in. They can only be the failed message's own, as the deserializer
+        #: reads no further before they are taken; the receiver must not take fields at the
+        #: end of a failed message itself, as those may already be the next message's.
         self.drain = drain = Signal(name="rx_drain")
         #: the next message's good verdict, when it came while this one was being published
         #: (possible only for a type without strings or sequences)
         self.next_good = Signal(name="rx_next_good")
+        #: the receiver takes a message this cycle: a verdict in this cycle is that message's
+        self.taking = Signal(name="rx_taking")
         decided = self.good | self.failed
         with m.If(des.error.valid):
             m.d.sync += errors.eq(errors + 1)
             with m.If(self.active & ~decided):
                 m.d.sync += self.failed.eq(1)
-            with m.Elif(des.fields.valid):
+            with m.If(des.fields.valid & ~des.fields.ready):
                 m.d.sync += drain.eq(1)
         with m.If(des.done):
             with m.If(self.active & ~decided):
                 m.d.sync += self.good.eq(1)
-            with m.Else():
+            with m.Elif(~self.taking):
                 m.d.sync += self.next_good.eq(1)
         with m.If(drain & des.fields.valid):
             m.d.comb += des.fields.ready.eq(1)
@@ -408,8 +413,10 @@ class _Receiver:
         with m.FSM(name="rx"):
             with m.State("RX_IDLE"):
                 with m.If(self.started & self.arriving):
-                    m.d.sync += [self.active.eq(1), self.failed.eq(0),
-                                 self.good.eq(self.next_good), self.next_good.eq(0)]
+                    m.d.comb += self.taking.eq(1)
+                    m.d.sync += [self.active.eq(1), self.failed.eq(des.error.valid),
+                                 self.good.eq(self.next_good | des.done),
+                                 self.next_good.eq(0)]
                     m.next = first
             for k, var in enumerate(t.order):
                 v = t.plan.variables[var]
@@ -465,8 +472,6 @@ class _Receiver:
             lock.call(_OsifLock.RX, "RX_PUBLISH",
                       lambda then: os.ros_publish(h_pub, h_msg, then=then), "RX_IDLE")
             with m.State("RX_END"):
-                with m.If(des.fields.valid):
-                    m.d.comb += des.fields.ready.eq(1)
                 m.d.sync += self.active.eq(0)
                 m.next = "RX_IDLE"
 
