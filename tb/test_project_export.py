@@ -3,6 +3,7 @@ content (every file it uses exists, every interface maps onto ports of the Veril
 block design's addresses and interrupts are ReconROS'), FuseSoC cores that FuseSoC itself
 reads and lints, and a manifest that agrees with build.cfg."""
 
+import fcntl
 import json
 import os
 import re
@@ -22,17 +23,33 @@ from .harness import ROOT
 from .projects import EXAMPLES, EXPORT_PARAMS, external_threads_project
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
-    """Each example exported once: name -> (project, output folder, manifest)."""
-    out = {}
-    for name in EXAMPLES:
-        folder = tmp_path_factory.mktemp(name)
+class _Exports:
+    """Example projects exported on first use, once per test run: ``exported[name]`` is
+    ``(project, output folder, manifest)``. The folders are shared by pytest-xdist's workers,
+    a lock per project keeps two from exporting it at once; so each worker exports only what
+    its tests need and nothing twice."""
+
+    def __init__(self, root):
+        self.root = root
+        root.mkdir(parents=True, exist_ok=True)
+
+    def __getitem__(self, name):
         cfg = ROOT / "examples" / name / "build.cfg"
-        params = [a for p in EXPORT_PARAMS.get(name, ()) for a in ("--param", p)]
-        assert rosgate(["export-hw", str(cfg), "-o", str(folder), *params]) == 0
-        out[name] = (load_project(cfg), folder, json.loads((folder / "manifest.json").read_text()))
-    return out
+        folder = self.root / name
+        with open(self.root / f"{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not (folder / "manifest.json").is_file():
+                params = [a for p in EXPORT_PARAMS.get(name, ()) for a in ("--param", p)]
+                assert rosgate(["export-hw", str(cfg), "-o", str(folder), *params]) == 0
+        return load_project(cfg), folder, json.loads((folder / "manifest.json").read_text())
+
+
+@pytest.fixture(scope="session")
+def exported(tmp_path_factory):
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent                  # the run's folder, above each worker's own
+    return _Exports(root / "exported")
 
 
 def verilog_ports(path, module):
