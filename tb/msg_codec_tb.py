@@ -6,7 +6,7 @@ import os
 import random
 
 import cocotb
-from cocotb.triggers import ClockCycles, RisingEdge, with_timeout
+from cocotb.triggers import RisingEdge, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
 from gen.msg import MessageLibrary
@@ -23,7 +23,8 @@ from tb.models.msgstream import (
     set_at,
     variable_bytes,
 )
-from tb.streams import HandshakeSink, HandshakeSource, PacketSink, bursty_pauses, random_pauses
+from tb.streams import (HandshakeSink, HandshakeSource, PacketSink, bursty_pauses,
+                        random_pauses, reset_aresetn)
 
 __all__ = ["CLOCK_NS", "TEST_MSGS", "IMAGE", "STREAMABLE", "ELEMENTS", "POINTS", "config",
            "PARAMS", "PUBLISHER", "MsgCodecTB"]
@@ -109,10 +110,7 @@ class MsgCodecTB:
                     self.errors[side].append(int(getattr(self.dut, f"{side}_error_code").value))
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 4)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
 
     def set_idle(self, probability):
         for port in [self.ser_fields, self.des_in] + self.ser_payloads:
