@@ -17,7 +17,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 from host.simulator import start_clock
 from .harness import bench_params, run_bench
 from .projects import external_threads_project
-from .streams import random_pauses
+from .streams import random_pauses, reset_aresetn
 
 PUBS = {"Threadb": "slot1_nicehwtopic", "Gateway1": "slot2_nicehwtopic_out"}
 SUBS = {"Threada": "slot0_nicehwtopic", "Gateway1": "slot2_nicehwtopic_in"}
@@ -46,10 +46,7 @@ class TopicPortsTB:
             s.set_pause_generator(random_pauses(random.Random(self.rng.random()), p))
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 5)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
 
 
 def message(pub, seq, rng):

@@ -13,6 +13,7 @@ from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStream
 from host.simulator import start_clock
 from tb.harness import bench_params
 from tb.models.topic import TopicScoreboard, random_lengths, tagged_message
+from tb.streams import reset_aresetn
 
 __all__ = ["CLOCK_NS", "CONFIGS", "PARAMS", "ONE_PUBLISHER", "LOSSY", "PortWatch", "TopicTB",
            "lossless"]
@@ -129,10 +130,7 @@ class TopicTB:
                 sink.pause = False
 
     async def reset(self):
-        self.dut.aresetn.value = 0
-        await ClockCycles(self.dut.aclk, 4)
-        self.dut.aresetn.value = 1
-        await ClockCycles(self.dut.aclk, 2)
+        await reset_aresetn(self.dut)
         for watch in self.pub_watch + self.sub_watch:
             watch.clear()
 
