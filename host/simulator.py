@@ -27,7 +27,7 @@ from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
 
-__all__ = ["SIMULATORS", "SimulationFailed", "export_top", "run_top", "top_params",
+__all__ = ["SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
            "top_manifest", "environment_seed", "failed_seeds", "start_clock"]
 
 SIMULATORS = ("icarus", "verilator")
@@ -90,6 +90,19 @@ class SimulationFailed(AssertionError):
         self.failed = dict(failed or {})
         self.total = total
         self.results = results
+
+
+
+@contextlib.contextmanager
+def exclusive(lock_path):
+    """Hold an exclusive lock on the file ``lock_path`` (created if missing) for the
+    ``with`` block: one process at a time across a test run's workers."""
+    with open(lock_path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def export_top(component, top, build_dir, *, icarus=False):
@@ -259,47 +272,44 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     build_dir.mkdir(parents=True, exist_ok=True)
     # several test modules may share one build: export and build are serialised across
     # processes, and each module gets its own results file
-    lock = open(build_dir / ".build.lock", "w")
-    fcntl.flock(lock, fcntl.LOCK_EX)
-    top_only = sim == "verilator" and not internals
-    runner = _top_only_runner() if top_only else get_runner(sim)
-    build_args, test_args, plusargs = [], [], []
-    fst = build_dir / f"{top}.fst"
-    # waveform builds get their own object folder, so switching waves never reuses the other
-    obj_dir = build_dir / ("obj_fst" if waves else "obj")
-    if sim == "verilator":
-        build_args = list(VERILATOR_TOP_ARGS if lint else VERILATOR_BENCH_ARGS)
-        if waves:
-            build_args.append("--trace-fst")
-            test_args = ["--trace-file", str(fst)]
-    elif waves:
-        plusargs = [f"+dumpfile_path={fst}"]
-    try:
-        vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus")
-        sources = [vfile]
-        if top_only:
-            from cocotb_tools.runner import VerilatorControlFile
-            control = build_dir / f"{top}.vlt"
-            write_if_changed(control, verilator_public_config(top))
-            # first: cocotb takes the language of the top from the last source
-            sources.insert(0, VerilatorControlFile(str(control)))
-        with _verilator_make_fix(sim, cxx_opt), \
-                _watch_build(obj_dir, progress if sim == "verilator" else None):
-            runner.build(sources=sources, hdl_toplevel=top, build_dir=obj_dir,
-                         build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
-                         log_file=build_dir / "build.log")
-    except RuntimeError as e:
-        log = (build_dir / "build.log").read_text(errors="replace").splitlines()
-        warnings = [line for line in log if line.startswith("%Warning")]
-        if warnings:
-            raise RuntimeError(f"{top} is not lint-clean ({len(warnings)} warning(s), see "
-                               f"{build_dir / 'build.log'}):\n" + "\n".join(warnings[:20])) from e
-        errors = [line for line in log if "error" in line.lower()][:20]
-        raise RuntimeError(f"building {top} for {sim} failed (see {build_dir / 'build.log'})"
-                           + (":\n" + "\n".join(errors) if errors else "")) from e
-    finally:
-        fcntl.flock(lock, fcntl.LOCK_UN)
-        lock.close()
+    with exclusive(build_dir / ".build.lock"):
+        top_only = sim == "verilator" and not internals
+        runner = _top_only_runner() if top_only else get_runner(sim)
+        build_args, test_args, plusargs = [], [], []
+        fst = build_dir / f"{top}.fst"
+        # waveform builds get their own object folder, so switching waves never reuses the other
+        obj_dir = build_dir / ("obj_fst" if waves else "obj")
+        if sim == "verilator":
+            build_args = list(VERILATOR_TOP_ARGS if lint else VERILATOR_BENCH_ARGS)
+            if waves:
+                build_args.append("--trace-fst")
+                test_args = ["--trace-file", str(fst)]
+        elif waves:
+            plusargs = [f"+dumpfile_path={fst}"]
+        try:
+            vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus")
+            sources = [vfile]
+            if top_only:
+                from cocotb_tools.runner import VerilatorControlFile
+                control = build_dir / f"{top}.vlt"
+                write_if_changed(control, verilator_public_config(top))
+                # first: cocotb takes the language of the top from the last source
+                sources.insert(0, VerilatorControlFile(str(control)))
+            with _verilator_make_fix(sim, cxx_opt), \
+                    _watch_build(obj_dir, progress if sim == "verilator" else None):
+                runner.build(sources=sources, hdl_toplevel=top, build_dir=obj_dir,
+                             build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
+                             log_file=build_dir / "build.log")
+        except RuntimeError as e:
+            log = (build_dir / "build.log").read_text(errors="replace").splitlines()
+            warnings = [line for line in log if line.startswith("%Warning")]
+            if warnings:
+                raise RuntimeError(f"{top} is not lint-clean ({len(warnings)} warning(s), "
+                                   f"see {build_dir / 'build.log'}):\n"
+                                   + "\n".join(warnings[:20])) from e
+            errors = [line for line in log if "error" in line.lower()][:20]
+            raise RuntimeError(f"building {top} for {sim} failed (see {build_dir / 'build.log'})"
+                               + (":\n" + "\n".join(errors) if errors else "")) from e
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
     results = build_dir / f"results-{short}.xml"
     if results.exists():

@@ -3,7 +3,6 @@ content (every file it uses exists, every interface maps onto ports of the Veril
 block design's addresses and interrupts are ReconROS'), FuseSoC cores that FuseSoC itself
 reads and lints, and a manifest that agrees with build.cfg."""
 
-import fcntl
 import json
 import os
 import re
@@ -18,9 +17,10 @@ from gen.export.vivado import BOARDS
 from hdl.reconos.protocol import ARCHS
 from host.cli import main as rosgate
 from host.lint import lint_verilog
+from host.simulator import exclusive
 
 from .harness import ROOT
-from .projects import EXAMPLES, EXPORT_PARAMS, external_threads_project
+from .projects import EXAMPLES, EXPORT_PARAMS, example_cfg, external_threads_project
 
 
 class _Exports:
@@ -34,10 +34,9 @@ class _Exports:
         root.mkdir(parents=True, exist_ok=True)
 
     def __getitem__(self, name):
-        cfg = ROOT / "examples" / name / "build.cfg"
+        cfg = example_cfg(name)
         folder = self.root / name
-        with open(self.root / f"{name}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+        with exclusive(self.root / f"{name}.lock"):
             if not (folder / "manifest.json").is_file():
                 params = [a for p in EXPORT_PARAMS.get(name, ()) for a in ("--param", p)]
                 assert rosgate(["export-hw", str(cfg), "-o", str(folder), *params]) == 0
