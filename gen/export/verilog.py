@@ -24,6 +24,8 @@ from amaranth.hdl import (
 )
 from amaranth.lib import wiring
 
+from .comb_cycles import faster_comb_cycle_check
+
 __all__ = ["VivadoTop", "exported_ports", "export_verilog", "port_name", "write_if_changed",
            "without_zero_memory_init",
            "fix_icarus_t0"]
@@ -163,8 +165,9 @@ def export_verilog(component, name, *, clock="aclk", reset="aresetn", icarus=Fal
     """Return ``(verilog_text, top)`` for ``component`` wrapped in a :class:`VivadoTop`;
     ``icarus`` prepares the text for Icarus simulation (see :func:`fix_icarus_t0`)."""
     top = VivadoTop(component, clock=clock, reset=reset)
-    text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
-                           strip_internal_attrs=True)
+    with faster_comb_cycle_check():
+        text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
+                               strip_internal_attrs=True)
     return fix_icarus_t0(text, delay=icarus), top
 
 
