@@ -188,22 +188,44 @@ class FinembClient(wiring.Component):
         io_len = Signal(11)       # ... and how many
         resp_busy = Signal()      # a response is being prepared or sent
 
-        good_header = ((h_magic == MAGIC) & (h_version == VERSION) &
-                       (fld.payload_len >= HEADER) & (h_length == fld.payload_len - HEADER))
         verdict = f.done & f.accept & ours
-        for_me = addressed & (h_node == node_id)
-
-        b_mac = body[0:48]
-        addr_ip = body[48:80]           # ADDR_REQ: mac, ipv4 (bytes in order), netmask, id
-        addr_id = body[112:128]
-        io_req_off, io_req_len = body[0:16], body[16:32]
-        soc_period = body[0:32]         # SoC: cycle period in ns
-        reinit_reason = body[0:8]
 
         def bswap(value, nbytes):
             return Cat(*(value.word_select(nbytes - 1 - k, 8) for k in range(nbytes)))
 
         mac_wire = bswap(Const(self._mac, 48), 6)    # the MAC's bytes in wire order
+        b_mac = body[0:48]
+        addr_ip = body[48:80]           # ADDR_REQ: mac, ipv4 (bytes in order), netmask, id
+        addr_id = body[112:128]
+        io_req_off, io_req_len = body[0:16], body[16:32]
+
+        # what the request's header and body say, registered (IODESC's chunk over two
+        # steps): they stop changing with the payload's last byte, and the verdict comes
+        # with the end of the frame, after at least the FCS's four bytes
+        good_header = Signal()
+        for_me = Signal()         # addressed to this node, which has an address
+        own_mac = Signal()        # ADDR_REQ: for this node's MAC ...
+        id_taken = Signal()       # ... or giving this node's id to another
+        page_size_ok = Signal()   # ISEND_REQ: the output page's size
+        total = len(rom_bytes)
+        first = Signal(16)        # IODESC_REQ: the chunk's first descriptor byte ...
+        chunk = Signal(range(IODESC_CHUNK + 1))    # ... and its length
+        m.d.sync += [
+            good_header.eq((h_magic == MAGIC) & (h_version == VERSION) &
+                           (fld.payload_len >= HEADER) & (h_length == fld.payload_len - HEADER)),
+            for_me.eq(addressed & (h_node == node_id)),
+            own_mac.eq(b_mac == mac_wire),
+            id_taken.eq(addressed & (addr_id == node_id)),
+            page_size_ok.eq(h_length == po),
+            first.eq(Mux(io_req_off > total, total, io_req_off)),
+        ]
+        left = Signal(16)
+        m.d.comb += left.eq(total - first)
+        count = Mux(io_req_len < left, io_req_len, left)
+        m.d.sync += chunk.eq(Mux(count > IODESC_CHUNK, IODESC_CHUNK, count))
+        soc_period = body[0:32]         # SoC: cycle period in ns
+        reinit_reason = body[0:8]
+
         started = Signal()        # a response starts this cycle
 
         r_state = Signal(NodeState)     # the state a response reports
@@ -251,7 +273,7 @@ class FinembClient(wiring.Component):
                                 Const(2, 8), Const(0b01, 8), Const(pi, 16), Const(po, 16)),
                                 node=NODE_ALL, new_state=NodeState.INIT, broadcast=True)
                     with m.Case(MsgType.ADDR_REQ):
-                        with m.If(b_mac == mac_wire):
+                        with m.If(own_mac):
                             new_state = Mux(state == NodeState.OP, NodeState.OP,
                                             NodeState.PREOP)
                             m.d.sync += [local_ip.eq(bswap(addr_ip, 4)), node_id.eq(addr_id),
@@ -259,24 +281,17 @@ class FinembClient(wiring.Component):
                             reply(MsgType.ADDR_RES, 13,
                                   Cat(mac_wire, addr_ip, addr_id, Const(0, 8)), node=addr_id,
                                   new_state=new_state)
-                        with m.Elif(addressed & (addr_id == node_id)):
+                        with m.Elif(id_taken):
                             # another node is given this node's id: give it up
                             m.d.comb += ev.id_conflict.eq(1)
                             m.d.sync += [state.eq(NodeState.INIT), node_id.eq(NODE_ALL),
                                          local_ip.eq(0)]
                     with m.Case(MsgType.IODESC_REQ):
                         with m.If(for_me):
-                            total = len(rom_bytes)
-                            first = Mux(io_req_off > total, total, io_req_off)
-                            left = Signal(16)
-                            count = Signal(16)
-                            m.d.comb += [left.eq(total - first),
-                                         count.eq(Mux(io_req_len < left, io_req_len, left))]
-                            n = Mux(count > IODESC_CHUNK, IODESC_CHUNK, count)
-                            reply(MsgType.IODESC_RES, 4 + n, Cat(first[:16], Const(total, 16)),
+                            reply(MsgType.IODESC_RES, 4 + chunk, Cat(first, Const(total, 16)),
                                   node=node_id, new_state=state)
                             with m.If(~resp_busy):
-                                m.d.sync += [io_off.eq(first), io_len.eq(n)]
+                                m.d.sync += [io_off.eq(first), io_len.eq(chunk)]
                         with m.Else():
                             m.d.comb += ev.other_node.eq(1)
                     with m.Case(MsgType.ISEND_REQ):
@@ -284,7 +299,7 @@ class FinembClient(wiring.Component):
                             # the master cycles: (back) to OP, the watchdog re-armed
                             m.d.comb += restart_watchdog.eq(1)
                             m.d.sync += [state.eq(NodeState.OP), since_soc.eq(0)]
-                            with m.If(h_length != po):
+                            with m.If(~page_size_ok):
                                 m.d.comb += ev.bad_page.eq(1)
                                 reply(MsgType.ISEND_RES, pi, 0, node=node_id,
                                       new_state=NodeState.OP, flags=Flag.ERROR)

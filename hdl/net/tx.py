@@ -9,18 +9,25 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET,
-    IP_PROTO_ICMP, IP_PROTO_OFFSET, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_VERSION,
-    L4_OFFSET, MIN_HEADER_WORDS, TCP_CSUM_OFFSET, TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH,
-    UDP_CSUM_OFFSET,
+    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_OFFSET,
+    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_VERSION,
+    IPV4_HEADER_FIELDS, L4_OFFSET, MIN_HEADER_WORDS, TCP_HEADER_FIELDS, TCP_MSS, TCP_OPT_MSS,
+    TCP_OPT_MSS_LENGTH, UDP_HEADER_FIELDS,
 )
 from .rx import FrameKind
 
 __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
 
-#: Cycles after a grant in which the checksum words that follow their checksum field are
-#: summed; the MAC's preamble (8 cycles) hides them.
-PRESUM_CYCLES = 4
+#: Cycles after a grant in which the checksum words known from the request are summed (the
+#: MAC's preamble, 8 cycles, hides them; the first byte they could collide with is byte 14)
+PRESUM_CYCLES = 5
+
+#: the first byte of each header that is summed from the request rather than as it leaves:
+#: IPv4 from the TTL on, UDP from the length field on, TCP from the window on, so that
+#: the bytes before a checksum field can be added a cycle after they left
+IP_TTL_OFFSET = IP_OFFSET + IPV4_HEADER_FIELDS["ttl"][0]
+UDP_LENGTH_OFFSET = L4_OFFSET + UDP_HEADER_FIELDS["length"][0]
+TCP_WINDOW_OFFSET = L4_OFFSET + TCP_HEADER_FIELDS["window"][0]
 
 #: The MSS option of a SYN or SYN-ACK, as sent (after the 20-byte TCP header)
 MSS_OPTION = (TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_MSS >> 8, TCP_MSS & 0xFF)
@@ -132,29 +139,39 @@ class FrameBuilder(wiring.Component):
         hdr_byte = Signal(8)
 
         # Checksums. Before the MAC takes the first byte (it sends 8 preamble bytes first),
-        # the words that come after their checksum field are pre-summed, one per cycle: the
-        # IP addresses for the IPv4 header, and for TCP or UDP the pseudo-header's length,
-        # the payload's sum and the MSS option. Every other covered byte is added as it
-        # leaves: IPv4 header bytes 14..23, and for TCP/UDP the protocol byte 23 (the
-        # pseudo-header's low byte) and bytes 26 up to the checksum field.
+        # the words known from the request are summed, one per cycle: for the IPv4 header
+        # the addresses, TTL and protocol; for TCP or UDP the pseudo-header's length and
+        # protocol, the payload's sum, the MSS option and the UDP length or TCP window.
+        # Every other covered byte is added the cycle after it left (a register apart from
+        # the byte's selection): IPv4 bytes 14..21, TCP/UDP bytes 26 up to the length or
+        # window field, which all leave at least two cycles before their checksum field.
         ip_acc = Signal(16)
         l4_acc = Signal(16)
         k = Signal(range(PRESUM_CYCLES + 1))
         src, dst = self.local_ip, r.ip_dst
-        ip_pre = Array([src[16:], src[:16], dst[16:], dst[:16]])
+        proto = Signal(8)
+        m.d.comb += proto.eq(Mux(is_tcp, IP_PROTO_TCP, Mux(is_udp, IP_PROTO_UDP, IP_PROTO_ICMP)))
+        ip_pre = Array([src[16:], src[:16], dst[16:], dst[:16], Cat(proto, Const(self._ttl, 8))])
         l4_pre = Array([l4_len, r.payload_sum,
                         Mux(is_tcp & r.mss, sum(MSS_OPTION[q] << 8 * (1 - q % 2)
-                                                for q in range(len(MSS_OPTION))), 0), 0])
-        byte_word = Mux(idx[0], Cat(hdr_byte, Const(0, 8)), Cat(Const(0, 8), hdr_byte))
-        l4_csum_at = Mux(is_tcp, TCP_CSUM_OFFSET, UDP_CSUM_OFFSET)
+                                                for q in range(len(MSS_OPTION))), 0),
+                        proto, Mux(is_tcp, r.window, l4_len)])
         with m.If(busy & (k < PRESUM_CYCLES)):
             m.d.sync += [k.eq(k + 1), ip_acc.eq(ones_complement_add(ip_acc, ip_pre[k])),
                          l4_acc.eq(ones_complement_add(l4_acc, l4_pre[k]))]
-        with m.If(accept & (idx >= ETH_HEADER) & (idx < IP_CSUM_OFFSET)):
-            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, byte_word))
-        with m.If(accept & ((idx == IP_PROTO_OFFSET) |
-                            ((idx >= IP_SRC_OFFSET) & (idx < l4_csum_at)))):
-            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, byte_word))
+        left_word = Signal(16)        # the byte that left last, in its half of a word ...
+        left_ip = Signal()            # ... which the IPv4 checksum covers
+        left_l4 = Signal()            # ... which the TCP or UDP checksum covers
+        l4_summed_end = Mux(is_tcp, TCP_WINDOW_OFFSET, UDP_LENGTH_OFFSET)
+        m.d.sync += [
+            left_word.eq(Mux(idx[0], Cat(hdr_byte, Const(0, 8)), Cat(Const(0, 8), hdr_byte))),
+            left_ip.eq(accept & (idx >= ETH_HEADER) & (idx < IP_TTL_OFFSET)),
+            left_l4.eq(accept & (idx >= IP_SRC_OFFSET) & (idx < l4_summed_end)),
+        ]
+        with m.If(left_ip):
+            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, left_word))
+        with m.If(left_l4):
+            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, left_word))
         ip_csum = ~ip_acc
         l4_csum = Signal(16)
         m.d.comb += l4_csum.eq(Mux(is_udp & (l4_acc == 0xFFFF), 0xFFFF, ~l4_acc))
