@@ -4,7 +4,7 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from ..stream import AXIStreamSignature
+from ..stream import AXIStreamSignature, RegisterSlice
 from .crc import Crc32
 from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, SFD
 
@@ -150,10 +150,12 @@ class GmiiTx(wiring.Component):
     Members
     -------
     s_axis : In(AXIStreamSignature(8, keep=False))
-        One frame per message, from the destination MAC to the end of the payload. ``tready``
-        is high from the first frame byte to ``tlast`` only: once a frame has started, the
-        source must offer a byte every cycle. A missing byte (underrun) is sent with
-        ``gmii_tx_er`` set, which makes the PHY corrupt the frame, and counts in ``underruns``.
+        One frame per message, from the destination MAC to the end of the payload, through a
+        register slice (``tready`` comes from a flip-flop; the slice takes a frame's first
+        two bytes while the preamble goes out). Once the frame's bytes leave the slice,
+        from the end of the preamble, the source must offer a byte every cycle. A missing
+        byte (underrun) is sent with ``gmii_tx_er`` set, which makes the PHY corrupt the
+        frame, and counts in ``underruns``.
     gmii_txd, gmii_tx_en, gmii_tx_er : Out
         To the PHY, registered.
     r_axis : In(FrameStreamSignature()), with ``raw``
@@ -186,6 +188,11 @@ class GmiiTx(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.fcs = crc = Crc32(1)
+        # the slice keeps the source's byte selection out of the FCS and the source's
+        # progress out of this state machine
+        m.submodules.slice = slice_ = RegisterSlice(AXIStreamSignature(8, keep=False))
+        wiring.connect(m, wiring.flipped(self.s_axis), slice_.s_axis)
+        s_axis = slice_.m_axis
         count = Signal(range(2048))
         underrun = Signal()
         byte = Signal(8)
@@ -202,11 +209,11 @@ class GmiiTx(wiring.Component):
                     with m.If(self.r_axis.tvalid):
                         m.d.sync += [count.eq(0), raw.eq(1)]
                         m.next = "PREAMBLE"
-                    with m.Elif(self.s_axis.tvalid):
+                    with m.Elif(s_axis.tvalid):
                         m.d.sync += [count.eq(0), raw.eq(0)]
                         m.next = "PREAMBLE"
                 else:
-                    with m.If(self.s_axis.tvalid):
+                    with m.If(s_axis.tvalid):
                         m.d.sync += count.eq(0)
                         m.next = "PREAMBLE"
             with m.State("PREAMBLE"):
@@ -232,12 +239,12 @@ class GmiiTx(wiring.Component):
                             m.d.sync += self.underruns.eq(self.underruns + 1)
                         m.next = "GAP"
             with m.State("DATA"):
-                m.d.comb += [en.eq(1), self.s_axis.tready.eq(1), byte.eq(self.s_axis.tdata),
-                             crc.valid.eq(1), err.eq(~self.s_axis.tvalid)]
+                m.d.comb += [en.eq(1), s_axis.tready.eq(1), byte.eq(s_axis.tdata),
+                             crc.valid.eq(1), err.eq(~s_axis.tvalid)]
                 m.d.sync += count.eq(count + 1)
-                with m.If(~self.s_axis.tvalid):
+                with m.If(~s_axis.tvalid):
                     m.d.sync += underrun.eq(1)
-                with m.Elif(self.s_axis.tlast):
+                with m.Elif(s_axis.tlast):
                     with m.If(count + 1 < MIN_FRAME - 4):
                         m.next = "PAD"
                     with m.Else():
