@@ -9,10 +9,10 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_OFFSET,
-    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_VERSION,
-    IPV4_HEADER_FIELDS, L4_OFFSET, MIN_HEADER_WORDS, TCP_HEADER_FIELDS, TCP_MSS, TCP_OPT_MSS,
-    TCP_OPT_MSS_LENGTH, UDP_HEADER_FIELDS,
+    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTO_ICMP,
+    IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_TTL_OFFSET, IP_VERSION, L4_OFFSET,
+    MIN_HEADER_WORDS, TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_WINDOW_OFFSET,
+    UDP_LENGTH_OFFSET,
 )
 from .rx import FrameKind
 
@@ -21,13 +21,6 @@ __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
 #: Cycles after a grant in which the checksum words known from the request are summed (the
 #: MAC's preamble, 8 cycles, hides them; the first byte they could collide with is byte 14)
 PRESUM_CYCLES = 5
-
-#: the first byte of each header that is summed from the request rather than as it leaves:
-#: IPv4 from the TTL on, UDP from the length field on, TCP from the window on, so that
-#: the bytes before a checksum field can be added a cycle after they left
-IP_TTL_OFFSET = IP_OFFSET + IPV4_HEADER_FIELDS["ttl"][0]
-UDP_LENGTH_OFFSET = L4_OFFSET + UDP_HEADER_FIELDS["length"][0]
-TCP_WINDOW_OFFSET = L4_OFFSET + TCP_HEADER_FIELDS["window"][0]
 
 #: The MSS option of a SYN or SYN-ACK, as sent (after the 20-byte TCP header)
 MSS_OPTION = (TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_MSS >> 8, TCP_MSS & 0xFF)
