@@ -9,10 +9,10 @@ from ..params import check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_PROTO_ICMP,
-    IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_TTL_OFFSET, IP_VERSION, L4_OFFSET,
-    MIN_HEADER_WORDS, TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_WINDOW_OFFSET,
-    UDP_LENGTH_OFFSET,
+    ARP_LENGTH, ARP_REQUEST, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, IP_CSUM_OFFSET,
+    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_SRC_OFFSET, IP_TTL, IP_TTL_OFFSET, IP_VERSION,
+    L4_OFFSET, MIN_HEADER_WORDS, TCP_CSUM_OFFSET, TCP_MSS, TCP_OPT_MSS, TCP_OPT_MSS_LENGTH,
+    TCP_WINDOW_OFFSET, UDP_CSUM_OFFSET, UDP_LENGTH_OFFSET,
 )
 from .rx import FrameKind
 
@@ -21,6 +21,12 @@ __all__ = ["TX_REQUEST", "TxRequestSignature", "FrameBuilder"]
 #: Cycles after a grant in which the checksum words known from the request are summed (the
 #: MAC's preamble, 8 cycles, hides them; the first byte they could collide with is byte 14)
 PRESUM_CYCLES = 5
+
+# a byte added to its checksum the cycle after it left must leave two bytes before the
+# checksum field: the fields from there to the checksum are summed from the request
+assert all(csum - summed_from >= 2 for csum, summed_from in (
+    (IP_CSUM_OFFSET, IP_TTL_OFFSET), (UDP_CSUM_OFFSET, UDP_LENGTH_OFFSET),
+    (TCP_CSUM_OFFSET, TCP_WINDOW_OFFSET)))
 
 #: The MSS option of a SYN or SYN-ACK, as sent (after the 20-byte TCP header)
 MSS_OPTION = (TCP_OPT_MSS, TCP_OPT_MSS_LENGTH, TCP_MSS >> 8, TCP_MSS & 0xFF)
