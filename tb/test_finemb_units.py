@@ -15,7 +15,7 @@ from hdl.finemb import IoDescriptor, PageBuffer
 from hdl.finemb.protocol import (
     FINEMB_PORT, GROUP_IP, GROUP_MAC, HEADER, MsgType, PortType, decode_header, encode_header,
 )
-from hdl.net.queue import FrameQueue
+from hdl.net.queue import FrameQueue, FrameToRxBytes
 from hdl.params import ParameterError
 
 from .harness import ROOT
@@ -309,20 +309,22 @@ def test_page_buffer_refuses_bad_sizes():
 
 # ---- the frame queue
 
-def run_queue(frames, *, depth=2048, backpressure=0.0, seed=0, hold_reader=False):
+def run_queue(frames, *, depth=2048, backpressure=0.0, seed=0, hold_from=None):
     """Feed ``frames`` (``(bytes, keep, ok)``) through a FrameQueue as a MAC would, the
-    decision at byte 6 (the reader held off until all arrived with ``hold_reader``); return
-    ``(frames out with their status, overflows)``."""
+    decision at byte 6 (the reader held off from frame ``hold_from`` until all arrived);
+    return ``(frames out with their status, overflows)``."""
     dut = FrameQueue(depth)
     rng = random.Random(seed)
     sink = StreamSink(dut.m_axis, backpressure=backpressure, seed=seed)
-    sink.paused = hold_reader
     statuses = []
     overflow = [0]
 
     async def mac(ctx):
         rx = dut.rx
-        for data, keep, ok in frames:
+        for k, (data, keep, ok) in enumerate(frames):
+            if k == hold_from:
+                await ctx.tick().repeat(2 * depth)     # the reader empties the queue first
+                sink.paused = True
             for i, byte in enumerate(data):
                 ctx.set(rx.valid, 1)
                 ctx.set(rx.data, byte)
@@ -381,9 +383,106 @@ def test_frame_queue_drops_whole_frames_when_full():
     """A reader that waits: 300-byte frames are kept until 1 KiB is full (three), each
     further one is dropped whole and counted; then the three leave whole."""
     frames = [(bytes([k]) * 300, True, True) for k in range(10)]
-    out, overflows = run_queue(frames, depth=1024, hold_reader=True, seed=1)
+    out, overflows = run_queue(frames, depth=1024, hold_from=0, seed=1)
     assert out == [(d, 0) for d, _, _ in frames[:3]]
     assert overflows == 7
+
+
+@pytest.mark.parametrize("before", [11, 15, 20])
+def test_frame_queue_is_full_at_any_pointer_phase(before):
+    """The same once the queue's pointers have gone round (``before`` 100-byte frames read
+    out first: the writer's pointer wraps while the queue fills): the queue still fills at
+    1 KiB and drops
+    whole frames, whatever the pointers' phase. (A fullness check on the pointers' full-width
+    difference missed it once the writer had wrapped and the reader not, and overwrote bytes
+    not yet read.)"""
+    first = [(bytes([0x80 + k]) * 100, True, True) for k in range(before)]
+    held = [(bytes([k]) * 300, True, True) for k in range(10)]
+    out, overflows = run_queue(first + held, depth=1024, hold_from=before, seed=2)
+    assert out == [(d, 0) for d, _, _ in first + held[:3]]
+    assert overflows == 7
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_frame_queue_cuts_a_begun_frame_that_no_longer_fits(seed):
+    """A kept frame longer than the queue, read cut-through by a reader that takes a byte
+    every other cycle: the reader has begun it when the queue fills, so it cannot be rewound;
+    it leaves cut short where the queue filled, marked bad with a size error, and counted; the
+    frames after it leave whole. (Before this was handled the reader ran on through stale
+    bytes: a frame of old data marked good.)"""
+    depth = 256
+    long_frame = bytes(range(256)) * 4
+    frames = [(long_frame, True, True), (bytes([0x55]) * 100, True, True),
+              (bytes([0x66]) * 70, True, True)]
+    out, overflows = run_queue(frames, depth=depth, backpressure=0.5, seed=seed)
+    assert overflows == 1
+    (cut, cut_status), *rest = out
+    assert cut_status == 0b1001
+    assert depth // 2 <= len(cut) < len(long_frame) and long_frame.startswith(cut)
+    assert rest == [(d, 0) for d, _, _ in frames[1:]]
+
+
+def test_frame_to_rx_bytes_as_a_mac_hands_them_on():
+    """Frames (random pauses inside and between them, random status) come out as a MAC hands
+    them on: byte ``i`` with index ``i``, the end pulse the cycle after the last byte with the
+    frame's length and its status, then at least ``gap`` idle cycles; and no ``rx`` member
+    follows the input within a cycle (all from flip-flops)."""
+    gap = 16
+    dut = FrameToRxBytes(gap=gap)
+    rng = random.Random(7)
+    frames = [(rng.randbytes(rng.randrange(1, 120)), rng.randrange(16)) for _ in range(30)]
+    members = ("valid", "data", "index", "end", "ok", "err_fcs", "err_rx_er", "err_size")
+    seen = []
+
+    async def source(ctx):
+        s = dut.s_axis
+        for data, status in frames:
+            for i, byte in enumerate(data):
+                while rng.random() < 0.3:
+                    ctx.set(s.tvalid, 0)
+                    await ctx.tick()
+                last = i == len(data) - 1
+                before = [ctx.get(getattr(dut.rx, n)) for n in members]
+                for valid, value, user in ((1, byte ^ 0xFF, 15), (0, byte, 0)):
+                    ctx.set(s.tvalid, valid)
+                    ctx.set(s.tdata, value)
+                    ctx.set(s.tlast, not last)
+                    ctx.set(s.tuser, user)
+                    assert [ctx.get(getattr(dut.rx, n)) for n in members] == before
+                ctx.set(s.tdata, byte)
+                ctx.set(s.tlast, last)
+                ctx.set(s.tuser, status if last else 0)
+                ctx.set(s.tvalid, 1)
+                await ctx.tick().until(s.tready)
+            ctx.set(s.tvalid, 0)
+        await ctx.tick().repeat(gap + 4)
+
+    async def monitor(ctx):
+        while True:
+            seen.append({n: ctx.get(getattr(dut.rx, n)) for n in members})
+            await ctx.tick()
+
+    simulate(dut, source, background=[monitor])
+    cycle, last_end = 0, None
+    for data, status in frames:
+        while not seen[cycle]["valid"]:
+            assert not seen[cycle]["end"]
+            cycle += 1
+        if last_end is not None:
+            assert cycle - last_end - 1 >= gap
+        for i, byte in enumerate(data):
+            while not seen[cycle]["valid"]:
+                assert not seen[cycle]["end"]
+                cycle += 1
+            assert (seen[cycle]["data"], seen[cycle]["index"]) == (byte, i)
+            cycle += 1
+        end = seen[cycle]
+        assert end["end"] and not end["valid"] and end["index"] == len(data)
+        assert (end["ok"], end["err_fcs"], end["err_rx_er"], end["err_size"]) == (
+            1 - (status & 1), status >> 1 & 1, status >> 2 & 1, status >> 3 & 1)
+        last_end = cycle
+        cycle += 1
+    assert not any(c["valid"] or c["end"] for c in seen[cycle:])
 
 
 def test_frame_queue_parameters():

@@ -124,26 +124,31 @@ class FinembNode(wiring.Component):
                          port.txd.eq(tx.gmii_txd), port.tx_en.eq(tx.gmii_tx_en),
                          port.tx_er.eq(tx.gmii_tx_er)]
             wiring.connect(m, rx.rx, fq.rx, cq.rx)
-            # the destination address decides, one cycle after its last byte
+            # the destination address decides, with the byte after its last (a frame that
+            # ends with its address is not kept); the decision is registered from the last
+            # address byte's comparisons, so the queues' read enables start at flip-flops
             own, bcast, group = Signal(name=f"own{k}"), Signal(name=f"bcast{k}"), \
                 Signal(name=f"group{k}")
+            decided, to_forward, to_consume = (Signal(name=f"{n}{k}") for n in
+                                               ("decided", "to_forward", "to_consume"))
             r = rx.rx
+            m.d.sync += decided.eq(0)
             with m.If(r.valid & (r.index < 6)):
                 sel = (5 - r.index[:3]).as_unsigned()[:3]
-                with m.If(r.index == 0):
-                    m.d.sync += [own.eq(r.data == mac.word_select(5, 8)),
-                                 bcast.eq(r.data == 0xFF),
-                                 group.eq(r.data == group_mac.word_select(5, 8))]
-                with m.Else():
-                    with m.If(r.data != mac.word_select(sel, 8)):
-                        m.d.sync += own.eq(0)
-                    with m.If(r.data != 0xFF):
-                        m.d.sync += bcast.eq(0)
-                    with m.If(r.data != group_mac.word_select(sel, 8)):
-                        m.d.sync += group.eq(0)
-            decide = r.valid & (r.index == 6)
-            m.d.comb += [fq.decide.eq(decide), fq.keep.eq(~own),
-                         cq.decide.eq(decide), cq.keep.eq(own | bcast | group)]
+                is_own = r.data == mac.word_select(sel, 8)
+                is_bcast = r.data == 0xFF
+                is_group = r.data == group_mac.word_select(sel, 8)
+                first = r.index == 0
+                own_now = is_own & (first | own)
+                bcast_now = is_bcast & (first | bcast)
+                group_now = is_group & (first | group)
+                m.d.sync += [own.eq(own_now), bcast.eq(bcast_now), group.eq(group_now)]
+                with m.If(r.index == 5):
+                    m.d.sync += [decided.eq(1), to_forward.eq(~own_now),
+                                 to_consume.eq(own_now | bcast_now | group_now)]
+            decide = decided & r.valid
+            m.d.comb += [fq.decide.eq(decide), fq.keep.eq(to_forward),
+                         cq.decide.eq(decide), cq.keep.eq(to_consume)]
             m.d.comb += [ev[f"rx_frames{k}"].eq(r.end), ev[f"rx_bad{k}"].eq(r.end & ~r.ok),
                          ev[f"forward_dropped{k}"].eq(fq.overflow)]
             rxs.append(rx)

@@ -21,7 +21,11 @@ class FrameQueue(wiring.Component):
     that does not fit (``overflow`` pulses). A kept frame can be read from the moment it is
     kept, one byte behind the writer, so with a reader that keeps up the queue adds a few
     cycles of latency (cut-through); a reader that waits gets the whole frame later
-    (store-and-forward).
+    (store-and-forward). ``decide`` and ``keep`` reach the read's enable in the same cycle:
+    from flip-flops they keep the parent's decision logic out of that path. A kept frame that no longer fits once its reader has begun it cannot
+    be rewound: it ends at the last byte that fit, marked bad with a size error (``tuser``
+    ``0b1001``; a transmitter sends it with ``tx_er``, a parser drops it), and ``overflow``
+    pulses.
 
     Parameters
     ----------
@@ -43,7 +47,7 @@ class FrameQueue(wiring.Component):
         The kept frames. Once a frame's first byte is offered its bytes follow without a gap
         as long as the frame arrives without one.
     overflow : Out(1)
-        Pulse: a kept frame was dropped because the queue was full.
+        Pulse: a kept frame was dropped, or cut short, because the queue was full.
     level : Out(range(depth + 1))
         Bytes in the queue.
     """
@@ -78,16 +82,17 @@ class FrameQueue(wiring.Component):
         kept = Signal()
         decided = Signal()
         full_seen = Signal()
+        began = Signal()             # the reader has taken the arriving frame's first byte
         last_byte = Signal(8)
         m.d.comb += self.level.eq(wp - rp)
-        full = (wp - rp) == n - 1
+        full = (wp - rp)[:aw + 1] == n - 1
 
         with m.If(rx.valid):
             with m.If(rx.index == 0):
                 # a new frame (one cut off without an end is overwritten)
                 base = Mux(arriving, start, wp)
                 m.d.sync += [arriving.eq(1), kept.eq(0), decided.eq(0), start.eq(base),
-                             full_seen.eq(0)]
+                             full_seen.eq(0), began.eq(0)]
                 with m.If((base - rp)[:aw + 1] == n - 1):
                     m.d.sync += [full_seen.eq(1), wp.eq(base)]
                 with m.Else():
@@ -102,15 +107,19 @@ class FrameQueue(wiring.Component):
         with m.If(self.decide & arriving & ~decided):
             m.d.sync += [decided.eq(1), kept.eq(self.keep)]
         keep_now = kept | (self.decide & arriving & ~decided & self.keep)
+        # a begun frame's status FIFO has room: every frame before it has been read out
+        cut_short = full_seen & began
         with m.If(rx.end & arriving):
             m.d.sync += arriving.eq(0)
-            with m.If(keep_now & ~full_seen & status.w_rdy & (wp != start)):
+            with m.If(keep_now & (~full_seen | began) & status.w_rdy & (wp != start)):
                 # mark the last byte and record the frame's status
                 m.d.comb += [wr.en.eq(1), wr.addr.eq((wp - 1)[:aw]),
                              wr.data.eq(Cat(last_byte, 1)),
                              status.w_en.eq(1),
-                             status.w_data.eq(Cat(~rx.ok, rx.err_fcs, rx.err_rx_er,
-                                                  rx.err_size))]
+                             status.w_data.eq(Mux(cut_short, 0b1001,
+                                                  Cat(~rx.ok, rx.err_fcs, rx.err_rx_er,
+                                                      rx.err_size))),
+                             self.overflow.eq(cut_short)]
                 m.d.sync += done_wp.eq(wp)
             with m.Else():
                 m.d.sync += wp.eq(start)
@@ -118,7 +127,7 @@ class FrameQueue(wiring.Component):
                     m.d.comb += self.overflow.eq(1)
 
         # reading: up to the byte before the arriving kept frame's newest, whole frames after
-        reading_kept = arriving & keep_now & ~full_seen
+        reading_kept = arriving & keep_now & (~full_seen | began)
         visible = Signal(aw + 1)
         m.d.comb += visible.eq(Mux(reading_kept & (wp != start), wp - 1, done_wp))
         out_valid = Signal()
@@ -127,6 +136,8 @@ class FrameQueue(wiring.Component):
         m.d.comb += [rd.addr.eq(rp[:aw]), rd.en.eq(fetch)]
         with m.If(fetch):
             m.d.sync += [rp.eq(rp + 1), out_valid.eq(1)]
+            with m.If(reading_kept & (rp == start)):
+                m.d.sync += began.eq(1)
         with m.Elif(out.tready):
             m.d.sync += out_valid.eq(0)
         last = rd.data[8]
@@ -140,6 +151,8 @@ class FrameToRxBytes(wiring.Component):
     """A frame stream back into the :class:`~hdl.net.mac.RxByteSignature` a
     :class:`~hdl.net.rx.FrameParser` takes: bytes with their index, then the end pulse with
     the status, then ``gap`` idle cycles so the parser's consumers can read its fields.
+    Every ``rx`` member comes from a flip-flop (a byte leaves the cycle after it is taken):
+    the queue's read and the arbiter's choice end here, not in the parser.
 
     Parameters
     ----------
@@ -162,18 +175,22 @@ class FrameToRxBytes(wiring.Component):
         s, rx = self.s_axis, self.rx
         index = Signal(range(2048))
         wait = Signal(range(self._gap + 2))
-        m.d.comb += [s.tready.eq(wait == 0), rx.data.eq(s.tdata),
-                     rx.valid.eq(s.tvalid & s.tready), rx.index.eq(index)]
-        m.d.sync += rx.end.eq(0)
+        took = s.tvalid & s.tready
+        # ``index`` counts the bytes taken; ``rx.index`` is the byte's own (at the end pulse,
+        # the frame's length, as a MAC reports it)
+        m.d.comb += s.tready.eq(wait == 0)
+        m.d.sync += [rx.data.eq(s.tdata), rx.valid.eq(took), rx.index.eq(index)]
+        ended = Signal()
+        m.d.sync += [ended.eq(0), rx.end.eq(ended)]
         with m.If(wait != 0):
             m.d.sync += wait.eq(wait - 1)
         with m.If(wait == 1):
             m.d.sync += index.eq(0)
-        with m.If(s.tvalid & s.tready):
-            # at the end pulse ``index`` is the frame's length, as a MAC reports it
+        with m.If(took):
             m.d.sync += index.eq(Mux(index == 2047, index, index + 1))
             with m.If(s.tlast):
-                m.d.sync += [rx.end.eq(1), wait.eq(self._gap + 1),
-                             rx.ok.eq(~s.tuser[0]), rx.err_fcs.eq(s.tuser[1]),
-                             rx.err_rx_er.eq(s.tuser[2]), rx.err_size.eq(s.tuser[3])]
+                m.d.sync += [ended.eq(1), wait.eq(self._gap + 1)]
+        with m.If(took & s.tlast):
+            m.d.sync += [rx.ok.eq(~s.tuser[0]), rx.err_fcs.eq(s.tuser[1]),
+                         rx.err_rx_er.eq(s.tuser[2]), rx.err_size.eq(s.tuser[3])]
         return m
