@@ -118,15 +118,12 @@ def test_packer_moves_a_beat_per_cycle(nbytes):
     assert cycles["last"] - cycles["first"] + 1 == len(want) + len(messages) - 1
 
 
-@pytest.mark.parametrize("registered_ready", [False, True])
 @pytest.mark.parametrize("nbytes", [1, 8])
 @pytest.mark.parametrize("idle", [0.0, 0.4])
-def test_unpacker_random_takes_and_flushes(nbytes, idle, registered_ready):
+def test_unpacker_random_takes_and_flushes(nbytes, idle):
     """The consumer takes random amounts (0..min(avail, B)) at random: the bytes taken are
     each message's bytes in order; a flush in mid-message drops the rest of that message and
-    the next message starts whole (with ``registered_ready`` also when a beat enters in the
-    flush's cycle: the test asserts that happened); ``ended`` comes once the last beat is
-    absorbed."""
+    the next message starts whole; ``ended`` comes once the last beat is absorbed."""
     rng = random.Random(nbytes * 10 + int(10 * idle))
     messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
                 for _ in range(50)]
@@ -134,22 +131,19 @@ def test_unpacker_random_takes_and_flushes(nbytes, idle, registered_ready):
     beats = [(int.from_bytes(bytes(msg[i:i + nbytes]), "little"), int(i + nbytes >= len(msg)),
               (1 << len(msg[i:i + nbytes])) - 1)
              for msg in messages for i in range(0, len(msg), nbytes)]
-    dut = ByteUnpacker(8 * nbytes, registered_ready=registered_ready)
+    dut = ByteUnpacker(8 * nbytes)
     source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
     got = []
-    entered_at_flush = []
 
     async def consumer(ctx):
         for k, msg in enumerate(messages):
             taken = []
             while True:
                 avail, ended, window = ctx.get(dut.avail), ctx.get(dut.ended), ctx.get(dut.window)
-                assert avail <= (3 if registered_ready else 2) * nbytes
+                assert avail <= 2 * nbytes
                 if (ended and avail == 0) or len(taken) == cut.get(k, -1):
                     ctx.set(dut.flush, 1)
                     ctx.set(dut.take, 0)
-                    if ctx.get(dut.s_axis.tvalid) and ctx.get(dut.s_axis.tready):
-                        entered_at_flush.append(k)
                     await ctx.tick()
                     ctx.set(dut.flush, 0)
                     break
@@ -165,44 +159,3 @@ def test_unpacker_random_takes_and_flushes(nbytes, idle, registered_ready):
 
     simulate(dut, consumer, background=[source.run])
     assert got == [msg[:cut.get(k, len(msg))] for k, msg in enumerate(messages)]
-    if registered_ready:
-        assert entered_at_flush
-
-
-@pytest.mark.parametrize("offset", [0, 3, 7])
-def test_unpacker_registered_ready_keeps_the_rate(offset):
-    """With ``registered_ready`` a consumer taking ``offset`` bytes, then 8 bytes in every
-    cycle, finds them in every cycle once the window has filled, at any alignment; and the
-    input's ``tready`` does not follow ``take``, ``amount`` or ``flush`` within a cycle."""
-    nbytes, length = 8, 8 * 40
-    msg = [(7 * i + 1) & 0xFF for i in range(length)]
-    beats = [(int.from_bytes(bytes(msg[i:i + nbytes]), "little"), int(i + nbytes >= length),
-              0xFF) for i in range(0, length, nbytes)]
-    dut = ByteUnpacker(8 * nbytes, registered_ready=True)
-    source = StreamSource(dut.s_axis, beats, idle=0.0, seed=1)
-    taken, stalls = [], []
-
-    async def consumer(ctx):
-        cycle = 0
-        while len(taken) < length:
-            ready = ctx.get(dut.s_axis.tready)
-            for take, amount, flush in ((1, 8, 0), (0, 0, 1), (1, 0, 0), (0, 3, 0)):
-                ctx.set(dut.take, take)
-                ctx.set(dut.amount, amount)
-                ctx.set(dut.flush, flush)
-                assert ctx.get(dut.s_axis.tready) == ready
-            ctx.set(dut.flush, 0)
-            avail, window = ctx.get(dut.avail), ctx.get(dut.window)
-            want = offset if not taken and offset else 8
-            amount = min(want, avail, length - len(taken))
-            if cycle > 4 and len(taken) + want <= length and amount < want:
-                stalls.append(cycle)
-            ctx.set(dut.amount, amount)
-            ctx.set(dut.take, 1)
-            taken.extend(window.to_bytes(nbytes, "little")[:amount])
-            await ctx.tick()
-            cycle += 1
-
-    simulate(dut, consumer, background=[source.run])
-    assert taken == msg
-    assert stalls == []

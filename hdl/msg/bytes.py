@@ -172,29 +172,14 @@ class ByteUnpacker(wiring.Component):
     from its registers and whose decision comes late keeps the barrel shift out of its
     decision's path.
 
-    With ``registered_ready`` the input's ``tready`` is a function of the unpacker's
-    flip-flops alone (not of ``take``, ``amount`` or ``flush``): the consumer's decision then
-    ends at the window's registers and never reaches the producer. The window holds three
-    beats instead of two and takes a beat whenever it holds at most two, so a consumer taking
-    ``data_width // 8`` bytes every cycle still finds them at any alignment. A beat taken in
-    the cycle of a ``flush`` is dropped with the rest of the message.
-
-    Parameters
-    ----------
-    data_width : int
-        Bits per beat, a multiple of 8.
-    registered_ready : bool
-        ``s_axis.tready`` from flip-flops only (a third beat of window).
-
     Members
     -------
     s_axis : In(AXIStreamSignature(data_width))
         ``tkeep`` must be contiguous from byte 0 (all ones but on a last beat).
     window : Out(data_width)
         The next ``avail`` bytes of the message (higher bytes zero).
-    avail : Out(range(D * data_width // 8 + 1))
-        Bytes in the window (``D`` beats: 2, or 3 with ``registered_ready``); may exceed
-        ``data_width // 8`` (only the first W/8 are shown).
+    avail : Out(range(2 * data_width // 8 + 1))
+        Bytes in the window; may exceed ``data_width // 8`` (only the first W/8 are shown).
     ended : Out(1)
         The message's last beat has been absorbed: ``avail`` bytes are all that is left.
     amount : In(range(data_width // 8 + 1))
@@ -207,26 +192,15 @@ class ByteUnpacker(wiring.Component):
         Discarding input beats after a ``flush``.
     """
 
-    def __init__(self, data_width, *, registered_ready=False):
-        check_int("data_width", data_width, 8, 1024, multiple_of=8)
-        if not isinstance(registered_ready, bool):
-            raise TypeError(f"registered_ready must be a bool, not {registered_ready!r}")
+    def __init__(self, data_width):
         B = data_width // 8
-        self._depth = 3 if registered_ready else 2
         super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
-                          "window": Out(data_width), "avail": Out(range(self._depth * B + 1)),
+                          "window": Out(data_width), "avail": Out(range(2 * B + 1)),
                           "ended": Out(1), "amount": In(range(B + 1)), "take": In(1),
                           "flush": In(1), "dropping": Out(1)})
         self._width = data_width
-        self._registered_ready = registered_ready
-
-    @property
-    def registered_ready(self):
-        return self._registered_ready
 
     def elaborate(self, platform):
-        if self._registered_ready:
-            return self._elaborate_registered_ready()
         m = Module()
         W, B = self._width, self._width // 8
         buf = Signal(2 * W)
@@ -273,45 +247,4 @@ class ByteUnpacker(wiring.Component):
             m.d.sync += buf.eq(buf_kept)
             with m.If(s.tvalid & room_kept):
                 m.d.sync += [count.eq(count + n), ended.eq(s.tlast)]
-        return m
-
-    def _elaborate_registered_ready(self):
-        m = Module()
-        W, B = self._width, self._width // 8
-        buf = Signal(3 * W)
-        count = Signal(range(3 * B + 1))
-        ended = Signal()
-        dropping = Signal()
-        s = self.s_axis
-        m.d.comb += [self.window.eq(buf[:W]), self.avail.eq(count), self.ended.eq(ended),
-                     self.dropping.eq(dropping)]
-
-        room = ~ended & (count <= 2 * B)
-        m.d.comb += s.tready.eq(dropping | room)
-        entering = s.tvalid & room
-        n = keep_count(s.tkeep)
-        beat = Cat(byte_mask(s.tdata, B, n), Const(0, 2 * W))
-        left = Signal(range(3 * B + 1))
-        m.d.comb += left.eq(count - self.amount)
-        # a beat enters at a byte offset of at most 2B (``room``)
-        nb = len(self.amount) + 1
-        buf_taken = kept(m, Mux(entering, (buf >> (self.amount * 8)) | (beat << (left[:nb] * 8)),
-                                buf >> (self.amount * 8))[:3 * W], "buf_taken")
-        buf_kept = kept(m, Mux(entering, buf | (beat << (count[:nb] * 8)), buf)[:3 * W],
-                        "buf_kept")
-
-        with m.If(dropping):
-            with m.If(s.tvalid & s.tlast):
-                m.d.sync += dropping.eq(0)
-        with m.Elif(self.flush):
-            m.d.sync += [count.eq(0), buf.eq(0), ended.eq(0),
-                         dropping.eq(~ended & ~(entering & s.tlast))]
-        with m.Elif(self.take):
-            m.d.sync += [buf.eq(buf_taken), count.eq(left + Mux(entering, n, 0))]
-            with m.If(entering):
-                m.d.sync += ended.eq(s.tlast)
-        with m.Else():
-            m.d.sync += [buf.eq(buf_kept), count.eq(count + Mux(entering, n, 0))]
-            with m.If(entering):
-                m.d.sync += ended.eq(s.tlast)
         return m

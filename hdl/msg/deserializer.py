@@ -86,8 +86,7 @@ class _Offer:
 class Deserializer(wiring.Component):
     """Deserializes AXI4-Stream messages of one type in one framing.
 
-    Nothing is buffered beyond two beats (three with ``registered_ready``): each
-    variable-length field streams out as it arrives.
+    Nothing is buffered beyond two beats: each variable-length field streams out as it arrives.
 
     Parameters
     ----------
@@ -98,11 +97,6 @@ class Deserializer(wiring.Component):
     max_count : int
         Largest accepted element count of an unbounded variable-length field (a bounded one
         uses its bound). Default 2**24.
-    registered_ready : bool
-        ``s_axis.tready`` from flip-flops only (:class:`~hdl.msg.bytes.ByteUnpacker`'s
-        option, a third beat buffered): the deserializer's decisions, which follow a message's
-        counts and checks, then end at its own registers instead of reaching the producer's.
-        Throughput is the same. Default off.
 
     Members
     -------
@@ -129,15 +123,12 @@ class Deserializer(wiring.Component):
         exactly one verdict per message, in order.
     """
 
-    def __init__(self, plan, data_width=64, *, max_count=1 << 24, registered_ready=False):
+    def __init__(self, plan, data_width=64, *, max_count=1 << 24):
         check_plan_width(plan, data_width)
         check_int("max_count", max_count, 1, (1 << 32) - 2)
-        if not isinstance(registered_ready, bool):
-            raise TypeError(f"registered_ready must be a bool, not {registered_ready!r}")
         self.plan = plan
         self._width = data_width
         self._max_count = max_count
-        self._registered_ready = registered_ready
         members = {"s_axis": In(AXIStreamSignature(data_width)),
                    "fields": Out(stream.Signature(plan.layout))}
         for v in plan.streams:
@@ -156,8 +147,7 @@ class Deserializer(wiring.Component):
         plan, W, B = self.plan, self._width, self._width // 8
         steps = plan.steps
         reconros = plan.framing == "reconros"
-        m.submodules.unpacker = unpacker = ByteUnpacker(
-            W, registered_ready=self._registered_ready)
+        m.submodules.unpacker = unpacker = ByteUnpacker(W)
         wiring.connect(m, wiring.flipped(self.s_axis), unpacker.s_axis)
         window, avail, ended = unpacker.window, unpacker.avail, unpacker.ended
 
