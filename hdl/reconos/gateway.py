@@ -246,14 +246,7 @@ class _Transmitter:
                 nbytes_held = Signal(40, name=f"tx_bytes_held{var}")
                 words = Signal(37, name=f"tx_words{var}")
                 m.d.sync += [nbytes_held.eq(nbytes), words.eq((nbytes + WORD - 1) >> 3)]
-                # through a register slice: the MEMIF's read word reaches its flip-flops, not
-                # the serializer's, and the serializer's decision to take bytes reaches them,
-                # not the MEMIF's read path (the slice holds the field's last words after
-                # the read has ended: the serializer takes them before the next field's)
-                into = getattr(ser, payload_port(v, "s"))
-                passed = m.submodules[f"tx_slice{var}"] = RegisterSlice(into.signature.flip())
-                wiring.connect(m, passed.m_axis, into)
-                port = passed.s_axis
+                port = getattr(ser, payload_port(v, "s"))
                 after = "TX_DONE" if k == len(t.order) - 1 else f"TX_VAR{t.order[k + 1]}"
                 # the serializer holds the fields until the message's last byte: payloads
                 # are fed while it has them
@@ -330,7 +323,7 @@ class _Receiver:
         self.started = started
         plan = thread.plan
         m.submodules.deserializer = self.des = des = Deserializer(
-            plan, 64, max_count=thread.max_count, registered_ready=True)
+            plan, 64, max_count=thread.max_count)
         _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis,
                     des.signature.members["s_axis"].signature.flip(), thread.publisher_id,
                     plan.publisher_offset)
@@ -338,16 +331,15 @@ class _Receiver:
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
         self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
         self.counts = {v.index: Signal(32, name=f"rx_count{v.index}") for v in plan.variables}
-        # each payload port through a register slice: the MEMIF write's decision to take a
-        # word reaches the slice's flip-flops, not the deserializer's decision to take bytes,
-        # and the deserializer's word reaches them, not the MEMIF's write buffer.
+        # each payload port through a ready-only slice: the MEMIF write's decision to take a
+        # word reaches the slice's flip-flops, not the deserializer's decision to take bytes.
         # An error empties the slices: what they hold belongs to the failed message, whose
         # buffers are completed with zeros and which is not published.
         self.sources = {}
         for v in plan.variables:
             name = payload_port(v, "m")
             passed = m.submodules[f"rx_slice{v.index}"] = ResetInserter(des.error.valid)(
-                RegisterSlice(des.signature.members[name].signature))
+                RegisterSlice(des.signature.members[name].signature, ready_only=True))
             wiring.connect(m, getattr(des, name), passed.s_axis)
             self.sources[v.index] = _WordSource(passed.m_axis)
         errors = Signal(16, name="rx_errors")
