@@ -137,7 +137,9 @@ class FinembClient(wiring.Component):
                      self.local_ip.eq(local_ip)]
 
         # ---- the request as it arrives: the header, the first body bytes, the page
-        ours = (f.kind == FrameKind.UDP) & (fld.dst_port == FINEMB_PORT)
+        # registered: the port is in 4 bytes before the payload, the verdict much later
+        ours = Signal()
+        m.d.sync += ours.eq((f.kind == FrameKind.UDP) & (fld.dst_port == FINEMB_PORT))
         hdr = Signal(8 * HEADER)
         body = Signal(8 * _BODY)
         off = f.payload_offset

@@ -229,18 +229,22 @@ class FrameParser(wiring.Component):
         with m.If(v & (i == IP_PROTO_OFFSET + 2)):
             m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, f.l4_len))
 
+        # ``kind`` and ``payload_len`` from flip-flops, a cycle after the header bytes they
+        # follow (ethertype, protocol, lengths, TCP data offset): all of those arrive at
+        # least eight bytes before the payload and the verdict, where they are used, and
+        # the verdict's consumers start at registers
         kind = self.kind
         with m.Switch(ethertype):
             with m.Case(ETHERTYPE_ARP):
-                m.d.comb += kind.eq(FrameKind.ARP)
+                m.d.sync += kind.eq(FrameKind.ARP)
             with m.Default():
                 with m.Switch(f.ip_proto):
                     with m.Case(IP_PROTO_ICMP):
-                        m.d.comb += kind.eq(FrameKind.ICMP)
+                        m.d.sync += kind.eq(FrameKind.ICMP)
                     with m.Case(IP_PROTO_UDP):
-                        m.d.comb += kind.eq(FrameKind.UDP)
+                        m.d.sync += kind.eq(FrameKind.UDP)
                     with m.Default():
-                        m.d.comb += kind.eq(FrameKind.TCP)
+                        m.d.sync += kind.eq(FrameKind.TCP)
         with m.If(v & (i == IP_PROTO_OFFSET + 1)):
             with m.Switch(f.ip_proto):
                 with m.Case(IP_PROTO_ICMP):
@@ -352,11 +356,11 @@ class FrameParser(wiring.Component):
                                       (l4_sum == 0xFFFF))]
         with m.Switch(f.ip_proto):
             with m.Case(IP_PROTO_ICMP):
-                m.d.comb += f.payload_len.eq(f.l4_len)
+                m.d.sync += f.payload_len.eq(f.l4_len)
             with m.Case(IP_PROTO_UDP):
-                m.d.comb += f.payload_len.eq(f.l4_len - 8)
+                m.d.sync += f.payload_len.eq(f.l4_len - 8)
             with m.Default():
-                m.d.comb += f.payload_len.eq(f.l4_len - Cat(Const(0, 2), f.doff))
+                m.d.sync += f.payload_len.eq(f.l4_len - Cat(Const(0, 2), f.doff))
 
         # a group's (or the limited broadcast's) datagrams: UDP only, in a frame to that
         # group's MAC (or to broadcast)
