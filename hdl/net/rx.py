@@ -75,7 +75,8 @@ class FrameParser(wiring.Component):
     local_mac, local_ip : In(48), In(32)
         This node's addresses.
     fields : Out(RX_FIELDS)
-        Header fields, captured in place.
+        Header fields, captured in place (``payload_len`` a cycle after the last header byte
+        it follows: valid during the payload and at ``done``).
     payload_data, payload_valid, payload_offset : Out
         The L4 payload's bytes as they pass: the whole ICMP message, the UDP data, the TCP
         data (after the options); ``payload_offset`` counts from 0 without a gap. Bytes beyond
@@ -83,7 +84,8 @@ class FrameParser(wiring.Component):
         ARP frame, of an IPv4 header shorter than 20 bytes or of a TCP segment whose data
         offset is below 5 (tb/test_net_formal.py proves these rules).
     kind : Out(FrameKind)
-        What the frame is, from its EtherType and IP protocol (valid during the payload).
+        What the frame is, from its EtherType and IP protocol (a register, a cycle after
+        them: valid during the payload).
     done : Out(1)
         One-cycle pulse after the frame: ``accept``, ``reason`` and ``kind`` are valid.
     accept : Out(1)
