@@ -22,10 +22,10 @@ class FrameQueue(wiring.Component):
     kept, one byte behind the writer, so with a reader that keeps up the queue adds a few
     cycles of latency (cut-through); a reader that waits gets the whole frame later
     (store-and-forward). ``decide`` and ``keep`` reach the read's enable in the same cycle:
-    from flip-flops they keep the parent's decision logic out of that path. A kept frame that no longer fits once its reader has begun it cannot
-    be rewound: it ends at the last byte that fit, marked bad with a size error (``tuser``
-    ``0b1001``; a transmitter sends it with ``tx_er``, a parser drops it), and ``overflow``
-    pulses.
+    from flip-flops they keep the parent's decision logic out of that path. A kept frame
+    that no longer fits once its reader has begun it cannot be rewound: it ends at the last
+    byte that fit, marked bad with a size error (``tuser`` ``0b1001``; a transmitter sends
+    it with ``tx_er``, a parser drops it), and ``overflow`` pulses.
 
     Parameters
     ----------
