@@ -107,7 +107,8 @@ class FrameQueue(wiring.Component):
         with m.If(self.decide & arriving & ~decided):
             m.d.sync += [decided.eq(1), kept.eq(self.keep)]
         keep_now = kept | (self.decide & arriving & ~decided & self.keep)
-        # a begun frame's status FIFO has room: every frame before it has been read out
+        # cut short: a size error, the only reason given (as a MAC gives one). A begun
+        # frame's status FIFO has room: every frame before it has been read out
         cut_short = full_seen & began
         with m.If(rx.end & arriving):
             m.d.sync += arriving.eq(0)
@@ -116,9 +117,10 @@ class FrameQueue(wiring.Component):
                 m.d.comb += [wr.en.eq(1), wr.addr.eq((wp - 1)[:aw]),
                              wr.data.eq(Cat(last_byte, 1)),
                              status.w_en.eq(1),
-                             status.w_data.eq(Mux(cut_short, 0b1001,
-                                                  Cat(~rx.ok, rx.err_fcs, rx.err_rx_er,
-                                                      rx.err_size))),
+                             status.w_data.eq(Cat(~rx.ok | cut_short,
+                                                  rx.err_fcs & ~cut_short,
+                                                  rx.err_rx_er & ~cut_short,
+                                                  rx.err_size | cut_short)),
                              self.overflow.eq(cut_short)]
                 m.d.sync += done_wp.eq(wp)
             with m.Else():

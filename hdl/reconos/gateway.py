@@ -459,10 +459,10 @@ class _Receiver:
                     m.next = "RX_END"
                 with m.Else():
                     m.d.comb += des.fields.ready.eq(1)
-                with m.If(~self.failed & des.fields.valid):
-                    m.d.sync += [w.eq(struct[64 * i:64 * i + 64])
-                                 for i, w in enumerate(self.words)]
-                    m.next = "RX_WRITE"
+                    with m.If(des.fields.valid):
+                        m.d.sync += [w.eq(struct[64 * i:64 * i + 64])
+                                     for i, w in enumerate(self.words)]
+                        m.next = "RX_WRITE"
             with m.State("RX_WRITE"):
                 mem.write_words(self.msg, self.words, then="RX_CHECK")
             with m.State("RX_CHECK"):
