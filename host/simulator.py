@@ -22,7 +22,10 @@ import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from gen.export.verilog import export_verilog, write_if_changed, write_manifest
+from amaranth.hdl import Elaboratable
+
+from gen.export.verilog import (VivadoTop, convert_top, fix_icarus_t0, manifest_data,
+                                write_if_changed)
 from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
@@ -105,13 +108,63 @@ def exclusive(lock_path):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
-def export_top(component, top, build_dir, *, icarus=False):
+#: cached conversions unused for this many days are removed when a new one is kept
+VERILOG_CACHE_DAYS = 7
+
+
+def _converted(component, top):
+    """``(verilog_text before the simulator fixes, manifest)`` of ``component`` as ``top``."""
+    vtop = VivadoTop(component)
+    text = convert_top(vtop, top)
+    return text, manifest_data(module=top, component=component, top=vtop)
+
+
+def _cached_conversion(make, top, key):
+    """:func:`_converted` of ``make()`` through ``verilog/`` of rosgate's cache; ``make`` is
+    called only when ``key`` is not there. Processes that ask for one key at once wait for
+    the first."""
+    folder = cache_dir() / "verilog"
+    folder.mkdir(parents=True, exist_ok=True)
+    vfile, mfile = folder / f"{top}-{key}.v", folder / f"{top}-{key}.json"
+    with exclusive(folder / f"{top}-{key}.lock"):
+        if vfile.is_file() and mfile.is_file():
+            vfile.touch()
+            return vfile.read_text(), json.loads(mfile.read_text())
+        text, manifest = _converted(make(), top)
+        for path, content in ((mfile, json.dumps(manifest)), (vfile, text)):
+            partial = path.with_suffix(".part")
+            partial.write_text(content)
+            partial.replace(path)
+    stale = time.time() - VERILOG_CACHE_DAYS * 86400
+    for old in folder.glob("*.v"):
+        with contextlib.suppress(FileNotFoundError):
+            if old.stat().st_mtime < stale:
+                old.unlink()
+                for other in (".json", ".lock"):
+                    old.with_suffix(other).unlink(missing_ok=True)
+    return text, manifest
+
+
+def export_top(component, top, build_dir, *, icarus=False, key=None):
     """Write ``component`` as Verilog module ``top`` and its manifest into ``build_dir``;
-    return the Verilog path (left untouched when its text is unchanged)."""
-    text, vtop = export_verilog(component, top, icarus=icarus)
+    return the Verilog path (left untouched when its text is unchanged).
+
+    ``component`` may be a function of no arguments that makes it. With ``key``, a
+    fingerprint of everything the Verilog depends on (the design's sources and parameters),
+    the conversion and the manifest are kept in ``verilog/`` of rosgate's cache and reused by
+    every later export with that key, for either simulator, without making the component
+    again. Converting is most of a small bench's build (a message codec: 13 s, mostly
+    Amaranth's netlist), and one configuration is often built for both simulators or by
+    several test modules."""
+    make = component if callable(component) and not isinstance(component, Elaboratable) \
+        else lambda: component
+    if key is None:
+        text, manifest = _converted(make(), top)
+    else:
+        text, manifest = _cached_conversion(make, top, key)
     vfile = Path(build_dir) / f"{top}.v"
-    write_if_changed(vfile, text)
-    write_manifest(Path(build_dir) / f"{top}.json", module=top, component=component, top=vtop)
+    write_if_changed(vfile, fix_icarus_t0(text, delay=icarus))
+    write_if_changed(Path(build_dir) / f"{top}.json", json.dumps(manifest, indent=2) + "\n")
     return vfile
 
 
@@ -211,7 +264,7 @@ def environment_seed():
 
 def run_top(module, top, component, sim, build_dir, *, params=None, testcase=None, seed=None,
             extra_env=None, log_file=None, run_name=None, lint=True, cxx_opt=DEFAULT_CXX_OPT,
-            waves=False, progress=None, exported=None, internals=False):
+            waves=False, progress=None, exported=None, internals=False, verilog_key=None):
     """Export ``component`` as ``top``, build it for ``sim`` and run the cocotb tests of
     ``module`` against it; return the results file.
 
@@ -221,7 +274,8 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
         Dotted name of the cocotb test module (imported inside the simulator).
     top : str
         Verilog module name.
-    component : amaranth.lib.wiring.Component
+    component : amaranth.lib.wiring.Component or callable
+        The design, or a function of no arguments that makes it (see :func:`export_top`).
     sim : str
         ``"icarus"`` or ``"verilator"``.
     build_dir : path
@@ -254,6 +308,10 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     internals : bool
         Verilator: let the cocotb side see every signal of the design, not only the top
         module's (a larger, slower model).
+    verilog_key : str or None
+        A fingerprint of everything the Verilog depends on (the design's sources, its
+        parameters): the conversion is then shared through rosgate's cache, see
+        :func:`converted_verilog`. ``None`` converts ``component`` every time.
 
     Raises
     ------
@@ -287,7 +345,8 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
         elif waves:
             plusargs = [f"+dumpfile_path={fst}"]
         try:
-            vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus")
+            vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus",
+                                              key=verilog_key)
             sources = [vfile]
             if top_only:
                 from cocotb_tools.runner import VerilatorControlFile

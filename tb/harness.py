@@ -17,10 +17,14 @@ runs one bench with many seeds (tb/soak.py).
 """
 
 import contextlib
+import functools
+import hashlib
+import json
 import os
 import sys
 from pathlib import Path
 
+import amaranth
 import pytest
 
 from gen.tops import build_top
@@ -39,7 +43,7 @@ from host.simulator import (
 
 __all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "amount", "cocotb_bench", "run_bench",
            "bench_params", "bench_manifest", "export_bench_top", "environment_seed",
-           "failed_seeds"]
+           "failed_seeds", "verilog_key"]
 
 #: the repository, and its simulator output folder
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,13 +76,63 @@ def _waves():
     return os.environ.get("WAVES", "0") not in ("", "0")
 
 
+#: what a bench top's Verilog can depend on besides its parameters: every file of these
+#: folders (the hardware, its generators and message definitions, the bench tops), and the
+#: Python of these
+_DESIGN_FOLDERS, _PYTHON_FOLDERS = ("hdl", "gen"), ("tb", "bench", "host")
+
+
+@functools.cache
+def _design_digest():
+    digest = hashlib.sha256(amaranth.__version__.encode())
+    files = [p for folder in _DESIGN_FOLDERS for p in (ROOT / folder).rglob("*")]
+    files += [p for folder in _PYTHON_FOLDERS for p in (ROOT / folder).rglob("*.py")]
+    for path in sorted(p for p in files if p.is_file() and "__pycache__" not in p.parts):
+        digest.update(str(path.relative_to(ROOT)).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+def _named_files(value):
+    """Files named by string values anywhere in ``value`` (message folders, I/O descriptions),
+    relative to the repository or absolute."""
+    if isinstance(value, dict):
+        value = list(value.values())
+    if isinstance(value, (list, tuple)):
+        return [f for v in value for f in _named_files(v)]
+    if isinstance(value, str) and value and len(value) < 4096 and "\n" not in value:
+        path = ROOT / value
+        if path.is_file():
+            return [path]
+        if path.is_dir() and path != ROOT:
+            return sorted(p for p in path.rglob("*") if p.is_file())
+    return []
+
+
+def verilog_key(top, params, build=None):
+    """A fingerprint of the Verilog of ``top`` built with ``params`` (by ``build``, default the
+    :data:`gen.tops.TOPS` builder): the sources it can depend on, the parameters and the files
+    they name. ``None`` when ``build`` may hold state the fingerprint does not see (a lambda
+    or a closure): that top is converted every time."""
+    if build is not None and (build.__name__ == "<lambda>" or build.__closure__
+                              or "<locals>" in build.__qualname__):
+        return None
+    digest = hashlib.sha256(_design_digest().encode())
+    if build is not None:
+        digest.update(f"{build.__module__}.{build.__qualname__}".encode())
+    digest.update(json.dumps([top, params], sort_keys=True).encode())
+    for path in _named_files(params):
+        digest.update(str(path).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:32]
+
+
 def export_bench_top(top, params, build_dir, *, build=None, icarus=False):
     """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path.
 
     ``build`` makes the component (default: the :data:`gen.tops.TOPS` builder of ``top``).
     """
-    component = (build or (lambda **p: build_top(top, **p)))(**params)
-    return export_top(component, top, build_dir, icarus=icarus)
+    builder = build or (lambda **p: build_top(top, **p))
+    return export_top(lambda: builder(**params), top, build_dir, icarus=icarus,
+                      key=verilog_key(top, params, build))
 
 
 def rerun_hint(seed):
@@ -113,7 +167,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     :data:`host.simulator.DEFAULT_CXX_OPT`. ``optimise`` keeps Verilator's own -Os, in a
     build folder of its own, for runs long enough to repay it (``make bench``).
     """
-    component = (build or (lambda **p: build_top(top, **p)))(**params)
+    builder = build or (lambda **p: build_top(top, **p))
     cxx_opt = None if optimise else DEFAULT_CXX_OPT if top in OPTIMISED_TOPS else QUICK_CXX_OPT
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
@@ -126,11 +180,11 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         **(extra_env or {}),
     }
     try:
-        return run_top(module, top, component, sim, build_dir, params=params,
+        return run_top(module, top, lambda: builder(**params), sim, build_dir, params=params,
                        testcase=testcase, seed=seed, extra_env=env,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
                        run_name=run_name, lint=build is None, cxx_opt=cxx_opt,
-                       waves=_waves())
+                       waves=_waves(), verilog_key=verilog_key(top, params, build))
     except SimulationFailed as exc:
         seeds = sorted({s for s in exc.failed.values() if s is not None})
         again = "".join(f"; again with: {rerun_hint(s)}" for s in seeds)

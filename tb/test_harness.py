@@ -14,7 +14,8 @@ import cocotb
 import pytest
 from cocotb.triggers import Timer
 
-from tb.harness import environment_seed, run_bench
+from gen.tops import build_top
+from tb.harness import environment_seed, run_bench, verilog_key
 from tb.topic_tb import CONFIGS
 
 CONFIG_ID = "1x1_w8"
@@ -90,3 +91,25 @@ def test_bad_seed_is_refused_by_name(monkeypatch, value):
 def test_seed_values(monkeypatch, value, seed):
     monkeypatch.setenv("SEED", value)
     assert environment_seed() == seed
+
+
+def test_verilog_key_follows_parameters_named_files_and_builder(tmp_path):
+    """The fingerprint a bench top's conversion is cached under changes with its parameters,
+    with the content of a file they name, and with the builder; a builder that may hold state
+    the fingerprint cannot see (a lambda, a closure) gets none."""
+    params = dict(CONFIGS["1x1_w8"])
+    key = verilog_key("topic", params)
+    assert key == verilog_key("topic", dict(params))
+    assert key != verilog_key("topic", dict(params, data_width=16))
+    assert key != verilog_key("topic", params, build=build_top)
+    named = tmp_path / "io.txt"
+    named.write_text("a")
+    with_file = verilog_key("topic", dict(params, io=str(named)))
+    named.write_text("b")
+    assert with_file != verilog_key("topic", dict(params, io=str(named)))
+    assert verilog_key("topic", params, build=lambda **p: build_top("topic", **p)) is None
+    stop = 3
+
+    def closure(**p):
+        return stop
+    assert verilog_key("topic", params, build=closure) is None

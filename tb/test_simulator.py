@@ -5,6 +5,7 @@ below runs only when the pytest tests of this module start it."""
 
 import json
 import os
+import time
 from pathlib import Path
 
 import cocotb
@@ -14,7 +15,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from host.simulator import QUICK_CXX_OPT, run_top, start_clock
+from host.simulator import (QUICK_CXX_OPT, VERILOG_CACHE_DAYS, export_top, run_top,
+                            start_clock)
 
 
 class _Accumulator(wiring.Component):
@@ -87,3 +89,42 @@ def test_verilator_model_shows_the_top_module(tmp_path, internals):
     assert report["port"] is True
     assert report["seen"] is internals and report["inner"] is internals
     assert (tmp_path / "build" / "accumulator_top.vlt").exists() is not internals
+
+
+def test_conversion_is_cached_by_key_for_both_simulators(tmp_path, monkeypatch):
+    """``export_top`` with a key converts once: a second export with the same key, for the
+    other simulator, reads the cache without making the component; its Verilog differs from
+    an uncached export only by the simulator's fixes, and its manifest is the same; another
+    key converts again."""
+    monkeypatch.setenv("ROSGATE_CACHE", str(tmp_path / "cache"))
+    made = []
+
+    def make():
+        made.append(1)
+        return _Top()
+
+    first = export_top(make, "accumulator_top", tmp_path / "v", key="k1")
+    second = export_top(make, "accumulator_top", tmp_path / "i", icarus=True, key="k1")
+    assert len(made) == 1
+    plain = export_top(_Top(), "accumulator_top", tmp_path / "p", icarus=True)
+    assert second.read_text() == plain.read_text()
+    assert first.read_text() == export_top(_Top(), "accumulator_top", tmp_path / "q").read_text()
+    assert first.read_text() != second.read_text()          # Icarus' t=0 fix
+    for folder in ("i", "p"):
+        manifest = json.loads((tmp_path / folder / "accumulator_top.json").read_text())
+        assert manifest == json.loads((tmp_path / "v" / "accumulator_top.json").read_text())
+    export_top(make, "accumulator_top", tmp_path / "v2", key="k2")
+    assert len(made) == 2
+    assert sorted(p.name for p in (tmp_path / "cache" / "verilog").glob("*.v")) == [
+        "accumulator_top-k1.v", "accumulator_top-k2.v"]
+
+
+def test_cache_forgets_conversions_unused_for_a_week(tmp_path, monkeypatch):
+    monkeypatch.setenv("ROSGATE_CACHE", str(tmp_path / "cache"))
+    export_top(_Top, "accumulator_top", tmp_path / "a", key="old")
+    old = tmp_path / "cache" / "verilog" / "accumulator_top-old.v"
+    week = time.time() - (VERILOG_CACHE_DAYS + 1) * 86400
+    os.utime(old, (week, week))
+    export_top(_Top, "accumulator_top", tmp_path / "b", key="new")
+    assert sorted(p.name for p in old.parent.iterdir()) == [
+        "accumulator_top-new.json", "accumulator_top-new.lock", "accumulator_top-new.v"]

@@ -26,8 +26,8 @@ from amaranth.lib import wiring
 
 from .comb_cycles import faster_comb_cycle_check
 
-__all__ = ["VivadoTop", "exported_ports", "export_verilog", "port_name", "write_if_changed",
-           "without_zero_memory_init",
+__all__ = ["VivadoTop", "convert_top", "exported_ports", "export_verilog", "manifest_data",
+           "port_name", "write_if_changed", "write_manifest", "without_zero_memory_init",
            "fix_icarus_t0"]
 
 
@@ -161,14 +161,19 @@ def _trigger_single_statement_blocks(text):
     return "".join(out)
 
 
+def convert_top(top, name):
+    """The Verilog text of :class:`VivadoTop` ``top`` as module ``name``, as Yosys writes it
+    (before :func:`fix_icarus_t0`)."""
+    with faster_comb_cycle_check():
+        return verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
+                               strip_internal_attrs=True)
+
+
 def export_verilog(component, name, *, clock="aclk", reset="aresetn", icarus=False):
     """Return ``(verilog_text, top)`` for ``component`` wrapped in a :class:`VivadoTop`;
     ``icarus`` prepares the text for Icarus simulation (see :func:`fix_icarus_t0`)."""
     top = VivadoTop(component, clock=clock, reset=reset)
-    with faster_comb_cycle_check():
-        text = verilog.convert(top, name=name, ports=top.port_list(), emit_src=False,
-                               strip_internal_attrs=True)
-    return fix_icarus_t0(text, delay=icarus), top
+    return fix_icarus_t0(convert_top(top, name), delay=icarus), top
 
 
 _ZERO_MEMORY_INIT = re.compile(r"^\s*initial begin\n(?:\s*[\w\\$.]+\[\d+\] = \d+'[hbd]0+;\n)+"
@@ -196,8 +201,8 @@ def write_if_changed(path, text):
     return True
 
 
-def write_manifest(path, *, module, component, top, extra=None):
-    """Write a JSON manifest describing an exported top."""
+def manifest_data(*, module, component, top, extra=None):
+    """The manifest describing an exported top (a JSON-able dict), see :func:`write_manifest`."""
     data = {
         "module": module,
         "component": f"{type(component).__module__}.{type(component).__qualname__}",
@@ -208,5 +213,11 @@ def write_manifest(path, *, module, component, top, extra=None):
     }
     if extra:
         data.update(extra)
+    return data
+
+
+def write_manifest(path, *, module, component, top, extra=None):
+    """Write a JSON manifest describing an exported top; return it."""
+    data = manifest_data(module=module, component=component, top=top, extra=extra)
     write_if_changed(path, json.dumps(data, indent=2) + "\n")
     return data
