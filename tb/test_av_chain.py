@@ -21,10 +21,11 @@ from .av_chain_tb import SMALL, AvChainTB
 
 CONFIGS = {"small_p1": SMALL}
 
-# make test-full only (the same nodes run in make test as the threads of examples/av_chain,
-# tb/test_project_sim.py; the top is linted there): the latency and bad-frame test on
-# Verilator, and every test on both simulators (the design is large: its
-# idle-and-backpressure run takes half a minute)
+# make test-full only, as the chain's other benches (its ReconROS variant in
+# tb/test_project_sim.py, its export in tb/test_project_export.py): the latency and bad-frame
+# test on Verilator, and every test on both simulators (the design is large: its
+# idle-and-backpressure run takes half a minute). make test runs each of its nodes' kernels
+# (tb/test_kernels_image.py, _warp, _lane).
 test_av_chain = cocotb_bench("av_chain", {"small_p1": pytest.param(SMALL, marks=pytest.mark.full)},
                              simulators=("verilator",),
                              testcases=["chain_alpha_latency_and_bad_frames"])

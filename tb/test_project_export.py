@@ -20,7 +20,7 @@ from host.lint import lint_verilog
 from host.simulator import exclusive
 
 from .harness import ROOT
-from .projects import EXAMPLES, EXPORT_PARAMS, example_cfg, external_threads_project
+from .projects import EXPORT_PARAMS, EXPORTED_EXAMPLES, example_cfg, external_threads_project
 
 
 class _Exports:
@@ -74,7 +74,7 @@ def tcl_interfaces(text):
     return out
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
+@pytest.mark.parametrize("name", EXPORTED_EXAMPLES)
 def test_verilog_lint_clean(exported, name):
     project, folder, manifest = exported[name]
     for core, info in manifest["cores"].items():
@@ -82,7 +82,7 @@ def test_verilog_lint_clean(exported, name):
         assert not report, f"{name}/{core}:\n{report}"
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
+@pytest.mark.parametrize("name", EXPORTED_EXAMPLES)
 def test_tcl_references_and_interfaces(exported, name):
     project, folder, manifest = exported[name]
     scripts = [folder / "build.tcl", folder / "bd" / "design_1.tcl",
@@ -112,7 +112,7 @@ def test_tcl_references_and_interfaces(exported, name):
             assert set(fifo["ports"]) == logical, (core, fifo["name"])
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
+@pytest.mark.parametrize("name", EXPORTED_EXAMPLES)
 def test_block_design(exported, name):
     """ReconROS addresses (docs/reconos.md), interrupt positions, memory port and clocks."""
     project, folder, manifest = exported[name]
@@ -147,7 +147,7 @@ def test_block_design(exported, name):
     assert "BIN_FILE true" in build
 
 
-@pytest.mark.parametrize("name", EXAMPLES)
+@pytest.mark.parametrize("name", EXPORTED_EXAMPLES)
 def test_manifest_agrees_with_build_cfg(exported, name):
     project, folder, manifest = exported[name]
     assert manifest["arch"] == project.arch and manifest["top"] == "rosgate_system"

@@ -304,7 +304,8 @@ def test_ball_on_plate_settles(tmp_path):
     assert results["final_radius_mm"] < 3.0, results["final_radius_mm"]
 
 
-@pytest.mark.parametrize("sim", ["verilator", pytest.param("icarus", marks=pytest.mark.full)])
+@pytest.mark.full
+@pytest.mark.parametrize("sim", ["verilator", "icarus"])
 def test_av_chain_reconros_variant(sim, tmp_path):
     """examples/av_chain, its seven nodes ReconOS threads with their topics through memory,
     the scene at a fifth of its size: bad frames are dropped by the node they reach and

@@ -130,8 +130,11 @@ def photo():
     return cv2.imread(str(IMAGES / "coffee_80x60.png"))
 
 
+@pytest.mark.full
 def test_sobel_dip_from_dds(tmp_path, photo):
-    """A DDS participant drives the Sobel/DIP system (Verilator) as ROS 2 nodes would."""
+    """A DDS participant drives the Sobel/DIP system (Verilator) as ROS 2 nodes would. In
+    make test-full only (40 s): make test drives hardware services, topics and actions from
+    DDS in the tests below, and the Sobel/DIP system in tb/test_project_sim.py."""
     rng = np.random.default_rng()
     odd = rng.integers(0, 256, (17, 33, 3), np.uint8)
     domain = peer.unique_domain()

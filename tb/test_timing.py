@@ -45,8 +45,9 @@ def _place(tmp_path, depth, mhz, seeds=(1, 2)):
 
 
 def test_adder_chain_is_slower_than_one_adder_and_margin_decides(tmp_path):
-    short = _place(tmp_path, 1, 100)
-    long = _place(tmp_path, 8, 100)
+    # one adder places at about 470 MHz, the chain at about 185
+    short = _place(tmp_path, 1, 250)
+    long = _place(tmp_path, 8, 250)
     for r in (short, long):
         assert r["seeds"] == [1, 2] and set(r["per_seed"]) == {1, 2}
         assert r["fmax_mhz"] == min(next(iter(v.values())) for v in r["per_seed"].values())
@@ -59,11 +60,8 @@ def test_adder_chain_is_slower_than_one_adder_and_margin_decides(tmp_path):
     assert long["critical_path"]["to"].rsplit(".", 1)[-1] in ("total", "y"), \
         long["critical_path"]
     assert "held" in long["critical_path"]["from"], long["critical_path"]
-    # a target the chain cannot reach fails, one it reaches with margin passes
-    too_fast = _place(tmp_path, 8, round(long["fmax_mhz"] * 2), seeds=(1,))
-    assert not too_fast["pass"]
-    easy = _place(tmp_path, 8, round(long["fmax_mhz"] / 2), seeds=(1,))
-    assert easy["pass"]
+    # at a target between them the one adder passes with margin, the chain fails
+    assert short["pass"] and not long["pass"], (short["fmax_mhz"], long["fmax_mhz"])
 
 
 def test_tool_failure_names_the_log(tmp_path):
