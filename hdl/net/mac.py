@@ -1,7 +1,7 @@
 """GMII 8-bit Ethernet MAC, receive and transmit halves (docs/network.md)."""
 
 from amaranth.hdl import Module, Mux, Signal
-from amaranth.lib import wiring
+from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from ..stream import AXIStreamSignature, RegisterSlice
@@ -9,7 +9,7 @@ from .crc import Crc32
 from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, SFD
 
 __all__ = ["GmiiSignature", "GmiiRx", "GmiiTx", "RxByteSignature", "FrameStreamSignature",
-           "FRAME_STATUS_BITS"]
+           "FrameStatus"]
 
 _PREAMBLE_BYTE = 0x55
 
@@ -58,15 +58,15 @@ class RxByteSignature(wiring.Signature):
         })
 
 
-#: ``tuser`` of a frame stream's last byte: bit 0 the frame is bad (``not ok``), bits 1-3
-#: why (FCS, RX_ER, size), as :class:`RxByteSignature` reports them
-FRAME_STATUS_BITS = 4
+#: ``tuser`` of a frame stream's last byte: ``bad`` (the frame is not ``ok``) and why
+#: (``err_fcs``, ``err_rx_er``, ``err_size``), as :class:`RxByteSignature` reports them
+FrameStatus = data.StructLayout({"bad": 1, "err_fcs": 1, "err_rx_er": 1, "err_size": 1})
 
 
 def FrameStreamSignature():
     """Whole frames as bytes, destination MAC to FCS, ``tlast`` on the last byte, whose
-    ``tuser`` carries the frame's status (:data:`FRAME_STATUS_BITS`)."""
-    return AXIStreamSignature(8, keep=False, user_width=FRAME_STATUS_BITS)
+    ``tuser`` carries the frame's status (:data:`FrameStatus`)."""
+    return AXIStreamSignature(8, keep=False, user_width=FrameStatus.size)
 
 
 class GmiiRx(wiring.Component):
@@ -160,8 +160,8 @@ class GmiiTx(wiring.Component):
         To the PHY, registered.
     r_axis : In(FrameStreamSignature()), with ``raw``
         Whole frames to repeat as they are, destination MAC to FCS (no padding, no FCS
-        added), from a :class:`~hdl.net.queue.FrameQueue`; ``tuser[0]`` on the last byte
-        (a bad frame) sends that byte with ``gmii_tx_er``, so the next receiver drops the
+        added), from a :class:`~hdl.net.queue.FrameQueue`; a last byte whose status
+        (:data:`FrameStatus`) is ``bad`` is sent with ``gmii_tx_er``, so the next receiver drops the
         frame. Served before ``s_axis`` when both wait. The same no-gap rule applies.
     frames : Out(32)
         Frames sent.
@@ -230,7 +230,7 @@ class GmiiTx(wiring.Component):
                 with m.State("RAW"):
                     r = self.r_axis
                     m.d.comb += [en.eq(1), r.tready.eq(1), byte.eq(r.tdata),
-                                 err.eq(~r.tvalid | (r.tlast & r.tuser[0]))]
+                                 err.eq(~r.tvalid | (r.tlast & FrameStatus(r.tuser).bad))]
                     with m.If(~r.tvalid):
                         m.d.sync += underrun.eq(1)
                     with m.Elif(r.tlast):

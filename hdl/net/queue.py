@@ -8,9 +8,9 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from .mac import FRAME_STATUS_BITS, FrameStreamSignature, RxByteSignature
+from .mac import FrameStatus, FrameStreamSignature, RxByteSignature
 
-__all__ = ["FRAME_STATUS_BITS", "FrameStreamSignature", "FrameQueue", "FrameToRxBytes"]
+__all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBytes"]
 
 class FrameQueue(wiring.Component):
     """Received frames in a block-RAM queue, kept or dropped on a decision.
@@ -24,8 +24,8 @@ class FrameQueue(wiring.Component):
     (store-and-forward). ``decide`` and ``keep`` reach the read's enable in the same cycle:
     from flip-flops they keep the parent's decision logic out of that path. A kept frame
     that no longer fits once its reader has begun it cannot be rewound: it ends at the last
-    byte that fit, marked bad with a size error (``tuser`` ``0b1001``; a transmitter sends
-    it with ``tx_er``, a parser drops it), and ``overflow`` pulses.
+    byte that fit, marked bad with a size error (its :data:`~hdl.net.mac.FrameStatus`; a
+    transmitter sends it with ``tx_er``, a parser drops it), and ``overflow`` pulses.
 
     Parameters
     ----------
@@ -71,7 +71,8 @@ class FrameQueue(wiring.Component):
         m.submodules.mem = mem = Memory(shape=9, depth=n, init=[])     # byte + last
         wr = mem.write_port()
         rd = mem.read_port()
-        m.submodules.status = status = SyncFIFO(width=FRAME_STATUS_BITS, depth=self._frames)
+        m.submodules.status = status = SyncFIFO(width=FrameStatus.size, depth=self._frames)
+        written = Signal(FrameStatus)
         rx = self.rx
 
         wp = Signal(aw + 1)          # next byte of the arriving frame
@@ -117,10 +118,11 @@ class FrameQueue(wiring.Component):
                 m.d.comb += [wr.en.eq(1), wr.addr.eq((wp - 1)[:aw]),
                              wr.data.eq(Cat(last_byte, 1)),
                              status.w_en.eq(1),
-                             status.w_data.eq(Cat(~rx.ok | cut_short,
-                                                  rx.err_fcs & ~cut_short,
-                                                  rx.err_rx_er & ~cut_short,
-                                                  rx.err_size | cut_short)),
+                             status.w_data.eq(written),
+                             written.bad.eq(~rx.ok | cut_short),
+                             written.err_fcs.eq(rx.err_fcs & ~cut_short),
+                             written.err_rx_er.eq(rx.err_rx_er & ~cut_short),
+                             written.err_size.eq(rx.err_size | cut_short),
                              self.overflow.eq(cut_short)]
                 m.d.sync += done_wp.eq(wp)
             with m.Else():
@@ -193,6 +195,7 @@ class FrameToRxBytes(wiring.Component):
             with m.If(s.tlast):
                 m.d.sync += [ended.eq(1), wait.eq(self._gap + 1)]
         with m.If(took & s.tlast):
-            m.d.sync += [rx.ok.eq(~s.tuser[0]), rx.err_fcs.eq(s.tuser[1]),
-                         rx.err_rx_er.eq(s.tuser[2]), rx.err_size.eq(s.tuser[3])]
+            status = FrameStatus(s.tuser)
+            m.d.sync += [rx.ok.eq(~status.bad), rx.err_fcs.eq(status.err_fcs),
+                         rx.err_rx_er.eq(status.err_rx_er), rx.err_size.eq(status.err_size)]
         return m
