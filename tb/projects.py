@@ -10,10 +10,11 @@ __all__ = ["EXAMPLES", "EXPORTED_EXAMPLES", "EXPORT_PARAMS", "example_cfg",
 #: every folder of examples/ with a build.cfg
 EXAMPLES = sorted(p.parent.name for p in (ROOT / "examples").glob("*/build.cfg"))
 #: the examples the export tests take, as pytest parameters: the lane-following chain (seven
-#: threads, 28 s to export even at a fifth of its size) in make test-full only; every part of
-#: the export it uses is exercised by the other examples in make test
-EXPORTED_EXAMPLES = [pytest.param(n, marks=pytest.mark.full) if n == "av_chain" else n
-                     for n in EXAMPLES]
+#: threads, 28 s to export even at a fifth of its size) and the six service threads of
+#: hw_services (25 s) in make test-full only; every part of the export they use is exercised
+#: by the other examples in make test (sort_service and sort_action export services)
+EXPORTED_EXAMPLES = [pytest.param(n, marks=pytest.mark.full)
+                     if n in ("av_chain", "hw_services") else n for n in EXAMPLES]
 #: ``--param`` settings the export tests use: the lane-following chain at a fifth of its
 #: frame size and 1 px/clk (the full-size export at 4 px/clk takes two and a half minutes)
 EXPORT_PARAMS = {"av_chain": ["*.scale=0.2", "*.pixels_per_beat=1"]}
