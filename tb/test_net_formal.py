@@ -43,7 +43,7 @@ from hdl.net.frames import (
 )
 from hdl.net.rbcp import RbcpServer
 from hdl.net.rx import FrameKind, FrameParser
-from hdl.net.registers import GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, GlobalRegisters
+from hdl.net.registers import GLOBAL_BASE, GLOBAL_REGS, GlobalRegisters
 from hdl.net.tcp import TcpRequest, TcpRequestScheduler
 from hdl.net.tx import FrameBuilder
 from tb.formal import held_until_taken, run_sby
