@@ -132,7 +132,7 @@ def _cached_conversion(make, top, key):
             return vfile.read_text(), json.loads(mfile.read_text())
         text, manifest = _converted(make(), top)
         for path, content in ((mfile, json.dumps(manifest)), (vfile, text)):
-            partial = path.with_suffix(".part")
+            partial = path.with_name(path.name + ".part")
             partial.write_text(content)
             partial.replace(path)
     stale = time.time() - VERILOG_CACHE_DAYS * 86400

@@ -125,13 +125,18 @@ def verilog_key(top, params, build=None):
     return digest.hexdigest()[:32]
 
 
+def _maker(top, params, build):
+    """A function of no arguments that makes ``top`` with ``params`` (by ``build``, default the
+    :data:`gen.tops.TOPS` builder): called only when its conversion is not cached."""
+    return lambda: (build or functools.partial(build_top, top))(**params)
+
+
 def export_bench_top(top, params, build_dir, *, build=None, icarus=False):
     """Export ``top`` with ``params`` into ``build_dir``; return the Verilog path.
 
     ``build`` makes the component (default: the :data:`gen.tops.TOPS` builder of ``top``).
     """
-    builder = build or (lambda **p: build_top(top, **p))
-    return export_top(lambda: builder(**params), top, build_dir, icarus=icarus,
+    return export_top(_maker(top, params, build), top, build_dir, icarus=icarus,
                       key=verilog_key(top, params, build))
 
 
@@ -167,7 +172,6 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     :data:`host.simulator.DEFAULT_CXX_OPT`. ``optimise`` keeps Verilator's own -Os, in a
     build folder of its own, for runs long enough to repay it (``make bench``).
     """
-    builder = build or (lambda **p: build_top(top, **p))
     cxx_opt = None if optimise else DEFAULT_CXX_OPT if top in OPTIMISED_TOPS else QUICK_CXX_OPT
     build_dir = SIM_BUILD / f"{top}-{config_id}-{sim}{'-opt' if optimise else ''}"
     short = module.rsplit(".", 1)[-1] + (f"-{run_name}" if run_name else "")
@@ -180,7 +184,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         **(extra_env or {}),
     }
     try:
-        return run_top(module, top, lambda: builder(**params), sim, build_dir, params=params,
+        return run_top(module, top, _maker(top, params, build), sim, build_dir, params=params,
                        testcase=testcase, seed=seed, extra_env=env,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
                        run_name=run_name, lint=build is None, cxx_opt=cxx_opt,
