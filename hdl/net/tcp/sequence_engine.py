@@ -32,20 +32,24 @@ SEQUENCE_INTENT = data.StructLayout({
 
 class TcpSequenceEngine(wiring.Component):
     """Sequence numbers SND.UNA, SND.NXT, SND.MAX, RCV.NXT, SND.WL1, SND.WL2 and the
-    control sequence number, written through one 32-bit adder.
+    control sequence number, written through one 32-bit adder and compared on one 32-bit
+    subtractor.
 
     Comparing a segment with six 32-bit numbers at once would need six wide subtractors
-    on the path from the parser; one adder and a short program do it instead. An arrived
+    on the path from the parser; one subtractor and a short program do it instead. An arrived
     segment's fields (latched by the connection at the verdict) are compared one per cycle
-    (9 cycles), the engine then spends one cycle in DECIDE, where the connection reads
+    (9 cycles; the subtractor's operands depend only on the program's step, so nothing an
+    idle cycle decides reaches the comparisons), the engine then spends one cycle in DECIDE, where the connection reads
     ``flags`` and gives its ``intent``, and writes the new sequence numbers over the next 4
     (the next segment's payload cannot start within 54 cycles). A new connection's numbers
     take 5 cycles from ``initialise``; SND.MAX follows SND.NXT forward in 2 cycles after a
     frame is sent.
 
     Outside programs, in an idle cycle, the adder serves one of: the SND.NXT of a frame just
-    sent, SND.NXT = SND.UNA for a retransmission timeout, or the sequence number of the
-    request being chosen (``choose``): its ``ctl_seq``. A program withdraws the pending
+    sent or SND.NXT = SND.UNA for a retransmission timeout; the sequence number of the
+    request being chosen (``choose``), its ``ctl_seq``, is a copy of SND.NXT, SND.UNA,
+    SND.UNA - 1 or the write pointer, so the choice (which frames are due, whether the next
+    segment fits the windows) never waits for the adder. A program withdraws the pending
     request (the scheduler chooses it again), so what the program compared stays true.
 
     Parameters
@@ -133,9 +137,6 @@ class TcpSequenceEngine(wiring.Component):
         alu = Signal(32)
         m.d.comb += [alu.eq(alu_a + Mux(alu_sub, ~alu_b, alu_b) + (alu_sub & ~alu_minus_1)),
                      self.wr_seq_value.eq(alu)]
-        alu_zero = alu == 0
-        alu_positive = ~alu[31] & ~alu_zero
-        alu_in_window = (alu[16:] == 0) & (alu[:16] < self.window)
         flags = self.flags
         d = Signal(32)              # SEG.SEQ - RCV.NXT
         snd_max_behind = Signal()
@@ -175,6 +176,35 @@ class TcpSequenceEngine(wiring.Component):
                 m.d.comb += write[name].eq(cond)
             m.d.sync += list(results)
 
+        # the arrival's comparisons have a subtractor of their own, whose operands depend
+        # only on the program's state: the adder's operands follow whatever an idle cycle
+        # serves (a frame sent, the request chosen), and that path must not reach the flags
+        cmp_a = Signal(32)
+        cmp_b = Signal(32)
+        cmp_minus_1 = Signal()
+        cmp_small = Signal(signed(13))
+        cmp = Signal(32)
+        m.d.comb += cmp.eq(cmp_a - cmp_b - cmp_minus_1)
+        cmp_zero = cmp == 0
+        cmp_positive = ~cmp[31] & ~cmp_zero
+        cmp_in_window = (cmp[16:] == 0) & (cmp[:16] < self.window)
+        cmp_sources = {"seg_seq": self.seg_seq, "seg_ack": self.seg_ack, "d": d,
+                       "rcv_nxt": self.rcv_nxt, "snd_una": self.snd_una,
+                       "snd_max": self.snd_max, "wr_seq": self.wr_seq, "wl1": wl1, "wl2": wl2,
+                       "snd_nxt": self.snd_nxt}
+
+        def compare(a, b, *, minus_1=False, results=()):
+            """``a - b`` (``- 1``) on the comparator this cycle; store ``results`` from it."""
+            if not isinstance(b, str):
+                m.d.comb += cmp_small.eq(b)
+            m.d.comb += [cmp_a.eq(cmp_sources[a]),
+                         cmp_b.eq(cmp_sources[b] if isinstance(b, str) else cmp_small),
+                         cmp_minus_1.eq(minus_1)]
+            m.d.sync += list(results)
+
+        snd_una_minus_1 = Signal(32)
+        m.d.comb += snd_una_minus_1.eq(self.snd_una - 1)
+
         intent = Signal(SEQUENCE_INTENT)
         rcv_add = Signal(12)
         with m.If(self.deciding):
@@ -202,17 +232,19 @@ class TcpSequenceEngine(wiring.Component):
                             ~self.init_pending):
                     m.d.comb += self.choose.eq(1)
                     with m.Switch(self.request_kind):
+                        # copies of registers, not the adder: the request's choice (the
+                        # connection's due frames, the transmit windows) stays off its path
                         with m.Case(R.RST):
                             with m.If(self.rst_at_nxt):
-                                op(0, "snd_nxt", writes=("ctl_seq",))
+                                m.d.sync += self.ctl_seq.eq(self.snd_nxt)
                         with m.Case(R.SYN):
-                            op(0, "snd_una", writes=("ctl_seq",))
+                            m.d.sync += self.ctl_seq.eq(self.snd_una)
                         with m.Case(R.FIN):
-                            op(0, "wr_seq", writes=("ctl_seq",))
+                            m.d.sync += self.ctl_seq.eq(self.wr_seq)
                         with m.Case(R.PROBE):
-                            op(-1, "snd_una", writes=("ctl_seq",))
+                            m.d.sync += self.ctl_seq.eq(snd_una_minus_1)
                         with m.Case(R.ACK):
-                            op(0, "snd_nxt", writes=("ctl_seq",))
+                            m.d.sync += self.ctl_seq.eq(self.snd_nxt)
                 with m.If(sent_op):
                     m.next = "MAX_COMPARE"
                 with m.Elif(self.arrival_pending):
@@ -223,7 +255,7 @@ class TcpSequenceEngine(wiring.Component):
                     m.next = "INIT_ISS"
             # SND.MAX follows SND.NXT forward
             with m.State("MAX_COMPARE"):
-                op("snd_nxt", "snd_max", sub=True, results=[snd_max_behind.eq(alu_positive)])
+                compare("snd_nxt", "snd_max", results=[snd_max_behind.eq(cmp_positive)])
                 m.next = "MAX_WRITE"
             with m.State("MAX_WRITE"):
                 op(0, "snd_nxt", writes=[("snd_max", snd_max_behind)])
@@ -247,38 +279,37 @@ class TcpSequenceEngine(wiring.Component):
             with m.State("INIT_WL2"):
                 op(0, 0, writes=("wl2",))
                 m.next = "IDLE"
-            # a segment of the connection: its comparisons, one per cycle ...
+            # a segment of the connection: its comparisons, one per cycle, on the comparator
             compares = [
                 ("COMPARE_RCV_NXT", "seg_seq", "rcv_nxt", False, [
-                    d.eq(alu), flags.seq_is_rcv_nxt.eq(alu_zero),
-                    flags.seq_is_rcv_nxt_minus_1.eq(alu == 0xFFFFFFFF),
-                    flags.seq_in_window.eq(alu_in_window)]),
+                    d.eq(cmp), flags.seq_is_rcv_nxt.eq(cmp_zero),
+                    flags.seq_is_rcv_nxt_minus_1.eq(cmp == 0xFFFFFFFF),
+                    flags.seq_in_window.eq(cmp_in_window)]),
                 ("COMPARE_SND_UNA", "seg_ack", "snd_una", False, [
-                    flags.ack_is_snd_una.eq(alu_zero),
-                    flags.ack_after_snd_una.eq(alu_positive),
-                    flags.ack_is_snd_una_plus_1.eq(alu == 1)]),
+                    flags.ack_is_snd_una.eq(cmp_zero),
+                    flags.ack_after_snd_una.eq(cmp_positive),
+                    flags.ack_is_snd_una_plus_1.eq(cmp == 1)]),
                 ("COMPARE_SND_MAX", "seg_ack", "snd_max", False, [
-                    flags.ack_after_snd_max.eq(alu_positive),
-                    flags.ack_is_snd_max.eq(alu_zero)]),
+                    flags.ack_after_snd_max.eq(cmp_positive),
+                    flags.ack_is_snd_max.eq(cmp_zero)]),
                 ("COMPARE_FIN", "seg_ack", "wr_seq", True, [
-                    flags.ack_is_fin_plus_1.eq(alu_zero)]),
+                    flags.ack_is_fin_plus_1.eq(cmp_zero)]),
                 ("COMPARE_WL1", "seg_seq", "wl1", False, [
-                    flags.seq_after_wl1.eq(alu_positive), flags.seq_is_wl1.eq(alu_zero)]),
+                    flags.seq_after_wl1.eq(cmp_positive), flags.seq_is_wl1.eq(cmp_zero)]),
                 ("COMPARE_WL2", "seg_ack", "wl2", False, [
-                    flags.ack_not_before_wl2.eq(~alu[31])]),
+                    flags.ack_not_before_wl2.eq(~cmp[31])]),
                 ("COMPARE_SND_NXT", "seg_ack", "snd_nxt", False, [
-                    flags.ack_after_snd_nxt.eq(alu_positive)]),
+                    flags.ack_after_snd_nxt.eq(cmp_positive)]),
+                # d + (SEG.LEN - 1) and d + (payload - written), as differences
+                ("LAST_IN_WINDOW", "d", 1 - seqlen, False, [
+                    flags.last_in_window.eq(cmp_in_window)]),
+                ("FIN_AT_END", "d", self.seg_written - self.seg_len, False, [
+                    flags.fin_at_end.eq(cmp_zero)]),
             ]
             for k, (name, a, b, minus_1, results) in enumerate(compares):
                 with m.State(name):
-                    op(a, b, sub=True, minus_1=minus_1, results=results)
-                    m.next = compares[k + 1][0] if k + 1 < len(compares) else "LAST_IN_WINDOW"
-            with m.State("LAST_IN_WINDOW"):
-                op("d", seqlen - 1, results=[flags.last_in_window.eq(alu_in_window)])
-                m.next = "FIN_AT_END"
-            with m.State("FIN_AT_END"):
-                op("d", self.seg_len - self.seg_written, results=[flags.fin_at_end.eq(alu_zero)])
-                m.next = "DECIDE"
+                    compare(a, b, minus_1=minus_1, results=results)
+                    m.next = compares[k + 1][0] if k + 1 < len(compares) else "DECIDE"
             # ... the connection's decision ...
             with m.State("DECIDE"):
                 m.d.comb += self.deciding.eq(1)
