@@ -4,7 +4,10 @@ Waived, each for a reason that belongs to the generator rather than the design:
 DECLFILENAME (Amaranth names submodules ``top.sub`` in one file), UNUSEDSIGNAL (unused bits of
 Amaranth temporaries), PROCASSINIT (Yosys initialises registers at declaration for simulation),
 WIDTHEXPAND / WIDTHTRUNC (Yosys arithmetic temporaries), CASEINCOMPLETE (Yosys ``casez`` with
-a default assignment before it), UNSIGNED (``x >= 0`` comparisons from range checks).
+a default assignment before it), UNSIGNED (``x >= 0`` comparisons from range checks),
+SYNCASYNCNET (an ``amaranth.lib.fifo.AsyncFIFO`` between clock domains resets its read side
+through an asynchronous reset synchronizer fed by the write side's synchronous reset: the
+standard way to take a reset across clocks).
 """
 
 import argparse
@@ -17,7 +20,7 @@ from host.toolchain import put_verilator_on_path
 __all__ = ["WAIVERS", "LINT_ARGS", "lint_verilog", "main"]
 
 WAIVERS = ("DECLFILENAME", "UNUSEDSIGNAL", "PROCASSINIT", "WIDTHEXPAND", "WIDTHTRUNC",
-           "CASEINCOMPLETE", "UNSIGNED")
+           "CASEINCOMPLETE", "UNSIGNED", "SYNCASYNCNET")
 
 #: Verilator's lint options: every warning but the waived ones (a build with them fails on
 #: a warning, as ``--lint-only`` reports it)

@@ -24,14 +24,20 @@ from pathlib import Path
 
 from amaranth.hdl import Elaboratable
 
-from gen.export.verilog import (VivadoTop, convert_top, fix_icarus_t0, manifest_data,
-                                write_if_changed)
+from gen.export.verilog import (
+    VivadoTop,
+    convert_top,
+    fix_icarus_t0,
+    manifest_data,
+    write_if_changed,
+)
 from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
 
 __all__ = ["SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
-           "top_manifest", "environment_seed", "failed_seeds", "start_clock"]
+           "top_manifest", "environment_seed", "failed_seeds", "start_clock",
+           "start_gmii_clocks", "GMII_NS", "CORE_NS"]
 
 SIMULATORS = ("icarus", "verilator")
 
@@ -403,6 +409,25 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
             f"{', '.join(failed)} (seed {', '.join(map(str, seeds)) or 'not recorded'})",
             failed=failed, total=total, results=results)
     return results
+
+
+#: a GMII port's byte clock (125 MHz) and the core clock of a network engine that moves two
+#: bytes per cycle (62.5 MHz), in nanoseconds
+GMII_NS, CORE_NS = 8, 16
+
+
+def start_gmii_clocks(dut, port="gmii"):
+    """Inside a cocotb test: start a top's core clock ``aclk`` and, when the top has them (a
+    network engine with two lanes), the GMII receive and transmit clocks of ``port``; return
+    the clocks ``port``'s receiver and transmitter run on (``aclk`` for a one-clock top)."""
+    if not hasattr(dut, f"{port}_rx_clk"):
+        start_clock(dut.aclk, GMII_NS)
+        return dut.aclk, dut.aclk
+    start_clock(dut.aclk, CORE_NS)
+    clocks = getattr(dut, f"{port}_rx_clk"), getattr(dut, f"{port}_tx_clk")
+    for clock in clocks:
+        start_clock(clock, GMII_NS)
+    return clocks
 
 
 def start_clock(signal, period_ns):

@@ -13,7 +13,7 @@ import cocotb
 from cocotb.triggers import ClockCycles
 from cocotbext.eth import GmiiSink, GmiiSource
 
-from host.simulator import start_clock, top_params
+from host.simulator import start_gmii_clocks, top_params
 from host.tap import TapBridge
 
 #: cycles between looks at the stop file and status updates
@@ -25,13 +25,13 @@ async def serve(dut):
     """Run the design on the TAP device until the stop file appears."""
     params = top_params()
     port = params["port"]
-    start_clock(dut.aclk, 8)
+    rx_clk, tx_clk = start_gmii_clocks(dut, port)
 
     def pin(name):
         return getattr(dut, f"{port}_{name}")
-    source = GmiiSource(pin("rxd"), pin("rx_er"), pin("rx_dv"), dut.aclk, dut.aresetn,
+    source = GmiiSource(pin("rxd"), pin("rx_er"), pin("rx_dv"), rx_clk, dut.aresetn,
                         reset_active_level=False)
-    sink = GmiiSink(pin("txd"), pin("tx_er"), pin("tx_en"), dut.aclk, dut.aresetn,
+    sink = GmiiSink(pin("txd"), pin("tx_er"), pin("tx_en"), tx_clk, dut.aresetn,
                     reset_active_level=False)
     for model in (source, sink):
         model.log.setLevel(logging.WARNING)

@@ -3,8 +3,9 @@ as wide words (so the Python peer wakes once per word, not once per byte), a byt
 generator and a checking sink for session streams, and a message generator and CRC sink for
 TCPROS endpoints. Not part of rosgate's hardware; the benches measure the engine inside."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, ClockDomain, DomainRenamer, Module, Mux, ResetSignal, Signal
 from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from hdl.net import NetStack
@@ -14,7 +15,7 @@ from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1 import TcprosNode
 from hdl.ros1.registers import PHASES
-from hdl.stream import AXIStreamSignature, StreamFIFO
+from hdl.stream import AXIStreamSignature, StreamFIFO, keep_count
 
 __all__ = ["GmiiWordPeer", "NetBenchTop", "Ros1BenchTop", "WORD_BYTES", "pattern_bytes",
            "NET_BENCH_CONFIGS", "ROS1_BENCH_CONFIG", "build_net_bench_top",
@@ -141,22 +142,33 @@ class GmiiWordPeer(wiring.Component):
         return m
 
 
+#: bytes per beat of the throughput bench's session streams: the engine's line rate at its
+#: core clock
+USER_BYTES = 2
+
+
 class _PatternSource(wiring.Component):
-    """``count`` bytes of :func:`pattern_bytes` on ``m_axis`` after each ``start`` pulse."""
+    """``count`` bytes of :func:`pattern_bytes` on ``m_axis``, ``USER_BYTES`` a beat (the
+    last beat partial), after each ``start`` pulse."""
 
     def __init__(self):
         super().__init__({"start": In(1), "count": In(32), "m_axis":
-                          Out(AXIStreamSignature(8, keep=False)), "sent": Out(32)})
+                          Out(AXIStreamSignature(8 * USER_BYTES)), "sent": Out(32)})
 
     def elaborate(self, platform):
         m = Module()
         left = Signal(32)
         with m.If(self.start):
             m.d.sync += left.eq(self.count)
-        m.d.comb += [self.m_axis.tvalid.eq(left != 0), self.m_axis.tdata.eq(_pattern(self.sent)),
-                     self.m_axis.tlast.eq(left == 1)]
-        with m.If(self.m_axis.tvalid & self.m_axis.tready):
-            m.d.sync += [left.eq(left - 1), self.sent.eq(self.sent + 1)]
+        short = left < USER_BYTES
+        n = Mux(short, left, USER_BYTES)
+        s = self.m_axis
+        m.d.comb += [s.tvalid.eq(left != 0),
+                     s.tdata.eq(Cat(*(_pattern(self.sent + k) for k in range(USER_BYTES)))),
+                     s.tkeep.eq(Cat(*((left > k) for k in range(USER_BYTES)))),
+                     s.tlast.eq(left <= USER_BYTES)]
+        with m.If(s.tvalid & s.tready):
+            m.d.sync += [left.eq(left - n), self.sent.eq(self.sent + n)]
         return m
 
 
@@ -164,34 +176,50 @@ class _PatternSink(wiring.Component):
     """Always ready; counts bytes and those that differ from :func:`pattern_bytes`."""
 
     def __init__(self):
-        super().__init__({"s_axis": In(AXIStreamSignature(8, keep=False)),
+        super().__init__({"s_axis": In(AXIStreamSignature(8 * USER_BYTES)),
                           "received": Out(32), "mismatches": Out(32)})
 
     def elaborate(self, platform):
         m = Module()
-        m.d.comb += self.s_axis.tready.eq(1)
-        with m.If(self.s_axis.tvalid):
-            m.d.sync += self.received.eq(self.received + 1)
-            with m.If(self.s_axis.tdata != _pattern(self.received)):
-                m.d.sync += self.mismatches.eq(self.mismatches + 1)
+        s = self.s_axis
+        m.d.comb += s.tready.eq(1)
+        with m.If(s.tvalid):
+            m.d.sync += self.received.eq(self.received + keep_count(s.tkeep))
+            wrong = Cat(*(s.tkeep[k] & (s.tdata.word_select(k, 8) !=
+                                        _pattern(self.received + k))
+                          for k in range(USER_BYTES)))
+            m.d.sync += self.mismatches.eq(self.mismatches + wrong.any())
         return m
 
 
-def _bridge(m, peer, device):
+def _bridge(m, peer, device, clock):
+    """``peer``'s GMII to ``device``'s, both on the bench's GMII clock ``clock``."""
     m.d.comb += [device.gmii_rxd.eq(peer.txd), device.gmii_rx_dv.eq(peer.tx_en),
                  device.gmii_rx_er.eq(0), peer.rxd.eq(device.gmii_txd),
-                 peer.rx_en.eq(device.gmii_tx_en), peer.rx_er.eq(device.gmii_tx_er)]
+                 peer.rx_en.eq(device.gmii_tx_en), peer.rx_er.eq(device.gmii_tx_er),
+                 device.gmii_rx_clk.eq(clock), device.gmii_tx_clk.eq(clock)]
+
+
+def _gmii_peer(m, clock):
+    """A :class:`GmiiWordPeer` in domain ``gmii``, on ``clock``."""
+    m.domains += (cd := ClockDomain("gmii", local=True))
+    m.d.comb += cd.clk.eq(clock)
+    m.submodules.gmii_reset = FFSynchronizer(ResetSignal("sync"), cd.rst, o_domain="gmii",
+                                             init=1)
+    m.submodules.peer = peer = DomainRenamer("gmii")(GmiiWordPeer())
+    return peer
 
 
 class NetBenchTop(wiring.Component):
-    """A :class:`NetStack` with one session, its GMII on a :class:`GmiiWordPeer`, a pattern
-    generator on its transmit stream and a checking sink on its receive stream."""
+    """A :class:`NetStack` with one session, its GMII on a :class:`GmiiWordPeer` on the GMII
+    clock ``gmii_clk`` (``peer_in``/``peer_out`` too), a pattern generator on its transmit
+    stream and a checking sink on its receive stream."""
 
     def __init__(self, **stack):
-        self._stack = NetStack(sessions=1, **stack)
+        self._stack = NetStack(sessions=1, user_width=8 * USER_BYTES, **stack)
         sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
         super().__init__({
-            "peer_in": In(sig), "peer_out": Out(sig),
+            "gmii_clk": In(1), "peer_in": In(sig), "peer_out": Out(sig),
             "out_overflow": Out(16), "out_errors": Out(16),
             "gen_start": In(1), "gen_count": In(32), "gen_sent": Out(32),
             "sink_received": Out(32), "sink_mismatches": Out(32),
@@ -204,10 +232,10 @@ class NetBenchTop(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.stack = stack = self._stack
-        m.submodules.peer = peer = GmiiWordPeer()
+        peer = _gmii_peer(m, self.gmii_clk)
         m.submodules.gen = gen = _PatternSource()
         m.submodules.sink = sink = _PatternSink()
-        _bridge(m, peer, stack)
+        _bridge(m, peer, stack, self.gmii_clk)
         wiring.connect(m, wiring.flipped(self.peer_in), peer.peer_in)
         wiring.connect(m, peer.peer_out, wiring.flipped(self.peer_out))
         s = stack.tcp0
@@ -228,13 +256,14 @@ class NetBenchTop(wiring.Component):
 
 
 class _MessageSource(wiring.Component):
-    """One message of ``length`` bytes per ``start``: ``prefix`` (``prefix_len`` bytes) then
-    :func:`pattern_bytes` bytes; ``tuser`` = ``length``."""
+    """One message of ``length`` bytes per ``start``, ``USER_BYTES`` a beat: ``prefix``
+    (``prefix_len`` bytes) then :func:`pattern_bytes` bytes; ``tuser`` = ``length``."""
 
     def __init__(self):
         from hdl.ros1 import message_stream_signature
         super().__init__({"start": In(1), "length": In(32), "prefix": In(8 * 64),
-                          "prefix_len": In(7), "m_axis": Out(message_stream_signature())})
+                          "prefix_len": In(7),
+                          "m_axis": Out(message_stream_signature(USER_BYTES))})
 
     def elaborate(self, platform):
         m = Module()
@@ -242,11 +271,17 @@ class _MessageSource(wiring.Component):
         i = Signal(32)
         with m.If(self.start):
             m.d.sync += [left.eq(self.length), i.eq(0)]
-        data = Mux(i < self.prefix_len, self.prefix.word_select(i[:6], 8), _pattern(i))
-        m.d.comb += [self.m_axis.tvalid.eq(left != 0), self.m_axis.tdata.eq(data),
-                     self.m_axis.tlast.eq(left == 1), self.m_axis.tuser.eq(self.length)]
-        with m.If(self.m_axis.tvalid & self.m_axis.tready):
-            m.d.sync += [left.eq(left - 1), i.eq(i + 1)]
+
+        def byte(k):
+            at = i + k
+            return Mux(at < self.prefix_len, self.prefix.word_select(at[:6], 8), _pattern(at))
+        n = Mux(left < USER_BYTES, left, USER_BYTES)
+        s = self.m_axis
+        m.d.comb += [s.tvalid.eq(left != 0), s.tdata.eq(Cat(*(byte(k) for k in range(USER_BYTES)))),
+                     s.tkeep.eq(Cat(*((left > k) for k in range(USER_BYTES)))),
+                     s.tlast.eq(left <= USER_BYTES), s.tuser.eq(self.length)]
+        with m.If(s.tvalid & s.tready):
+            m.d.sync += [left.eq(left - n), i.eq(i + n)]
         return m
 
 
@@ -256,19 +291,19 @@ class _MessageSink(wiring.Component):
 
     def __init__(self):
         from hdl.ros1 import message_stream_signature
-        super().__init__({"s_axis": In(message_stream_signature()), "received": Out(32),
-                          "messages": Out(32), "crc": Out(32)})
+        super().__init__({"s_axis": In(message_stream_signature(USER_BYTES)),
+                          "received": Out(32), "messages": Out(32), "crc": Out(32)})
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.fcs = crc = Crc32(1)
+        m.submodules.fcs = crc = Crc32(USER_BYTES)
         s = self.s_axis
         done = Signal()
-        m.d.comb += [s.tready.eq(1), crc.data.eq(s.tdata), crc.valid.eq(s.tvalid),
-                     crc.clear.eq(done)]
+        m.d.comb += [s.tready.eq(1), crc.data.eq(s.tdata), crc.count.eq(keep_count(s.tkeep)),
+                     crc.valid.eq(s.tvalid), crc.clear.eq(done)]
         m.d.sync += done.eq(s.tvalid & s.tlast)
         with m.If(s.tvalid):
-            m.d.sync += self.received.eq(self.received + 1)
+            m.d.sync += self.received.eq(self.received + keep_count(s.tkeep))
             with m.If(s.tlast):
                 m.d.sync += self.messages.eq(self.messages + 1)
         with m.If(done):
@@ -279,7 +314,8 @@ class _MessageSink(wiring.Component):
 class Ros1BenchTop(wiring.Component):
     """The seed paper's measurement rig: a :class:`TcprosNode` with endpoints 0 subscriber
     (into a CRC sink: receive-only), 1 publisher (from a message generator: send-only),
-    2 subscriber looped to 3 publisher (round trip), on a :class:`GmiiWordPeer`."""
+    2 subscriber looped to 3 publisher (round trip), on a :class:`GmiiWordPeer` on the GMII
+    clock ``gmii_clk``."""
 
     ENDPOINTS = ["subscriber", "publisher", "subscriber", "publisher"]
 
@@ -287,7 +323,8 @@ class Ros1BenchTop(wiring.Component):
         self._node = TcprosNode(self.ENDPOINTS, loopback=[(2, 3)], **stack)
         sig = AXIStreamSignature(8 * WORD_BYTES, keep=True)
         super().__init__({
-            "peer_in": In(sig), "peer_out": Out(sig), "out_overflow": Out(16),
+            "gmii_clk": In(1), "peer_in": In(sig), "peer_out": Out(sig),
+            "out_overflow": Out(16),
             "gen_start": In(1), "gen_length": In(32), "gen_prefix": In(8 * 64),
             "gen_prefix_len": In(7),
             "sink_received": Out(32), "sink_messages": Out(32), "sink_crc": Out(32),
@@ -297,10 +334,10 @@ class Ros1BenchTop(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.node = node = self._node
-        m.submodules.peer = peer = GmiiWordPeer()
+        peer = _gmii_peer(m, self.gmii_clk)
         m.submodules.gen = gen = _MessageSource()
         m.submodules.sink = sink = _MessageSink()
-        _bridge(m, peer, node)
+        _bridge(m, peer, node, self.gmii_clk)
         wiring.connect(m, wiring.flipped(self.peer_in), peer.peer_in)
         wiring.connect(m, peer.peer_out, wiring.flipped(self.peer_out))
         wiring.connect(m, node.sub0, sink.s_axis)

@@ -13,15 +13,16 @@ from scapy.packet import Raw
 from hdl.net.frames import DEFAULT_RBCP_PORT, int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
-from host.simulator import start_clock
+from host.simulator import CORE_NS, GMII_NS, start_gmii_clocks
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
 __all__ = ["NET_CONFIGS", "WIDE_USER_CONFIGS", "NODE_CONFIG", "NetTB", "read_counter_bank",
-           "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS", "RegisterBusModel", "SessionPort",
-           "checksums_ok", "eth", "rbcp"]
+           "PEER_MAC", "PEER_IP", "ENGINE_IP", "CLOCK_NS", "GMII_NS", "RegisterBusModel",
+           "SessionPort", "checksums_ok", "eth", "rbcp", "start_gmii_clocks"]
 
-CLOCK_NS = 8
+#: the engine's core clock (62.5 MHz: two bytes per cycle) and the GMII clock (125 MHz)
+CLOCK_NS = CORE_NS
 #: The network benches' configuration: one build per simulator, shared by the scripted and
 #: the Linux benches (the address is the TAP namespace's; docs/network.md).
 #: the engine's and the peer's addresses (RFC 2544 block; on the TAP inside the namespace)
@@ -30,7 +31,8 @@ PEER_IP = "198.18.0.1"
 #: The ISS clock starts 12,000 below 2**32 at reset, so a connection opened soon after a
 #: reset sends across 2**32 within its first 12 KB (docs/network.md: tests wrap 2**32).
 NET_CONFIGS = {"stack": dict(ip=ENGINE_IP, sessions=2, tx_depth=4096, rx_depth=4096,
-                             rto_us=200, msl_us=20, arp_retry_us=40, iss_seed=2**32 - 12_000)}
+                             rto_us=200, msl_us=20, arp_retry_us=40, iss_seed=2**32 - 12_000,
+                             user_width=16)}
 #: The same engine with 32-bit user streams (``user_width``), for the benches of the user side.
 WIDE_USER_CONFIGS = {"stack_w32": dict(NET_CONFIGS["stack"], user_width=32)}
 #: The ROS 1 node benches' configuration (the seed paper's component: a subscriber looped
@@ -90,15 +92,15 @@ class RegisterBusModel:
 
 
 class NetTB:
-    """Clock, reset, GMII source and sink, frame helpers for a ``net`` top."""
+    """Clocks, reset, GMII source and sink, frame helpers for a ``net`` top."""
 
     def __init__(self, dut):
         self.dut = dut
         self.params = bench_params()
-        start_clock(dut.aclk, CLOCK_NS)
-        self.source = GmiiSource(dut.gmii_rxd, dut.gmii_rx_er, dut.gmii_rx_dv, dut.aclk,
+        rx_clk, tx_clk = start_gmii_clocks(dut)
+        self.source = GmiiSource(dut.gmii_rxd, dut.gmii_rx_er, dut.gmii_rx_dv, rx_clk,
                                  dut.aresetn, reset_active_level=False)
-        self.sink = GmiiSink(dut.gmii_txd, dut.gmii_tx_er, dut.gmii_tx_en, dut.aclk,
+        self.sink = GmiiSink(dut.gmii_txd, dut.gmii_tx_er, dut.gmii_tx_en, tx_clk,
                              dut.aresetn, reset_active_level=False)
         for model in (self.source, self.sink):
             model.log.setLevel(logging.WARNING)

@@ -25,7 +25,7 @@ no read past frame end, no dead FSM state").
   by a write strobe to one of its bytes (unbounded, ``abc pdr``).
 
 The environment models (:class:`GmiiRxEnvironment`, the requesters) are written from the
-interfaces' docstrings (RxByteSignature, TxRequestSignature), not from the RTL.
+interfaces' docstrings (RxBeatSignature, TxRequestSignature), not from the RTL.
 """
 
 import pytest
@@ -42,8 +42,8 @@ from hdl.net.frames import (
     RBCP_WRITE,
 )
 from hdl.net.rbcp import RbcpServer
-from hdl.net.rx import FrameKind, FrameParser
 from hdl.net.registers import GLOBAL_BASE, GLOBAL_REGS, GlobalRegisters
+from hdl.net.rx import OPTIONS_WAIT, FrameKind, FrameParser
 from hdl.net.tcp import TcpRequest, TcpRequestScheduler
 from hdl.net.tx import FrameBuilder
 from tb.formal import held_until_taken, run_sby
@@ -66,7 +66,7 @@ BUILDER_DEPTHS = [pytest.param(38, id="bmc38"), pytest.param(44, id="bmc44",
 
 
 class GmiiRxEnvironment(Elaboratable):
-    """Drives a ``RxByteSignature`` port as :class:`GmiiRx` may: a frame is a run of bytes on
+    """Drives a ``RxBeatSignature`` port as :class:`GmiiRx` may: a frame is a run of bytes on
     consecutive cycles (``index`` counting from 0) closed by one ``end`` pulse with any status;
     at least 4 idle cycles separate ``end`` from the next frame (preamble and inter-frame
     gap). Byte values and the status flags are free.
@@ -144,10 +144,10 @@ class FrameParserOptionsResyncProperty(Elaboratable):
     def elaborate(self, platform):
         m = Module()
         dut = FrameParser()
-        # the walker's state is not a port: elaborate the parser here to reach its FSM
+        # the walker's state is not a port: elaborate the parser here to reach it
         dut._MustUse__silence = True
-        m.submodules.dut = dut_module = dut.elaborate(platform)
-        waiting = dut_module._generated["options"].ongoing("WAIT")
+        m.submodules.dut = dut.elaborate(platform)
+        waiting = dut._options_state == OPTIONS_WAIT
         m.submodules.env = env = GmiiRxEnvironment(dut.rx)
         m.d.comb += Assume(ResetSignal() == Initial())
         m.d.comb += [dut.local_mac.eq(AnyConst(48)), dut.local_ip.eq(AnyConst(32))]

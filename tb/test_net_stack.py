@@ -21,6 +21,7 @@ from host.ros1.rbcp import rbcp_request
 from tb.harness import cocotb_bench
 from tb.net_tb import (
     CLOCK_NS,
+    GMII_NS,
     NET_CONFIGS,
     PEER_IP,
     PEER_MAC,
@@ -47,11 +48,11 @@ test_net_small_ring = cocotb_bench("net", SMALL_RING, testcases=["run_tcp_fast_r
                                    long=[("stack_ring4", "verilator")])
 
 
-#: Cycles a minimum-size frame (a pure ACK, a RST) occupies the wire: preamble, SFD, the
-#: frame padded to its minimum with FCS
-WIRE_MIN_FRAME = PREAMBLE + 1 + MIN_FRAME
-#: Cycles from the end of one peer frame to the end of a pure ACK sent right after it
-WIRE_ACK = IFG + WIRE_MIN_FRAME
+#: Core cycles a minimum-size frame (a pure ACK, a RST) occupies the wire: preamble, SFD, the
+#: frame padded to its minimum with FCS, at a byte per GMII cycle
+WIRE_MIN_FRAME = (PREAMBLE + 1 + MIN_FRAME) * GMII_NS // CLOCK_NS
+#: Core cycles from the end of one peer frame to the end of a pure ACK sent right after it
+WIRE_ACK = (IFG + PREAMBLE + 1 + MIN_FRAME) * GMII_NS // CLOCK_NS
 
 
 def sim_cycle():
@@ -823,7 +824,8 @@ async def run_tcp_send_sequence_wraps(dut):
 async def run_tcp_ack_every_second_segment(dut):
     """docs/network.md "data": at most 2 full segments per ACK (RFC 5681 §4.2, RFC 9293
     §3.8.6.3): four in-order segments without PSH get an ACK after the second and the
-    fourth; a single one waits for the delayed ACK, sent within 20 us (2,500 cycles)."""
+    fourth; a single one waits for the delayed ACK, sent within 20 us."""
+    from hdl.net.tcp.connection import DELAYED_ACK_US
     tb = NetTB(dut)
     await tb.reset()
     peer = ScriptedPeer(tb, 40009, 24, isn=300)
@@ -838,8 +840,9 @@ async def run_tcp_ack_every_second_segment(dut):
     await peer.send("A", data[4 * 1460:])
     await peer.expect("A", seq=iss + 1, ack=peer.seq, timeout=5000)
     delay = sim_cycle() - start
-    # the segment takes about 1,530 cycles to arrive; then the ACK waits 2,500 cycles
-    assert 2500 <= delay <= 1600 + 2500 + 300, delay
+    # the segment takes about 1,530 byte times to arrive; then the ACK waits 20 us
+    delayed = DELAYED_ACK_US * 1000 // CLOCK_NS
+    assert delayed <= delay <= (1600 * GMII_NS + 300 * CLOCK_NS) // CLOCK_NS + delayed, delay
     assert await s.wait_received(len(data), 4000) == data
 
 
@@ -960,12 +963,12 @@ async def run_tcp_retransmit_and_zero_window(dut):
     await s.write(data[:1000])
     await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000])
     # unacknowledged, it comes again after the RTO, 2 RTO, 4 RTO (RFC 6298 §5.5)
-    rto_ns = rto_cycles * 8
+    rto_ns = rto_cycles * CLOCK_NS
     sent_at = [get_sim_time("ns")]
     rtos_before = (await tb.session_counters(0))["rto"]
     for k in range(3):
         await peer.expect("PA", seq=iss + 1, ack=peer.seq, data=data[:1000],
-                          timeout=(rto_ns << k) // 8 + 5000)
+                          timeout=(rto_ns << k) // CLOCK_NS + 5000)
         sent_at.append(get_sim_time("ns"))
     intervals = [b - a for a, b in zip(sent_at, sent_at[1:])]
     for k, interval in enumerate(intervals):
@@ -1011,7 +1014,7 @@ async def run_tcp_fast_retransmit(dut):
     from hdl.net.tcp import TcpState
     tb = NetTB(dut)
     await tb.reset()
-    await write_global(tb, "rto_cycles", 1_000_000)      # 8 ms: no timeout in the test
+    await write_global(tb, "rto_cycles", 1_000_000)      # 16 ms: no timeout in the test
     peer = ScriptedPeer(tb, 41002, 29, isn=0x7FFFFF00)
     s, iss = await establish(tb, 0, 29, peer)
     rng = random.Random(11)

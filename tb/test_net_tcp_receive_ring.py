@@ -16,13 +16,22 @@ from .streamsim import StreamSink, simulate
 DEPTH = 2048
 
 
+def received(sink, lanes):
+    """The bytes ``sink`` took from a ring of ``lanes`` bytes per beat, in order."""
+    if lanes == 1:
+        return [data for data, _ in sink.beats]
+    return [(data >> 8 * k) & 0xFF for data, _, keep in sink.beats
+            for k in range(lanes) if keep >> k & 1]
+
+
 class ReceiveRingTB:
     """Drives segments into the ring and keeps the model: ``expected`` is every committed
     byte in order."""
 
-    def __init__(self, dut, rng):
+    def __init__(self, dut, rng, lanes=1):
         self.dut = dut
         self.rng = rng
+        self.lanes = lanes
         self.expected = []
         self.written_seen = []
 
@@ -31,23 +40,25 @@ class ReceiveRingTB:
             await ctx.tick()
 
     async def drain(self, ctx, sink, count, limit=20000):
-        """Wait until ``sink`` holds ``count`` beats (a bounded wait)."""
+        """Wait until ``sink`` holds ``count`` bytes (a bounded wait)."""
         for _ in range(limit):
-            if len(sink.beats) >= count:
+            if len(received(sink, self.lanes)) >= count:
                 return
             await ctx.tick()
-        raise AssertionError(f"{len(sink.beats)} bytes read, {count} expected")
+        raise AssertionError(f"{len(received(sink, self.lanes))} bytes read, {count} expected")
 
     async def send_segment(self, ctx, payload, *, accept, skip, good, gap=0.0):
-        """One frame: payload bytes at offsets 0.., the verdict, then commit or rollback."""
-        dut = self.dut
+        """One frame: payload beats at offsets 0.., the verdict, then commit or rollback."""
+        dut, L = self.dut, self.lanes
         ctx.set(dut.accept, accept)
         ctx.set(dut.skip, skip)
-        for offset, byte in enumerate(payload):
+        for offset in range(0, len(payload), L):
+            beat = payload[offset:offset + L]
             while self.rng.random() < gap:
                 ctx.set(dut.payload_valid, 0)
                 await ctx.tick()
-            ctx.set(dut.payload_data, byte)
+            ctx.set(dut.payload_data, int.from_bytes(beat, "little"))
+            ctx.set(dut.payload_keep, (1 << len(beat)) - 1)
             ctx.set(dut.payload_offset, offset)
             ctx.set(dut.payload_valid, 1)
             await ctx.tick()
@@ -68,11 +79,12 @@ class ReceiveRingTB:
         return written
 
 
-def test_tcp_receive_ring_commits_good_segments_only():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_tcp_receive_ring_commits_good_segments_only(lanes):
     rng = random.Random(11)
-    dut = TcpReceiveRing(DEPTH)
-    sink = StreamSink(dut.m_axis, backpressure=0.3, seed=3)
-    tb = ReceiveRingTB(dut, rng)
+    dut = TcpReceiveRing(DEPTH, lanes=lanes)
+    sink = StreamSink(dut.m_axis, backpressure=0.3, seed=3, keep=lanes > 1)
+    tb = ReceiveRingTB(dut, rng, lanes)
     plan = []
 
     async def bench(ctx):
@@ -91,16 +103,17 @@ def test_tcp_receive_ring_commits_good_segments_only():
     simulate(dut, bench, background=[sink.run])
     for length, accept, skip, written in plan:
         assert written == (length - skip if accept else 0), (length, accept, skip, written)
-    assert [b for b, _ in sink.beats] == tb.expected
-    assert all(last == 0 for _, last in sink.beats)
+    assert received(sink, lanes) == tb.expected
+    assert all(beat[1] == 0 for beat in sink.beats)
 
 
-def test_tcp_receive_ring_stops_at_full_and_discards():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_tcp_receive_ring_stops_at_full_and_discards(lanes):
     rng = random.Random(12)
-    dut = TcpReceiveRing(DEPTH)
-    sink = StreamSink(dut.m_axis, backpressure=0.0)
+    dut = TcpReceiveRing(DEPTH, lanes=lanes)
+    sink = StreamSink(dut.m_axis, backpressure=0.0, keep=lanes > 1)
     sink.paused = True
-    tb = ReceiveRingTB(dut, rng)
+    tb = ReceiveRingTB(dut, rng, lanes)
 
     async def bench(ctx):
         total = 0
@@ -118,7 +131,7 @@ def test_tcp_receive_ring_stops_at_full_and_discards():
         await tb.drain(ctx, sink, 100)
         sink.paused = True
         await tb.idle(ctx, 2)
-        taken = len(sink.beats)
+        taken = len(received(sink, lanes))
         assert ctx.get(dut.window) == taken
         assert await tb.send_segment(ctx, rng.randbytes(400), accept=1, skip=0,
                                      good=True) == taken
@@ -129,7 +142,7 @@ def test_tcp_receive_ring_stops_at_full_and_discards():
         await tb.idle(ctx, 2)
         assert ctx.get(dut.window) == DEPTH - 1
         assert ctx.get(dut.m_axis.tvalid) == 0
-        tb.expected = tb.expected[:len(sink.beats)]
+        tb.expected = tb.expected[:len(received(sink, lanes))]
         fresh = rng.randbytes(30)
         assert await tb.send_segment(ctx, fresh, accept=1, skip=0, good=True) == 30
         sink.paused = False
@@ -137,7 +150,7 @@ def test_tcp_receive_ring_stops_at_full_and_discards():
         await tb.idle(ctx, 5)
 
     simulate(dut, bench, background=[sink.run])
-    assert [b for b, _ in sink.beats] == tb.expected
+    assert received(sink, lanes) == tb.expected
 
 
 def test_tcp_receive_ring_rejects_bad_depth():

@@ -14,7 +14,7 @@ from scapy.utils import checksum as scapy_checksum
 from hdl.net.tcp import TcpTransmitBuffer
 from hdl.params import ParameterError
 
-from .streamsim import StreamSource, messages_to_beats, simulate
+from .streamsim import StreamSource, simulate
 
 DEPTH = 2048
 DESCRIPTORS = 8
@@ -26,12 +26,29 @@ def payload_sum(data):
     return 0xFFFF - scapy_checksum(data) if data else 0
 
 
+def user_beats(messages, lanes, rng):
+    """``messages`` as ``(tdata, tlast, tkeep)`` beats of ``lanes`` bytes; with 2 lanes some
+    beats carry one byte anywhere in a message (a segment's length then changes parity)."""
+    beats = []
+    for msg in messages:
+        k = 0
+        while k < len(msg):
+            n = min(lanes, len(msg) - k)
+            if n == 2 and rng.random() < 0.2:
+                n = 1
+            beats.append((int.from_bytes(bytes(msg[k:k + n]), "little"),
+                          int(k + n == len(msg)), (1 << n) - 1))
+            k += n
+    return beats
+
+
 class TransmitBufferTB:
     """Plays the session around the buffer: sends segments (``advance``), reads their bytes
     as the frame builder does, and acknowledges them (``snd_una``)."""
 
-    def __init__(self, dut):
+    def __init__(self, dut, lanes=1):
         self.dut = dut
+        self.lanes = lanes
         self.segments = []          # (seq, len, sum, bytes) as sent, in order
 
     async def load(self, ctx, seq):
@@ -42,12 +59,13 @@ class TransmitBufferTB:
         ctx.set(self.dut.load, 0)
 
     async def read(self, ctx, seq, length):
+        """The bytes a frame builder reads: ``lanes`` a cycle from ``seq`` (any alignment)."""
         data = bytearray()
-        for k in range(length):
+        for k in range(0, length, self.lanes):
             ctx.set(self.dut.rd_addr, (seq + k) & 0xFFFF)
             await ctx.tick()
-            data.append(ctx.get(self.dut.rd_data))
-        return bytes(data)
+            data += ctx.get(self.dut.rd_data).to_bytes(self.lanes, "little")
+        return bytes(data[:length])
 
     async def send_next(self, ctx):
         dut = self.dut
@@ -61,9 +79,10 @@ class TransmitBufferTB:
         return seq, length, total, data
 
 
-def test_tcp_transmit_buffer_segments_match_the_user_stream():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_tcp_transmit_buffer_segments_match_the_user_stream(lanes):
     rng = random.Random(21)
-    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS)
+    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS, lanes=lanes)
     messages = [list(rng.randbytes(rng.choice([1, 2, 17, 63, 64, 65, 150, 300])))
                 for _ in range(40)]
     stream = bytes(b for msg in messages for b in msg)
@@ -72,9 +91,9 @@ def test_tcp_transmit_buffer_segments_match_the_user_stream():
     for msg in messages:
         position += len(msg)
         ends.add(position)
-    source = StreamSource(dut.s_axis, messages_to_beats(messages), idle=0.15, seed=4)
-    tb = TransmitBufferTB(dut)
-    start = 0xFFFFFC00       # the sequence numbers wrap during the test
+    source = StreamSource(dut.s_axis, user_beats(messages, lanes, rng), idle=0.15, seed=4)
+    tb = TransmitBufferTB(dut, lanes)
+    start = 0xFFFFFC03       # the sequence numbers wrap during the test, at an odd number
     fills = []
 
     async def bench(ctx):
@@ -123,15 +142,19 @@ def test_tcp_transmit_buffer_segments_match_the_user_stream():
     assert max(fills) <= DEPTH - 1
 
 
-def test_tcp_transmit_buffer_idle_closes_and_rewind_resends():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_tcp_transmit_buffer_idle_closes_and_rewind_resends(lanes):
     rng = random.Random(22)
-    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS)
-    tb = TransmitBufferTB(dut)
+    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS, lanes=lanes)
+    tb = TransmitBufferTB(dut, lanes)
 
     async def put(ctx, data, last):
-        for k, byte in enumerate(data):
-            ctx.set(dut.s_axis.tdata, byte)
-            ctx.set(dut.s_axis.tlast, last and k == len(data) - 1)
+        for k in range(0, len(data), lanes):
+            beat = data[k:k + lanes]
+            ctx.set(dut.s_axis.tdata, int.from_bytes(beat, "little"))
+            if lanes > 1:
+                ctx.set(dut.s_axis.tkeep, (1 << len(beat)) - 1)
+            ctx.set(dut.s_axis.tlast, last and k + len(beat) == len(data))
             ctx.set(dut.s_axis.tvalid, 1)
             await ctx.tick().until(dut.s_axis.tready)
         ctx.set(dut.s_axis.tvalid, 0)
@@ -181,27 +204,35 @@ def test_tcp_transmit_buffer_idle_closes_and_rewind_resends():
     simulate(dut, bench)
 
 
-def test_tcp_transmit_buffer_stops_when_full():
-    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS)
-    tb = TransmitBufferTB(dut)
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_tcp_transmit_buffer_stops_when_full(lanes):
+    dut = TcpTransmitBuffer(depth=DEPTH, descriptors=DESCRIPTORS, lanes=lanes)
+    tb = TransmitBufferTB(dut, lanes)
     taken = []
+    # with 2 lanes a beat of two waits for room for two: the buffer holds DEPTH - 2 bytes
+    room = DEPTH - 1 if lanes == 1 else DEPTH - 2
+    pattern = bytes(k & 0xFF for k in range(2 * DEPTH))
 
     async def bench(ctx):
         ctx.set(dut.mss, 1460)
         await tb.load(ctx, 5)
         ctx.set(dut.accept, 1)
         ctx.set(dut.s_axis.tvalid, 1)
-        for k in range(2 * DEPTH):
-            ctx.set(dut.s_axis.tdata, k & 0xFF)
+        if lanes > 1:
+            ctx.set(dut.s_axis.tkeep, 0b11)
+        k = 0
+        for _ in range(2 * DEPTH):
+            ctx.set(dut.s_axis.tdata, int.from_bytes(pattern[k:k + lanes], "little"))
             *_, ready = await ctx.tick().sample(dut.s_axis.tready)
             taken.append(ready)
-        assert ctx.get(dut.fill) == DEPTH - 1
-        assert ctx.get(dut.wr_seq) == 5 + DEPTH - 1
+            k += lanes * ready
+        assert ctx.get(dut.fill) == room
+        assert ctx.get(dut.wr_seq) == 5 + room
         # the bytes kept are the first ones, in place
-        assert await tb.read(ctx, 5, 300) == bytes(k & 0xFF for k in range(300))
+        assert await tb.read(ctx, 5, 300) == pattern[:300]
 
     simulate(dut, bench)
-    assert sum(taken) == DEPTH - 1
+    assert sum(taken) * lanes == room
 
 
 def test_tcp_transmit_buffer_rejects_bad_parameters():

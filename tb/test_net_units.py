@@ -11,12 +11,13 @@ import random
 import zlib
 
 import pytest
-from amaranth.hdl import ClockDomain, Elaboratable, Module, Signal, Value
+from amaranth.hdl import ClockDomain, DomainRenamer, Elaboratable, Module, Signal, Value
 from amaranth.lib import wiring
 from scapy.utils import checksum as scapy_checksum
 
 from hdl.net import Crc32, FrameParser, GmiiRx, InternetChecksum, NetStack
 from hdl.net.counters import EventCounters
+from hdl.net.mac import RxBeatBridge
 from hdl.params import ParameterError
 
 from .streamsim import simulate
@@ -239,58 +240,79 @@ def test_event_counters_reject_bad_parameters():
 
 
 class _ParserHarness(Elaboratable):
-    """GmiiRx + FrameParser with fixed local addresses, for amaranth.sim."""
+    """GmiiRx + FrameParser with fixed local addresses, for amaranth.sim; with 2 lanes the
+    GmiiRx runs in domain ``gmii`` and an RxBeatBridge brings its frames to ``sync``."""
 
-    def __init__(self, mac, ip):
+    def __init__(self, mac, ip, lanes=1):
+        self.lanes = lanes
         self.rx = GmiiRx()
-        self.parser = FrameParser()
+        self.parser = FrameParser(lanes=lanes)
         self.mac, self.ip = mac, ip
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.rx = self.rx
         m.submodules.parser = self.parser
-        wiring.connect(m, self.rx.rx, self.parser.rx)
+        if self.lanes == 1:
+            m.submodules.rx = self.rx
+            wiring.connect(m, self.rx.rx, self.parser.rx)
+        else:
+            m.domains.gmii = ClockDomain()
+            m.submodules.rx = DomainRenamer("gmii")(self.rx)
+            m.submodules.bridge = bridge = RxBeatBridge()
+            wiring.connect(m, self.rx.rx, bridge.gmii)
+            wiring.connect(m, bridge.rx, self.parser.rx)
         m.d.comb += [self.parser.local_mac.eq(self.mac), self.parser.local_ip.eq(self.ip)]
         return m
 
 
-def parse_frames(frames, mac, ip):
+#: the GMII clock and, with 2 lanes, the core clock at half its rate (seconds)
+GMII_PERIOD, CORE_PERIOD = 8e-9, 16e-9
+
+
+def parse_frames(frames, mac, ip, lanes=1):
     """Run frames (bytes with FCS) through the parser; return per frame the verdict, kind,
     fields, payload bytes seen, ``arp_seen`` and ``options_malformed``."""
     from hdl.net.rx import RX_FIELDS
-    dut = _ParserHarness(mac, ip)
+    dut = _ParserHarness(mac, ip, lanes)
     p = dut.parser
+    gmii = "sync" if lanes == 1 else "gmii"
     out = []
 
-    async def bench(ctx):
+    async def drive(ctx):
         for frame in frames:
-            payload = bytearray()
             for byte in b"\x55" * 7 + b"\xd5" + frame:
                 ctx.set(dut.rx.gmii_rxd, byte)
                 ctx.set(dut.rx.gmii_rx_dv, 1)
-                await ctx.tick()
-                if ctx.get(p.payload_valid):
-                    payload.append(ctx.get(p.payload_data))
+                await ctx.tick(gmii)
             ctx.set(dut.rx.gmii_rx_dv, 0)
-            for _ in range(6):
-                await ctx.tick()
-                if ctx.get(p.payload_valid):
-                    payload.append(ctx.get(p.payload_data))
-                if ctx.get(p.done):
-                    fields = {name: ctx.get(Value.cast(getattr(p.fields, name)))
-                              for name in RX_FIELDS.members}
-                    out.append((ctx.get(p.accept), ctx.get(p.reason), ctx.get(p.kind),
-                                fields, bytes(payload), ctx.get(p.arp_seen),
-                                ctx.get(p.options_malformed)))
-            for _ in range(6):
-                await ctx.tick()
+            for _ in range(24):
+                await ctx.tick(gmii)
+        for _ in range(40):
+            await ctx.tick(gmii)
 
-    simulate(dut, bench)
+    async def watch(ctx):
+        payload = bytearray()
+        while True:
+            await ctx.tick()
+            if ctx.get(p.payload_valid):
+                data, keep = ctx.get(p.payload_data), ctx.get(p.payload_keep)
+                payload += bytes((data >> 8 * k) & 0xFF for k in range(lanes) if keep >> k & 1)
+            if ctx.get(p.done):
+                fields = {name: ctx.get(Value.cast(getattr(p.fields, name)))
+                          for name in RX_FIELDS.members}
+                out.append((ctx.get(p.accept), ctx.get(p.reason), ctx.get(p.kind),
+                            fields, bytes(payload), ctx.get(p.arp_seen),
+                            ctx.get(p.options_malformed)))
+                payload = bytearray()
+
+    simulate(dut, drive, background=[watch],
+             clocks={"sync": GMII_PERIOD} if lanes == 1 else
+             {"sync": CORE_PERIOD, "gmii": GMII_PERIOD})
     return out
 
 
-def test_frame_parser_matches_scapy():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_frame_parser_matches_scapy(lanes):
     """Every header field the parser captures equals scapy's dissection of the same frame;
     checksums, lengths and options decide the verdict as scapy's checksums say (docs/network.md)."""
     from scapy.layers.inet import ICMP, IP, TCP, UDP, in4_chksum
@@ -347,7 +369,7 @@ def test_frame_parser_matches_scapy():
     bad[-1] ^= 0x40                                        # TCP payload: bad checksum
     frames.append(bytes(bad))
     with_fcs = [f + zlib.crc32(f).to_bytes(4, "little") for f in frames]
-    got = parse_frames(with_fcs, mac_to_int(mac), ip_to_int(ip))
+    got = parse_frames(with_fcs, mac_to_int(mac), ip_to_int(ip), lanes)
     assert len(got) == len(frames)
     malformed_seen = 0
     for n, (frame, (accept, reason, kind, f, payload, arp_seen, malformed)) in enumerate(

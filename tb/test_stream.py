@@ -11,6 +11,7 @@ from hdl.params import ParameterError
 from hdl.stream import (
     AsyncStreamFIFO,
     AXIStreamSignature,
+    ByteWindow,
     MessageFIFO,
     PayloadRegisterSlice,
     ReadyRegisterSlice,
@@ -457,6 +458,90 @@ def test_repacker_full_rate(in_bytes, out_bytes):
     first = next(i for i, n in enumerate(taken) if n)
     done = taken.index(beats_out)
     assert done - first + 1 <= max(len(beats), beats_out) + 1, (first, done)
+
+
+@pytest.mark.parametrize("in_bytes,out_bytes", [(2, 4), (2, 3), (1, 4), (4, 2)])
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.5, 0.0), (0.3, 0.5)])
+def test_repacker_eager_never_holds_bytes(in_bytes, out_bytes, idle, backpressure):
+    """With ``eager``, a byte stream without message boundaries (beats of 1..in_bytes bytes,
+    no tlast, as a TCP session delivers) comes out whole and in order; a partial beat
+    carries tlast; once the input stops, every byte is out within a few cycles."""
+    rng = random.Random(in_bytes * 7 + out_bytes + int(10 * idle) + int(100 * backpressure))
+    beats = []
+    for _ in range(300):
+        n = rng.choice([in_bytes, rng.randint(1, in_bytes)])
+        beats.append((rng.getrandbits(8 * in_bytes), 0, (1 << n) - 1))
+    sent = [b for data, _, keep in beats for b in beat_bytes(data, keep)]
+    dut = StreamRepacker(in_bytes, out_bytes, eager=True)
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
+    sink = StreamSink(dut.m_axis, backpressure=backpressure, seed=6, keep=True)
+    left = {}
+
+    async def bench(ctx):
+        await source.run(ctx)
+        for _ in range(6):              # the input has stopped: everything leaves
+            await ctx.tick()
+        ctx.set(dut.m_axis.tready, 1)
+        sink.paused = True
+        left["count"] = len(sent) - sum(bin(k).count("1") for _, _, k in sink.beats)
+
+    simulate(dut, bench, background=[sink.run])
+    got = [b for data, _, keep in sink.beats for b in beat_bytes(data, keep)]
+    assert got == sent[:len(got)]
+    assert all(last or keep == (1 << out_bytes) - 1 for _, last, keep in sink.beats)
+    assert left["count"] <= out_bytes
+
+
+@pytest.mark.parametrize("nbytes", [1, 2, 4])
+@pytest.mark.parametrize("idle", [0.0, 0.4])
+def test_byte_window_gives_every_byte_once_in_order(nbytes, idle):
+    """Beats of 1..nbytes bytes in; a consumer that takes random amounts (0..what the
+    window holds) at random cycles gets every byte once, in order."""
+    rng = random.Random(nbytes * 13 + int(10 * idle))
+    beats = [(rng.getrandbits(8 * nbytes), 0, (1 << rng.randint(1, nbytes)) - 1)
+             for _ in range(300)]
+    sent = [b for data, _, keep in beats for b in beat_bytes(data, keep)]
+    dut = ByteWindow(nbytes)
+    source = StreamSource(dut.s_axis, beats, idle=idle, seed=3)
+    got = []
+
+    async def consume(ctx):
+        while len(got) < len(sent):
+            avail = ctx.get(dut.avail)
+            amount = rng.randint(0, min(avail, nbytes)) if rng.random() < 0.8 else 0
+            window = ctx.get(dut.window)
+            ctx.set(dut.amount, amount)
+            ctx.set(dut.take, 1)
+            got.extend((window >> 8 * k) & 0xFF for k in range(amount))
+            await ctx.tick()
+        ctx.set(dut.take, 0)
+
+    simulate(dut, consume, background=[source.run])
+    assert got == sent
+
+
+@pytest.mark.parametrize("nbytes", [2, 4])
+def test_byte_window_full_rate(nbytes):
+    """Full beats in and ``nbytes`` taken every cycle: a beat a cycle."""
+    beats = [(random.Random(i).getrandbits(8 * nbytes), 0, (1 << nbytes) - 1)
+             for i in range(100)]
+    dut = ByteWindow(nbytes)
+    source = StreamSource(dut.s_axis, beats)
+    cycles = {"n": 0}
+
+    async def consume(ctx):
+        taken = 0
+        while taken < 100 * nbytes:
+            avail = ctx.get(dut.avail)
+            amount = min(avail, nbytes)
+            ctx.set(dut.amount, amount)
+            ctx.set(dut.take, 1)
+            taken += amount
+            cycles["n"] += 1
+            await ctx.tick()
+
+    simulate(dut, consume, background=[source.run])
+    assert cycles["n"] <= 100 + 2, cycles
 
 
 def test_repacker_rejects_bad_sizes():

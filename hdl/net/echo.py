@@ -30,8 +30,9 @@ class EchoEngine(wiring.Component):
 
     Members
     -------
-    gmii : Out(GmiiSignature())
-        The Ethernet port.
+    gmii : Out(GmiiSignature(clocks=True))
+        The Ethernet port, with its receive and transmit clocks (the engine's core runs on the
+        ``sync`` clock at half their rate, :class:`NetStack` with two lanes).
     counter_index, counter_value :
         The engine's counters (:data:`~hdl.net.stack.STACK_COUNTERS`).
     """
@@ -40,20 +41,17 @@ class EchoEngine(wiring.Component):
                  tcp_port=DEFAULT_TCP_PORT, sessions=2, registers=256):
         self._registers = check_power_of_two("registers", registers, 16, 65536)
         self._stack = NetStack(mac=mac, ip=ip, rbcp_port=rbcp_port, tcp_port=tcp_port,
-                               sessions=sessions, user_window=registers)
+                               sessions=sessions, user_window=registers, user_width=16)
         self._sessions = sessions
-        super().__init__({"gmii": Out(GmiiSignature()),
+        super().__init__({"gmii": Out(GmiiSignature(clocks=self._stack.lanes == 2)),
                           "counter_index": In(range(len(STACK_COUNTERS))),
                           "counter_value": Out(32)})
 
     def elaborate(self, platform):
         m = Module()
         m.submodules.stack = stack = self._stack
-        g = self.gmii
-        m.d.comb += [stack.gmii_rxd.eq(g.rxd), stack.gmii_rx_dv.eq(g.rx_dv),
-                     stack.gmii_rx_er.eq(g.rx_er), g.txd.eq(stack.gmii_txd),
-                     g.tx_en.eq(stack.gmii_tx_en), g.tx_er.eq(stack.gmii_tx_er),
-                     stack.counter_index.eq(self.counter_index),
+        stack.connect_gmii(m, self.gmii)
+        m.d.comb += [stack.counter_index.eq(self.counter_index),
                      self.counter_value.eq(stack.counter_value)]
 
         # RBCP: register RAM, every access acknowledged the next cycle

@@ -8,7 +8,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from .mac import FrameStatus, FrameStreamSignature, RxByteSignature
+from .mac import FrameStatus, FrameStreamSignature, RxBeatSignature
 
 __all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBytes"]
 
@@ -36,7 +36,7 @@ class FrameQueue(wiring.Component):
 
     Members
     -------
-    rx : In(RxByteSignature())
+    rx : In(RxBeatSignature(1))
         Bytes and end status from a :class:`~hdl.net.mac.GmiiRx`.
     decide : In(1)
         Pulse while the frame arrives (at or after its first byte, before its end): the
@@ -59,7 +59,7 @@ class FrameQueue(wiring.Component):
         self._depth = depth
         self._frames = check_int("frames", frames, 2, 64)
         super().__init__({
-            "rx": In(RxByteSignature()), "decide": In(1), "keep": In(1),
+            "rx": In(RxBeatSignature(1)), "decide": In(1), "keep": In(1),
             "m_axis": Out(FrameStreamSignature()), "overflow": Out(1),
             "level": Out(range(depth + 1)),
         })
@@ -152,7 +152,7 @@ class FrameQueue(wiring.Component):
 
 
 class FrameToRxBytes(wiring.Component):
-    """A frame stream back into the :class:`~hdl.net.mac.RxByteSignature` a
+    """A frame stream back into the :class:`~hdl.net.mac.RxBeatSignature` a
     :class:`~hdl.net.rx.FrameParser` takes: bytes with their index, then the end pulse with
     the status, then ``gap`` idle cycles so the parser's consumers can read its fields.
     Every ``rx`` member comes from a flip-flop (a byte leaves the cycle after it is taken):
@@ -167,12 +167,13 @@ class FrameToRxBytes(wiring.Component):
     -------
     s_axis : In(FrameStreamSignature())
         Frames; a gap inside a frame becomes a gap in ``rx.valid``.
-    rx : Out(RxByteSignature())
+    rx : Out(RxBeatSignature(1))
     """
 
     def __init__(self, gap=16):
         self._gap = check_int("gap", gap, 1, 255)
-        super().__init__({"s_axis": In(FrameStreamSignature()), "rx": Out(RxByteSignature())})
+        super().__init__({"s_axis": In(FrameStreamSignature()),
+                          "rx": Out(RxBeatSignature(1))})
 
     def elaborate(self, platform):
         m = Module()

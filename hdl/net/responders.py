@@ -1,7 +1,7 @@
 """Responders on a :class:`~hdl.net.tx.FrameBuilder` request port: each answers one kind of
 received frame (docs/network.md)."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -16,28 +16,46 @@ from .tx import TX_REQUEST, TxRequestSignature
 __all__ = ["ParsedFrameSignature", "ArpResponder", "IcmpEchoResponder", "RbcpResponder",
            "TcpResetResponder"]
 
+#: bytes of the RBCP request and reply buffer (the longest request: 8 header + 255 data)
+_RBCP_BUFFER = 2048
+
 
 class ParsedFrameSignature(wiring.Signature):
     """What a :class:`~hdl.net.rx.FrameParser` tells its consumers, seen from the parser
     (``Out``); see its members of the same names.
 
+    Parameters
+    ----------
+    lanes : int
+        The parser's bytes per beat, 1 or 2.
+
     Members
     -------
     fields : Out(RX_FIELDS)
     kind : Out(FrameKind)
-    payload_data, payload_valid, payload_offset : Out
+    payload_data, payload_valid, payload_keep, payload_offset : Out
     first : Out(1)
-        The frame's first byte arrives (a consumer may claim a buffer for it).
+        The frame's first beat arrives (a consumer may claim a buffer for it).
     done, accept : Out(1)
         The verdict.
     """
 
-    def __init__(self):
+    def __init__(self, lanes=1):
+        self._lanes = check_int("lanes", lanes, 1, 2)
         super().__init__({
             "fields": Out(RX_FIELDS), "kind": Out(FrameKind),
-            "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
+            "payload_data": Out(8 * lanes), "payload_valid": Out(1),
+            "payload_keep": Out(lanes), "payload_offset": Out(11),
             "first": Out(1), "done": Out(1), "accept": Out(1),
         })
+
+    lanes = property(lambda self: self._lanes)
+
+    def __eq__(self, other):
+        return type(other) is type(self) and other._lanes == self._lanes
+
+    def __hash__(self):
+        return hash((type(self), self._lanes))
 
     @staticmethod
     def connect_parser(m, parser, port, rx, *, accept=None):
@@ -46,17 +64,18 @@ class ParsedFrameSignature(wiring.Signature):
         m.d.comb += [port.fields.eq(parser.fields), port.kind.eq(parser.kind),
                      port.payload_data.eq(parser.payload_data),
                      port.payload_valid.eq(parser.payload_valid),
+                     port.payload_keep.eq(parser.payload_keep),
                      port.payload_offset.eq(parser.payload_offset),
                      port.first.eq(rx.valid & (rx.index == 0)),
                      port.done.eq(parser.done),
                      port.accept.eq(parser.accept if accept is None else accept)]
 
 
-def _responder_members(tag_width, **more):
+def _responder_members(lanes, tag_width, **more):
     """The members every responder has: the parsed frame in, the request to the frame
     builder out, ``busy``, and with a tag the port the request came in on and the answer goes
     out of."""
-    members = {"frame": In(ParsedFrameSignature()), "tx": Out(TxRequestSignature()),
+    members = {"frame": In(ParsedFrameSignature(lanes)), "tx": Out(TxRequestSignature(lanes)),
                "busy": Out(1), **more}
     if tag_width:
         members.update({"rx_tag": In(tag_width), "tx_tag": Out(tag_width)})
@@ -72,11 +91,13 @@ class ArpResponder(wiring.Component):
     tag_width : int
         Width of ``rx_tag``/``tx_tag`` (0: none): something the parent wants back with the
         reply, such as the port the request came in on.
+    lanes : int
+        The parser's and the builder's bytes per beat, 1 or 2.
 
     Members
     -------
-    frame : In(ParsedFrameSignature())
-    tx : Out(TxRequestSignature())
+    frame : In(ParsedFrameSignature(lanes))
+    tx : Out(TxRequestSignature(lanes))
         To the builder.
     rx_tag : In(tag_width)
         Sampled at the verdict of a request that is answered ...
@@ -86,9 +107,9 @@ class ArpResponder(wiring.Component):
         A reply is pending: a request answered now would be dropped (count it as busy).
     """
 
-    def __init__(self, *, tag_width=0):
+    def __init__(self, *, tag_width=0, lanes=1):
         self._tag = check_int("tag_width", tag_width, 0, 8)
-        super().__init__(_responder_members(tag_width))
+        super().__init__(_responder_members(lanes, tag_width))
 
     def elaborate(self, platform):
         m = Module()
@@ -121,13 +142,13 @@ class IcmpEchoResponder(wiring.Component):
     buffer_bytes : int
         The longest ICMP message answered (header and data), a power of two in 64..2048
         (2048 holds the largest unfragmented ping, 1480 bytes).
-    tag_width : int
+    tag_width, lanes : int
         As for :class:`ArpResponder`.
 
     Members
     -------
-    frame : In(ParsedFrameSignature())
-    tx : Out(TxRequestSignature())
+    frame : In(ParsedFrameSignature(lanes))
+    tx : Out(TxRequestSignature(lanes))
     rx_tag, tx_tag :
         As for :class:`ArpResponder`.
     busy : Out(1)
@@ -136,36 +157,49 @@ class IcmpEchoResponder(wiring.Component):
         Pulse with the verdict of an accepted echo request that is not answered.
     """
 
-    def __init__(self, *, buffer_bytes=2048, tag_width=0):
+    def __init__(self, *, buffer_bytes=2048, tag_width=0, lanes=1):
         check_int("buffer_bytes", buffer_bytes, 64, 2048)
         if buffer_bytes & (buffer_bytes - 1):
             raise ParameterError("buffer_bytes", buffer_bytes, "a power of two in 64..2048")
         self._bytes = buffer_bytes
         self._tag = check_int("tag_width", tag_width, 0, 8)
-        super().__init__(_responder_members(tag_width, dropped=Out(1)))
+        self._lanes = check_int("lanes", lanes, 1, 2)
+        super().__init__(_responder_members(lanes, tag_width, dropped=Out(1)))
 
     def elaborate(self, platform):
         m = Module()
         f, tx = self.frame, self.tx
         req = tx.request
-        aw = (self._bytes - 1).bit_length()
-        m.submodules.buffer = mem = Memory(shape=8, depth=self._bytes, init=[])
-        wp = mem.write_port()
+        L = self._lanes
+        shift = L.bit_length() - 1
+        aw = (self._bytes // L - 1).bit_length()
+        m.submodules.buffer = mem = Memory(shape=8 * L, depth=self._bytes // L, init=[])
+        wp = mem.write_port(granularity=8)
         rp = mem.read_port(transparent_for=())
         eth, ip = Signal(48), Signal(32)
         length = Signal(11)
         csum = Signal(16)
         claim = Signal()          # this frame's message goes into the buffer
         m.d.comb += [req.kind.eq(FrameKind.ICMP), req.eth_dst.eq(eth), req.ip_dst.eq(ip),
-                     req.length.eq(length), rp.addr.eq(tx.rd_addr[:aw]), tx.rd_data.eq(rp.data)]
+                     req.length.eq(length), rp.addr.eq(tx.rd_addr[shift:shift + aw]),
+                     tx.rd_data.eq(rp.data)]
+        # the reply's changes, as (buffer word, byte enables, data) writes: type 8 -> 0 at
+        # byte 0, the checksum at bytes 2..3 (RFC 1624)
+        edits = {}
+        for offset, value in ((0, Const(0, 8)), (2, csum[8:]), (3, csum[:8])):
+            word, byte = divmod(offset, L)
+            edits.setdefault(word, {})[byte] = value
+        edits = [(word, sum(1 << b for b in lanes),
+                  Cat(*(lanes.get(b, Const(0, 8)) for b in range(L))))
+                 for word, lanes in sorted(edits.items())]
         with m.FSM() as fsm:
             with m.State("IDLE"):
                 with m.If(f.first):
                     m.d.sync += claim.eq(1)
                 with m.If(f.payload_valid & claim & (f.kind == FrameKind.ICMP) &
                           (f.payload_offset < self._bytes)):
-                    m.d.comb += [wp.addr.eq(f.payload_offset[:aw]), wp.data.eq(f.payload_data),
-                                 wp.en.eq(1)]
+                    m.d.comb += [wp.addr.eq(f.payload_offset[shift:shift + aw]),
+                                 wp.data.eq(f.payload_data), wp.en.eq(f.payload_keep)]
                 with m.If(f.done):
                     m.d.sync += claim.eq(0)
                     with m.If(f.accept & (f.kind == FrameKind.ICMP)):
@@ -175,20 +209,16 @@ class IcmpEchoResponder(wiring.Component):
                                          csum.eq(f.fields.icmp_csum)]
                             if self._tag:
                                 m.d.sync += self.tx_tag.eq(self.rx_tag)
-                            m.next = "TYPE"
+                            m.next = "CHECKSUM"
                         with m.Else():
                             m.d.comb += self.dropped.eq(1)
-            with m.State("TYPE"):
-                # echo reply: type 8 -> 0
-                m.d.comb += [wp.addr.eq(0), wp.data.eq(0), wp.en.eq(1)]
+            with m.State("CHECKSUM"):
                 m.d.sync += csum.eq(echo_reply_checksum(csum))
-                m.next = "CSUM_HI"
-            with m.State("CSUM_HI"):
-                m.d.comb += [wp.addr.eq(2), wp.data.eq(csum[8:]), wp.en.eq(1)]
-                m.next = "CSUM_LO"
-            with m.State("CSUM_LO"):
-                m.d.comb += [wp.addr.eq(3), wp.data.eq(csum[:8]), wp.en.eq(1)]
-                m.next = "REQUEST"
+                m.next = "EDIT_0"
+            for k, (word, enables, value) in enumerate(edits):
+                with m.State(f"EDIT_{k}"):
+                    m.d.comb += [wp.addr.eq(word), wp.data.eq(value), wp.en.eq(enables)]
+                    m.next = f"EDIT_{k + 1}" if k + 1 < len(edits) else "REQUEST"
             with m.State("REQUEST"):
                 m.d.comb += tx.valid.eq(1)
                 with m.If(tx.ready):
@@ -214,11 +244,13 @@ class RbcpResponder(wiring.Component):
     ----------
     windows : list of (int, int)
         The bus windows, as :class:`~hdl.net.rbcp.RbcpServer`'s.
+    lanes : int
+        As for :class:`ArpResponder`.
 
     Members
     -------
-    frame : In(ParsedFrameSignature())
-    tx : Out(TxRequestSignature())
+    frame : In(ParsedFrameSignature(lanes))
+    tx : Out(TxRequestSignature(lanes))
     port : In(16)
         The RBCP UDP port.
     bus : Out(RbcpBusSignature())
@@ -229,35 +261,43 @@ class RbcpResponder(wiring.Component):
         Pulse with the verdict of an accepted datagram to ``port`` that is not taken.
     """
 
-    def __init__(self, windows):
+    def __init__(self, windows, *, lanes=1):
         self._server = RbcpServer(windows)
-        super().__init__(_responder_members(0, port=In(16), bus=Out(RbcpBusSignature()),
+        self._lanes = check_int("lanes", lanes, 1, 2)
+        super().__init__(_responder_members(lanes, 0, port=In(16), bus=Out(RbcpBusSignature()),
                                             dropped=Out(1)))
 
     def elaborate(self, platform):
         m = Module()
         f, tx = self.frame, self.tx
         req = tx.request
+        L = self._lanes
+        shift = L.bit_length() - 1
         m.submodules.server = server = self._server
         wiring.connect(m, server.bus, wiring.flipped(self.bus))
-        m.submodules.buffer = mem = Memory(shape=8, depth=2048, init=[])
-        wp = mem.write_port()
+        m.submodules.buffer = mem = Memory(shape=8 * L, depth=_RBCP_BUFFER // L, init=[])
+        wp = mem.write_port(granularity=8)
         rp = mem.read_port(transparent_for=())
+        # the server works byte by byte: its byte's lane, one cycle later for a read
+        server_lane = Signal(range(L)) if L > 1 else Const(0)
+        if L > 1:
+            m.d.sync += server_lane.eq(server.buf_addr[:shift])
         eth, ip, src_port, dst_port = Signal(48), Signal(32), Signal(16), Signal(16)
         length, total = Signal(11), Signal(16)
         claim = Signal()
         m.d.comb += [req.kind.eq(FrameKind.UDP), req.eth_dst.eq(eth), req.ip_dst.eq(ip),
                      req.src_port.eq(src_port), req.dst_port.eq(dst_port),
                      req.length.eq(length), req.payload_sum.eq(total),
-                     tx.rd_data.eq(rp.data), server.buf_rdata.eq(rp.data)]
+                     tx.rd_data.eq(rp.data),
+                     server.buf_rdata.eq(rp.data.word_select(server_lane, 8))]
         mine = f.accept & (f.kind == FrameKind.UDP) & (f.fields.dst_port == self.port)
         with m.FSM() as fsm:
             with m.State("IDLE"):
                 with m.If(f.first):
                     m.d.sync += claim.eq(1)
                 with m.If(f.payload_valid & claim & (f.kind == FrameKind.UDP)):
-                    m.d.comb += [wp.addr.eq(f.payload_offset), wp.data.eq(f.payload_data),
-                                 wp.en.eq(1)]
+                    m.d.comb += [wp.addr.eq(f.payload_offset[shift:]), wp.data.eq(f.payload_data),
+                                 wp.en.eq(f.payload_keep)]
                 with m.If(f.done):
                     m.d.sync += claim.eq(0)
                     with m.If(mine & claim):
@@ -269,8 +309,11 @@ class RbcpResponder(wiring.Component):
                     with m.Elif(mine):
                         m.d.comb += self.dropped.eq(1)
             with m.State("EXECUTE"):
-                m.d.comb += [rp.addr.eq(server.buf_addr), wp.addr.eq(server.buf_addr),
-                             wp.data.eq(server.buf_wdata), wp.en.eq(server.buf_we)]
+                m.d.comb += [rp.addr.eq(server.buf_addr[shift:]),
+                             wp.addr.eq(server.buf_addr[shift:]),
+                             wp.data.eq(Cat(*([server.buf_wdata] * L))),
+                             wp.en.eq(Mux(server.buf_we, 1 << server.buf_addr[:shift], 0)
+                                      if L > 1 else server.buf_we)]
                 with m.If(server.done):
                     m.d.sync += [length.eq(server.reply_len), total.eq(server.reply_sum)]
                     with m.If(server.reply):
@@ -278,11 +321,11 @@ class RbcpResponder(wiring.Component):
                     with m.Else():
                         m.next = "IDLE"
             with m.State("REQUEST"):
-                m.d.comb += [tx.valid.eq(1), rp.addr.eq(tx.rd_addr[:11])]
+                m.d.comb += [tx.valid.eq(1), rp.addr.eq(tx.rd_addr[shift:11])]
                 with m.If(tx.ready):
                     m.next = "SENDING"
             with m.State("SENDING"):
-                m.d.comb += rp.addr.eq(tx.rd_addr[:11])
+                m.d.comb += rp.addr.eq(tx.rd_addr[shift:11])
                 with m.If(tx.done):
                     m.next = "IDLE"
         with m.If(~fsm.ongoing("IDLE") & f.done & mine):
@@ -298,18 +341,23 @@ class TcpResetResponder(wiring.Component):
     ``ignore`` (one to a listening port without SYN, ACK and RST: RFC 9293 §3.10.7.2 drops
     it), nor one that arrives while a RST is pending.
 
+    Parameters
+    ----------
+    lanes : int
+        As for :class:`ArpResponder`.
+
     Members
     -------
-    frame : In(ParsedFrameSignature())
-    tx : Out(TxRequestSignature())
+    frame : In(ParsedFrameSignature(lanes))
+    tx : Out(TxRequestSignature(lanes))
     claimed, ignore : In(1)
         At the verdict: a session takes the segment; the segment is dropped silently.
     busy : Out(1)
         A RST is pending.
     """
 
-    def __init__(self):
-        super().__init__(_responder_members(0, claimed=In(1), ignore=In(1)))
+    def __init__(self, *, lanes=1):
+        super().__init__(_responder_members(lanes, 0, claimed=In(1), ignore=In(1)))
 
     def elaborate(self, platform):
         m = Module()

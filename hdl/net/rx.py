@@ -1,20 +1,44 @@
 """Receive-side frame parser: Ethernet, ARP, IPv4, ICMP, UDP and TCP headers and checksums,
-checked on the fly at one byte per cycle (docs/network.md)."""
+checked on the fly at one or two bytes per cycle (docs/network.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, enum, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..params import check_int
 from .checksum import ones_complement_add
 from .frames import (
-    ARP_REPLY, ARP_REQUEST, ARP_SHA_OFFSET, ARP_SPA_OFFSET, DROP_REASONS, ETH_SRC_OFFSET,
-    IP_SRC_OFFSET, ETH_HEADER, ETHERTYPE_ARP, ETHERTYPE_IPV4, ICMP_ECHO_REQUEST,
-    IP_PROTO_ICMP, IP_PROTO_TCP, IP_PROTO_UDP, IP_VERSION, MIN_HEADER_WORDS, TCP_OPT_MSS,
-    TCP_OPT_MSS_LENGTH, ARP_HEADER_FIELDS, ARP_OFFSET, ETH_HEADER_FIELDS, ICMP_HEADER_FIELDS,
-    IP_OFFSET, IP_PROTO_OFFSET, IPV4_HEADER_FIELDS, TCP_FLAGS, TCP_HEADER_FIELDS,
+    ARP_HEADER_FIELDS,
+    ARP_OFFSET,
+    ARP_REPLY,
+    ARP_REQUEST,
+    ARP_SHA_OFFSET,
+    ARP_SPA_OFFSET,
+    DROP_REASONS,
+    ETH_HEADER,
+    ETH_HEADER_FIELDS,
+    ETH_SRC_OFFSET,
+    ETHERTYPE_ARP,
+    ETHERTYPE_IPV4,
+    ICMP_ECHO_REQUEST,
+    ICMP_HEADER_FIELDS,
+    IP_OFFSET,
+    IP_PROTO_ICMP,
+    IP_PROTO_OFFSET,
+    IP_PROTO_TCP,
+    IP_PROTO_UDP,
+    IP_SRC_OFFSET,
+    IP_VERSION,
+    IPV4_HEADER_FIELDS,
+    L4_OFFSET,
+    MIN_HEADER_WORDS,
+    TCP_FLAGS,
+    TCP_HEADER_FIELDS,
+    TCP_OPT_MSS,
+    TCP_OPT_MSS_LENGTH,
     UDP_HEADER_FIELDS,
 )
-from .mac import RxByteSignature
+from .mac import RxBeatSignature
 
 __all__ = ["RX_FIELDS", "FrameKind", "DROP_CODE", "FrameParser"]
 
@@ -47,6 +71,10 @@ DROP_CODE = {name: code for code, name in enumerate(DROP_REASONS)}
 
 #: the TCP header without options: options start after it
 _TCP_FIXED_HEADER = sum(TCP_HEADER_FIELDS["urgent"])
+#: the beats at which the pseudo-header's protocol and L4 length are summed: in the L4 header
+#: of a frame of at least 64 bytes, after the addresses
+_PSEUDO_PROTO = L4_OFFSET
+_PSEUDO_LENGTH = L4_OFFSET + 2
 assert all(UDP_HEADER_FIELDS[port] == TCP_HEADER_FIELDS[port] for port in ("src_port", "dst_port"))
 
 
@@ -55,13 +83,42 @@ def _span(table, first, last):
     return table[last][0] + table[last][1] - table[first][0]
 
 
-def _shift_in(field, byte):
-    return field.eq(Cat(byte, field[:-8]))
-
-
 def _ipv4_version_ihl_ok(value):
     """The first IPv4 header byte names version 4 and a header of 20 bytes or more."""
     return (value[4:8] == IP_VERSION) & (value[0:4] >= MIN_HEADER_WORDS)
+
+
+def _options_step(st, byte, active):
+    """One byte through the TCP options parser (RFC 9293 §3.2): ``st`` and the result are
+    dicts of ``state``, ``left``, ``is_mss``, ``mss_high``, ``mss``, ``has_mss``, ``bad``.
+    Only MSS (length 4) is used; everything else is skipped by length. A length below 2 is
+    malformed: parsing stops."""
+    kind, length, body = st["state"] == _OPT_KIND, st["state"] == _OPT_LENGTH, \
+        st["state"] == _OPT_BODY
+    go = active
+    nxt = dict(st)
+    # KIND: End of list stops, NOP stays, any other kind waits for its length
+    kind_next = Mux(byte == 0, OPTIONS_WAIT, Mux(byte == 1, _OPT_KIND, _OPT_LENGTH))
+    # LENGTH: below 2 is malformed, 2 has no body
+    length_next = Mux(byte < 2, OPTIONS_WAIT, Mux(byte == 2, _OPT_KIND, _OPT_BODY))
+    body_ends = st["left"] == 1
+    nxt["state"] = Mux(go & kind, kind_next, Mux(go & length, length_next,
+                       Mux(go & body & body_ends, _OPT_KIND, st["state"])))
+    nxt["is_mss"] = Mux(go & kind, byte == TCP_OPT_MSS,
+                        Mux(go & length, st["is_mss"] & (byte == TCP_OPT_MSS_LENGTH),
+                            st["is_mss"]))
+    nxt["left"] = Mux(go & length, (byte - 2)[:8], Mux(go & body, (st["left"] - 1)[:8],
+                                                         st["left"]))
+    nxt["mss_high"] = Mux(go & body, byte, st["mss_high"])
+    take_mss = go & body & body_ends & st["is_mss"]
+    nxt["mss"] = Mux(take_mss, Cat(byte, st["mss_high"]), st["mss"])
+    nxt["has_mss"] = st["has_mss"] | take_mss
+    nxt["bad"] = st["bad"] | (go & length & (byte < 2))
+    return nxt
+
+
+#: the TCP option walker's states
+OPTIONS_WAIT, _OPT_KIND, _OPT_LENGTH, _OPT_BODY = range(4)
 
 
 class FrameParser(wiring.Component):
@@ -70,19 +127,22 @@ class FrameParser(wiring.Component):
 
     Members
     -------
-    rx : In(RxByteSignature())
-        Bytes and end status from :class:`GmiiRx`.
+    rx : In(RxBeatSignature(lanes))
+        Beats and end status from a :class:`GmiiRx` (1 lane) or an :class:`RxBeatBridge`
+        (2 lanes).
     local_mac, local_ip : In(48), In(32)
         This node's addresses.
     fields : Out(RX_FIELDS)
         Header fields, captured in place (``payload_len`` a cycle after the last header byte
         it follows: valid during the payload and at ``done``).
-    payload_data, payload_valid, payload_offset : Out
-        The L4 payload's bytes as they pass: the whole ICMP message, the UDP data, the TCP
-        data (after the options); ``payload_offset`` counts from 0 without a gap. Bytes beyond
-        the IP total length (Ethernet padding, FCS) are not payload, nor are any bytes of an
-        ARP frame, of an IPv4 header shorter than 20 bytes or of a TCP segment whose data
-        offset is below 5 (tb/test_net_formal.py proves these rules).
+    payload_data, payload_valid, payload_keep, payload_offset : Out
+        The L4 payload as it passes: the whole ICMP message, the UDP data, the TCP data
+        (after the options). ``payload_data`` holds bytes ``payload_offset`` ..
+        ``payload_offset + lanes - 1`` of it (offset counts from 0 without a gap, a multiple
+        of ``lanes``), ``payload_keep`` which of them are payload (contiguous from lane 0).
+        Bytes beyond the IP total length (Ethernet padding, FCS) are not payload, nor are
+        any bytes of an ARP frame, of an IPv4 header shorter than 20 bytes or of a TCP
+        segment whose data offset is below 5 (tb/test_net_formal.py proves these rules).
     kind : Out(FrameKind)
         What the frame is, from its EtherType and IP protocol (a register, a cycle after
         them: valid during the payload).
@@ -107,6 +167,10 @@ class FrameParser(wiring.Component):
 
     Parameters
     ----------
+    lanes : int
+        Bytes per beat, 1 or 2. Every header this parser reads starts at an even offset
+        (Ethernet's 14 bytes, IPv4 and TCP headers in 4-byte words), so with 2 lanes each
+        field sits in a fixed lane and each payload starts in lane 0.
     groups : sequence of (int, int)
         The MAC and IPv4 address of each multicast group whose UDP datagrams are accepted
         (a FinEmbP node's group); none by default.
@@ -115,28 +179,33 @@ class FrameParser(wiring.Component):
         address, as DHCP clients).
     """
 
-    def __init__(self, *, groups=(), limited_broadcast=False):
+    def __init__(self, *, lanes=1, groups=(), limited_broadcast=False):
+        self._lanes = check_int("lanes", lanes, 1, 2)
         # (MAC, IP) of multicast groups whose UDP datagrams are accepted, as ints
         self._groups = tuple((int(mac), int(ip)) for mac, ip in groups)
         self._limited_broadcast = bool(limited_broadcast)
         super().__init__({
-            "rx": In(RxByteSignature()),
+            "rx": In(RxBeatSignature(lanes)),
             "local_mac": In(48), "local_ip": In(32),
             "fields": Out(RX_FIELDS),
-            "payload_data": Out(8), "payload_valid": Out(1), "payload_offset": Out(11),
+            "payload_data": Out(8 * lanes), "payload_valid": Out(1),
+            "payload_keep": Out(lanes), "payload_offset": Out(11),
             "kind": Out(FrameKind),
             "done": Out(1), "accept": Out(1), "reason": Out(range(len(DROP_REASONS))),
             "arp_seen": Out(1), "options_malformed": Out(1),
             **({"group": Out(1)} if groups or limited_broadcast else {}),
         })
 
+    lanes = property(lambda self: self._lanes)
+
     def elaborate(self, platform):
         m = Module()
+        L = self._lanes
         f = self.fields
         rx = self.rx
         i = rx.index
-        byte = rx.data
         v = rx.valid
+        lane = [rx.data[8 * k:8 * k + 8] for k in range(L)]
 
         dst_mine = Signal()
         dst_bcast = Signal()
@@ -154,37 +223,55 @@ class FrameParser(wiring.Component):
         ip_end = Signal(17)             # an IP total length up to 65535 must not wrap
         m.d.comb += ip_end.eq(ETH_HEADER + f.ip_len)
 
+        def at(offset, index=i, valid=v):
+            """The beat holding byte ``offset`` (of the frame, or of ``index``'s header) is
+            here; the byte is in lane ``offset % L``."""
+            return valid & (index == offset - offset % L)
+
+        def byte_at(offset):
+            return lane[offset % L]
+
+        def word(k, index=i):
+            """The beat's 16-bit contribution to a checksum: lane ``k``'s byte in the high or
+            low half of its word (by the byte's own index)."""
+            if L == 2:
+                return Cat(Const(0, 8), lane[k]) if k == 0 else Cat(lane[k], Const(0, 8))
+            return Mux(index[0], Cat(lane[0], Const(0, 8)), Cat(Const(0, 8), lane[0]))
+
+        def beat_word(include_second=1, index=i):
+            if L == 2:
+                return Cat(Mux(include_second, lane[1], 0), lane[0])
+            return word(0, index)
+
         j = Signal(11)
         m.d.comb += j.eq(i - l4_off)
-        in_l4 = Signal()
-        m.d.comb += in_l4.eq((i >= l4_off) & (i < ip_end) & (i >= 18))
-        word = Mux(i[0], Cat(byte, Const(0, 8)), Cat(Const(0, 8), byte))
+        lv = Signal()                   # the beat's first byte is in the L4 part
+        m.d.comb += lv.eq(v & (i >= l4_off) & (i < ip_end) & (i >= 18))
+        # with 2 lanes the second byte is in the L4 part unless the datagram ends before it
+        second_in = (i + 1 < ip_end) if L == 2 else Const(0)
 
         with m.If(v & (i == 0)):
-            m.d.sync += [dst_mine.eq(1), dst_bcast.eq(1), l4_off.eq(2047), pl_start.eq(2047),
-                         ip_acc.eq(0), l4_acc.eq(0), pseudo_acc.eq(0), f.has_mss.eq(0),
-                         f.ip_len.eq(0xFFFF), f.doff.eq(0), f.mss.eq(0)]
-        dst_group = Signal(max(len(self._groups), 1))
-        with m.If(v & (i < 6)):
-            for g, (gmac, _) in enumerate(self._groups):
-                gbyte = Const(gmac, 48).word_select((5 - i[:3]).as_unsigned()[:3], 8)
-                with m.If(byte != gbyte):
-                    m.d.sync += dst_group[g].eq(0)
-                with m.If(i == 0):
-                    m.d.sync += dst_group[g].eq(byte == (gmac >> 40))
-        with m.If(v & (i < 6)):
-            own = self.local_mac.word_select((5 - i[:3]).as_unsigned()[:3], 8)
-            with m.If(byte != own):
-                m.d.sync += dst_mine.eq(0)
-            with m.If(byte != 0xFF):
-                m.d.sync += dst_bcast.eq(0)
-            with m.If(i == 0):
-                m.d.sync += [dst_mine.eq(byte == self.local_mac[40:48]),
-                             dst_bcast.eq(byte == 0xFF)]
+            m.d.sync += [l4_off.eq(2047), pl_start.eq(2047),
+                         ip_acc.eq(0), l4_acc.eq(0), pseudo_acc.eq(0),
+                         f.ip_len.eq(0xFFFF), f.doff.eq(0)]
 
-        def capture(field, offset, nbytes, index=i, valid=v):
-            with m.If(valid & (index >= offset) & (index < offset + nbytes)):
-                m.d.sync += _shift_in(field, byte)
+        # destination MAC: this node's, broadcast, or a group's
+        dst_group = Signal(max(len(self._groups), 1))
+        targets = [(dst_mine, self.local_mac), (dst_bcast, Const(0xFFFFFFFFFFFF, 48))]
+        targets += [(dst_group[g], Const(gmac, 48)) for g, (gmac, _) in enumerate(self._groups)]
+        for start in range(0, 6, L):
+            for flag, address in targets:
+                same = Cat(*(lane[k] == address.word_select(5 - (start + k), 8)
+                             for k in range(L) if start + k < 6)).all()
+                with m.If(at(start)):
+                    m.d.sync += flag.eq(same if start == 0 else flag & same)
+
+        def capture(field, offset, nbytes, index=i, valid=v, when=1):
+            """Write bytes ``offset`` .. ``offset + nbytes - 1`` into ``field`` (big-endian)
+            as they pass."""
+            for k in range(nbytes):
+                with m.If(at(offset + k, index, valid) & when):
+                    m.d.sync += field.word_select(nbytes - 1 - k, 8).eq(byte_at(offset + k))
 
         def capture_field(field, header, table, name, index=i, valid=v):
             """Capture ``table[name]`` of the header that starts at byte ``header``."""
@@ -193,14 +280,12 @@ class FrameParser(wiring.Component):
 
         capture_field(ethertype, 0, ETH_HEADER_FIELDS, "ethertype")
         arp_frame = ethertype == ETHERTYPE_ARP
-        def within(offset, nbytes):
-            return (i >= offset) & (i < offset + nbytes)
-
-        with m.If(v & (within(ETH_SRC_OFFSET, 6) |
-                       (arp_frame & (i >= ARP_SHA_OFFSET) & (i < ARP_SHA_OFFSET + 6)))):
-            m.d.sync += _shift_in(f.sender_mac, byte)
-        with m.If(v & Mux(arp_frame, within(ARP_SPA_OFFSET, 4), within(IP_SRC_OFFSET, 4))):
-            m.d.sync += _shift_in(f.sender_ip, byte)
+        # where an answer goes: the ARP sender's addresses of an ARP frame, else the Ethernet
+        # and IPv4 sources (the ARP sender's come later and overwrite)
+        capture(f.sender_mac, ETH_SRC_OFFSET, 6)
+        capture(f.sender_mac, ARP_SHA_OFFSET, 6, when=arp_frame)
+        capture(f.sender_ip, IP_SRC_OFFSET, 4, when=~arp_frame)
+        capture(f.sender_ip, ARP_SPA_OFFSET, 4, when=arp_frame)
         # ARP (RFC 826): htype, ptype, hlen and plen in one register
         capture(arp_fixed, ARP_OFFSET, _span(ARP_HEADER_FIELDS, "htype", "plen"))
         capture_field(f.arp_oper, ARP_OFFSET, ARP_HEADER_FIELDS, "oper")
@@ -214,21 +299,24 @@ class FrameParser(wiring.Component):
         # only an IPv4 header of 20 bytes or more has an L4 part: no other frame's bytes
         # become payload (the verdict drops those frames; their bytes must not reach a
         # consumer before it)
-        with m.If(v & (i == IP_OFFSET + IPV4_HEADER_FIELDS["version_ihl"][0]) &
-                  (ethertype == ETHERTYPE_IPV4) & _ipv4_version_ihl_ok(byte)):
-            m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), byte[0:4]))
-        with m.If(v & (i >= 14) & (i < l4_off)):
-            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, word))
+        version_ihl = IP_OFFSET + IPV4_HEADER_FIELDS["version_ihl"][0]
+        vbyte = byte_at(version_ihl)
+        with m.If(at(version_ihl) & (ethertype == ETHERTYPE_IPV4) & _ipv4_version_ihl_ok(vbyte)):
+            m.d.sync += l4_off.eq(ETH_HEADER + Cat(Const(0, 2), vbyte[0:4]))
+        with m.If(v & (i >= IP_OFFSET) & (i < l4_off)):
+            m.d.sync += ip_acc.eq(ones_complement_add(ip_acc, beat_word()))
         # the pseudo-header (RFC 9293 §3.1): source and destination address as they pass,
-        # then the protocol and the L4 length in the two cycles after the protocol byte
+        # then the protocol and the L4 length, at two beats of the L4 header that every
+        # frame long enough to be accepted has
         addresses = IP_OFFSET + IPV4_HEADER_FIELDS["src"][0]
         with m.If(v & (i >= addresses) &
                   (i < addresses + _span(IPV4_HEADER_FIELDS, "src", "dst"))):
-            m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, word))
-        with m.If(v & (i == IP_PROTO_OFFSET + 1)):
-            m.d.sync += [pseudo_acc.eq(ones_complement_add(pseudo_acc, f.ip_proto)),
-                         f.l4_len.eq(f.ip_len - ihl4)]
-        with m.If(v & (i == IP_PROTO_OFFSET + 2)):
+            m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, beat_word()))
+        with m.If(at(IP_PROTO_OFFSET + 1)):
+            m.d.sync += f.l4_len.eq(f.ip_len - ihl4)
+        with m.If(at(_PSEUDO_PROTO)):
+            m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, f.ip_proto))
+        with m.If(at(_PSEUDO_LENGTH)):
             m.d.sync += pseudo_acc.eq(ones_complement_add(pseudo_acc, f.l4_len))
 
         # ``kind`` and ``payload_len`` from flip-flops, a cycle after the header bytes they
@@ -247,17 +335,17 @@ class FrameParser(wiring.Component):
                         m.d.sync += kind.eq(FrameKind.UDP)
                     with m.Default():
                         m.d.sync += kind.eq(FrameKind.TCP)
-        with m.If(v & (i == IP_PROTO_OFFSET + 1)):
+        with m.If(at(IP_PROTO_OFFSET + 1)):
             with m.Switch(f.ip_proto):
                 with m.Case(IP_PROTO_ICMP):
                     m.d.sync += pl_start.eq(0)
                 with m.Case(IP_PROTO_UDP):
                     m.d.sync += pl_start.eq(8)
 
-        # L4 headers, relative to the end of the IP header
-        lv = v & in_l4
+        # L4 headers, relative to the end of the IP header (a multiple of 4 bytes, so the
+        # lanes stay those of a header at offset 0)
         with m.If(lv):
-            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, word))
+            m.d.sync += l4_acc.eq(ones_complement_add(l4_acc, beat_word(second_in, j)))
         for field, table, name in (
                 (f.icmp_type, ICMP_HEADER_FIELDS, "type"),
                 (f.icmp_code, ICMP_HEADER_FIELDS, "code"),
@@ -273,64 +361,41 @@ class FrameParser(wiring.Component):
                 (tcp_csum, TCP_HEADER_FIELDS, "checksum")):
             capture_field(field, 0, table, name, j, lv)
         is_tcp = f.ip_proto == IP_PROTO_TCP
-        with m.If(lv & (j == TCP_HEADER_FIELDS["data_offset"][0])):
-            m.d.sync += f.doff.eq(byte[4:8])
-            with m.If(is_tcp & (byte[4:8] >= MIN_HEADER_WORDS)):
-                m.d.sync += pl_start.eq(Cat(Const(0, 2), byte[4:8]))
+        doff_at = TCP_HEADER_FIELDS["data_offset"][0]
+        doff_byte = byte_at(doff_at)
+        with m.If(at(doff_at, j, lv)):
+            m.d.sync += f.doff.eq(doff_byte[4:8])
+            with m.If(is_tcp & (doff_byte[4:8] >= MIN_HEADER_WORDS)):
+                m.d.sync += pl_start.eq(Cat(Const(0, 2), doff_byte[4:8]))
 
-        # TCP options (RFC 9293 §3.2): only MSS (length 4) is used; everything else is
-        # skipped by length. A length below 2, or an option that runs past the data offset,
+        # TCP options (RFC 9293 §3.2), one byte after the other through ``_options_step``,
+        # lanes in order. A length below 2, or an option that runs past the data offset,
         # is malformed (docs/network.md): parsing stops, the segment is processed, the stack
         # counts it.
-        opt_is_mss = Signal()
-        opt_left = Signal(8)
-        opt_mss = Signal(8)
-        opt_bad = Signal()
+        self._options_state = Signal(2, name="opt_state")   # (the formal check reads it)
+        opt = {"state": self._options_state, "left": Signal(8, name="opt_left"),
+               "is_mss": Signal(name="opt_is_mss"), "mss_high": Signal(8, name="opt_mss_high"),
+               "mss": f.mss, "has_mss": f.has_mss, "bad": Signal(name="opt_bad")}
+        in_options = lv & is_tcp & (j < pl_start)       # pl_start and j are multiples of L
+        st = dict(opt)
+        for k in range(L):
+            st = _options_step(st, lane[k], in_options & (Const(1) if k == 0 else second_in))
         with m.If(v & (i == 0)):
-            m.d.sync += opt_bad.eq(0)
-        with m.FSM(name="options") as options:
-            with m.State("WAIT"):
-                with m.If(lv & is_tcp & (j == _TCP_FIXED_HEADER - 1)):
-                    m.next = "KIND"
-            with m.State("KIND"):
-                with m.If(v & (i == 0)):
-                    m.next = "WAIT"
-                with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += opt_is_mss.eq(byte == TCP_OPT_MSS)
-                    with m.If(byte == 0):
-                        m.next = "WAIT"
-                    with m.Elif(byte != 1):
-                        m.next = "LENGTH"
-            with m.State("LENGTH"):
-                with m.If(v & (i == 0)):
-                    m.next = "WAIT"
-                with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += [opt_left.eq(byte - 2),
-                                 opt_is_mss.eq(opt_is_mss & (byte == TCP_OPT_MSS_LENGTH))]
-                    with m.If(byte < 2):
-                        m.d.sync += opt_bad.eq(1)
-                        m.next = "WAIT"
-                    with m.Elif(byte == 2):
-                        m.next = "KIND"
-                    with m.Else():
-                        m.next = "BODY"
-            with m.State("BODY"):
-                with m.If(v & (i == 0)):
-                    m.next = "WAIT"
-                with m.Elif(lv & (j < pl_start)):
-                    m.d.sync += [opt_left.eq(opt_left - 1), opt_mss.eq(byte)]
-                    with m.If(opt_left == 1):
-                        m.next = "KIND"
-                        with m.If(opt_is_mss):
-                            m.d.sync += [f.mss.eq(Cat(byte, opt_mss)), f.has_mss.eq(1)]
+            m.d.sync += [opt["state"].eq(OPTIONS_WAIT), f.mss.eq(0), f.has_mss.eq(0),
+                         opt["bad"].eq(0)]
+        with m.Elif(at(_TCP_FIXED_HEADER - 1, j, lv) & is_tcp):
+            m.d.sync += opt["state"].eq(_OPT_KIND)
+        with m.Elif(in_options):
+            m.d.sync += [opt[name].eq(value) for name, value in st.items()]
         # at the verdict an option still waiting for its length or body was cut by the end
         # of the header
-        options_cut = options.ongoing("LENGTH") | options.ongoing("BODY")
+        options_cut = (opt["state"] == _OPT_LENGTH) | (opt["state"] == _OPT_BODY)
 
         m.d.comb += [
-            self.payload_data.eq(byte),
+            self.payload_data.eq(rx.data),
             self.payload_offset.eq(j - pl_start),
             self.payload_valid.eq(lv & (j >= pl_start)),
+            self.payload_keep.eq(Cat(Const(1), second_in) if L == 2 else 1),
         ]
 
         # verdict, one cycle after the end pulse
@@ -407,7 +472,7 @@ class FrameParser(wiring.Component):
         m.d.sync += [self.done.eq(rx.end), self.accept.eq(accept), self.reason.eq(reason),
                      self.arp_seen.eq(~rx.err_size & ~rx.err_rx_er & rx.ok &
                                       (dst_mine | dst_bcast) & arp_frame & arp_well_formed),
-                     self.options_malformed.eq(~arp_frame & is_tcp & (opt_bad | options_cut))]
+                     self.options_malformed.eq(~arp_frame & is_tcp & (opt["bad"] | options_cut))]
         if self._groups or self._limited_broadcast:
             m.d.sync += self.group.eq(group_ok)
         return m

@@ -1,24 +1,40 @@
 """The network engine: GMII MAC, ARP, IPv4, ICMP echo, RBCP over UDP and N TCP sessions on
 one MAC and IP address (docs/network.md)."""
 
-from amaranth.hdl import Cat, Const, Module
+from amaranth.hdl import Cat, ClockDomain, Const, DomainRenamer, Module, ResetSignal
 from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from ..stream import AXIStreamSignature, StreamDownsizer, StreamUpsizer
+from ..stream import AXIStreamSignature, StreamDownsizer, StreamRepacker, StreamUpsizer
 from .counters import EventCounters
 from .frames import (
-    ARP_REQUEST, DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT, DROP_REASONS,
-    ip_to_int, mac_to_int,
+    ARP_REQUEST,
+    DEFAULT_IP,
+    DEFAULT_MAC,
+    DEFAULT_RBCP_PORT,
+    DEFAULT_TCP_PORT,
+    DROP_REASONS,
+    ip_to_int,
+    mac_to_int,
 )
-from .mac import GmiiRx, GmiiTx
+from .mac import GmiiRx, GmiiTx, RxBeatBridge, TxBeatBridge
 from .rbcp import RbcpBusSignature
 from .registers import (
-    GLOBAL_BASE, GLOBAL_OFFSETS, GLOBAL_REGS, STACK_COUNTERS, GlobalRegisters, global_register,
+    GLOBAL_BASE,
+    GLOBAL_OFFSETS,
+    GLOBAL_REGS,
+    STACK_COUNTERS,
+    GlobalRegisters,
+    global_register,
 )
 from .responders import (
-    ArpResponder, IcmpEchoResponder, ParsedFrameSignature, RbcpResponder, TcpResetResponder,
+    ArpResponder,
+    IcmpEchoResponder,
+    ParsedFrameSignature,
+    RbcpResponder,
+    TcpResetResponder,
 )
 from .rx import FrameKind, FrameParser
 from .tcp import TCP_COUNTERS, TcpError, TcpSession, TcpState
@@ -30,7 +46,10 @@ __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLO
 #: the stack's own requesters on the frame builder, before the sessions'
 RESPONDERS = ("arp", "icmp", "rbcp", "rst")
 
-_CLOCK_HZ = 125_000_000
+#: the GMII byte clock
+GMII_HZ = 125_000_000
+#: the core clock by lanes: GMII's own with one byte per cycle, half of it with two
+DEFAULT_CLOCK_HZ = {1: GMII_HZ, 2: GMII_HZ // 2}
 
 
 class TcpUserSignature(wiring.Signature):
@@ -100,8 +119,8 @@ class NetStack(wiring.Component):
         congestion window never exceeds one less.
     rto_us, msl_us, arp_retry_us : int
         Initial retransmission timeout, maximum segment lifetime and a client's ARP retry
-        interval in microseconds at 125 MHz (defaults 200 ms, 1 s and 2 s; docs/network.md);
-        registers at :data:`GLOBAL_BASE` change them at run time.
+        interval in microseconds (defaults 200 ms, 1 s and 2 s; docs/network.md);
+        registers at :data:`GLOBAL_BASE` change them at run time, in cycles of ``sync``.
     user_window : int
         Bytes of RBCP address space from 0 that the user bus decodes.
     iss_seed : int
@@ -111,15 +130,29 @@ class NetStack(wiring.Component):
         (16..1024). A wider ``tx`` beat is sent byte 0 first, its ``tkeep`` contiguous from
         byte 0, ``tlast`` pushing out the segment as on the byte stream. A wider ``rx`` beat
         leaves when full or, partial and with ``tlast``, when the session has no further
-        byte to deliver, so bytes never wait for later ones. Both directions keep one byte
-        per cycle (:class:`~hdl.stream.StreamDownsizer`, :class:`~hdl.stream.StreamUpsizer`).
+        byte to deliver, so bytes never wait for later ones. Each direction moves up to
+        ``lanes`` bytes per cycle, so with 2 lanes a byte-wide user side runs at half the
+        line rate.
+    lanes : int
+        Bytes the engine moves per cycle. 1: GMII, the protocol logic and the user side on
+        one clock (``sync``, 125 MHz: a fabric that closes the whole engine at the byte
+        clock). 2: the protocol logic two bytes wide on ``sync`` at half the GMII clock
+        (62.5 MHz: line rate both ways, as LiteEth runs its 32-bit core at 62.5 MHz), the
+        GMII receiver and transmitter on their own clocks (``gmii_rx_clk``,
+        ``gmii_tx_clk``), each crossing to ``sync`` through an asynchronous FIFO
+        (:class:`~hdl.net.mac.RxBeatBridge`, :class:`~hdl.net.mac.TxBeatBridge`).
+    clock_hz : int
+        The ``sync`` clock, for the timers given in microseconds (default: 125 MHz with one
+        lane, 62.5 MHz with two). With two lanes it must be at least half the GMII clock.
 
     Members
     -------
     gmii_txd, gmii_tx_en, gmii_tx_er : Out
-        To the PHY.
+        To the PHY (on ``gmii_tx_clk`` with 2 lanes).
     gmii_rxd, gmii_rx_dv, gmii_rx_er : In
-        From the PHY (on the core clock).
+        From the PHY (on ``gmii_rx_clk`` with 2 lanes, else on the core clock).
+    gmii_rx_clk, gmii_tx_clk : In(1), with 2 lanes
+        The PHY's receive clock and the 125 MHz transmit clock (GMII's RX_CLK and GTX_CLK).
     tcp<k> : Out(TcpUserSignature(user_width))
         Session ``k``.
     rbcp : Out(RbcpBusSignature())
@@ -137,7 +170,7 @@ class NetStack(wiring.Component):
                  tcp_port=DEFAULT_TCP_PORT,
                  sessions=1, tx_depth=65536, rx_depth=65536, descriptors=64, rto_us=200_000,
                  msl_us=1_000_000, arp_retry_us=2_000_000, user_window=0x10000,
-                 iss_seed=0x1000, user_width=8):
+                 iss_seed=0x1000, user_width=8, lanes=2, clock_hz=None):
         try:
             self._mac = mac_to_int(mac)
         except ValueError as e:
@@ -149,16 +182,25 @@ class NetStack(wiring.Component):
         self._rbcp_port = check_int("rbcp_port", rbcp_port, 1, 65535)
         self._tcp_port = check_int("tcp_port", tcp_port, 1, 65535)
         self._sessions = check_int("sessions", sessions, 1, 8)
-        self._rto = check_int("rto_us", rto_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
-        self._msl = check_int("msl_us", msl_us, 1, 30_000_000) * (_CLOCK_HZ // 1_000_000)
-        self._arp_retry = (check_int("arp_retry_us", arp_retry_us, 1, 30_000_000) *
-                           (_CLOCK_HZ // 1_000_000))
+        self._lanes = check_int("lanes", lanes, 1, 2)
+        if clock_hz is None:
+            clock_hz = DEFAULT_CLOCK_HZ[self._lanes]
+        self._clock_hz = check_int("clock_hz", clock_hz, GMII_HZ // self._lanes, 1_000_000_000)
+        per_us = self._clock_hz / 1_000_000
+        self._rto = round(check_int("rto_us", rto_us, 1, 30_000_000) * per_us)
+        self._msl = round(check_int("msl_us", msl_us, 1, 30_000_000) * per_us)
+        self._arp_retry = round(check_int("arp_retry_us", arp_retry_us, 1, 30_000_000) * per_us)
         self._user_window = check_int("user_window", user_window, 1, GLOBAL_BASE)
-        self._session_args = TcpSession.check_parameters(
-            tx_depth=tx_depth, rx_depth=rx_depth, descriptors=descriptors, iss_seed=iss_seed)
         self._user_width = check_int("user_width", user_width, 8, 1024, multiple_of=8)
+        # a byte-wide user reads the receive ring a byte at a time
+        self._session_args = TcpSession.check_parameters(
+            tx_depth=tx_depth, rx_depth=rx_depth, descriptors=descriptors, iss_seed=iss_seed,
+            lanes=self._lanes, read_lanes=1 if user_width == 8 else None,
+            clock_hz=self._clock_hz)
         members = {"gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
                    "gmii_rxd": In(8), "gmii_rx_dv": In(1), "gmii_rx_er": In(1)}
+        if self._lanes == 2:
+            members.update({"gmii_rx_clk": In(1), "gmii_tx_clk": In(1)})
         for k in range(sessions):
             members[f"tcp{k}"] = Out(TcpUserSignature(user_width))
         members.update({"rbcp": Out(RbcpBusSignature()), "local_mac": Out(48),
@@ -167,12 +209,47 @@ class NetStack(wiring.Component):
                         "counter_value": Out(32)})
         super().__init__(members)
 
+    lanes = property(lambda self: self._lanes)
+    clock_hz = property(lambda self: self._clock_hz)
+
+    def connect_gmii(self, m, port):
+        """Drive this stack's GMII members from ``port`` (an ``Out(GmiiSignature(clocks=
+        lanes == 2))`` of a parent) and ``port``'s outputs from them."""
+        m.d.comb += [self.gmii_rxd.eq(port.rxd), self.gmii_rx_dv.eq(port.rx_dv),
+                     self.gmii_rx_er.eq(port.rx_er), port.txd.eq(self.gmii_txd),
+                     port.tx_en.eq(self.gmii_tx_en), port.tx_er.eq(self.gmii_tx_er)]
+        if self._lanes == 2:
+            m.d.comb += [self.gmii_rx_clk.eq(port.rx_clk), self.gmii_tx_clk.eq(port.tx_clk)]
+
     def elaborate(self, platform):
         m = Module()
-        m.submodules.mac_rx = mac_rx = GmiiRx()
-        m.submodules.mac_tx = mac_tx = GmiiTx()
-        m.submodules.parser = parser = FrameParser()
-        m.submodules.builder = builder = FrameBuilder(len(RESPONDERS) + self._sessions)
+        L = self._lanes
+        mac_rx, mac_tx = GmiiRx(), GmiiTx()
+        m.submodules.parser = parser = FrameParser(lanes=L)
+        m.submodules.builder = builder = FrameBuilder(len(RESPONDERS) + self._sessions, lanes=L)
+        if L == 1:
+            m.submodules.mac_rx, m.submodules.mac_tx = mac_rx, mac_tx
+            wiring.connect(m, mac_rx.rx, parser.rx)
+            wiring.connect(m, builder.m_axis, mac_tx.s_axis)
+            rx_beats = mac_rx.rx
+        else:
+            # GMII on the PHY's clocks, everything else two bytes wide on ``sync``
+            for name, clock in (("gmii_rx", self.gmii_rx_clk), ("gmii_tx", self.gmii_tx_clk)):
+                m.domains += (cd := ClockDomain(name, local=True))
+                m.d.comb += cd.clk.eq(clock)
+                # the core's reset, taken into the GMII clock through flip-flops (a
+                # synchronous reset; the PHY's clocks run while it is held)
+                m.submodules[f"{name}_reset"] = FFSynchronizer(ResetSignal("sync"), cd.rst,
+                                                               o_domain=name, init=1)
+            m.submodules.mac_rx = DomainRenamer("gmii_rx")(mac_rx)
+            m.submodules.mac_tx = DomainRenamer("gmii_tx")(mac_tx)
+            m.submodules.rx_bridge = rx_bridge = RxBeatBridge(gmii_domain="gmii_rx")
+            m.submodules.tx_bridge = tx_bridge = TxBeatBridge(gmii_domain="gmii_tx")
+            wiring.connect(m, mac_rx.rx, rx_bridge.gmii)
+            wiring.connect(m, rx_bridge.rx, parser.rx)
+            wiring.connect(m, builder.m_axis, tx_bridge.s_axis)
+            wiring.connect(m, tx_bridge.gmii, mac_tx.s_axis)
+            rx_beats = rx_bridge.rx
         m.submodules.registers = registers = GlobalRegisters({
             "mac": self._mac, "ip": self._ip, "rto_cycles": self._rto, "msl_cycles": self._msl,
             "rbcp_port": self._rbcp_port, "arp_retry_cycles": self._arp_retry,
@@ -181,8 +258,6 @@ class NetStack(wiring.Component):
                      mac_rx.gmii_rx_er.eq(self.gmii_rx_er),
                      self.gmii_txd.eq(mac_tx.gmii_txd), self.gmii_tx_en.eq(mac_tx.gmii_tx_en),
                      self.gmii_tx_er.eq(mac_tx.gmii_tx_er)]
-        wiring.connect(m, mac_rx.rx, parser.rx)
-        wiring.connect(m, builder.m_axis, mac_tx.s_axis)
         m.d.comb += [self.local_mac.eq(registers.mac), self.local_ip.eq(registers.ip),
                      parser.local_mac.eq(registers.mac), parser.local_ip.eq(registers.ip),
                      builder.local_mac.eq(registers.mac), builder.local_ip.eq(registers.ip)]
@@ -199,6 +274,7 @@ class NetStack(wiring.Component):
                 s.seg_fields.eq(f), s.seg_kind.eq(parser.kind),
                 s.seg_payload_data.eq(parser.payload_data),
                 s.seg_payload_valid.eq(parser.payload_valid),
+                s.seg_payload_keep.eq(parser.payload_keep),
                 s.seg_payload_offset.eq(parser.payload_offset),
                 s.seg_done.eq(parser.done), s.seg_accept.eq(parser.accept),
                 s.seg_arp.eq(parser.arp_seen),
@@ -207,16 +283,7 @@ class NetStack(wiring.Component):
                 s.default_port.eq(registers.tcp_port),
             ]
             wiring.connect(m, s.tx, getattr(builder, f"req_{len(RESPONDERS) + k}"))
-            if self._user_width == 8:
-                wiring.connect(m, wiring.flipped(user.tx), s.s_axis)
-                wiring.connect(m, s.m_axis, wiring.flipped(user.rx))
-            else:
-                m.submodules[f"tcp{k}_tx_downsizer"] = down = StreamDownsizer(self._user_width)
-                m.submodules[f"tcp{k}_rx_upsizer"] = up = StreamUpsizer(self._user_width)
-                wiring.connect(m, wiring.flipped(user.tx), down.s_axis)
-                wiring.connect(m, down.m_axis, s.s_axis)
-                wiring.connect(m, s.m_axis, up.s_axis)
-                wiring.connect(m, up.m_axis, wiring.flipped(user.rx))
+            self._connect_user(m, k, s, user)
             for name in ("open_req", "active", "local_port", "remote_ip", "remote_port",
                          "close_ack", "abort", "counter_index", "counters_clear"):
                 m.d.comb += getattr(s, name).eq(getattr(user, name))
@@ -238,14 +305,14 @@ class NetStack(wiring.Component):
                        ~f.flags.syn & ~f.flags.rst & ~f.flags.ack)
 
         # ---- one responder per protocol, each on its own builder port
-        m.submodules.arp = arp = ArpResponder()
-        m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048)
+        m.submodules.arp = arp = ArpResponder(lanes=L)
+        m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048, lanes=L)
         m.submodules.rbcp = rbcp = RbcpResponder([(0, self._user_window),
-                                                  (GLOBAL_BASE, 0x10000)])
-        m.submodules.tcp_reset = rst = TcpResetResponder()
+                                                  (GLOBAL_BASE, 0x10000)], lanes=L)
+        m.submodules.tcp_reset = rst = TcpResetResponder(lanes=L)
         responders = {"arp": arp, "icmp": icmp, "rbcp": rbcp, "rst": rst}
         for k, name in enumerate(RESPONDERS):
-            ParsedFrameSignature.connect_parser(m, parser, responders[name].frame, mac_rx.rx)
+            ParsedFrameSignature.connect_parser(m, parser, responders[name].frame, rx_beats)
             wiring.connect(m, responders[name].tx, getattr(builder, f"req_{k}"))
         m.d.comb += [rbcp.port.eq(registers.rbcp_port), rst.claimed.eq(claimed),
                      rst.ignore.eq(listen_drop)]
@@ -259,8 +326,8 @@ class NetStack(wiring.Component):
                      registers.counter_value.eq(counters.rd_data[0]),
                      counters.rd_addr[1].eq(self.counter_index),
                      self.counter_value.eq(counters.rd_data[1])]
-        m.d.comb += counters.events.frames_out.eq(
-            mac_tx.s_axis.tvalid & mac_tx.s_axis.tready & mac_tx.s_axis.tlast)
+        out = builder.m_axis
+        m.d.comb += counters.events.frames_out.eq(out.tvalid & out.tready & out.tlast)
 
         def bump(name):
             return counters.events[name].eq(1)
@@ -302,3 +369,40 @@ class NetStack(wiring.Component):
                         with m.If(parser.options_malformed):
                             m.d.comb += bump("tcp_bad_options")
         return m
+
+    def _connect_user(self, m, k, session, user):
+        """Session ``k``'s streams to the user's width: bytes or ``lanes``-byte beats inside,
+        ``user_width`` outside, at the inside's rate."""
+        L, width = self._lanes, self._user_width
+        if width == 8 * L:
+            wiring.connect(m, wiring.flipped(user.tx), session.s_axis)
+            if L == 1:
+                wiring.connect(m, session.m_axis, wiring.flipped(user.rx))
+            else:
+                # the ring's beats as they are, a partial one (no further byte) with tlast
+                r = session.m_axis
+                m.d.comb += [user.rx.tdata.eq(r.tdata), user.rx.tkeep.eq(r.tkeep),
+                             user.rx.tlast.eq(~r.tkeep[L - 1]), user.rx.tvalid.eq(r.tvalid),
+                             r.tready.eq(user.rx.tready)]
+            return
+        if L == 1:
+            tx, rx = StreamDownsizer(width), StreamUpsizer(width)
+        elif width == 8:
+            # a byte per beat each way: one-byte beats into the session, and the receive
+            # ring read a byte at a time
+            s = session.s_axis
+            m.d.comb += [s.tdata.eq(user.tx.tdata), s.tkeep.eq(1), s.tlast.eq(user.tx.tlast),
+                         s.tvalid.eq(user.tx.tvalid), user.tx.tready.eq(s.tready)]
+            wiring.connect(m, session.m_axis, wiring.flipped(user.rx))
+            return
+        else:
+            # beats regrouped into whole lanes-byte beats (partial only at tlast), received
+            # bytes into user beats that never wait for bytes to come
+            tx = StreamRepacker(width // 8, L)
+            rx = StreamRepacker(L, width // 8, eager=True)
+        m.submodules[f"tcp{k}_tx_width"] = tx
+        m.submodules[f"tcp{k}_rx_width"] = rx
+        wiring.connect(m, wiring.flipped(user.tx), tx.s_axis)
+        wiring.connect(m, tx.m_axis, session.s_axis)
+        wiring.connect(m, session.m_axis, rx.s_axis)
+        wiring.connect(m, rx.m_axis, wiring.flipped(user.rx))

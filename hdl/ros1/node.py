@@ -28,14 +28,17 @@ class TcprosNode(wiring.Component):
         unchanged (the paper's receive-and-send-back component); those endpoints have no
         user port.
     **stack
-        :class:`~hdl.net.NetStack` parameters (``mac``, ``ip``, ``tx_depth``, ...).
+        :class:`~hdl.net.NetStack` parameters (``mac``, ``ip``, ``tx_depth``, ``lanes``, ...;
+        the sessions' user streams are as wide as the engine, ``8 * lanes`` bits).
 
     Members
     -------
-    gmii_* : GMII to the PHY.
-    pub<k> : In(message_stream_signature())
+    gmii_* : GMII to the PHY; with an engine of two lanes (the default) also its receive
+        and transmit clocks ``gmii_rx_clk``, ``gmii_tx_clk``, the node on ``sync`` at half
+        their rate (:class:`~hdl.net.stack.NetStack`).
+    pub<k> : In(message_stream_signature(lanes))
         Messages for publisher endpoint ``k``.
-    sub<k> : Out(message_stream_signature())
+    sub<k> : Out(message_stream_signature(lanes))
         Messages from subscriber endpoint ``k``.
     phase<k> : Out
         Endpoint ``k``'s phase (:data:`~hdl.ros1.registers.PHASES`).
@@ -61,18 +64,22 @@ class TcprosNode(wiring.Component):
                 raise ParameterError("loopback", pair,
                                      "(subscriber index, publisher index) pairs")
             self._loopback.append((sub, pub))
-        self._stack_params = dict(stack, sessions=len(endpoints),
+        lanes = stack.get("lanes", 2)
+        self._stack_params = dict(stack, sessions=len(endpoints), user_width=8 * lanes,
                                   user_window=len(endpoints) * ENDPOINT_STRIDE)
         self._stack = NetStack(**self._stack_params)
+        self._lanes = self._stack.lanes
         looped = {i for pair in self._loopback for i in pair}
         members = {"gmii_txd": Out(8), "gmii_tx_en": Out(1), "gmii_tx_er": Out(1),
                    "gmii_rxd": In(8), "gmii_rx_dv": In(1), "gmii_rx_er": In(1)}
+        if self._stack.lanes == 2:
+            members.update({"gmii_rx_clk": In(1), "gmii_tx_clk": In(1)})
         for k, role in enumerate(endpoints):
             if k not in looped:
                 if role == "publisher":
-                    members[f"pub{k}"] = In(message_stream_signature())
+                    members[f"pub{k}"] = In(message_stream_signature(self._lanes))
                 else:
-                    members[f"sub{k}"] = Out(message_stream_signature())
+                    members[f"sub{k}"] = Out(message_stream_signature(self._lanes))
             members[f"phase{k}"] = Out(range(len(PHASES)))
         members["local_mac"] = Out(48)
         members["local_ip"] = Out(32)
@@ -83,7 +90,10 @@ class TcprosNode(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.stack = stack = self._stack
-        for name in ("gmii_rxd", "gmii_rx_dv", "gmii_rx_er"):
+        inputs = ("gmii_rxd", "gmii_rx_dv", "gmii_rx_er")
+        if stack.lanes == 2:
+            inputs += ("gmii_rx_clk", "gmii_tx_clk")
+        for name in inputs:
             m.d.comb += getattr(stack, name).eq(getattr(self, name))
         for name in ("gmii_txd", "gmii_tx_en", "gmii_tx_er", "local_mac", "local_ip",
                      "counter_value"):
@@ -92,7 +102,7 @@ class TcprosNode(wiring.Component):
 
         endpoints = []
         for k, role in enumerate(self._roles):
-            ep = TcprosEndpoint(role, endpoints=len(self._roles))
+            ep = TcprosEndpoint(role, endpoints=len(self._roles), lanes=self._lanes)
             m.submodules[f"endpoint{k}"] = ep
             endpoints.append(ep)
             wiring.connect(m, getattr(stack, f"tcp{k}"), ep.tcp)

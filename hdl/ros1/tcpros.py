@@ -9,8 +9,9 @@ from amaranth.lib.wiring import In, Out
 from ..net.rbcp import RbcpBusSignature
 from ..net.stack import TcpUserSignature
 from ..net.tcp import TCP_COUNTERS, TcpError, TcpState
-from ..params import check_choice
-from ..stream import AXIStreamSignature
+from ..params import check_choice, check_int
+from ..msg.bytes import byte_mask
+from ..stream import AXIStreamSignature, ByteWindow, keep_count
 from .registers import (
     CHECK_DEFAULT, COUNTERS, COUNTERS_OFFSET, CTRL, ENDPOINT_ID, ERRORS, EXPECTED, EXPECTED_AREA,
     HDR_ERR, HDR_RX, HDR_TX, PHASES, REG,
@@ -33,10 +34,11 @@ def _area(area):
     return f"{base >> low:0{16 - low}b}" + "-" * low
 
 
-def message_stream_signature():
-    """Messages as AXI-Stream bytes: ``tlast`` on a message's last byte, ``tuser`` its length
-    in bytes (on every beat; a publisher reads it on the first)."""
-    return AXIStreamSignature(8, keep=False, user_width=32)
+def message_stream_signature(lanes=1):
+    """Messages as AXI-Stream beats of ``lanes`` bytes: ``tlast`` on a message's last beat
+    (with 2 lanes ``tkeep`` 0b01 when it holds one byte, the only partial beat), ``tuser`` its
+    length in bytes (on every beat; a publisher reads it on the first)."""
+    return AXIStreamSignature(8 * lanes, keep=lanes > 1, user_width=32)
 
 
 class TcprosEndpoint(wiring.Component):
@@ -55,35 +57,44 @@ class TcprosEndpoint(wiring.Component):
     the connection), then delivers each message body on ``m_axis``; messages longer than
     MAX_MSG are dropped whole.
 
+    The connection headers are read and written a byte per cycle; message bodies move
+    ``lanes`` bytes per cycle, the engine's rate (received bytes pass a
+    :class:`~hdl.stream.ByteWindow`, so a body starts in lane 0 wherever it fell in the
+    session's beats).
+
     Parameters
     ----------
     role : str
         ``"publisher"`` or ``"subscriber"``.
+    lanes : int
+        Bytes per beat of the session's streams and of the message stream, 1 or 2 (the
+        engine's ``lanes``).
 
     Members
     -------
-    tcp : In(TcpUserSignature())
+    tcp : In(TcpUserSignature(8 * lanes))
         The session's user side.
     regs : In(RbcpBusSignature())
         Register port: strobes for addresses of this endpoint (low 16 bits), acknowledged two
         cycles later.
-    s_axis : In(message_stream_signature())
+    s_axis : In(message_stream_signature(lanes))
         Publisher only: messages to send.
-    m_axis : Out(message_stream_signature())
+    m_axis : Out(message_stream_signature(lanes))
         Subscriber only: received messages.
     phase : Out(range(len(PHASES)))
         :data:`~hdl.ros1.registers.PHASES`.
     """
 
-    def __init__(self, role, *, endpoints=1):
+    def __init__(self, role, *, endpoints=1, lanes=1):
         self._role = check_choice("role", role, ROLES)
         self._endpoints = endpoints
-        members = {"tcp": In(TcpUserSignature()), "regs": In(RbcpBusSignature()),
+        self._lanes = check_int("lanes", lanes, 1, 2)
+        members = {"tcp": In(TcpUserSignature(8 * lanes)), "regs": In(RbcpBusSignature()),
                    "phase": Out(range(len(PHASES)))}
         if role == "publisher":
-            members["s_axis"] = In(message_stream_signature())
+            members["s_axis"] = In(message_stream_signature(lanes))
         else:
-            members["m_axis"] = Out(message_stream_signature())
+            members["m_axis"] = Out(message_stream_signature(lanes))
         super().__init__(members)
 
     role = property(lambda self: self._role)
@@ -91,9 +102,17 @@ class TcprosEndpoint(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         pub = self._role == "publisher"
+        L = self._lanes
         tcp = self.tcp
-        tx = tcp.tx
-        rx = tcp.rx
+        # transmit: header and length bytes one per beat, bodies as they come
+        tx = _ByteBeat(tcp.tx, L)
+        # receive: the session's bytes through a window, taken one at a time (headers,
+        # lengths) or ``lanes`` at a time (bodies)
+        m.submodules.rx_window = window = ByteWindow(L)
+        w = window.s_axis
+        m.d.comb += [w.tdata.eq(tcp.rx.tdata), w.tvalid.eq(tcp.rx.tvalid),
+                     w.tkeep.eq(tcp.rx.tkeep if L > 1 else 1), tcp.rx.tready.eq(w.tready)]
+        rx = _ByteTake(m, window)
 
         # ---- registers
         ctrl = Signal(8)
@@ -427,7 +446,10 @@ class TcprosEndpoint(wiring.Component):
         if pub:
             self._publisher_stream(m, s, tx, streaming, ctrl, msg_len, msg_cnt, bump, error)
         else:
-            self._subscriber_stream(m, rx, mo, streaming, max_msg, msg_len, msg_cnt, bump)
+            self._subscriber_stream(m, rx, window, mo, streaming, max_msg, msg_len, msg_cnt,
+                                    bump)
+        tx.finish(m)
+        rx.finish(m)
         return m
 
     @staticmethod
@@ -465,19 +487,27 @@ class TcprosEndpoint(wiring.Component):
                         with m.Else():
                             m.next = "BODY"
             with m.State("BODY"):
-                m.d.comb += [tx.tvalid.eq(s.tvalid), tx.tdata.eq(s.tdata),
-                             s.tready.eq(tx.tready)]
+                # the beat's bytes up to the message's length; a beat that runs past it is cut
+                n = keep_count(s.tkeep) if tx.lanes > 1 else Const(1, 1)
+                room = msg_len - msg_cnt
+                over = n > room
+                sent = Mux(over, room, n)
+                tx.body(m, s.tdata, Mux(over, room, n), s.tvalid)
+                m.d.comb += s.tready.eq(tx.tready)
                 with m.If(~streaming):
                     m.next = "DROP"
                 with m.Elif(s.tvalid & tx.tready):
-                    m.d.sync += msg_cnt.eq(msg_cnt + 1)
-                    with m.If(msg_cnt + 1 == msg_len):
+                    m.d.sync += msg_cnt.eq(msg_cnt + sent)
+                    with m.If(msg_cnt + sent == msg_len):
                         m.d.sync += bump("messages_tx")
-                        with m.If(s.tlast):
+                        with m.If(s.tlast & ~over):
                             m.next = "WAIT"
                         with m.Else():
                             m.d.sync += error.eq(error | ERRORS["length_mismatch"])
-                            m.next = "DISCARD"
+                            with m.If(s.tlast):
+                                m.next = "WAIT"
+                            with m.Else():
+                                m.next = "DISCARD"
                     with m.Elif(s.tlast):
                         m.d.sync += error.eq(error | ERRORS["length_mismatch"])
                         m.next = "PAD"
@@ -501,8 +531,9 @@ class TcprosEndpoint(wiring.Component):
                     m.next = "WAIT"
 
     @staticmethod
-    def _subscriber_stream(m, rx, mo, streaming, max_msg, msg_len, msg_cnt, bump):
+    def _subscriber_stream(m, rx, window, mo, streaming, max_msg, msg_len, msg_cnt, bump):
         lenb = Signal(2)
+        lanes = len(mo.tdata) // 8
         with m.FSM(name="subscribe"):
             with m.State("LENGTH"):
                 with m.If(streaming):
@@ -520,22 +551,88 @@ class TcprosEndpoint(wiring.Component):
                             with m.Else():
                                 m.next = "BODY"
             with m.State("BODY"):
-                last = msg_cnt + 1 == msg_len
-                m.d.comb += [mo.tvalid.eq(rx.tvalid), mo.tdata.eq(rx.tdata),
-                             mo.tuser.eq(msg_len), mo.tlast.eq(last),
-                             rx.tready.eq(mo.tready)]
+                # up to ``lanes`` bytes of the message a beat, from the window; a beat once
+                # offered keeps its bytes until taken, though more may arrive behind them
+                room = msg_len - msg_cnt
+                have = Mux(window.avail < lanes, window.avail, lanes)
+                n = Signal(range(lanes + 1))
+                offered = Signal(range(lanes + 1))
+                m.d.comb += n.eq(Mux(offered != 0, offered, Mux(room < have, room, have)))
+                last = msg_cnt + n == msg_len
+                keep = Cat(*(n > k for k in range(lanes)))
+                m.d.comb += [mo.tvalid.eq(window.avail != 0),
+                             mo.tdata.eq(byte_mask(window.window, lanes, n)),
+                             mo.tuser.eq(msg_len), mo.tlast.eq(last)]
+                if lanes > 1:
+                    m.d.comb += mo.tkeep.eq(keep)
+                m.d.sync += offered.eq(Mux(mo.tvalid & ~mo.tready, n, 0))
                 with m.If(~streaming):
                     m.next = "LENGTH"
-                with m.Elif(rx.tvalid & mo.tready):
-                    m.d.sync += msg_cnt.eq(msg_cnt + 1)
+                with m.Elif(mo.tvalid & mo.tready):
+                    rx.take_bytes(m, n)
+                    m.d.sync += msg_cnt.eq(msg_cnt + n)
                     with m.If(last):
                         m.d.sync += bump("messages_rx")
                         m.next = "LENGTH"
             with m.State("SKIP"):
-                m.d.comb += rx.tready.eq(1)
+                room = msg_len - msg_cnt
+                have = Mux(window.avail < lanes, window.avail, lanes)
+                n = Mux(room < have, room, have)
                 with m.If(~streaming):
                     m.next = "LENGTH"
-                with m.Elif(rx.tvalid):
-                    m.d.sync += msg_cnt.eq(msg_cnt + 1)
-                    with m.If(msg_cnt + 1 == msg_len):
+                with m.Elif(window.avail != 0):
+                    rx.take_bytes(m, n)
+                    m.d.sync += msg_cnt.eq(msg_cnt + n)
+                    with m.If(msg_cnt + n == msg_len):
                         m.next = "LENGTH"
+
+
+class _ByteBeat:
+    """A session's transmit stream driven a byte at a time (``tvalid``, ``tdata``, ``tready``
+    as on a byte stream), or with a body beat of up to ``lanes`` bytes (:meth:`body`)."""
+
+    def __init__(self, stream, lanes):
+        self.stream = stream
+        self.lanes = lanes
+        self.tvalid = Signal(name="tx_byte_valid")
+        self.tdata = Signal(8, name="tx_byte")
+        self.tready = stream.tready
+        self._body = Signal(name="tx_body")
+        self._data = Signal(8 * lanes, name="tx_body_data")
+        self._count = Signal(range(lanes + 1), name="tx_body_count")
+        self._valid = Signal(name="tx_body_valid")
+
+    def body(self, m, data, count, valid):
+        """This cycle's beat: ``count`` bytes of ``data`` (lane 0 first) while ``valid``."""
+        m.d.comb += [self._body.eq(1), self._data.eq(data), self._count.eq(count),
+                     self._valid.eq(valid)]
+
+    def finish(self, m):
+        t = self.stream
+        m.d.comb += [t.tvalid.eq(Mux(self._body, self._valid, self.tvalid)),
+                     t.tdata.eq(Mux(self._body, self._data, self.tdata))]
+        if self.lanes > 1:
+            m.d.comb += t.tkeep.eq(Mux(self._body,
+                                       Cat(*(self._count > k for k in range(self.lanes))), 1))
+
+
+class _ByteTake:
+    """A :class:`~hdl.stream.ByteWindow` read as a byte stream (``tvalid``, ``tdata``,
+    ``tready``: one byte taken per handshake), or ``n`` bytes at once (:meth:`take_bytes`)."""
+
+    def __init__(self, m, window):
+        self.window = window
+        self.tvalid = Signal(name="rx_byte_valid")
+        self.tdata = Signal(8, name="rx_byte")
+        self.tready = Signal(name="rx_byte_ready")
+        self._many = Signal(name="rx_take_many")
+        self._amount = Signal(len(window.amount), name="rx_take_amount")
+        m.d.comb += [self.tvalid.eq(window.avail != 0), self.tdata.eq(window.window[:8])]
+
+    def take_bytes(self, m, n):
+        m.d.comb += [self._many.eq(1), self._amount.eq(n)]
+
+    def finish(self, m):
+        w = self.window
+        m.d.comb += [w.take.eq(self._many | (self.tready & self.tvalid)),
+                     w.amount.eq(Mux(self._many, self._amount, 1))]

@@ -13,6 +13,6 @@ from .monitor import StreamMonitorSignature, StreamMonitor
 
 __all__ += ["StreamMonitorSignature", "StreamMonitor"]
 
-from .width import StreamDownsizer, StreamRepacker, StreamUpsizer, keep_count
+from .width import ByteWindow, StreamDownsizer, StreamRepacker, StreamUpsizer, keep_count
 
-__all__ += ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "keep_count"]
+__all__ += ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count"]

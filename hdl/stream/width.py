@@ -7,7 +7,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from .signature import AXIStreamSignature
 
-__all__ = ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "keep_count"]
+__all__ = ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count"]
 
 
 def keep_count(tkeep):
@@ -151,6 +151,11 @@ class StreamRepacker(wiring.Component):
     ----------
     in_bytes, out_bytes : int
         Bytes of an input and of an output beat, 1..128.
+    eager : bool
+        Bytes never wait for more that may not come: when the input offers nothing while
+        less than a beat is held, those bytes leave the next cycle as a partial beat with
+        ``tlast``, as after an input ``tlast`` (for a byte stream whose beat boundaries mean
+        nothing, such as a TCP session's received bytes).
 
     Members
     -------
@@ -162,10 +167,11 @@ class StreamRepacker(wiring.Component):
         The bytes in order, ``tkeep`` contiguous from byte 0.
     """
 
-    def __init__(self, in_bytes, out_bytes):
+    def __init__(self, in_bytes, out_bytes, *, eager=False):
         check_int("in_bytes", in_bytes, 1, 128)
         check_int("out_bytes", out_bytes, 1, 128)
         self._in, self._out = in_bytes, out_bytes
+        self._eager = bool(eager)
         super().__init__({"s_axis": In(AXIStreamSignature(8 * in_bytes)),
                           "m_axis": Out(AXIStreamSignature(8 * out_bytes))})
 
@@ -203,4 +209,66 @@ class StreamRepacker(wiring.Component):
         m.d.sync += [count.eq(new_count),
                      last.eq(Mux(take_in, s.tlast, last & ~(take_out & out.tlast)) &
                              (new_count != 0))]
+        if self._eager:
+            with m.If(~last & (count != 0) & (count < Bo) & ~s.tvalid):
+                m.d.sync += last.eq(1)
+        return m
+
+
+class ByteWindow(wiring.Component):
+    """Presents a byte stream as a window from which 0..``nbytes`` bytes are taken per cycle.
+
+    The input's beat boundaries mean nothing (a TCP session's received bytes: beats of 1 to
+    ``nbytes`` bytes); the consumer takes what it needs (a length field byte by byte, a
+    message body ``nbytes`` at a time), at full rate: a beat enters in the cycle the bytes
+    it follows make room for it. The window holds up to ``2 * nbytes - 1`` bytes.
+
+    Parameters
+    ----------
+    nbytes : int
+        Bytes of an input beat and of the window, 1..16.
+
+    Members
+    -------
+    s_axis : In(AXIStreamSignature(8 * nbytes))
+        Bytes; ``tkeep`` contiguous from byte 0; ``tlast`` is ignored.
+    window : Out(8 * nbytes)
+        The next bytes, the first in bits 0..7 (those beyond ``avail`` mean nothing).
+    avail : Out(range(2 * nbytes))
+        Bytes in the window (more than ``nbytes`` may be held; ``window`` shows ``nbytes``).
+    amount : In(range(nbytes + 1))
+        Bytes taken if ``take``, at most ``avail``.
+    take : In(1)
+        Take ``amount`` bytes this cycle.
+    """
+
+    def __init__(self, nbytes):
+        self._n = check_int("nbytes", nbytes, 1, 16)
+        super().__init__({"s_axis": In(AXIStreamSignature(8 * nbytes)),
+                          "window": Out(8 * nbytes), "avail": Out(range(2 * nbytes)),
+                          "amount": In(range(nbytes + 1)), "take": In(1)})
+
+    def elaborate(self, platform):
+        m = Module()
+        B = self._n
+        C = 2 * B - 1
+        buf = [Signal(8, name=f"buf{j}") for j in range(C)]
+        count = Signal(range(C + 1))
+        s = self.s_axis
+        m.d.comb += [self.window.eq(Cat(*buf[:B])), self.avail.eq(count)]
+        taken = Mux(self.take, self.amount, 0)
+        left = Signal(range(C + 1))
+        m.d.comb += [left.eq(count - taken), s.tready.eq(left < B)]
+        accept = s.tvalid & s.tready
+        shifted = [buf[j] for j in range(C)]
+        for a in range(1, B + 1):          # drop ``taken`` bytes from the front
+            shifted = [Mux(taken == a, buf[j + a] if j + a < C else 0, shifted[j])
+                       for j in range(C)]
+        for j in range(C):
+            value = shifted[j]
+            for a in range(B):             # the beat lands at byte ``left`` (< B)
+                if a <= j < a + B:
+                    value = Mux(accept & (left == a), s.tdata.word_select(j - a, 8), value)
+            m.d.sync += buf[j].eq(value)
+        m.d.sync += count.eq(left + Mux(accept, keep_count(s.tkeep), 0))
         return m

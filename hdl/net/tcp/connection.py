@@ -5,14 +5,17 @@ from amaranth.hdl import Module, Mux, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from ...params import check_power_of_two
+from ...params import check_int, check_power_of_two
 from ..frames import TCP_FLAGS, TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN
 from ..rx import RX_FIELDS, FrameKind
 from .codes import TcpError, TcpRequest, TcpState
 from .sequence_engine import ARRIVAL_FLAGS, SEQUENCE_INTENT
 from .timer import TimerMode
 
-__all__ = ["CONNECTION_EVENTS", "TcpConnection", "user_control_members"]
+__all__ = ["CONNECTION_EVENTS", "DELAYED_ACK_US", "TcpConnection", "user_control_members"]
+
+#: the longest an in-order segment waits for its acknowledgement (docs/network.md)
+DELAYED_ACK_US = 20
 
 #: Events the connection counts (fields of the session's counters).
 CONNECTION_EVENTS = data.StructLayout({
@@ -50,6 +53,10 @@ class TcpConnection(wiring.Component):
     ----------
     rx_depth : int
         Receive ring bytes (for the window-update threshold).
+    descriptors : int
+        Segments of the transmit buffer.
+    clock_hz : int
+        The clock, for the delayed ACK's :data:`DELAYED_ACK_US`.
 
     Members
     -------
@@ -94,9 +101,10 @@ class TcpConnection(wiring.Component):
         Counted events, this cycle.
     """
 
-    def __init__(self, *, rx_depth=65536, descriptors=64):
+    def __init__(self, *, rx_depth=65536, descriptors=64, clock_hz=125_000_000):
         self._rx_depth = check_power_of_two("rx_depth", rx_depth, 2048, 65536)
         self._descriptors = check_power_of_two("descriptors", descriptors, 4, 256)
+        self._clock_hz = check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000)
         members = {
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind), "seg_done": In(1),
             "seg_accept": In(1), "seg_arp": In(1),
@@ -149,7 +157,7 @@ class TcpConnection(wiring.Component):
         arp_due = Signal()
         ack_now = Signal()          # send an ACK as soon as possible
         ack_owed = Signal()         # one in-order segment not yet acknowledged
-        delack = Signal(12)
+        delack = Signal(range(DELAYED_ACK_US * self._clock_hz // 1_000_000 + 1))
         rst_due = Signal()
         rst_at_nxt = self.rst_at_nxt    # the pending RST carries SND.NXT (else ``ctl_seq``)
         fin_queued = Signal()
@@ -237,10 +245,10 @@ class TcpConnection(wiring.Component):
                 with m.Case(R.PROBE):
                     m.d.sync += probe_due.eq(0)
 
-        # delayed ACK: at most 20 us (2500 cycles at 125 MHz)
+        # delayed ACK: at most 20 us
         with m.If(ack_owed & ~ack_now):
             m.d.sync += delack.eq(delack + 1)
-            with m.If(delack == 2500):
+            with m.If(delack == DELAYED_ACK_US * self._clock_hz // 1_000_000):
                 m.d.sync += ack_now.eq(1)
         # window update once the user has made room (SWS avoidance, RFC 9293 §3.8.6.2.2);
         # not in the cycle a segment leaves: ``adv_wnd`` takes its window only then

@@ -39,11 +39,12 @@ class TcpSequenceEngine(wiring.Component):
     on the path from the parser; one subtractor and a short program do it instead. An arrived
     segment's fields (latched by the connection at the verdict) are compared one per cycle
     (9 cycles; the subtractor's operands depend only on the program's step, so nothing an
-    idle cycle decides reaches the comparisons), the engine then spends one cycle in DECIDE, where the connection reads
-    ``flags`` and gives its ``intent``, and writes the new sequence numbers over the next 4
-    (the next segment's payload cannot start within 54 cycles). A new connection's numbers
-    take 5 cycles from ``initialise``; SND.MAX follows SND.NXT forward in 2 cycles after a
-    frame is sent.
+    idle cycle decides reaches the comparisons), the engine then spends one cycle in DECIDE,
+    where the connection reads ``flags`` and gives its ``intent``, and writes the new
+    sequence numbers over the next 4 (the next segment's payload comes at least 33 cycles
+    later at two bytes per cycle: a gap shrunk to 4 bytes, the preamble and 54 header
+    bytes). A new connection's numbers take 5 cycles from ``initialise``; SND.MAX follows
+    SND.NXT forward in 2 cycles after a frame is sent.
 
     Outside programs, in an idle cycle, the adder serves one of: the SND.NXT of a frame just
     sent or SND.NXT = SND.UNA for a retransmission timeout; the sequence number of the

@@ -5,7 +5,7 @@ from amaranth.hdl import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from ...params import check_int, check_power_of_two
+from ...params import ParameterError, check_int, check_power_of_two
 from ...stream import AXIStreamSignature
 from ..counters import EventCounters
 from ..rx import RX_FIELDS, FrameKind
@@ -51,6 +51,11 @@ class TcpSession(wiring.Component):
     ----------
     tx_depth, rx_depth : int
         Buffer sizes in bytes, powers of two in 2**11..2**16.
+    lanes : int
+        Bytes per beat of the parser's payload, the builder's reads and ``s_axis``, 1 or 2.
+    read_lanes : int
+        Bytes per beat of ``m_axis``: 1 or ``lanes`` (default; see
+        :class:`~hdl.net.tcp.receive_ring.TcpReceiveRing`).
     descriptors : int
         Segments the transmit buffer may hold, a power of two in 4..256.
     iss_seed : int
@@ -60,7 +65,7 @@ class TcpSession(wiring.Component):
     -------
     seg_* : In
         From the :class:`FrameParser`: ``seg_fields`` (live header fields), ``seg_kind``,
-        ``seg_payload_*`` (payload bytes as they arrive), ``seg_done``, ``seg_accept`` (the
+        ``seg_payload_*`` (payload beats as they arrive), ``seg_done``, ``seg_accept`` (the
         parser's verdict) and ``seg_arp`` (an ARP frame from anyone to anyone: one from the
         peer's IP resolves it for a client and refreshes its MAC on a live connection,
         docs/network.md).
@@ -75,13 +80,15 @@ class TcpSession(wiring.Component):
     listen_block : In(1)
         Another session takes this SYN (its connection, or a lower-numbered listener on the
         same port): do not accept it.
-    tx : Out(TxRequestSignature())
+    tx : Out(TxRequestSignature(lanes))
         Frame requests to the :class:`FrameBuilder`.
-    s_axis : In(AXIStreamSignature(8, keep=False))
-        Bytes to send; ``tlast`` pushes the segment out at once. ``tready`` is high only in
-        ESTABLISHED and CLOSE-WAIT, while there is buffer room.
-    m_axis : Out(AXIStreamSignature(8, keep=False))
-        Received bytes in order (``tlast`` is 0). Backpressure closes the receive window.
+    s_axis : In(AXIStreamSignature(8 * lanes, keep=lanes > 1))
+        Bytes to send (``tkeep`` contiguous from lane 0); ``tlast`` pushes the segment out at
+        once. ``tready`` is high only in ESTABLISHED and CLOSE-WAIT, while there is buffer
+        room.
+    m_axis : Out(AXIStreamSignature(8 * read_lanes, keep=read_lanes > 1))
+        Received bytes in order, up to ``read_lanes`` per beat (``tlast`` is 0).
+        Backpressure closes the receive window.
     open_req : In(1)
         Client (``active`` = 1): a rising level connects to ``remote_ip:remote_port``.
         Server: listen on ``local_port`` while high. Falling while connected: close (FIN
@@ -121,28 +128,41 @@ class TcpSession(wiring.Component):
     """
 
     @staticmethod
-    def check_parameters(*, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000):
+    def check_parameters(*, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000,
+                         lanes=1, read_lanes=None, clock_hz=125_000_000):
         """The parameters, validated (:class:`~hdl.params.ParameterError` names a bad one);
         for containers that build their sessions later, in ``elaborate``."""
+        lanes = check_int("lanes", lanes, 1, 2)
+        read_lanes = lanes if read_lanes is None else read_lanes
+        if read_lanes not in (1, lanes):
+            raise ParameterError("read_lanes", read_lanes, f"1 or lanes ({lanes})")
         return dict(tx_depth=check_power_of_two("tx_depth", tx_depth, 2048, 65536),
                     rx_depth=check_power_of_two("rx_depth", rx_depth, 2048, 65536),
                     descriptors=check_power_of_two("descriptors", descriptors, 4, 256),
-                    iss_seed=check_int("iss_seed", iss_seed, 0, 2**32 - 1))
+                    iss_seed=check_int("iss_seed", iss_seed, 0, 2**32 - 1),
+                    lanes=lanes, read_lanes=read_lanes,
+                    clock_hz=check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000))
 
-    def __init__(self, *, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000):
+    def __init__(self, *, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000,
+                 lanes=1, read_lanes=None, clock_hz=125_000_000):
         params = self.check_parameters(tx_depth=tx_depth, rx_depth=rx_depth,
-                                       descriptors=descriptors, iss_seed=iss_seed)
+                                       descriptors=descriptors, iss_seed=iss_seed, lanes=lanes,
+                                       read_lanes=read_lanes, clock_hz=clock_hz)
         self._tx_depth, self._rx_depth = params["tx_depth"], params["rx_depth"]
         self._descriptors, self._iss_seed = params["descriptors"], params["iss_seed"]
+        self._lanes, self._clock_hz = params["lanes"], params["clock_hz"]
+        self._read_lanes = params["read_lanes"]
+        L, R = self._lanes, self._read_lanes
         super().__init__({
             "seg_fields": In(RX_FIELDS), "seg_kind": In(FrameKind),
-            "seg_payload_data": In(8), "seg_payload_valid": In(1), "seg_payload_offset": In(11),
+            "seg_payload_data": In(8 * L), "seg_payload_valid": In(1),
+            "seg_payload_keep": In(L), "seg_payload_offset": In(11),
             "seg_done": In(1), "seg_accept": In(1), "seg_arp": In(1),
             "conn_match": Out(1), "listen_match": Out(1), "port_listening": Out(1),
             "listen_block": In(1),
-            "tx": Out(TxRequestSignature()),
-            "s_axis": In(AXIStreamSignature(8, keep=False)),
-            "m_axis": Out(AXIStreamSignature(8, keep=False)),
+            "tx": Out(TxRequestSignature(L)),
+            "s_axis": In(AXIStreamSignature(8 * L, keep=L > 1)),
+            "m_axis": Out(AXIStreamSignature(8 * R, keep=R > 1)),
             **user_control_members(),
             "tx_fill": Out(17),
             "counter_index": In(range(len(TCP_COUNTERS))), "counter_value": Out(32),
@@ -152,16 +172,20 @@ class TcpSession(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.ring = ring = TcpReceiveRing(self._rx_depth)
+        L = self._lanes
+        m.submodules.ring = ring = TcpReceiveRing(self._rx_depth, lanes=L,
+                                                  read_lanes=self._read_lanes)
         m.submodules.tx_buffer = buffer = TcpTransmitBuffer(depth=self._tx_depth,
-                                                         descriptors=self._descriptors)
+                                                            descriptors=self._descriptors,
+                                                            lanes=L)
         m.submodules.engine = engine = TcpSequenceEngine(iss_seed=self._iss_seed)
         m.submodules.scheduler = scheduler = TcpRequestScheduler()
         m.submodules.timer = timer = TcpTimer()
         m.submodules.congestion = congestion = TcpCongestionControl(
             descriptors=self._descriptors)
         m.submodules.connection = conn = TcpConnection(rx_depth=self._rx_depth,
-                                                       descriptors=self._descriptors)
+                                                       descriptors=self._descriptors,
+                                                       clock_hz=self._clock_hz)
 
         # parser and user side
         m.d.comb += [
@@ -172,6 +196,7 @@ class TcpSession(wiring.Component):
             self.port_listening.eq(conn.port_listening),
             ring.payload_data.eq(self.seg_payload_data),
             ring.payload_valid.eq(self.seg_payload_valid),
+            ring.payload_keep.eq(self.seg_payload_keep),
             ring.payload_offset.eq(self.seg_payload_offset),
             ring.frame_end.eq(self.seg_done),
         ]
@@ -261,8 +286,8 @@ class TcpSession(wiring.Component):
         ]
 
         # counters: the events are registered
-        m.submodules.counters = counters = EventCounters(TCP_COUNTERS,
-                                                         amounts={"bytes_rx": 11})
+        m.submodules.counters = counters = EventCounters(
+            TCP_COUNTERS, amounts={"bytes_rx": 11, "bytes_tx": len(buffer.taken)})
         events = Signal(counters.events.shape())
         m.d.sync += [events.eq(0), events.bytes_tx.eq(buffer.taken),
                      events.segments_tx.eq(scheduler.sent)]

@@ -6,9 +6,10 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ...params import check_power_of_two
-from ...stream import AXIStreamSignature
+from ...params import check_int, check_power_of_two
+from ...stream import AXIStreamSignature, keep_count
 from ..checksum import ones_complement_add
+from .banks import ByteBanks
 
 __all__ = ["TcpTransmitBuffer"]
 
@@ -21,8 +22,11 @@ class TcpTransmitBuffer(wiring.Component):
     writes its descriptor (first sequence number, length, ones'-complement sum of its bytes
     summed while they were written) into a ring. Three ring pointers say which segments are
     acknowledged (freed as SND.UNA passes their end, one per cycle), sent and written. A
-    segment is therefore sent at one byte per cycle straight from the buffer, and resent
-    unchanged until acknowledged.
+    segment is therefore sent at ``lanes`` bytes per cycle straight from the buffer, and
+    resent unchanged until acknowledged. With 2 lanes the buffer is two byte banks
+    (:class:`~hdl.net.tcp.banks.ByteBanks`), so that both the user's beats and the frame
+    builder's reads move two bytes at any sequence number; a beat that would take a segment
+    past ``mss`` closes the segment first and starts the next one.
 
     Parameters
     ----------
@@ -30,18 +34,21 @@ class TcpTransmitBuffer(wiring.Component):
         Buffer bytes, a power of two in 2**11..2**16.
     descriptors : int
         Segments the ring holds (one stays unused), a power of two in 4..256.
+    lanes : int
+        Bytes per beat of ``s_axis`` and of the builder's reads, 1 or 2.
 
     Members
     -------
-    s_axis : In(AXIStreamSignature(8, keep=False))
-        The user's bytes; ``tlast`` closes the segment at once. ``tready`` is high while
-        ``accept`` is and there is room in the buffer and the ring.
+    s_axis : In(AXIStreamSignature(8 * lanes, keep=lanes > 1))
+        The user's bytes (``tkeep`` contiguous from lane 0); ``tlast`` closes the segment at
+        once. ``tready`` is high while ``accept`` is and there is room in the buffer and
+        the ring.
     accept : In(1)
         The connection takes user bytes (ESTABLISHED or CLOSE-WAIT, no FIN queued).
     mss : In(11)
         The longest segment.
-    taken : Out(1)
-        A byte was taken this cycle.
+    taken : Out(range(lanes + 1))
+        Bytes taken this cycle.
     fill : Out(17)
         Bytes held (written and not yet acknowledged).
     wr_seq : Out(32)
@@ -66,32 +73,30 @@ class TcpTransmitBuffer(wiring.Component):
         counted).
     reset : In(1)
         Drop every segment (the connection closed); ``wr_seq`` stays.
-    rd_addr, rd_data : In(16), Out(8)
-        The frame builder reads the byte at sequence number ``rd_addr`` (low 16 bits), one
-        cycle later.
+    rd_addr, rd_data : In(16), Out(8 * lanes)
+        The frame builder reads the bytes at sequence numbers ``rd_addr`` (low 16 bits)
+        .. ``rd_addr + lanes - 1``, one cycle later.
     """
 
-    def __init__(self, *, depth=65536, descriptors=64):
+    def __init__(self, *, depth=65536, descriptors=64, lanes=1):
         self._depth = check_power_of_two("depth", depth, 2048, 65536)
         self._descriptors = check_power_of_two("descriptors", descriptors, 4, 256)
+        self._lanes = check_int("lanes", lanes, 1, 2)
         super().__init__({
-            "s_axis": In(AXIStreamSignature(8, keep=False)),
-            "accept": In(1), "mss": In(11), "taken": Out(1), "fill": Out(17),
+            "s_axis": In(AXIStreamSignature(8 * lanes, keep=lanes > 1)),
+            "accept": In(1), "mss": In(11), "taken": Out(range(lanes + 1)), "fill": Out(17),
             "wr_seq": Out(32), "load": In(1), "load_value": In(32), "snd_una": In(32),
             "next_seq": Out(32), "next_len": Out(11), "next_sum": Out(16),
             "unsent": Out(1), "all_sent": Out(1), "in_flight": Out(range(descriptors)),
             "advance": In(1), "rewind": In(1), "reset": In(1),
-            "rd_addr": In(16), "rd_data": Out(8),
+            "rd_addr": In(16), "rd_data": Out(8 * lanes),
         })
 
     def elaborate(self, platform):
         m = Module()
-        depth, nd = self._depth, self._descriptors
-        bits = depth.bit_length() - 1
-        m.submodules.data = buffer = Memory(shape=8, depth=depth, init=[])
-        buf_w = buffer.write_port()
-        buf_r = buffer.read_port(transparent_for=())
-        m.d.comb += [buf_r.addr.eq(self.rd_addr[:bits]), self.rd_data.eq(buf_r.data)]
+        depth, nd, L = self._depth, self._descriptors, self._lanes
+        m.submodules.data = buffer = ByteBanks(depth, lanes=L)
+        m.d.comb += [buffer.rd_addr.eq(self.rd_addr), self.rd_data.eq(buffer.rd_data)]
 
         m.submodules.ring = ring = Memory(shape=32 + 11 + 16, depth=nd, init=[])
         ring_w = ring.write_port()
@@ -115,31 +120,47 @@ class TcpTransmitBuffer(wiring.Component):
         m.d.comb += self.fill.eq(wr_seq - oldest)
         ring_used = Signal(ptr_bits)
         m.d.comb += ring_used.eq(written - acked)
+        s = self.s_axis
+        n = keep_count(s.tkeep) if L > 1 else Const(1, 1)
+        # a beat that does not fit into the open segment closes it first, without being taken
+        too_long = s.tvalid & (seg_len + n > self.mss)
         m.d.comb += [
-            self.s_axis.tready.eq(self.accept & (ring_used < nd - 1) & (self.fill < depth - 1)),
+            s.tready.eq(self.accept & (ring_used < nd - 1) & (self.fill < depth - L) &
+                        ~too_long),
             self.unsent.eq(sending != written),
             self.all_sent.eq((sending == written) & (seg_len == 0)),
             self.in_flight.eq(sending - acked),
         ]
-        take = self.s_axis.tvalid & self.s_axis.tready
-        m.d.comb += [buf_w.addr.eq(wr_seq[:bits]), buf_w.data.eq(self.s_axis.tdata),
-                     buf_w.en.eq(take), self.taken.eq(take)]
+        take = s.tvalid & s.tready
+        m.d.comb += [buffer.wr_addr.eq(wr_seq[:16]), buffer.wr_data.eq(s.tdata),
+                     buffer.wr_en.eq(Mux(take, s.tkeep if L > 1 else 1, 0)),
+                     self.taken.eq(Mux(take, n, 0))]
 
-        byte_word = Mux(seg_len[0], Cat(self.s_axis.tdata, Const(0, 8)),
-                        Cat(Const(0, 8), self.s_axis.tdata))
+        # the beat's bytes as a word of the segment's sum: the first in the high half if it
+        # is at an even place of the segment, else in the low half (RFC 1071 sums are the
+        # same byte-swapped)
+        if L == 1:
+            byte_word = Mux(seg_len[0], Cat(s.tdata, Const(0, 8)), Cat(Const(0, 8), s.tdata))
+        else:
+            second = Mux(s.tkeep[1], s.tdata[8:], 0)
+            byte_word = Mux(seg_len[0], Cat(s.tdata[:8], second), Cat(second, s.tdata[:8]))
         new_sum = ones_complement_add(seg_sum, byte_word)
+        new_len = (seg_len + n)[:11]
         close = Signal()
         close_len = Signal(11)
         close_sum = Signal(16)
         with m.If(take):
-            m.d.sync += [wr_seq.eq(wr_seq + 1), idle.eq(0)]
+            m.d.sync += [wr_seq.eq(wr_seq + n), idle.eq(0)]
             with m.If(seg_len == 0):
                 m.d.sync += seg_start.eq(wr_seq)
-            with m.If(self.s_axis.tlast | (seg_len + 1 >= self.mss)):
-                m.d.comb += [close.eq(1), close_len.eq(seg_len + 1), close_sum.eq(new_sum)]
+            with m.If((s.tlast & (new_len != 0)) | (new_len >= self.mss)):
+                m.d.comb += [close.eq(1), close_len.eq(new_len), close_sum.eq(new_sum)]
                 m.d.sync += [seg_len.eq(0), seg_sum.eq(0)]
             with m.Else():
-                m.d.sync += [seg_len.eq(seg_len + 1), seg_sum.eq(new_sum)]
+                m.d.sync += [seg_len.eq(new_len), seg_sum.eq(new_sum)]
+        with m.Elif(too_long & (ring_used < nd)):
+            m.d.comb += [close.eq(1), close_len.eq(seg_len), close_sum.eq(seg_sum)]
+            m.d.sync += [seg_len.eq(0), seg_sum.eq(0), idle.eq(0)]
         with m.Elif(seg_len != 0):
             m.d.sync += idle.eq(idle + 1)
             with m.If((idle == 15) & (ring_used < nd)):
