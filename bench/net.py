@@ -17,7 +17,12 @@ from tb.net_bench_tops import (
     build_ros1_bench_top,
 )
 
+#: the GMII clock, the benches' time base (8 ns per byte on the wire) ...
 CLOCK_MHZ = 125
+#: ... and the engine's core clock: two bytes per cycle
+CORE_MHZ = 62.5
+#: bytes per cycle of the engine the benches measure
+LANES = 2
 #: where the captures go (the first 400 frames each way of each run, simulated time stamps)
 RESULTS = Path(__file__).resolve().parent / "results"
 CEILING_MBPS = 949.3
@@ -68,34 +73,43 @@ def resource_blocks():
     from hdl.net import FrameBuilder, FrameParser, GmiiRx, GmiiTx, NetStack, RbcpServer, TcpSession
     from hdl.net.counters import EventCounters
     from hdl.net.stack import GLOBAL_BASE, STACK_COUNTERS
+    from hdl.net.mac import RxBeatBridge, TxBeatBridge
     from hdl.ros1 import TcprosEndpoint
-    from hdl.stream import StreamDownsizer, StreamUpsizer
+    from hdl.stream import StreamRepacker
+    L = LANES
     blocks = [
         ("engine", "engine: MAC + ARP + ICMP + IPv4 + UDP/RBCP + 1 TCP session, 4 KiB buffers "
                    "(64 KiB each way: + 30 RAMB36)",
          lambda: NetStack(sessions=1, tx_depth=4096, rx_depth=4096)),
         ("mac_rx", "  GmiiRx", GmiiRx),
         ("mac_tx", "  GmiiTx", GmiiTx),
-        ("parser", "  FrameParser", FrameParser),
-        ("builder", "  FrameBuilder (2 requesters)", lambda: FrameBuilder(2)),
+        ("rx_bridge", "  RxBeatBridge (GMII receive clock to the core clock)", RxBeatBridge),
+        ("tx_bridge", "  TxBeatBridge (core clock to the GMII transmit clock)", TxBeatBridge),
+        ("parser", "  FrameParser, 2 lanes", lambda: FrameParser(lanes=L)),
+        ("builder", "  FrameBuilder (2 requesters), 2 lanes", lambda: FrameBuilder(2, lanes=L)),
         ("rbcp", "  RbcpServer", lambda: RbcpServer([(0, 0x10000), (GLOBAL_BASE, 0x10000)])),
         ("counters", "  EventCounters (the stack's counters, 2 read ports)",
          lambda: EventCounters(STACK_COUNTERS, readers=2, spacing=2)),
-        ("tcp", "  TcpSession, 4 KiB buffers", lambda: TcpSession(tx_depth=4096, rx_depth=4096)),
-        ("downsizer", "  with user_width=32, per session: StreamDownsizer(32) (tx)",
-         lambda: StreamDownsizer(32)),
-        ("upsizer", "  with user_width=32, per session: StreamUpsizer(32) (rx)",
-         lambda: StreamUpsizer(32)),
-        ("publisher", "TCPROS publisher endpoint (header memories, registers)",
-         lambda: TcprosEndpoint("publisher")),
-        ("subscriber", "TCPROS subscriber endpoint", lambda: TcprosEndpoint("subscriber")),
+        ("tcp", "  TcpSession, 4 KiB buffers, 2 lanes",
+         lambda: TcpSession(tx_depth=4096, rx_depth=4096, lanes=L)),
+        ("repacker_tx", "  with user_width=32, per session: StreamRepacker(4, 2) (tx)",
+         lambda: StreamRepacker(4, L)),
+        ("repacker_rx", "  with user_width=32, per session: StreamRepacker(2, 4, eager) (rx)",
+         lambda: StreamRepacker(L, 4, eager=True)),
+        ("publisher", "TCPROS publisher endpoint, 2 lanes (header memories, registers)",
+         lambda: TcprosEndpoint("publisher", lanes=L)),
+        ("subscriber", "TCPROS subscriber endpoint, 2 lanes",
+         lambda: TcprosEndpoint("subscriber", lanes=L)),
     ]
     return blocks
 
 
-#: the blocks of :func:`resource_blocks` placed and routed by bench/timing.py: the engine
-#: (its parts are inside it) and the TCPROS endpoints
-TIMING_BLOCKS = ("engine", "publisher", "subscriber")
+#: the blocks of :func:`resource_blocks` placed and routed by bench/timing.py and their
+#: clocks: the engine's core clock and GMII's receive and transmit clocks, and the TCPROS
+#: endpoints (on the core clock in a node; held to the GMII clock)
+TIMING_CLOCKS = {"engine": {"aclk": CORE_MHZ, "gmii_rx_clk": CLOCK_MHZ,
+                            "gmii_tx_clk": CLOCK_MHZ},
+                 "publisher": CLOCK_MHZ, "subscriber": CLOCK_MHZ}
 
 
 def measure_resources(log=print):

@@ -39,7 +39,8 @@ def _kernel(spec):
 
 def catalog():
     """``{core: {"label", "build" (or a list of (label, build) to try, largest first), "top",
-    "clock_mhz"}}`` in the order of the benches."""
+    "clock_mhz"}}`` in the order of the benches; ``clock_mhz`` is a number, or for a core
+    with several clocks ``{clock port: MHz}``."""
     from bench import hmt, kernels, liteeth, msg, net, reconos
     cores = {}
 
@@ -68,9 +69,9 @@ def catalog():
     add("kernel_servo", "servo PWM, six channels, 50 Hz", _kernel(dict(kind="servo_pwm")),
         "kernel_servo", kernels.CLOCK_MHZ)
     for name, label, build in net.resource_blocks():
-        if name in net.TIMING_BLOCKS:
+        if name in net.TIMING_CLOCKS:
             add(f"net_{name}" if name != "engine" else "engine", label, build, f"net_{name}",
-                net.CLOCK_MHZ)
+                net.TIMING_CLOCKS[name])
     for core, (width, sys_mhz) in liteeth.CONFIGS.items():
         def peer(core=core):
             return liteeth.liteeth_verilog(core, FOLDER / core)
@@ -175,7 +176,8 @@ def _place(core, entry, seeds, log):
             text, clocks = built
         else:
             text, _ = export_verilog(built, entry["top"])
-            clocks = {"clk": entry["clock_mhz"]}
+            mhz = entry["clock_mhz"]
+            clocks = dict(mhz) if isinstance(mhz, dict) else {"clk": mhz}
         vfile = folder / f"{entry['top']}.v"
         write_if_changed(vfile, text)
         try:
@@ -235,7 +237,7 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     for i, core in enumerate(names, 1):
         entry = cores[core]
         start = time.monotonic()
-        log(f"  [{i}/{len(names)}] {core} at {entry['clock_mhz']} MHz, seeds "
+        log(f"  [{i}/{len(names)}] {core} at {_per_clock(entry['clock_mhz'])} MHz, seeds "
             f"{', '.join(map(str, seeds))}...")
         try:
             row = _place(core, entry, seeds, log)
@@ -357,7 +359,8 @@ def markdown(results):
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['core']} | {r['clock_mhz']} | not placed: {r['error']} | | | | "
+            lines.append(f"| {r['core']} | {_per_clock(r['clock_mhz'])} | not placed: "
+                         f"{r['error']} | | | | "
                          f"| | | FAIL |")
             continue
         seeds = " / ".join(_per_clock(v if len(v) > 1 else next(iter(v.values())))
@@ -415,7 +418,7 @@ def main(argv=None):
     cores = catalog()
     if "--list" in args:
         for name, entry in cores.items():
-            print(f"{name:28} {entry['clock_mhz']:>4} MHz  {entry['label']}")
+            print(f"{name:28} {_per_clock(entry['clock_mhz']):>4} MHz  {entry['label']}")
         return 0
     unknown = [a for a in args if a not in cores]
     if unknown:

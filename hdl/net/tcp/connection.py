@@ -509,11 +509,12 @@ class TcpConnection(wiring.Component):
             m.d.comb += events.bytes_rx.eq(s_committed)
 
         # retransmission timeout (RFC 6298 with a fixed initial RTO, doubled per expiry); a
-        # timer acts only between segments: a segment being applied, or arriving in this
-        # very cycle, is seen first (it may restart the timer: FIN-WAIT-2 ends only after a
-        # silence)
+        # timer acts only between segments: a segment being applied, or whose verdict comes
+        # in this very cycle, is seen first (it may restart the timer: FIN-WAIT-2 ends only
+        # after a silence). Any frame's verdict holds the timer for that cycle, so that the
+        # segment's match with the connection stays off the timer's path into the engine.
         sent_op = sent & ((kind == R.SYN) | (kind == R.DATA) | (kind == R.FIN))
-        timers_free = ~self.engine_busy & ~sent_op & ~self.arrival_pending & ~arriving
+        timers_free = ~self.engine_busy & ~sent_op & ~self.arrival_pending & ~self.seg_done
         with m.If(state == S.ARP):
             with m.If(expired):
                 m.d.sync += [retries.eq(retries + 1), arp_due.eq(1)]

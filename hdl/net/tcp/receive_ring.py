@@ -16,7 +16,9 @@ class TcpReceiveRing(wiring.Component):
     """A byte ring with a speculative write pointer.
 
     A segment's payload is written while its frame arrives, before its Ethernet FCS and TCP
-    checksum are known. The bytes become readable on ``commit`` and are dropped on
+    checksum are known, a cycle behind the parser (the payload, ``accept`` and ``skip`` pass
+    a register first; ``written`` is complete a cycle after the last payload beat, before
+    the FCS has passed). The bytes become readable on ``commit`` and are dropped on
     ``rollback``. Three pointers (17 bits, wrapping) hold the state: read, committed and
     speculative; the ring's free space is the receive window. With 2 lanes the ring is two
     byte banks (:class:`~hdl.net.tcp.banks.ByteBanks`): two bytes in and two out per cycle
@@ -110,18 +112,25 @@ class TcpReceiveRing(wiring.Component):
         with m.If(self.discard):
             m.d.sync += read.eq(committed)
 
-        # writing: the beat's payload bytes at or after ``skip``, while they fit
+        # writing: the beat's payload bytes at or after ``skip``, while they fit; the parser's
+        # payload and the connection's ``accept`` and ``skip`` through a register first
+        p_data, p_keep = Signal(8 * L), Signal(L)
+        p_valid, p_first = Signal(), Signal()
+        offset = Signal(11)
+        p_accept, p_skip = Signal(), Signal(16)
+        m.d.sync += [p_data.eq(self.payload_data), p_keep.eq(self.payload_keep),
+                     p_valid.eq(self.payload_valid), offset.eq(self.payload_offset),
+                     p_first.eq(self.payload_valid & (self.payload_offset == 0)),
+                     p_accept.eq(self.accept), p_skip.eq(self.skip)]
         writing = Signal()
         skipping = Signal(16)
-        offset = self.payload_offset
-        first = self.payload_valid & (offset == 0)
-        on = Mux(first, self.accept, writing)
-        skip = Mux(first, self.skip, skipping)
+        first = p_first
+        on = Mux(first, p_accept, writing)
+        skip = Mux(first, p_skip, skipping)
         in_use = Signal(17)
         m.d.comb += in_use.eq(speculative - read)
-        lanes = [self.payload_data[8 * k:8 * k + 8] for k in range(L)]
-        wanted = [self.payload_valid & on & self.payload_keep[k] & (offset + k >= skip)
-                  for k in range(L)]
+        lanes = [p_data[8 * k:8 * k + 8] for k in range(L)]
+        wanted = [p_valid & on & p_keep[k] & (offset + k >= skip) for k in range(L)]
         if L == 1:
             fits = [in_use < depth - 1]
             data, count = lanes[0], wanted[0]
@@ -136,7 +145,7 @@ class TcpReceiveRing(wiring.Component):
         m.d.comb += [banks.wr_addr.eq(speculative[:16]), banks.wr_data.eq(data),
                      banks.wr_en.eq(Cat(*write))]
         with m.If(first):
-            m.d.sync += [writing.eq(self.accept), skipping.eq(self.skip)]
+            m.d.sync += [writing.eq(p_accept), skipping.eq(p_skip)]
         m.d.sync += [speculative.eq(speculative + n_written),
                      self.written.eq(self.written + n_written)]
         with m.If(n_written != count):

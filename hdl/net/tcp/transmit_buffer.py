@@ -100,13 +100,16 @@ class TcpTransmitBuffer(wiring.Component):
 
         m.submodules.ring = ring = Memory(shape=32 + 11 + 16, depth=nd, init=[])
         ring_w = ring.write_port()
-        ring_send = ring.read_port(domain="comb")
+        # the next segment's descriptor from a register: read with the address ``sending``
+        # takes next, so that nothing waits for the ring's read (it sees this cycle's write)
+        ring_send = ring.read_port(transparent_for=(ring_w,))
         ring_ack = ring.read_port(domain="comb")
         ptr_bits = nd.bit_length()
         written = Signal(ptr_bits)
         sending = Signal(ptr_bits)
+        sending_next = Signal(ptr_bits)
         acked = Signal(ptr_bits)
-        m.d.comb += [ring_send.addr.eq(sending[:-1]), ring_ack.addr.eq(acked[:-1])]
+        m.d.comb += [ring_send.addr.eq(sending_next[:-1]), ring_ack.addr.eq(acked[:-1])]
         m.d.comb += [self.next_seq.eq(ring_send.data[:32]), self.next_len.eq(ring_send.data[32:43]),
                      self.next_sum.eq(ring_send.data[43:59])]
         ack_seq, ack_len = ring_ack.data[:32], ring_ack.data[32:43]
@@ -181,14 +184,17 @@ class TcpTransmitBuffer(wiring.Component):
         m.d.comb += behind.eq(self.snd_una[:18] - ack_seq[:18] - ack_len)
         free_now = (acked != written) & ~behind[17]
         acked_next = acked + free_now
+        m.d.comb += sending_next.eq(sending)
         with m.If(free_now):
             m.d.sync += acked.eq(acked + 1)
             with m.If(sending == acked):
-                m.d.sync += sending.eq(sending + 1)
+                m.d.comb += sending_next.eq(sending + 1)
         with m.If(self.advance):
-            m.d.sync += sending.eq(sending + 1)
+            m.d.comb += sending_next.eq(sending + 1)
         with m.If(self.rewind):
-            m.d.sync += sending.eq(acked_next)
+            m.d.comb += sending_next.eq(acked_next)
         with m.If(self.reset):
-            m.d.sync += [sending.eq(written), acked.eq(written), seg_len.eq(0), seg_sum.eq(0)]
+            m.d.comb += sending_next.eq(written)
+            m.d.sync += [acked.eq(written), seg_len.eq(0), seg_sum.eq(0)]
+        m.d.sync += sending.eq(sending_next)
         return m
