@@ -37,7 +37,7 @@ async def soc_times(dut, times, stop):
 async def hop_latency(dut, master):
     """First byte into node 0 to first byte out of its far port, for a frame it forwards only
     (another node's MAC), on an idle line."""
-    await ClockCycles(dut.aclk, 2000)
+    await ClockCycles(dut.gmii_clk, 2000)
     master.send(Ether(src="02:00:00:00:00:01", dst="02:00:00:00:46:99", type=0x88B5) /
                 Raw(bytes(100)))
     await RisingEdge(dut.hop_in)
@@ -72,7 +72,7 @@ async def measure_line(dut):
         first = master.now() + 10
         sizes = None
         for k in range(FIXED):
-            await ClockCycles(dut.aclk, first + k * period - master.now())
+            await ClockCycles(dut.gmii_clk, first + k * period - master.now())
             start, last, got = await master.cycle(rng, polling=polling,
                                                   deadline=first + (k + 1) * period)
             assert start == first + k * period, (start, first + k * period)

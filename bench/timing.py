@@ -84,7 +84,7 @@ def catalog():
         from tb.finemb_tb import PID_IO
         return FinembPidNode(load_io_description(PID_IO))
     add("finemb_node", "FinEmbP PID node (2 ports, forwarding, client, page buffer, PID)",
-        finemb_node, "finemb_node", net.CLOCK_MHZ)
+        finemb_node, "finemb_node", {"aclk": net.CORE_MHZ, "gmii_clk": net.CLOCK_MHZ})
 
     for name, label, build, fallbacks in av_chain_nodes():
         add(f"av_{name}", label, build, f"av_{name}", kernels.CLOCK_MHZ, fallbacks)
@@ -342,7 +342,8 @@ def engine_beside_liteeth(rows):
             "liteeth_udp8_lut4": peer["lut4"], "liteeth_udp8_ff": peer["ff"],
             "lut4_ratio": round(engine["lut4"] / peer["lut4"], 2),
             "ff_ratio": round(engine["ff"] / peer["ff"], 2),
-            "goal_lut4": round(peer["lut4"] * ENGINE_GOAL), "goal_ff": round(peer["ff"] * ENGINE_GOAL)}
+            "goal_lut4": round(peer["lut4"] * ENGINE_GOAL),
+            "goal_ff": round(peer["ff"] * ENGINE_GOAL)}
 
 
 def markdown(results):

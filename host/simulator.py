@@ -418,8 +418,13 @@ GMII_NS, CORE_NS = 8, 16
 
 def start_gmii_clocks(dut, port="gmii"):
     """Inside a cocotb test: start a top's core clock ``aclk`` and, when the top has them (a
-    network engine with two lanes), the GMII receive and transmit clocks of ``port``; return
-    the clocks ``port``'s receiver and transmitter run on (``aclk`` for a one-clock top)."""
+    network engine with two lanes), the GMII receive and transmit clocks of ``port``, or its
+    one GMII clock ``gmii_clk`` (a FinEmbP node or line); return the clocks ``port``'s
+    receiver and transmitter run on (``aclk`` for a one-clock top)."""
+    if hasattr(dut, "gmii_clk"):
+        start_clock(dut.aclk, CORE_NS)
+        start_clock(dut.gmii_clk, GMII_NS)
+        return dut.gmii_clk, dut.gmii_clk
     if not hasattr(dut, f"{port}_rx_clk"):
         start_clock(dut.aclk, GMII_NS)
         return dut.aclk, dut.aclk

@@ -2,8 +2,9 @@
 :class:`hdl.finemb.FinembLine` with a lossy cable on every link, the master's included, and
 the signals the benches measure hop latency and loss with."""
 
-from amaranth.hdl import Module, Signal
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetSignal, Signal
 from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from gen.finemb import load_io_description
@@ -69,6 +70,8 @@ class FinembLineBench(wiring.Component):
 
     Members
     -------
+    gmii_clk : In(1)
+        The line's GMII clock (its links and the master's link run on it).
     port0 : Out(GmiiSignature())
         The master's link (through a :class:`LossyLink`).
     loss_threshold : In(16)
@@ -90,7 +93,8 @@ class FinembLineBench(wiring.Component):
         self._line = FinembLine(descriptor, nodes, link=link)
         self._master_link = LossyLink(seed=seed % 65535 + 1)
         super().__init__({
-            "port0": Out(GmiiSignature()), "loss_threshold": In(16), "lost": Out(32),
+            "gmii_clk": In(1), "port0": Out(GmiiSignature()), "loss_threshold": In(16),
+            "lost": Out(32),
             "state": Out(NodeState).array(nodes), "node_id": Out(16).array(nodes),
             "updates": Out(32).array(nodes), "soc": Out(1).array(nodes),
             "hop_in": Out(1), "hop_out": Out(1),
@@ -99,7 +103,14 @@ class FinembLineBench(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         m.submodules.line = line = self._line
-        m.submodules.master_link = ml = self._master_link
+        # the master's link on the GMII clock (a domain name of its own: the line's and its
+        # nodes' domains are local to them)
+        m.domains += (cd := ClockDomain("master_link", local=True))
+        m.d.comb += [cd.clk.eq(self.gmii_clk), line.gmii_clk.eq(self.gmii_clk)]
+        m.submodules.link_reset = FFSynchronizer(ResetSignal("sync"), cd.rst,
+                                                 o_domain="master_link", init=1)
+        ml = self._master_link
+        m.submodules.master_link = DomainRenamer("master_link")(ml)
         p = self.port0
         m.d.comb += [ml.west.txd.eq(p.rxd), ml.west.tx_en.eq(p.rx_dv), ml.west.tx_er.eq(p.rx_er),
                      p.txd.eq(ml.west.rxd), p.tx_en.eq(ml.west.rx_dv), p.tx_er.eq(ml.west.rx_er)]

@@ -17,7 +17,7 @@ from hdl.finemb.protocol import (
     ReinitReason,
 )
 from hdl.net.frames import int_to_mac, mac_to_int
-from host.simulator import start_clock
+from host.simulator import GMII_NS, start_gmii_clocks
 
 from .harness import ROOT, bench_params
 from .models.finemb import body_of, finemb_frame, parse_finemb
@@ -26,7 +26,8 @@ from .streams import reset_aresetn
 
 __all__ = ["CLOCK_NS", "PID_IO", "NodeTB", "LineMaster", "Port", "node_ip"]
 
-CLOCK_NS = 8
+#: the benches' time base: the GMII clock (a byte on the wire; the nodes' core runs at half)
+CLOCK_NS = GMII_NS
 PID_IO = str(ROOT / "examples" / "finemb" / "pid_node.toml")
 
 
@@ -41,10 +42,10 @@ class Port:
     def __init__(self, dut, prefix):
         self.dut = dut
         self.source = GmiiSource(getattr(dut, f"{prefix}_rxd"), getattr(dut, f"{prefix}_rx_er"),
-                                 getattr(dut, f"{prefix}_rx_dv"), dut.aclk, dut.aresetn,
+                                 getattr(dut, f"{prefix}_rx_dv"), dut.gmii_clk, dut.aresetn,
                                  reset_active_level=False)
         self.sink = GmiiSink(getattr(dut, f"{prefix}_txd"), getattr(dut, f"{prefix}_tx_er"),
-                             getattr(dut, f"{prefix}_tx_en"), dut.aclk, dut.aresetn,
+                             getattr(dut, f"{prefix}_tx_en"), dut.gmii_clk, dut.aresetn,
                              reset_active_level=False)
         for model in (self.source, self.sink):
             model.log.setLevel(logging.WARNING)
@@ -77,7 +78,7 @@ class NodeTB:
         self.dut = dut
         self.params = bench_params()
         self.io = load_io_description(self.params["io"])
-        start_clock(dut.aclk, CLOCK_NS)
+        start_gmii_clocks(dut)
         self.ports = [Port(dut, "port0"), Port(dut, "port1")]
         dut.counter_index.value = 0
         self.cycle = 0
@@ -86,7 +87,7 @@ class NodeTB:
 
     async def _count(self):
         while True:
-            await RisingEdge(self.dut.aclk)
+            await RisingEdge(self.dut.gmii_clk)
             self.cycle += 1
 
     async def reset(self):
@@ -114,7 +115,7 @@ class NodeTB:
                 if IP in frame:
                     frame = Ether(bytes(frame)[:14 + frame[IP].len])
                 return parse_finemb(frame) if finemb else frame
-            await ClockCycles(self.dut.aclk, 8)
+            await ClockCycles(self.dut.gmii_clk, 8)
         return None
 
     async def expect_silence(self, port=0, cycles=2000):
@@ -124,7 +125,7 @@ class NodeTB:
     async def drain(self, port, cycles=200):
         """Frames sent on ``port`` within ``cycles`` (scapy)."""
         out = []
-        await ClockCycles(self.dut.aclk, cycles)
+        await ClockCycles(self.dut.gmii_clk, cycles)
         while (got := self.ports[port].take()) is not None:
             out.append(got[1])
         return out
@@ -204,7 +205,7 @@ class LineMaster:
         self.dut = dut
         self.n = nodes
         self.io = load_io_description(io)
-        start_clock(dut.aclk, CLOCK_NS)
+        start_gmii_clocks(dut)
         self.port = Port(dut, "port0")
         self.seq = 0
         self.nodes = {}           # node id -> {"mac", "ip", "model", "serial"}

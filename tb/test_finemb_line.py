@@ -85,7 +85,7 @@ async def hot_join_while_the_others_cycle(dut):
                 await master.join(newcomer, mac)       # the address, then the descriptor
                 steps.pop(0)
             assert master.now() < start + SLOW_PERIOD, "the join overran the cycle"
-        await ClockCycles(dut.aclk, max(0, start + SLOW_PERIOD - master.now()))
+        await ClockCycles(dut.gmii_clk, max(0, start + SLOW_PERIOD - master.now()))
     assert newcomer in master.nodes and master.answered[newcomer] >= 4
     assert states(dut) == [NodeState.OP] * NODES
     assert all(v == 0 for v in master.late.values()), master.late
@@ -141,7 +141,7 @@ async def master_restart_mid_operation(dut):
         assert len(got) == NODES
     master.send(master.request(MsgType.REINIT, NODE_ALL,
                                body_of(MsgType.REINIT, ReinitReason.MASTER_RESTART)))
-    await ClockCycles(dut.aclk, 2000)
+    await ClockCycles(dut.gmii_clk, 2000)
     assert states(dut) == [NodeState.INIT] * NODES
     master.nodes.clear()
     master.cycle_no = 0

@@ -104,7 +104,7 @@ async def forwarding_is_byte_exact_and_cut_through(dut):
     await tb.ports[0].send(Ether(src="02:aa:00:00:00:01", dst="02:cc:00:00:00:03",
                                  type=0x88B5) / Raw(bytes(800)))
     while not int(dut.port1_tx_en.value):
-        await ClockCycles(dut.aclk, 1)
+        await ClockCycles(dut.gmii_clk, 1)
     latency = tb.cycle - start
     dut._log.info("hop latency: %d cycles (%d ns)", latency, latency * 8)
     assert latency <= 20, latency
@@ -117,7 +117,7 @@ async def forwarding_is_byte_exact_and_cut_through(dut):
     # a bad FCS: forwarded, ended with TX_ER
     await tb.ports[0].send(None, raw=bytes(Ether(dst="02:bb:00:00:00:02") / Raw(bytes(80))) +
                            b"\x00\x00\x00\x00")
-    await ClockCycles(dut.aclk, 400)
+    await ClockCycles(dut.gmii_clk, 400)
     gf, frame = tb.ports[1].take()
     assert frame is None and any(gf.error), "a bad frame left without TX_ER"
     counters = await tb.counters()
@@ -181,7 +181,7 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
                                       dst_mac="01:00:5e:7f:46:46", dst_ip="239.255.70.70"))]
     for _, frame in bad:
         await tb.send(frame)
-        await ClockCycles(dut.aclk, 200)
+        await ClockCycles(dut.gmii_clk, 200)
     await tb.ports[0].send(None, raw=bytes(bad_ip)[:30])           # truncated (runt)
     # wrong page size: ERROR, nothing written
     res = await tb.exchange(tb.request(MsgType.ISEND_REQ, 1, page + b"\0\0", **unicast))
@@ -193,7 +193,7 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
                           ARP(op=1, psrc="198.18.0.99", pdst=f"198.18.0.{100 + k}"), port)
         await tb.send(Ether(src="02:aa:00:00:00:09", dst=BROADCAST_MAC, type=0x88CC) /
                       Raw(bytes(50)), port)
-    await ClockCycles(dut.aclk, 8000)
+    await ClockCycles(dut.gmii_clk, 8000)
     await tb.drain(0, 10)
     await tb.drain(1, 10)
     after = await tb.counters()
@@ -219,15 +219,15 @@ async def watchdog_restart_and_id_conflict(dut):
     res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
     assert res["state"] == NodeState.OP
     # the watchdog runs from the last SoC or ISEND_REQ, at most 400 cycles before its answer
-    await ClockCycles(dut.aclk, 2500)
+    await ClockCycles(dut.gmii_clk, 2500)
     assert tb.state == NodeState.OP, "the watchdog fired before three periods"
-    await ClockCycles(dut.aclk, 600)
+    await ClockCycles(dut.gmii_clk, 600)
     assert tb.state == NodeState.REINIT
     res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
     assert res["state"] == NodeState.OP
     assert (await tb.counters())["missed_cycles"] == 1
     await tb.send(tb.reinit_all())
-    await ClockCycles(dut.aclk, 200)
+    await ClockCycles(dut.gmii_clk, 200)
     assert tb.state == NodeState.INIT and int(dut.local_ip.value) == 0
     await tb.init(2)
     res = await tb.isend(2, dict(set_point=1, measurement=0, **GAINS))
@@ -236,7 +236,7 @@ async def watchdog_restart_and_id_conflict(dut):
     await tb.send(tb.request(MsgType.ADDR_REQ, NODE_ALL, body_of(
         MsgType.ADDR_REQ, other_mac, bytes([198, 18, 0, 40]), bytes(4), 2),
         dst_mac=BROADCAST_MAC, dst_ip=BROADCAST_IP))
-    await ClockCycles(dut.aclk, 300)
+    await ClockCycles(dut.gmii_clk, 300)
     assert tb.state == NodeState.INIT and int(dut.node_id.value) == NODE_ALL
     assert (await tb.counters())["id_conflict"] == 1
 

@@ -15,7 +15,7 @@ from hdl.finemb import IoDescriptor, PageBuffer
 from hdl.finemb.protocol import (
     FINEMB_PORT, GROUP_IP, GROUP_MAC, HEADER, MsgType, PortType, decode_header, encode_header,
 )
-from hdl.net.queue import FrameQueue, FrameToRxBytes
+from hdl.net.queue import FrameQueue, FrameToRxBeats
 from hdl.params import ParameterError
 
 from .harness import ROOT
@@ -144,8 +144,9 @@ class PageSides:
     pages, the application that claims, reads twice and releases, and, for the input
     direction, the application that writes and commits and the sender that claims."""
 
-    def __init__(self, dut, po, pi, rng, frames):
+    def __init__(self, dut, po, pi, rng, frames, lanes=1):
         self.dut, self.po, self.pi, self.rng, self.frames = dut, po, pi, rng, frames
+        self.lanes = lanes
         self.cycle = 0
         # output direction: commits (cycle, page), the claim the application holds
         self.out_commits = []
@@ -171,14 +172,19 @@ class PageSides:
             # refused exactly when the only page it may go to is the one held: a page was
             # committed after the held one
             expect_refused = self.held is not None and self.newest(self.cycle) > self.held[0]
-            accepted = yield ((dut.out_begin, 1), (dut.out_we, 1), (dut.out_waddr, 0),
-                              (dut.out_wdata, page[0]))
+            L = self.lanes
+
+            def beat(k):
+                part = page[k:k + L]
+                return ((dut.out_we, (1 << len(part)) - 1), (dut.out_waddr, k),
+                        (dut.out_wdata, int.from_bytes(part, "little")))
+            accepted = yield ((dut.out_begin, 1),) + beat(0)
             assert accepted == (not expect_refused), (self.cycle, self.held, accepted)
             self.refused += not accepted
-            for k in range(1, self.po):
+            for k in range(L, self.po, L):
                 while rng.random() < 0.2:
                     yield ()
-                yield ((dut.out_we, 1), (dut.out_waddr, k), (dut.out_wdata, page[k]))
+                yield beat(k)
             if good and accepted:
                 self.out_commits.append((self.cycle, page))
                 yield ((dut.out_commit, 1),)
@@ -247,11 +253,12 @@ class PageSides:
                 assert not done, "no input page held though one was committed long ago"
                 continue
             got = bytearray()
-            for k in range(self.pi):
+            for k in range(0, self.pi, self.lanes):
                 yield ((dut.in_raddr, k),)
-                got.append(self.get(dut.in_rdata))
+                got += self.get(dut.in_rdata).to_bytes(self.lanes, "little")
                 for _ in range(rng.randrange(0, 3)):
                     yield ()
+            got = got[:self.pi]
             assert bytes(got) in done[-1:] + recent, "the held input page is not the newest"
             assert self.get(dut.in_sum) == ones_sum(got)
             yield ((dut.in_release, 1),)
@@ -284,16 +291,18 @@ class PageSides:
                 replies[id(gen)] = accepted
 
 
+@pytest.mark.parametrize("lanes", [1, 2])
 @pytest.mark.parametrize("po, pi, seed", [(10, 8, 1), (1, 3, 2), (37, 64, 3)])
-def test_page_buffer_flipping_under_random_timing(po, pi, seed):
+def test_page_buffer_flipping_under_random_timing(po, pi, seed, lanes):
     """Output pages: frames (a fifth of them bad, never committed) written at random times
     while the application claims, reads twice and releases at random times; a claimed page is
     always the newest committed one (a commit in the claim's cycle included), whole and
     unchanged while held, ``out_new`` says whether a page arrived since the last claim, and a
     frame is refused (overrun) exactly when it would have to go to the held page. Input pages
-    mirrored, with the page's sum."""
-    dut = PageBuffer(po, pi)
-    sides = PageSides(dut, po, pi, random.Random(seed), frames=150)
+    mirrored, with the page's sum. With 2 lanes the communication side writes and reads two
+    bytes at a time (odd page sizes end with one)."""
+    dut = PageBuffer(po, pi, lanes=lanes)
+    sides = PageSides(dut, po, pi, random.Random(seed), frames=150, lanes=lanes)
     simulate(dut, sides.run)
     assert sides.out_claims > 20 and sides.in_claims > 20
     # both cases happened: pages taken, and pages refused while the application held one
@@ -422,14 +431,16 @@ def test_frame_queue_cuts_a_begun_frame_that_no_longer_fits(seed):
     assert rest == [(d, 0) for d, _, _ in frames[1:]]
 
 
-def test_frame_to_rx_bytes_as_a_mac_hands_them_on():
+@pytest.mark.parametrize("lanes", [1, 2])
+def test_frame_to_rx_beats_as_a_mac_hands_them_on(lanes):
     """Frames (random pauses inside and between them, random status) come out as a MAC hands
-    them on: byte ``i`` with index ``i``, the end pulse the cycle after the last byte with the
-    frame's length and its status, then at least ``gap`` idle cycles; and no ``rx`` member
-    follows the input within a cycle (all from flip-flops)."""
+    them on: the beat of bytes ``i`` .. ``i + lanes - 1`` with index ``i``, the end pulse the
+    cycle after the last beat with the frame's length and its status, then at least ``gap``
+    idle cycles; and no ``rx`` member follows the input within a cycle (all from
+    flip-flops)."""
     gap = 16
-    dut = FrameToRxBytes(gap=gap)
-    rng = random.Random(7)
+    dut = FrameToRxBeats(lanes=lanes, gap=gap)
+    rng = random.Random(7 + lanes)
     frames = [(rng.randbytes(rng.randrange(1, 120)), rng.randrange(16)) for _ in range(30)]
     members = ("valid", "data", "index", "end", "ok", "err_fcs", "err_rx_er", "err_size")
     seen = []
@@ -437,19 +448,23 @@ def test_frame_to_rx_bytes_as_a_mac_hands_them_on():
     async def source(ctx):
         s = dut.s_axis
         for data, status in frames:
-            for i, byte in enumerate(data):
+            for i in range(0, len(data), lanes):
+                beat = data[i:i + lanes]
                 while rng.random() < 0.3:
                     ctx.set(s.tvalid, 0)
                     await ctx.tick()
-                last = i == len(data) - 1
+                last = i + lanes >= len(data)
+                value = int.from_bytes(beat, "little")
                 before = [ctx.get(getattr(dut.rx, n)) for n in members]
-                for valid, value, user in ((1, byte ^ 0xFF, 15), (0, byte, 0)):
+                for valid, junk, user in ((1, value ^ 0xFF, 15), (0, value, 0)):
                     ctx.set(s.tvalid, valid)
-                    ctx.set(s.tdata, value)
+                    ctx.set(s.tdata, junk)
                     ctx.set(s.tlast, not last)
                     ctx.set(s.tuser, user)
                     assert [ctx.get(getattr(dut.rx, n)) for n in members] == before
-                ctx.set(s.tdata, byte)
+                ctx.set(s.tdata, value)
+                if lanes > 1:
+                    ctx.set(s.tkeep, (1 << len(beat)) - 1)
                 ctx.set(s.tlast, last)
                 ctx.set(s.tuser, status if last else 0)
                 ctx.set(s.tvalid, 1)
@@ -470,11 +485,13 @@ def test_frame_to_rx_bytes_as_a_mac_hands_them_on():
             cycle += 1
         if last_end is not None:
             assert cycle - last_end - 1 >= gap
-        for i, byte in enumerate(data):
+        for i in range(0, len(data), lanes):
             while not seen[cycle]["valid"]:
                 assert not seen[cycle]["end"]
                 cycle += 1
-            assert (seen[cycle]["data"], seen[cycle]["index"]) == (byte, i)
+            beat = data[i:i + lanes]
+            got = seen[cycle]["data"].to_bytes(lanes, "little")[:len(beat)]
+            assert (got, seen[cycle]["index"]) == (beat, i)
             cycle += 1
         end = seen[cycle]
         assert end["end"] and not end["valid"] and end["index"] == len(data)

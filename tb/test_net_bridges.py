@@ -5,7 +5,8 @@ GmiiRx gives every frame's bytes, length and status as GmiiRx saw them (frames o
 even length, bad FCS, RX_ER, runts, inter-frame gaps down to 4 bytes); with a core clock
 too slow for the line a frame is lost as an RX error, never delivered wrong. TxBeatBridge
 in front of a GmiiTx sends each frame as given, padded and with its FCS (checked with
-``zlib.crc32``), without a TX_ER."""
+``zlib.crc32``), without a TX_ER. FrameStreamBridge pairs a frame queue's bytes into
+two-byte beats on the core clock, every frame whole."""
 
 import random
 import zlib
@@ -15,6 +16,7 @@ from amaranth.hdl import ClockDomain, DomainRenamer, Elaboratable, Module
 from amaranth.lib import wiring
 
 from hdl.net.mac import GmiiRx, GmiiTx, RxBeatBridge, TxBeatBridge
+from hdl.net.queue import FrameStreamBridge
 
 from .streamsim import simulate
 
@@ -191,3 +193,59 @@ def test_tx_bridge_sends_frames_without_underrun():
         assert sent[:8] == b"\x55" * 7 + b"\xd5"
         body = frame.ljust(60, b"\0")
         assert sent[8:] == body + zlib.crc32(body).to_bytes(4, "little")
+
+
+class FrameBridgeHarness(Elaboratable):
+    def __init__(self):
+        self.bridge = FrameStreamBridge()
+
+    def elaborate(self, platform):
+        m = Module()
+        m.domains.gmii = ClockDomain()
+        m.submodules.bridge = self.bridge
+        return m
+
+
+@pytest.mark.parametrize("idle,backpressure", [(0.0, 0.0), (0.3, 0.5)])
+def test_frame_stream_bridge_pairs_bytes_across_clocks(idle, backpressure):
+    """A queue's frames (byte stream with status on the last byte) written on the GMII clock
+    come out on the core clock as two-byte beats: every frame whole, in order, odd lengths
+    ending with ``tkeep`` 0b01, the status on the last beat; nothing lost under random
+    pauses and backpressure."""
+    rng = random.Random(int(10 * idle) + int(100 * backpressure))
+    frames = [(rng.randbytes(rng.randrange(1, 200)), rng.randrange(16)) for _ in range(40)]
+    dut = FrameBridgeHarness()
+    s, o = dut.bridge.s_axis, dut.bridge.m_axis
+    got, current = [], bytearray()
+
+    async def source(ctx):
+        for data, status in frames:
+            for k, byte in enumerate(data):
+                while rng.random() < idle:
+                    ctx.set(s.tvalid, 0)
+                    await ctx.tick("gmii")
+                last = k == len(data) - 1
+                ctx.set(s.tdata, byte)
+                ctx.set(s.tlast, last)
+                ctx.set(s.tuser, status if last else 0)
+                ctx.set(s.tvalid, 1)
+                await ctx.tick("gmii").until(s.tready)
+            ctx.set(s.tvalid, 0)
+        await ctx.tick("gmii").repeat(200)
+
+    async def sink(ctx):
+        nonlocal current
+        while True:
+            ready = rng.random() >= backpressure
+            ctx.set(o.tready, ready)
+            *_, valid, data, keep, last, user = await ctx.tick().sample(
+                o.tvalid, o.tdata, o.tkeep, o.tlast, o.tuser)
+            if valid and ready:
+                assert keep in (0b01, 0b11) and (keep == 0b11 or last)
+                current += data.to_bytes(2, "little")[:bin(keep).count("1")]
+                if last:
+                    got.append((bytes(current), user))
+                    current = bytearray()
+
+    simulate(dut, source, background=[sink], clocks={"sync": CORE_PERIOD, "gmii": GMII_PERIOD})
+    assert got == frames

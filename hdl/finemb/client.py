@@ -21,8 +21,8 @@ from .protocol import (
 
 __all__ = ["FinembClient", "CLIENT_EVENTS", "CLOCK_HZ"]
 
-#: the node's clock: the GMII byte clock
-CLOCK_HZ = 125_000_000
+#: the node's core clock: half the GMII byte clock, two bytes per cycle
+CLOCK_HZ = 62_500_000
 
 #: what the client counts (the node's counters include these)
 CLIENT_EVENTS = ("finemb_rx", "bad_header", "other_node", "bad_page", "overrun", "id_conflict",
@@ -70,21 +70,27 @@ class FinembClient(wiring.Component):
         Serial number reported in ID_RES.
     app_deadline : int
         Cycles an ISEND_RES waits for the application's next input page, 0..4095.
+    lanes : int
+        Bytes per beat of the parser and the frame builder, 1 or 2.
+    clock_hz : int
+        The client's clock, for the SoC's cycle period given in nanoseconds (a clock period
+        of a power of two nanoseconds: 8, 16, ...).
 
     Members
     -------
-    frame : In(ParsedFrameSignature())
+    frame : In(ParsedFrameSignature(lanes))
         The frames the node consumes, from its parser.
     rx_tag : In(1)
         The port the current frame came in on ...
     tx_tag : Out(1)
         ... and the port of the pending response (the request's).
-    tx : Out(TxRequestSignature())
+    tx : Out(TxRequestSignature(lanes))
         Responses, to the frame builder.
     local_ip : Out(32)
         The node's address (0.0.0.0 until assigned).
-    page_* : the :class:`~hdl.finemb.page.PageBuffer` ports (see there; ``page_in_ready``
-        is the buffer's ``app.in_ready``: low while it sums a committed input page)
+    page_* : the :class:`~hdl.finemb.page.PageBuffer` ports (see there: ``lanes`` bytes
+        a write or read; ``page_in_ready`` is the buffer's ``app.in_ready``: low while it
+        sums a committed input page)
     app_commit : In(1)
         The application committed an input page (the buffer's ``app.in_commit``).
     state : Out(NodeState)
@@ -96,25 +102,32 @@ class FinembClient(wiring.Component):
         One pulse per :data:`CLIENT_EVENTS` counter.
     """
 
-    def __init__(self, *, mac, descriptor, serial=0, app_deadline=256):
+    def __init__(self, *, mac, descriptor, serial=0, app_deadline=256, lanes=1,
+                 clock_hz=CLOCK_HZ):
         if not isinstance(descriptor, IoDescriptor):
             raise ParameterError("descriptor", descriptor, "an IoDescriptor")
         self._mac = check_int("mac", mac, 0, (1 << 48) - 1)
         self._desc = descriptor
         self._serial = check_int("serial", serial, 0, (1 << 32) - 1)
         self._deadline = check_int("app_deadline", app_deadline, 0, 4095)
+        self._lanes = L = check_int("lanes", lanes, 1, 2)
+        ns = 1_000_000_000 // check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000)
+        if ns * clock_hz != 1_000_000_000 or ns & (ns - 1):
+            raise ParameterError("clock_hz", clock_hz,
+                                 "a clock whose period is a power of two nanoseconds")
+        self._ns_shift = ns.bit_length() - 1
         po, pi = descriptor.page_out_bytes, descriptor.page_in_bytes
         from amaranth.lib import data
         super().__init__({
-            "frame": In(ParsedFrameSignature()),
+            "frame": In(ParsedFrameSignature(L)),
             "rx_tag": In(1), "tx_tag": Out(1),
-            "tx": Out(TxRequestSignature()),
+            "tx": Out(TxRequestSignature(L)),
             "local_ip": Out(32),
             "page_out_begin": Out(1), "page_out_accept": In(1),
-            "page_out_we": Out(1), "page_out_waddr": Out(range(max(po, 2))),
-            "page_out_wdata": Out(8), "page_out_commit": Out(1),
+            "page_out_we": Out(L), "page_out_waddr": Out(range(max(po, 2))),
+            "page_out_wdata": Out(8 * L), "page_out_commit": Out(1),
             "page_in_claim": Out(1), "page_in_held": In(1), "page_in_sum": In(16),
-            "page_in_raddr": Out(range(max(pi, 2))), "page_in_rdata": In(8),
+            "page_in_raddr": Out(range(max(pi, 2))), "page_in_rdata": In(8 * L),
             "page_in_release": Out(1), "page_in_ready": In(1),
             "app_commit": In(1),
             "state": Out(NodeState), "node_id": Out(16), "soc": Out(1),
@@ -123,6 +136,7 @@ class FinembClient(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
+        L = self._lanes
         f, tx = self.frame, self.tx
         fld = f.fields
         desc = self._desc
@@ -143,13 +157,15 @@ class FinembClient(wiring.Component):
         hdr = Signal(8 * HEADER)
         body = Signal(8 * _BODY)
         off = f.payload_offset
+        lane = [f.payload_data[8 * q:8 * q + 8] for q in range(L)]
         with m.If(f.payload_valid & ours):
             for k in range(HEADER):
-                with m.If(off == k):
-                    m.d.sync += hdr.word_select(k, 8).eq(f.payload_data)
+                with m.If(off == k - k % L):
+                    m.d.sync += hdr.word_select(k, 8).eq(lane[k % L])
             for k in range(_BODY):
-                with m.If(off == HEADER + k):
-                    m.d.sync += body.word_select(k, 8).eq(f.payload_data)
+                at = HEADER + k
+                with m.If(off == at - at % L):
+                    m.d.sync += body.word_select(k, 8).eq(lane[at % L])
         h_magic, h_version, h_type = hdr[0:16], hdr[16:24], hdr[24:32]
         h_node, h_cycle = hdr[32:48], hdr[64:96]
         h_length, h_seq = hdr[96:112], hdr[112:128]
@@ -169,9 +185,12 @@ class FinembClient(wiring.Component):
             m.d.sync += [page_req.eq(1), page_ok.eq(self.page_out_accept)]
             with m.If(~self.page_out_accept):
                 m.d.comb += ev.overrun.eq(1)
-        in_page = (off >= HEADER) & (off < HEADER + po)
-        m.d.comb += [self.page_out_we.eq(f.payload_valid & ours & in_page &
-                                         ((page_req & page_ok) | begin)),
+        # (the page starts at an even payload byte: its bytes keep their lanes)
+        assert HEADER % L == 0
+        writing = f.payload_valid & ours & ((page_req & page_ok) | begin)
+        m.d.comb += [self.page_out_we.eq(Cat(*(writing & f.payload_keep[q] &
+                                               (off + q >= HEADER) & (off + q < HEADER + po)
+                                               for q in range(L)))),
                      self.page_out_waddr.eq(off - HEADER), self.page_out_wdata.eq(f.payload_data)]
 
         # ---- the verdict
@@ -267,7 +286,7 @@ class FinembClient(wiring.Component):
                         m.d.comb += self.soc.eq(1)
                         m.d.comb += restart_watchdog.eq(1)
                         m.d.sync += [since_soc.eq(0),
-                                     period_cycles.eq(soc_period >> 3)]   # 8 ns per cycle
+                                     period_cycles.eq(soc_period >> self._ns_shift)]
                     with m.Case(MsgType.ID_REQ):
                         with m.If(state == NodeState.INIT):
                             reply(MsgType.ID_RES, 18, Cat(
@@ -338,7 +357,9 @@ class FinembClient(wiring.Component):
         rom_depth = 1 << max(len(rom_bytes) - 1, 1).bit_length()
         m.submodules.iodesc = rom = Memory(
             shape=8, depth=rom_depth, init=list(rom_bytes) + [0] * (rom_depth - len(rom_bytes)))
-        rom_rd = rom.read_port()
+        # a descriptor chunk starts anywhere: a read port per lane
+        rom_rds = [rom.read_port() for _ in range(L)]
+        rom_rd = rom_rds[0]
         req = tx.request
         header_out = Cat(Const(MAGIC, 16), Const(VERSION, 8), r_type, r_node,
                          (r_flags | r_state.shift_left(STATE_SHIFT))[:16], r_cycle,
@@ -368,14 +389,20 @@ class FinembClient(wiring.Component):
             ones_complement_add(header_sum, body_sum),
             Mux(is_isend, self.page_in_sum, Mux(is_iodesc, chunk_sum, 0))))
 
+        # the builder reads ``L`` bytes from ``rd`` (a multiple of ``L``): each lane its own
+        # source, as the fixed part may end inside a beat
         rd = tx.rd_addr
-        sel_fixed = Signal()
-        fixed_byte = Signal(8)
-        m.d.sync += [sel_fixed.eq(rd < fixed_len), fixed_byte.eq(fixed_bytes[rd[:6]])]
-        m.d.comb += [rom_rd.addr.eq(io_off + rd - (HEADER + 4)),
-                     self.page_in_raddr.eq(rd - HEADER),
-                     tx.rd_data.eq(Mux(sel_fixed, fixed_byte,
-                                       Mux(is_isend, self.page_in_rdata, rom_rd.data)))]
+        m.d.comb += self.page_in_raddr.eq(rd - HEADER)
+        lanes_out = []
+        for q in range(L):
+            sel_fixed = Signal(name=f"sel_fixed{q}")
+            fixed_byte = Signal(8, name=f"fixed_byte{q}")
+            m.d.sync += [sel_fixed.eq(rd + q < fixed_len), fixed_byte.eq(fixed_bytes[(rd + q)[:6]])]
+            m.d.comb += rom_rds[q].addr.eq(io_off + rd + q - (HEADER + 4))
+            lanes_out.append(Mux(sel_fixed, fixed_byte,
+                                 Mux(is_isend, self.page_in_rdata.word_select(q, 8),
+                                     rom_rds[q].data)))
+        m.d.comb += tx.rd_data.eq(Cat(*lanes_out))
         m.d.comb += [req.kind.eq(FrameKind.UDP), req.eth_dst.eq(r_eth), req.ip_dst.eq(r_ip),
                      req.src_port.eq(FINEMB_PORT), req.dst_port.eq(r_port),
                      req.length.eq(HEADER + r_len), req.payload_sum.eq(payload_sum)]

@@ -1,8 +1,9 @@
 """A line of FinEmbP nodes, port 1 of each wired to port 0 of the next: the fieldbus segment a
 simulation runs and a board carries (docs/finemb.md)."""
 
-from amaranth.hdl import Module
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, ResetSignal
 from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from hdl.net.frames import int_to_mac
@@ -42,9 +43,9 @@ class Wire(wiring.Component):
 class FinembLine(wiring.Component):
     """``nodes`` :class:`~hdl.finemb.FinembPidNode` in a line: node k's port 1 is joined to
     node k+1's port 0 by a link (a :class:`Wire`, GMII transmit to receive both ways, unless
-    ``link`` makes another). Node 0's port 0 is the line's ``port0`` (the master's side), the
-    last node's port 1 the line's ``port1`` (the far end: leave its receive side idle, or
-    continue the line there).
+    ``link`` makes another, which runs on the line's GMII clock). Node 0's port 0 is the
+    line's ``port0`` (the master's side), the last node's port 1 the line's ``port1`` (the far
+    end: leave its receive side idle, or continue the line there).
 
     Parameters
     ----------
@@ -58,6 +59,8 @@ class FinembLine(wiring.Component):
 
     Members
     -------
+    gmii_clk : In(1)
+        Every node's GMII clock (a line's PHYs share one 125 MHz reference).
     port0, port1 : Out(GmiiSignature())
         The line's two ends.
     state : Out(NodeState).array(nodes)
@@ -77,7 +80,7 @@ class FinembLine(wiring.Component):
         self._links = [(link or Wire)(*(() if link is None else (k,)))
                        for k in range(nodes - 1)]
         super().__init__({
-            "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
+            "gmii_clk": In(1), "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
             "state": Out(NodeState).array(nodes), "node_id": Out(16).array(nodes),
             "updates": Out(32).array(nodes), "soc": Out(1).array(nodes),
         })
@@ -92,9 +95,15 @@ class FinembLine(wiring.Component):
             m.submodules[f"node{k}"] = node
             m.d.comb += [self.state[k].eq(node.state), self.node_id[k].eq(node.node_id),
                          self.updates[k].eq(node.updates), self.soc[k].eq(node.soc),
-                         node.counter_index.eq(0)]
+                         node.counter_index.eq(0), node.gmii_clk.eq(self.gmii_clk)]
+        # the links on the GMII clock, in a domain of their own name (each node has its own
+        # local ``gmii`` domain, and a local domain is seen by the submodules)
+        m.domains += (cd := ClockDomain("links", local=True))
+        m.d.comb += cd.clk.eq(self.gmii_clk)
+        m.submodules.links_reset = FFSynchronizer(ResetSignal("sync"), cd.rst,
+                                                  o_domain="links", init=1)
         for k, link in enumerate(self._links):
-            m.submodules[f"link{k}"] = link
+            m.submodules[f"link{k}"] = DomainRenamer("links")(link)
             wiring.connect(m, nodes[k].port1, link.west)
             wiring.connect(m, nodes[k + 1].port0, link.east)
         wiring.connect(m, wiring.flipped(self.port0), nodes[0].port0)

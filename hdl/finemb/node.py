@@ -1,15 +1,16 @@
 """A FinEmbP fieldbus node in gateware: two Ethernet ports in a line, layer-2 forwarding
 between them, and the node's own FinEmbP client, ARP and ICMP answers (docs/finemb.md)."""
 
-from amaranth.hdl import Array, Const, Module, Mux, Signal
+from amaranth.hdl import Array, ClockDomain, Const, DomainRenamer, Module, Mux, ResetSignal, Signal
 from amaranth.lib import wiring
+from amaranth.lib.cdc import FFSynchronizer, PulseSynchronizer
 from amaranth.lib.wiring import In, Out
 
 from hdl.dds.arbiter import TopicArbiter
 from hdl.net.counters import EventCounters
 from hdl.net.frames import DROP_REASONS, ip_to_int, mac_to_int
-from hdl.net.mac import GmiiRx, GmiiSignature, GmiiTx
-from hdl.net.queue import FrameQueue, FrameStreamSignature, FrameToRxBytes
+from hdl.net.mac import GmiiRx, GmiiSignature, GmiiTx, TxBeatBridge
+from hdl.net.queue import FrameQueue, FrameStreamBridge, FrameStreamSignature, FrameToRxBeats
 from hdl.net.responders import ArpResponder, IcmpEchoResponder, ParsedFrameSignature
 from hdl.net.rx import FrameKind, FrameParser
 from hdl.net.tx import FrameBuilder
@@ -27,6 +28,11 @@ NODE_COUNTERS = (("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0"
                   "forward_dropped0", "forward_dropped1", "consume_dropped", "delivered") +
                  DROP_REASONS + CLIENT_EVENTS + ("arp_replies", "icmp_replies",
                                                  "icmp_dropped"))
+#: the counters of events on the GMII clock (forwarding), taken to the core clock
+_GMII_EVENTS = ("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0", "forwarded1",
+                "forward_dropped0", "forward_dropped1", "consume_dropped")
+#: bytes the node's protocol side moves per cycle of its core clock
+LANES = 2
 
 
 class FinembNode(wiring.Component):
@@ -49,6 +55,13 @@ class FinembNode(wiring.Component):
     :class:`~hdl.net.responders.IcmpEchoResponder` (both answer only once the node has an
     address). Every answer leaves by the port its request came in on.
 
+    Clocks: the ports' receivers and transmitters, the forwarding and the queues run on the
+    GMII clock ``gmii_clk`` (125 MHz, both ports: a board clocks the two PHYs from one
+    reference); the parser, the client, the responders, the frame builder, the page buffer
+    and the application run two bytes wide on ``sync`` at half that rate
+    (:class:`~hdl.net.queue.FrameStreamBridge` and :class:`~hdl.net.mac.TxBeatBridge`
+    cross between them), as the network engine's protocol side does.
+
     Parameters
     ----------
     descriptor : IoDescriptor
@@ -65,6 +78,8 @@ class FinembNode(wiring.Component):
 
     Members
     -------
+    gmii_clk : In(1)
+        The ports' 125 MHz clock.
     port0, port1 : Out(GmiiSignature())
         The two Ethernet ports.
     app : Out(PageAppSignature)
@@ -94,7 +109,7 @@ class FinembNode(wiring.Component):
         self._deadline = check_int("app_deadline", app_deadline, 0, 4095)
         self._queue = check_int("queue_bytes", queue_bytes, 2048, 65536)
         super().__init__({
-            "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
+            "gmii_clk": In(1), "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
             "app": Out(PageAppSignature(descriptor.page_out_bytes, descriptor.page_in_bytes)),
             "state": Out(NodeState), "node_id": Out(16), "local_ip": Out(32), "soc": Out(1),
             "counter_index": In(range(len(NODE_COUNTERS))), "counter_value": Out(32),
@@ -113,12 +128,25 @@ class FinembNode(wiring.Component):
                      self.counter_value.eq(counters.rd_data[0])]
         ev = counters.events
 
+        # the GMII side: its own clock, the core's reset taken into it through flip-flops
+        m.domains += (cd := ClockDomain("gmii", local=True))
+        m.d.comb += cd.clk.eq(self.gmii_clk)
+        m.submodules.gmii_reset = FFSynchronizer(ResetSignal("sync"), cd.rst, o_domain="gmii",
+                                                 init=1)
+        gmii = DomainRenamer("gmii")
+        g = m.d.gmii
+        gev = {}                  # events on the GMII clock, each taken to sync below
+        for name in _GMII_EVENTS:
+            gev[name] = Signal(name=f"gmii_{name}")
+            m.submodules[f"{name}_sync"] = sync = PulseSynchronizer("gmii", "sync")
+            m.d.comb += [sync.i.eq(gev[name]), ev[name].eq(sync.o)]
+
         rxs, txs, fwd, consume = [], [], [], []
         for k, port in enumerate(ports):
-            m.submodules[f"rx{k}"] = rx = GmiiRx()
-            m.submodules[f"tx{k}"] = tx = GmiiTx(raw=True)
-            m.submodules[f"forward{k}"] = fq = FrameQueue(self._queue)    # k -> the other
-            m.submodules[f"consume{k}"] = cq = FrameQueue(self._queue)
+            m.submodules[f"rx{k}"] = rx = gmii(GmiiRx())
+            m.submodules[f"tx{k}"] = tx = gmii(GmiiTx(raw=True))
+            m.submodules[f"forward{k}"] = fq = gmii(FrameQueue(self._queue))   # k -> the other
+            m.submodules[f"consume{k}"] = cq = gmii(FrameQueue(self._queue))
             m.d.comb += [rx.gmii_rxd.eq(port.rxd), rx.gmii_rx_dv.eq(port.rx_dv),
                          rx.gmii_rx_er.eq(port.rx_er),
                          port.txd.eq(tx.gmii_txd), port.tx_en.eq(tx.gmii_tx_en),
@@ -132,7 +160,7 @@ class FinembNode(wiring.Component):
             decided, to_forward, to_consume = (Signal(name=f"{n}{k}") for n in
                                                ("decided", "to_forward", "to_consume"))
             r = rx.rx
-            m.d.sync += decided.eq(0)
+            g += decided.eq(0)
             with m.If(r.valid & (r.index < 6)):
                 sel = (5 - r.index[:3]).as_unsigned()[:3]
                 is_own = r.data == mac.word_select(sel, 8)
@@ -142,15 +170,15 @@ class FinembNode(wiring.Component):
                 own_now = is_own & (first | own)
                 bcast_now = is_bcast & (first | bcast)
                 group_now = is_group & (first | group)
-                m.d.sync += [own.eq(own_now), bcast.eq(bcast_now), group.eq(group_now)]
+                g += [own.eq(own_now), bcast.eq(bcast_now), group.eq(group_now)]
                 with m.If(r.index == 5):
-                    m.d.sync += [decided.eq(1), to_forward.eq(~own_now),
-                                 to_consume.eq(own_now | bcast_now | group_now)]
+                    g += [decided.eq(1), to_forward.eq(~own_now),
+                          to_consume.eq(own_now | bcast_now | group_now)]
             decide = decided & r.valid
             m.d.comb += [fq.decide.eq(decide), fq.keep.eq(to_forward),
                          cq.decide.eq(decide), cq.keep.eq(to_consume)]
-            m.d.comb += [ev[f"rx_frames{k}"].eq(r.end), ev[f"rx_bad{k}"].eq(r.end & ~r.ok),
-                         ev[f"forward_dropped{k}"].eq(fq.overflow)]
+            m.d.comb += [gev[f"rx_frames{k}"].eq(r.end), gev[f"rx_bad{k}"].eq(r.end & ~r.ok),
+                         gev[f"forward_dropped{k}"].eq(fq.overflow)]
             rxs.append(rx)
             txs.append(tx)
             fwd.append(fq)
@@ -159,17 +187,20 @@ class FinembNode(wiring.Component):
         for k in range(2):
             wiring.connect(m, fwd[k].m_axis, txs[1 - k].r_axis)
             r = txs[1 - k].r_axis
-            m.d.comb += ev[f"forwarded{k}"].eq(r.tvalid & r.tready & r.tlast)
-        m.d.comb += ev.consume_dropped.eq(consume[0].overflow | consume[1].overflow)
+            m.d.comb += gev[f"forwarded{k}"].eq(r.tvalid & r.tready & r.tlast)
+        m.d.comb += gev["consume_dropped"].eq(consume[0].overflow | consume[1].overflow)
 
-        # ---- consumed frames: one at a time through the parser
-        m.submodules.consume_arbiter = arb = TopicArbiter(FrameStreamSignature(), 2)
+        # ---- consumed frames: to the core clock, then one at a time through the parser
+        m.submodules.consume_arbiter = arb = TopicArbiter(FrameStreamSignature(LANES), 2)
         for k in range(2):
-            wiring.connect(m, consume[k].m_axis, arb.s_axis[k])
-        m.submodules.to_parser = to_parser = FrameToRxBytes(gap=16)
+            m.submodules[f"consume{k}_bridge"] = bridge = FrameStreamBridge(gmii_domain="gmii")
+            wiring.connect(m, consume[k].m_axis, bridge.s_axis)
+            wiring.connect(m, bridge.m_axis, arb.s_axis[k])
+        m.submodules.to_parser = to_parser = FrameToRxBeats(lanes=LANES, gap=16)
         wiring.connect(m, arb.m_axis, to_parser.s_axis)
         m.submodules.parser = parser = FrameParser(
-            groups=[(mac_to_int(GROUP_MAC), ip_to_int(GROUP_IP))], limited_broadcast=True)
+            lanes=LANES, groups=[(mac_to_int(GROUP_MAC), ip_to_int(GROUP_IP))],
+            limited_broadcast=True)
         wiring.connect(m, to_parser.rx, parser.rx)
         rx_port = Signal()        # the port of the frame being parsed
         with m.If(to_parser.rx.valid & (to_parser.rx.index == 0)):
@@ -177,9 +208,10 @@ class FinembNode(wiring.Component):
 
         m.submodules.client = client = FinembClient(
             mac=self._mac, descriptor=self._desc, serial=self._serial,
-            app_deadline=self._deadline)
-        m.submodules.arp = arp = ArpResponder(tag_width=1)
-        m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048, tag_width=1)
+            app_deadline=self._deadline, lanes=LANES)
+        m.submodules.arp = arp = ArpResponder(tag_width=1, lanes=LANES)
+        m.submodules.icmp = icmp = IcmpEchoResponder(buffer_bytes=2048, tag_width=1,
+                                                     lanes=LANES)
         local_ip = client.local_ip
         m.d.comb += [parser.local_mac.eq(mac), parser.local_ip.eq(local_ip),
                      self.local_ip.eq(local_ip), self.state.eq(client.state),
@@ -196,7 +228,7 @@ class FinembNode(wiring.Component):
 
         # ---- the page buffer
         m.submodules.pages = pages = PageBuffer(self._desc.page_out_bytes,
-                                                self._desc.page_in_bytes)
+                                                self._desc.page_in_bytes, lanes=LANES)
         m.d.comb += [pages.out_begin.eq(client.page_out_begin),
                      client.page_out_accept.eq(pages.out_accept),
                      pages.out_we.eq(client.page_out_we), pages.out_waddr.eq(client.page_out_waddr),
@@ -212,7 +244,7 @@ class FinembNode(wiring.Component):
         wiring.connect(m, wiring.flipped(self.app), pages.app)
 
         # ---- answers: one builder, each frame out of its request's port
-        m.submodules.builder = builder = FrameBuilder(3, ttl=IP_TTL_FINEMB)
+        m.submodules.builder = builder = FrameBuilder(3, lanes=LANES, ttl=IP_TTL_FINEMB)
         wiring.connect(m, arp.tx, builder.req_0)
         wiring.connect(m, icmp.tx, builder.req_1)
         wiring.connect(m, client.tx, builder.req_2)
@@ -221,11 +253,16 @@ class FinembNode(wiring.Component):
         out_port = Signal()
         m.d.comb += out_port.eq(tags[builder.grant])
         b = builder.m_axis
+        bridges = []
         for k in range(2):
-            s = txs[k].s_axis
-            m.d.comb += [s.tdata.eq(b.tdata), s.tlast.eq(b.tlast),
+            m.submodules[f"tx{k}_bridge"] = bridge = TxBeatBridge(gmii_domain="gmii")
+            wiring.connect(m, bridge.gmii, txs[k].s_axis)
+            s = bridge.s_axis
+            m.d.comb += [s.tdata.eq(b.tdata), s.tkeep.eq(b.tkeep), s.tlast.eq(b.tlast),
                          s.tvalid.eq(b.tvalid & (out_port == k))]
-        m.d.comb += b.tready.eq(Mux(out_port, txs[1].s_axis.tready, txs[0].s_axis.tready))
+            bridges.append(bridge)
+        m.d.comb += b.tready.eq(Mux(out_port, bridges[1].s_axis.tready,
+                                    bridges[0].s_axis.tready))
 
         # ---- counters
         # the node serves ARP, ICMP echo and FinEmbP's UDP port: any other UDP port or TCP

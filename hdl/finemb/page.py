@@ -1,7 +1,7 @@
 """The page buffer between a FinEmbP node's communication side and its application, with
 page flipping (docs/finemb.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -88,6 +88,10 @@ class PageBuffer(wiring.Component):
     ----------
     page_out_bytes, page_in_bytes : int
         Page sizes, 1..1024 bytes.
+    lanes : int
+        Bytes a communication-side write or read moves (the parser's and the builder's
+        beat), 1 or 2; the application's side moves one. With 2 lanes each page is two
+        byte banks.
 
     Members
     -------
@@ -96,8 +100,10 @@ class PageBuffer(wiring.Component):
     out_accept : Out(1)
         ... and may be written (valid in the cycle of ``out_begin``; when low the frame is
         dropped and ``overrun`` is set).
-    out_we, out_waddr, out_wdata : In
-        Bytes of the arriving page (the first may come with ``out_begin``).
+    out_we, out_waddr, out_wdata : In(lanes), In, In(8 * lanes)
+        Bytes ``out_waddr`` .. ``out_waddr + lanes - 1`` of the arriving page (``out_waddr`` a
+        multiple of ``lanes``, bit ``k`` of ``out_we`` for byte ``k``; the first may come with
+        ``out_begin``).
     out_commit : In(1)
         Pulse: the arriving page is complete and its frame good.
     in_claim : In(1)
@@ -107,23 +113,25 @@ class PageBuffer(wiring.Component):
     in_sum : Out(16)
         ... its bytes' one's complement sum (big-endian 16-bit words from byte 0).
     in_raddr : In(range(page_in_bytes))
-    in_rdata : Out(8)
-        Byte ``in_raddr`` of the held input page, one cycle later.
+    in_rdata : Out(8 * lanes)
+        Bytes ``in_raddr`` .. ``in_raddr + lanes - 1`` of the held input page (``in_raddr`` a
+        multiple of ``lanes``), one cycle later.
     in_release : In(1)
         Pulse: the held input page has been sent.
     app : Out(PageAppSignature(page_out_bytes, page_in_bytes))
         The application's side.
     """
 
-    def __init__(self, page_out_bytes, page_in_bytes):
+    def __init__(self, page_out_bytes, page_in_bytes, *, lanes=1):
         self._out = check_int("page_out_bytes", page_out_bytes, 1, MAX_PAGE_BYTES)
         self._in = check_int("page_in_bytes", page_in_bytes, 1, MAX_PAGE_BYTES)
+        self._lanes = L = check_int("lanes", lanes, 1, 2)
         super().__init__({
             "out_begin": In(1), "out_accept": Out(1),
-            "out_we": In(1), "out_waddr": In(range(max(page_out_bytes, 2))), "out_wdata": In(8),
-            "out_commit": In(1),
+            "out_we": In(L), "out_waddr": In(range(max(page_out_bytes, 2))),
+            "out_wdata": In(8 * L), "out_commit": In(1),
             "in_claim": In(1), "in_held": Out(1), "in_sum": Out(16),
-            "in_raddr": In(range(max(page_in_bytes, 2))), "in_rdata": Out(8),
+            "in_raddr": In(range(max(page_in_bytes, 2))), "in_rdata": Out(8 * L),
             "in_release": In(1),
             "app": Out(PageAppSignature(page_out_bytes, page_in_bytes)),
         })
@@ -135,12 +143,25 @@ class PageBuffer(wiring.Component):
         m = Module()
         app = self.app
         po, pi = self._out, self._in
+        L = self._lanes
+        q = L.bit_length() - 1            # address bits of the byte within a beat
         sh_o, sh_i = max(po - 1, 1).bit_length(), max(pi - 1, 1).bit_length()
 
+        def banks(name, sh):
+            """A page pair as ``L`` byte banks: byte ``a`` of page ``p`` in bank ``a % L`` at
+            ``(p, a // L)``."""
+            out = []
+            for b in range(L):
+                m.submodules[f"{name}{b}"] = mem = Memory(shape=8, depth=(2 << sh) // L,
+                                                          init=[])
+                out.append(mem)
+            return out
+
+        def bank_address(addr, page, sh):
+            return Cat(addr[q:sh], page)
+
         # ---- output pages: the comm side writes, the application reads
-        m.submodules.out_mem = out_mem = Memory(shape=8, depth=2 << sh_o, init=[])
-        ow = out_mem.write_port()
-        orp = out_mem.read_port()
+        out_mems = banks("out_mem", sh_o)
         front = Signal()          # the newest complete page ...
         front_valid = Signal()    # ... once one has arrived
         busy = Signal()           # the page the application holds ...
@@ -156,11 +177,20 @@ class PageBuffer(wiring.Component):
             m.d.sync += [target.eq(next_target), writing.eq(~blocked)]
             with m.If(blocked):
                 m.d.sync += overrun.eq(1)
-        # the first byte may come with out_begin
-        m.d.comb += [ow.en.eq(self.out_we & Mux(self.out_begin, ~blocked, writing)),
-                     ow.addr.eq(Cat(self.out_waddr[:sh_o],
-                                    Mux(self.out_begin, next_target, target))),
-                     ow.data.eq(self.out_wdata)]
+        # the first bytes may come with out_begin
+        may_write = Mux(self.out_begin, ~blocked, writing)
+        app_lane = Signal(range(L)) if L > 1 else Const(0)
+        if L > 1:
+            m.d.sync += app_lane.eq(app.out_raddr[:q])
+        reads = []
+        for b, mem in enumerate(out_mems):
+            ow, orp = mem.write_port(), mem.read_port()
+            m.d.comb += [ow.en.eq(self.out_we[b] & may_write),
+                         ow.addr.eq(bank_address(self.out_waddr, Mux(self.out_begin, next_target,
+                                                                     target), sh_o)),
+                         ow.data.eq(self.out_wdata.word_select(b, 8)),
+                         orp.addr.eq(bank_address(app.out_raddr, busy, sh_o))]
+            reads.append(orp.data)
         with m.If(self.out_commit & writing):
             m.d.sync += [front.eq(target), front_valid.eq(1), writing.eq(0), new.eq(1)]
         with m.If(app.out_claim):
@@ -174,14 +204,10 @@ class PageBuffer(wiring.Component):
             m.d.sync += overrun.eq(0)
         m.d.comb += [app.out_claimed.eq(busy_valid), app.overrun.eq(overrun),
                      app.out_pending.eq(new),
-                     orp.addr.eq(Cat(app.out_raddr[:sh_o], busy)),
-                     app.out_rdata.eq(Mux(busy_valid, orp.data, 0))]
+                     app.out_rdata.eq(Mux(busy_valid, Array(reads)[app_lane], 0))]
 
         # ---- input pages: the application writes, the comm side reads (and a summing pass)
-        m.submodules.in_mem = in_mem = Memory(shape=8, depth=2 << sh_i, init=[])
-        iw = in_mem.write_port()
-        irp = in_mem.read_port()
-        isp = in_mem.read_port()
+        in_mems = banks("in_mem", sh_i)
         in_front = Signal()
         in_front_valid = Signal()
         sums = [Signal(16, name=f"in_sum{k}") for k in range(2)]
@@ -192,18 +218,28 @@ class PageBuffer(wiring.Component):
         sum_idx = Signal(range(pi + 2))
         acc = Signal(16)
         m.d.comb += app.in_ready.eq(~summing & ~(held_valid & (held == back)))
-        m.d.comb += [iw.en.eq(app.in_we & app.in_ready),
-                     iw.addr.eq(Cat(app.in_waddr[:sh_i], back)), iw.data.eq(app.in_wdata)]
-        with m.If(app.in_commit & app.in_ready):
-            m.d.sync += [summing.eq(1), sum_idx.eq(0), acc.eq(0)]
         # the summing pass: one byte per cycle, read one cycle ahead
-        m.d.comb += isp.addr.eq(Cat(sum_idx[:sh_i], back))
         sum_byte = Signal(range(pi + 2))
         m.d.sync += sum_byte.eq(sum_idx)
+        sum_data, comm_data = [], []
+        for b, mem in enumerate(in_mems):
+            iw, irp, isp = mem.write_port(), mem.read_port(), mem.read_port()
+            lane_hit = (app.in_waddr[:q] == b) if L > 1 else 1
+            m.d.comb += [iw.en.eq(app.in_we & app.in_ready & lane_hit),
+                         iw.addr.eq(bank_address(app.in_waddr, back, sh_i)),
+                         iw.data.eq(app.in_wdata),
+                         isp.addr.eq(bank_address(sum_idx, back, sh_i)),
+                         irp.addr.eq(bank_address(self.in_raddr, held, sh_i))]
+            sum_data.append(isp.data)
+            comm_data.append(irp.data)
+        sum_lane = sum_byte[:q] if L > 1 else Const(0)
+        sum_value = Array(sum_data)[sum_lane]
+        with m.If(app.in_commit & app.in_ready):
+            m.d.sync += [summing.eq(1), sum_idx.eq(0), acc.eq(0)]
         with m.If(summing):
             m.d.sync += sum_idx.eq(sum_idx + 1)
             with m.If((sum_byte < pi) & (sum_idx != 0)):
-                word = Mux(sum_byte[0], Cat(isp.data, Const(0, 8)), Cat(Const(0, 8), isp.data))
+                word = Mux(sum_byte[0], Cat(sum_value, Const(0, 8)), Cat(Const(0, 8), sum_value))
                 m.d.sync += acc.eq(ones_complement_add(acc, word))
             with m.If(sum_byte == pi):
                 m.d.sync += [summing.eq(0), in_front.eq(back), in_front_valid.eq(1)]
@@ -216,6 +252,5 @@ class PageBuffer(wiring.Component):
             m.d.sync += held_valid.eq(0)
         m.d.comb += [self.in_held.eq(held_valid),
                      self.in_sum.eq(Mux(held_valid, Mux(held, sums[1], sums[0]), 0)),
-                     irp.addr.eq(Cat(self.in_raddr[:sh_i], held)),
-                     self.in_rdata.eq(Mux(held_valid, irp.data, 0))]
+                     self.in_rdata.eq(Mux(held_valid, Cat(*comm_data), 0))]
         return m

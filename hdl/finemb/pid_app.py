@@ -153,7 +153,7 @@ class FinembPidNode(wiring.Component):
 
     Members
     -------
-    port0, port1, state, node_id, local_ip, soc, counter_index, counter_value :
+    gmii_clk, port0, port1, state, node_id, local_ip, soc, counter_index, counter_value :
         As :class:`~hdl.finemb.FinembNode`.
     updates : Out(32)
         PID updates so far.
@@ -180,7 +180,7 @@ class FinembPidNode(wiring.Component):
             ours, theirs = getattr(self, name), getattr(node, name)
             if name in ("port0", "port1"):
                 wiring.connect(m, wiring.flipped(ours), theirs)
-            elif name == "counter_index":
+            elif name in ("counter_index", "gmii_clk"):
                 m.d.comb += theirs.eq(ours)
             else:
                 m.d.comb += ours.eq(theirs)

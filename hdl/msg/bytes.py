@@ -105,10 +105,12 @@ class BytePacker(wiring.Component):
         first = Signal(init=1)
         out, chunk = self.m_axis, self.chunk
 
-        def beat_ready(count, final, first):
+        def beat_ready(count, final, first, *, beyond_beat=True):
             # A full beat waits for one more byte (or the end of the message): the message's
-            # last chunk may be empty, and tlast must still land on its last byte.
-            return (count > B) | (final & ((count != 0) | first))
+            # last chunk may be empty, and tlast must still land on its last byte. A count of
+            # at most B bytes (``beyond_beat`` False) is never more than a beat.
+            more = (count > B) if beyond_beat else Const(0)
+            return more | (final & ((count != 0) | first))
 
         # ``tvalid`` comes from a flip-flop holding ``beat_ready`` of the registers: its next
         # value is built like the other next states below, so the consumer's ready meets
@@ -147,7 +149,8 @@ class BytePacker(wiring.Component):
         valid_sent_in = kept(m, beat_ready(count_sent_in, chunk.last, out.tlast),
                              "valid_sent_in")
         valid_in = kept(m, beat_ready(count_in, chunk.last, first), "valid_in")
-        valid_sent = kept(m, beat_ready(left_sent, final & ~out.tlast, out.tlast), "valid_sent")
+        valid_sent = kept(m, beat_ready(left_sent, final & ~out.tlast, out.tlast,
+                                        beyond_beat=False), "valid_sent")
         with m.If(chunk.valid & chunk.ready):
             m.d.sync += [buf.eq(Mux(sent, buf_sent_in, buf_in)),
                          count.eq(Mux(sent, count_sent_in, count_in)),

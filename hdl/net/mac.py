@@ -102,10 +102,11 @@ class RxBeatSignature(wiring.Signature):
 FrameStatus = data.StructLayout({"bad": 1, "err_fcs": 1, "err_rx_er": 1, "err_size": 1})
 
 
-def FrameStreamSignature():
-    """Whole frames as bytes, destination MAC to FCS, ``tlast`` on the last byte, whose
-    ``tuser`` carries the frame's status (:data:`FrameStatus`)."""
-    return AXIStreamSignature(8, keep=False, user_width=FrameStatus.size)
+def FrameStreamSignature(lanes=1):
+    """Whole frames as beats of ``lanes`` bytes, destination MAC to FCS, ``tlast`` on the
+    last beat (with 2 lanes ``tkeep`` 0b01 when it holds one byte), whose ``tuser`` carries
+    the frame's status (:data:`FrameStatus`)."""
+    return AXIStreamSignature(8 * lanes, keep=lanes > 1, user_width=FrameStatus.size)
 
 
 class GmiiRx(wiring.Component):

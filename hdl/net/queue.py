@@ -1,16 +1,17 @@
 """Queues of received frames: keep or drop a frame on a decision made from its first bytes,
 read it out while it still arrives (cut-through) or later (store-and-forward)."""
 
-from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import wiring
-from amaranth.lib.fifo import SyncFIFO
+from amaranth.lib.fifo import AsyncFIFO, SyncFIFO
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
+from ..stream import keep_count
 from .mac import FrameStatus, FrameStreamSignature, RxBeatSignature
 
-__all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBytes"]
+__all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBeats", "FrameStreamBridge"]
 
 class FrameQueue(wiring.Component):
     """Received frames in a block-RAM queue, kept or dropped on a decision.
@@ -151,37 +152,42 @@ class FrameQueue(wiring.Component):
         return m
 
 
-class FrameToRxBytes(wiring.Component):
+class FrameToRxBeats(wiring.Component):
     """A frame stream back into the :class:`~hdl.net.mac.RxBeatSignature` a
-    :class:`~hdl.net.rx.FrameParser` takes: bytes with their index, then the end pulse with
+    :class:`~hdl.net.rx.FrameParser` takes: beats with their index, then the end pulse with
     the status, then ``gap`` idle cycles so the parser's consumers can read its fields.
-    Every ``rx`` member comes from a flip-flop (a byte leaves the cycle after it is taken):
+    Every ``rx`` member comes from a flip-flop (a beat leaves the cycle after it is taken):
     the queue's read and the arbiter's choice end here, not in the parser.
 
     Parameters
     ----------
+    lanes : int
+        Bytes per beat, 1 or 2.
     gap : int
         Idle cycles after each frame's end (at least 1).
 
     Members
     -------
-    s_axis : In(FrameStreamSignature())
+    s_axis : In(FrameStreamSignature(lanes))
         Frames; a gap inside a frame becomes a gap in ``rx.valid``.
-    rx : Out(RxBeatSignature(1))
+    rx : Out(RxBeatSignature(lanes))
     """
 
-    def __init__(self, gap=16):
+    def __init__(self, *, lanes=1, gap=16):
+        self._lanes = check_int("lanes", lanes, 1, 2)
         self._gap = check_int("gap", gap, 1, 255)
-        super().__init__({"s_axis": In(FrameStreamSignature()),
-                          "rx": Out(RxBeatSignature(1))})
+        super().__init__({"s_axis": In(FrameStreamSignature(lanes)),
+                          "rx": Out(RxBeatSignature(lanes))})
 
     def elaborate(self, platform):
         m = Module()
+        L = self._lanes
         s, rx = self.s_axis, self.rx
         index = Signal(range(2048))
         wait = Signal(range(self._gap + 2))
         took = s.tvalid & s.tready
-        # ``index`` counts the bytes taken; ``rx.index`` is the byte's own (at the end pulse,
+        n = keep_count(s.tkeep) if L > 1 else 1
+        # ``index`` counts the bytes taken; ``rx.index`` is the beat's own (at the end pulse,
         # the frame's length, as a MAC reports it)
         m.d.comb += s.tready.eq(wait == 0)
         m.d.sync += [rx.data.eq(s.tdata), rx.valid.eq(took), rx.index.eq(index)]
@@ -192,11 +198,61 @@ class FrameToRxBytes(wiring.Component):
         with m.If(wait == 1):
             m.d.sync += index.eq(0)
         with m.If(took):
-            m.d.sync += index.eq(Mux(index == 2047, index, index + 1))
+            m.d.sync += index.eq(Mux(index > 2047 - L, 2048 - L, index + n))
             with m.If(s.tlast):
                 m.d.sync += [ended.eq(1), wait.eq(self._gap + 1)]
         with m.If(took & s.tlast):
             status = FrameStatus(s.tuser)
             m.d.sync += [rx.ok.eq(~status.bad), rx.err_fcs.eq(status.err_fcs),
                          rx.err_rx_er.eq(status.err_rx_er), rx.err_size.eq(status.err_size)]
+        return m
+
+
+class FrameStreamBridge(wiring.Component):
+    """Frames from the GMII clock to the core clock: a byte stream in, two-byte beats out.
+
+    A :class:`FrameQueue`'s bytes (domain ``gmii_domain``) are paired and cross an
+    asynchronous FIFO; on ``sync`` they leave as a :func:`FrameStreamSignature` of 2 lanes
+    (the last beat of a frame of odd length with ``tkeep`` 0b01), the status on the last.
+    A reader on a core clock of half the GMII clock takes a byte-wide writer's rate.
+
+    Parameters
+    ----------
+    gmii_domain : str
+        The writer's domain.
+
+    Members
+    -------
+    s_axis : In(FrameStreamSignature(1))
+        In ``gmii_domain``.
+    m_axis : Out(FrameStreamSignature(2))
+        In ``sync``.
+    """
+
+    def __init__(self, *, gmii_domain="gmii"):
+        self._domain = gmii_domain
+        super().__init__({"s_axis": In(FrameStreamSignature(1)),
+                          "m_axis": Out(FrameStreamSignature(2))})
+
+    def elaborate(self, platform):
+        m = Module()
+        sig = FrameStreamSignature(2)
+        m.submodules.fifo = fifo = AsyncFIFO(width=sig.payload_width, depth=16,
+                                             w_domain=self._domain, r_domain="sync")
+        s = self.s_axis
+        low = Signal(8)
+        have_low = Signal()
+        beat = sig.flip().create()
+        # a beat is complete with its second byte, or a frame's last byte alone
+        push = s.tvalid & (have_low | s.tlast)
+        m.d.comb += [beat.tdata.eq(Cat(Mux(have_low, low, s.tdata), Mux(have_low, s.tdata, 0))),
+                     beat.tkeep.eq(Cat(Const(1), have_low)), beat.tlast.eq(s.tlast),
+                     beat.tuser.eq(s.tuser),
+                     fifo.w_data.eq(sig.pack(beat)), fifo.w_en.eq(push),
+                     s.tready.eq(~push | fifo.w_rdy)]
+        with m.If(s.tvalid & s.tready):
+            m.d[self._domain] += [low.eq(s.tdata), have_low.eq(~push)]
+        o = self.m_axis
+        m.d.comb += [*sig.unpack(o, fifo.r_data), o.tvalid.eq(fifo.r_rdy),
+                     fifo.r_en.eq(o.tready)]
         return m
