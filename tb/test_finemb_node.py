@@ -85,8 +85,9 @@ async def init_and_cycles_match_the_pid_model(dut):
 async def forwarding_is_byte_exact_and_cut_through(dut):
     """Frames for other MACs go from port 0 to port 1 and back unchanged (FCS included),
     one frame for the node's MAC is not forwarded, broadcast and the FinEmbP group are
-    consumed and forwarded; the first byte leaves at most 20 cycles after the first byte
-    arrived; a frame with a bad FCS is forwarded ending with TX_ER."""
+    consumed and forwarded; the first byte leaves at most 21 cycles after the first byte
+    arrived (the queue's reader follows a kept frame from the cycle after its decision); a
+    frame with a bad FCS is forwarded ending with TX_ER."""
     tb, _ = await started(dut)
     rng = random.Random(cocotb.RANDOM_SEED)
     for src, dst in ((0, 1), (1, 0)):
@@ -107,7 +108,7 @@ async def forwarding_is_byte_exact_and_cut_through(dut):
         await ClockCycles(dut.gmii_clk, 1)
     latency = tb.cycle - start
     dut._log.info("hop latency: %d cycles (%d ns)", latency, latency * 8)
-    assert latency <= 20, latency
+    assert latency <= 21, latency
     await tb.drain(1, 1000)
     # own MAC: consumed, not forwarded (an ARP request for its address)
     await tb.send(Ether(src=MASTER_MAC, dst=tb.node_mac) /

@@ -43,7 +43,7 @@ class FinembNode(wiring.Component):
     only; broadcast or FinEmbP's multicast group, consumed and forwarded to the other port;
     anything else, forwarded only. A frame never goes back out of the port it came in on.
     The decision is made after the destination address: the frame then starts on the other
-    port right away (cut-through, about 17 cycles from its first byte in to its first byte
+    port right away (cut-through, about 19 cycles from its first byte in to its first byte
     out) or, when that port is sending, as soon as it is free (store-and-forward from a
     2 KiB queue; a queue that cannot take a frame drops it and counts it). A frame whose FCS
     turns out bad after it was forwarded is ended with TX_ER, so the next receiver drops it.

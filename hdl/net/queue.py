@@ -19,11 +19,12 @@ class FrameQueue(wiring.Component):
     A frame's bytes are written as they arrive. While it arrives, ``decide`` with ``keep``
     says whether to keep it (the parent looks at the destination address); a dropped frame,
     or one that ends without a decision, is rewound out of the queue, and so is a kept frame
-    that does not fit (``overflow`` pulses). A kept frame can be read from the moment it is
-    kept, one byte behind the writer, so with a reader that keeps up the queue adds a few
-    cycles of latency (cut-through); a reader that waits gets the whole frame later
-    (store-and-forward). ``decide`` and ``keep`` reach the read's enable in the same cycle:
-    from flip-flops they keep the parent's decision logic out of that path. A kept frame
+    that does not fit (``overflow`` pulses). A kept frame can be read from the cycle after
+    it is kept, one byte behind the writer, so with a reader that keeps up the queue adds a
+    few cycles of latency (cut-through); a reader that waits gets the whole frame later
+    (store-and-forward). The read's enable depends on registers only (the decision and the
+    pointers), so neither the parent's decision nor the writer's arithmetic is on the path
+    into the block RAM's read port. A kept frame
     that no longer fits once its reader has begun it cannot be rewound: it ends at the last
     byte that fit, marked bad with a size error (its :data:`~hdl.net.mac.FrameStatus`; a
     transmitter sends it with ``tx_er``, a parser drops it), and ``overflow`` pulses.
@@ -80,14 +81,19 @@ class FrameQueue(wiring.Component):
         start = Signal(aw + 1)       # its first byte
         done_wp = Signal(aw + 1)     # end of the last complete kept frame
         rp = Signal(aw + 1)
+        # the write pointer of a full queue (one byte short of n, for the last-byte mark),
+        # kept beside rp so that fullness is an equality of registers, not a subtraction
+        full_wp = Signal(aw + 1, init=n - 1)
         arriving = Signal()
         kept = Signal()
         decided = Signal()
         full_seen = Signal()
         began = Signal()             # the reader has taken the arriving frame's first byte
         last_byte = Signal(8)
+        newest = Signal(aw + 1)      # the arriving frame's newest byte ...
+        has_bytes = Signal()         # ... once it has one (wp != start)
         m.d.comb += self.level.eq(wp - rp)
-        full = (wp - rp)[:aw + 1] == n - 1
+        full = wp == full_wp
 
         with m.If(rx.valid):
             with m.If(rx.index == 0):
@@ -95,26 +101,29 @@ class FrameQueue(wiring.Component):
                 base = Mux(arriving, start, wp)
                 m.d.sync += [arriving.eq(1), kept.eq(0), decided.eq(0), start.eq(base),
                              full_seen.eq(0), began.eq(0)]
-                with m.If((base - rp)[:aw + 1] == n - 1):
-                    m.d.sync += [full_seen.eq(1), wp.eq(base)]
+                with m.If(base == full_wp):
+                    m.d.sync += [full_seen.eq(1), wp.eq(base), has_bytes.eq(0)]
                 with m.Else():
                     m.d.comb += [wr.en.eq(1), wr.addr.eq(base[:aw]), wr.data.eq(rx.data)]
-                    m.d.sync += [wp.eq(base + 1), last_byte.eq(rx.data)]
+                    m.d.sync += [wp.eq(base + 1), last_byte.eq(rx.data), newest.eq(base),
+                                 has_bytes.eq(1)]
             with m.Elif(arriving & ~full_seen):
                 with m.If(full):
                     m.d.sync += full_seen.eq(1)
                 with m.Else():
                     m.d.comb += [wr.en.eq(1), wr.addr.eq(wp[:aw]), wr.data.eq(rx.data)]
-                    m.d.sync += [wp.eq(wp + 1), last_byte.eq(rx.data)]
+                    m.d.sync += [wp.eq(wp + 1), last_byte.eq(rx.data), newest.eq(wp),
+                                 has_bytes.eq(1)]
         with m.If(self.decide & arriving & ~decided):
             m.d.sync += [decided.eq(1), kept.eq(self.keep)]
-        keep_now = kept | (self.decide & arriving & ~decided & self.keep)
+        # (``decide`` comes with a byte, never with the end pulse: at the end the decision is
+        # in ``kept``)
         # cut short: a size error, the only reason given (as a MAC gives one). A begun
         # frame's status FIFO has room: every frame before it has been read out
         cut_short = full_seen & began
         with m.If(rx.end & arriving):
             m.d.sync += arriving.eq(0)
-            with m.If(keep_now & (~full_seen | began) & status.w_rdy & (wp != start)):
+            with m.If(kept & (~full_seen | began) & status.w_rdy & has_bytes):
                 # mark the last byte and record the frame's status
                 m.d.comb += [wr.en.eq(1), wr.addr.eq((wp - 1)[:aw]),
                              wr.data.eq(Cat(last_byte, 1)),
@@ -128,19 +137,21 @@ class FrameQueue(wiring.Component):
                 m.d.sync += done_wp.eq(wp)
             with m.Else():
                 m.d.sync += wp.eq(start)
-                with m.If(keep_now):
+                with m.If(kept):
                     m.d.comb += self.overflow.eq(1)
 
         # reading: up to the byte before the arriving kept frame's newest, whole frames after
-        reading_kept = arriving & keep_now & (~full_seen | began)
-        visible = Signal(aw + 1)
-        m.d.comb += visible.eq(Mux(reading_kept & (wp != start), wp - 1, done_wp))
+        # from registers only: the reader follows a kept frame from the cycle after its
+        # decision, up to the newest byte written (``newest`` is ``wp - 1`` once a byte is)
+        # (both comparisons side by side, the choice between them after)
+        reading_kept = arriving & kept & (~full_seen | began)
+        readable = Mux(reading_kept & has_bytes, rp != newest, rp != done_wp)
         out_valid = Signal()
         out = self.m_axis
-        fetch = (rp != visible) & (~out_valid | out.tready)
+        fetch = readable & (~out_valid | out.tready)
         m.d.comb += [rd.addr.eq(rp[:aw]), rd.en.eq(fetch)]
         with m.If(fetch):
-            m.d.sync += [rp.eq(rp + 1), out_valid.eq(1)]
+            m.d.sync += [rp.eq(rp + 1), full_wp.eq(full_wp + 1), out_valid.eq(1)]
             with m.If(reading_kept & (rp == start)):
                 m.d.sync += began.eq(1)
         with m.Elif(out.tready):
