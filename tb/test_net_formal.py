@@ -30,7 +30,8 @@ interfaces' docstrings (RxBeatSignature, TxRequestSignature), not from the RTL.
 
 import pytest
 from amaranth.asserts import AnyConst, AnySeq, Initial
-from amaranth.hdl import Assert, Assume, Cat, Elaboratable, Module, Mux, ResetSignal, Signal
+from amaranth.hdl import (Assert, Assume, Cat, Const, Elaboratable, Module, Mux, ResetSignal,
+                          Signal)
 
 from hdl.net.frames import (
     ARP_LENGTH,
@@ -56,6 +57,13 @@ pytestmark = pytest.mark.formal
 #: time grows about 1.25 times per cycle beyond 55
 PARSER_DEPTHS = [pytest.param(56, id="bmc56"), pytest.param(66, id="bmc66",
                                                           marks=pytest.mark.full)]
+#: the same at two bytes per cycle: the same frames in about half the cycles
+PARSER_DEPTHS_2 = [pytest.param(32, id="bmc32"), pytest.param(38, id="bmc38",
+                                                            marks=pytest.mark.full)]
+#: the same at two bytes per cycle: a grant, the pre-sums, an ICMP header and its first
+#: payload beats at 24 (about 25 s), 16 payload bytes at 32
+BUILDER_DEPTHS_2 = [pytest.param(24, id="bmc24"), pytest.param(32, id="bmc32",
+                                                             marks=pytest.mark.full)]
 #: the RBCP server: the header, its checks and about six bus accesses at 30, ten at 40 (7 s / 65 s)
 RBCP_DEPTHS = [pytest.param(30, id="bmc30"), pytest.param(40, id="bmc40",
                                                         marks=pytest.mark.full)]
@@ -66,16 +74,19 @@ BUILDER_DEPTHS = [pytest.param(38, id="bmc38"), pytest.param(44, id="bmc44",
 
 
 class GmiiRxEnvironment(Elaboratable):
-    """Drives a ``RxBeatSignature`` port as :class:`GmiiRx` may: a frame is a run of bytes on
-    consecutive cycles (``index`` counting from 0) closed by one ``end`` pulse with any status;
-    at least 4 idle cycles separate ``end`` from the next frame (preamble and inter-frame
-    gap). Byte values and the status flags are free.
+    """Drives a ``RxBeatSignature`` port as :class:`GmiiRx` (one lane) or an
+    :class:`RxBeatBridge` (two) may: a frame is a run of beats on consecutive cycles
+    (``index`` counting from 0 by the lanes) closed by one ``end`` pulse with any status; at
+    least 4 idle cycles separate ``end`` from the next frame (preamble and inter-frame gap).
+    Byte values and the status flags are free; with two lanes the frame's length at ``end``
+    is its beats' bytes or one less (a last beat with one byte).
 
-    ``count`` is the index the next byte will have (at ``end``: the frame's length with FCS).
+    ``count`` is the index the next beat will have.
     """
 
     def __init__(self, rx):
         self.rx = rx
+        self.lanes = len(rx.data) // 8
         self.count = Signal(11)
         self.in_frame = Signal()
 
@@ -84,8 +95,12 @@ class GmiiRxEnvironment(Elaboratable):
         rx = self.rx
         valid, end = AnySeq(1), AnySeq(1)
         quiet = Signal(range(5), init=4)
-        m.d.comb += [rx.valid.eq(valid), rx.end.eq(end), rx.index.eq(self.count),
-                     rx.data.eq(AnySeq(8)), rx.ok.eq(AnySeq(1)), rx.err_fcs.eq(AnySeq(1)),
+        L = self.lanes
+        odd = AnySeq(1) if L == 2 else Const(0)
+        m.d.comb += [rx.valid.eq(valid), rx.end.eq(end),
+                     rx.index.eq(Mux(end & odd & (self.count != 0), self.count - 1,
+                                     self.count)),
+                     rx.data.eq(AnySeq(8 * L)), rx.ok.eq(AnySeq(1)), rx.err_fcs.eq(AnySeq(1)),
                      rx.err_rx_er.eq(AnySeq(1)), rx.err_size.eq(AnySeq(1))]
         m.d.comb += Assume(~(valid & end))
         with m.If(self.in_frame):
@@ -95,7 +110,8 @@ class GmiiRxEnvironment(Elaboratable):
             with m.If(quiet != 4):
                 m.d.comb += Assume(~valid)
         with m.If(valid):
-            m.d.sync += [self.count.eq(Mux(self.count == 2047, 2047, self.count + 1)),
+            m.d.sync += [self.count.eq(Mux(self.count == 2048 - L, 2048 - L,
+                                           self.count + L)),
                          self.in_frame.eq(1)]
         with m.If(end):
             m.d.sync += [self.count.eq(0), self.in_frame.eq(0), quiet.eq(0)]
@@ -105,31 +121,39 @@ class GmiiRxEnvironment(Elaboratable):
 
 
 class FrameParserPayloadProperty(Elaboratable):
-    """No payload byte outside the IPv4 datagram; payload offsets 0, 1, 2, ...; an accepted
-    frame delivered ``payload_len`` bytes, all before its FCS."""
+    """No payload byte outside the IPv4 datagram; payload offsets 0, 1, 2, ... without a
+    gap, a beat's payload bytes from lane 0; an accepted frame delivered ``payload_len``
+    bytes, all before its FCS."""
+
+    def __init__(self, lanes=1):
+        self.lanes = lanes
 
     def elaborate(self, platform):
         m = Module()
-        m.submodules.dut = dut = FrameParser()
+        m.submodules.dut = dut = FrameParser(lanes=self.lanes)
         m.submodules.env = env = GmiiRxEnvironment(dut.rx)
         f = dut.fields
         m.d.comb += Assume(ResetSignal() == Initial())
         m.d.comb += [dut.local_mac.eq(AnyConst(48)), dut.local_ip.eq(AnyConst(32))]
 
+        keep = dut.payload_keep
+        count = Signal(range(self.lanes + 1))   # payload bytes in this beat
+        m.d.comb += count.eq(sum(keep[k] for k in range(self.lanes)))
         delivered = Signal(12)          # payload bytes of the current frame so far
-        last_index = Signal(11)         # the frame index of the last of them
+        last_byte = Signal(12)          # the frame index of the last of them
         with m.If(dut.payload_valid):
-            m.d.sync += [delivered.eq(delivered + 1), last_index.eq(env.count)]
+            m.d.sync += [delivered.eq(delivered + count),
+                         last_byte.eq(env.count + count - 1)]
         frame_delivered = Signal(12)
         before_fcs = Signal()
         with m.If(dut.rx.end):
             m.d.sync += [delivered.eq(0), frame_delivered.eq(delivered),
-                         before_fcs.eq((delivered == 0) | (last_index < env.count - 4))]
+                         before_fcs.eq((delivered == 0) | (last_byte + 4 < dut.rx.index))]
 
         with m.If(~Initial() & ~ResetSignal()):
             with m.If(dut.payload_valid):
-                m.d.comb += [Assert(dut.rx.valid),
-                             Assert(env.count < ETH_HEADER + f.ip_len),
+                m.d.comb += [Assert(dut.rx.valid), Assert(keep[0]),
+                             Assert(env.count + count - 1 < ETH_HEADER + f.ip_len),
                              Assert(dut.payload_offset == delivered),
                              Assert(dut.kind != FrameKind.ARP)]
             with m.If(dut.done & dut.accept & (dut.kind != FrameKind.ARP)):
@@ -162,9 +186,13 @@ class FrameBuilderProperty(Elaboratable):
     """Frame length, payload addressing, one ``ready`` per request and one ``done`` per frame,
     and a stable output while it waits, for two requesters."""
 
+    def __init__(self, lanes=1):
+        self.lanes = lanes
+
     def elaborate(self, platform):
         m = Module()
-        m.submodules.dut = dut = FrameBuilder(2)
+        L = self.lanes
+        m.submodules.dut = dut = FrameBuilder(2, lanes=L)
         reqs = [dut.req_0, dut.req_1]
         o = dut.m_axis
         m.d.comb += Assume(ResetSignal() == Initial())
@@ -172,7 +200,8 @@ class FrameBuilderProperty(Elaboratable):
                      o.tready.eq(AnySeq(1))]
 
         # Requesters: any request, held unchanged from valid until ready; the buffer returns
-        # a byte one cycle after its address, a function of the address alone.
+        # a byte one cycle after its address, a function of the address alone (each lane's
+        # of its own address).
         for q in reqs:
             m.d.comb += [q.valid.eq(AnySeq(1)), q.request.eq(AnySeq(len(q.request.as_value())))]
             held_until_taken(m, q.valid, q.ready, q.request.as_value(), Assume)
@@ -180,7 +209,7 @@ class FrameBuilderProperty(Elaboratable):
             m.d.comb += Assume(q.request.kind.as_value() <= FrameKind.TCP.value)
             rd_addr = Signal(16)
             m.d.sync += rd_addr.eq(q.rd_addr)
-            m.d.comb += q.rd_data.eq(rd_addr[:8] ^ rd_addr[8:])
+            m.d.comb += q.rd_data.eq(Cat(*(_buffer_byte(rd_addr + k) for k in range(L))))
 
         # the frame being sent, from the request the builder took
         busy = Signal()
@@ -207,23 +236,40 @@ class FrameBuilderProperty(Elaboratable):
             with m.If(o.tvalid):
                 m.d.comb += Assert(busy)
             with m.If(beat):
-                m.d.sync += sent.eq(sent + 1)
-                m.d.comb += Assert(o.tlast == (sent + 1 == header + length))
-                with m.If(sent >= header):
-                    address = (request.payload_addr + (sent - header))[:16]
-                    m.d.comb += Assert(o.tdata == (address[:8] ^ address[8:]))
+                m.d.sync += sent.eq(sent + L)
+                m.d.comb += Assert(o.tlast == (sent + L >= header + length))
+                if L == 2:
+                    # a frame of odd length ends with one byte; header lengths are even
+                    m.d.comb += Assert(o.tkeep == Mux(sent + 1 == header + length, 0b01, 0b11))
+                for k in range(L):
+                    with m.If((sent + k >= header) & (sent + k < header + length)):
+                        address = (request.payload_addr + (sent + k - header))[:16]
+                        m.d.comb += Assert(o.tdata.word_select(k, 8) == _buffer_byte(address))
                 with m.If(o.tlast):
                     m.d.comb += Assert(reqs[0].done | reqs[1].done)
                     m.d.sync += busy.eq(0)
         # AXI4-Stream: an offered byte stays until taken
-        held_until_taken(m, o.tvalid, o.tready, Cat(o.tdata, o.tlast), Assert,
+        held_until_taken(m, o.tvalid, o.tready,
+                         Cat(o.tdata, o.tlast, o.tkeep if L == 2 else Const(0, 0)), Assert,
                          when=~ResetSignal())
         return m
+
+
+def _buffer_byte(address):
+    """The byte the formal checks' buffers hold at a 16-bit ``address``."""
+    address = address[:16]
+    return address[:8] ^ address[8:]
 
 
 @pytest.mark.parametrize("depth", PARSER_DEPTHS)
 def test_frame_parser_payload_inside_frame(depth):
     run_sby(f"frame_parser_payload_{depth}", FrameParserPayloadProperty(), depth,
+            engine="abc bmc3")
+
+
+@pytest.mark.parametrize("depth", PARSER_DEPTHS_2)
+def test_frame_parser_two_lanes_payload_inside_frame(depth):
+    run_sby(f"frame_parser_payload_2l_{depth}", FrameParserPayloadProperty(lanes=2), depth,
             engine="abc bmc3")
 
 
@@ -311,6 +357,12 @@ def test_rbcp_server_accesses(depth):
 @pytest.mark.parametrize("depth", BUILDER_DEPTHS)
 def test_frame_builder_frames(depth):
     run_sby(f"frame_builder_{depth}", FrameBuilderProperty(), depth, engine="abc bmc3")
+
+
+@pytest.mark.parametrize("depth", BUILDER_DEPTHS_2)
+def test_frame_builder_two_lanes_frames(depth):
+    run_sby(f"frame_builder_2l_{depth}", FrameBuilderProperty(lanes=2), depth,
+            engine="abc bmc3")
 
 
 class TcpRequestSchedulerProperty(Elaboratable):
