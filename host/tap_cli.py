@@ -236,7 +236,8 @@ def add_export_finemb(cores):
         "finemb", help="a FinEmbP node for an IO description",
         description="Export a FinEmbP node (docs/finemb.md) for the IO description file: "
                     "hdl/finemb_node.v, the manifest finemb_node.json (ports, page layout, "
-                    "IO descriptor bytes) and ip/package_finemb_node.tcl (Vivado IP). With "
+                    "IO descriptor bytes, clocks), constraints/finemb_node_clocks.xdc (its two "
+                    "clocks, asynchronous) and ip/package_finemb_node.tcl (Vivado IP). With "
                     "--app page the application's side of the page buffer is a port of the "
                     "core; with --app pid the PID benchmark application is inside.")
     p.add_argument("--io", type=Path, required=True, help="the IO description (TOML)")
@@ -253,9 +254,9 @@ def add_export_finemb(cores):
 def _run_export_finemb(args):
     from gen.export.interfaces import bus_interfaces
     from gen.export.verilog import export_verilog, write_if_changed, write_manifest
-    from gen.export.vivado import package_tcl
+    from gen.export.vivado import clock_constraints, package_tcl
     from gen.finemb import load_io_description
-    from hdl.finemb import FinembNode, FinembPidNode
+    from hdl.finemb import NODE_CLOCKS_HZ, FinembNode, FinembPidNode
 
     start = time.monotonic()
     descriptor = load_io_description(args.io)
@@ -268,6 +269,8 @@ def _run_export_finemb(args):
     out = args.output
     try:
         write_if_changed(out / "hdl" / f"{name}.v", text)
+        write_if_changed(out / "constraints" / f"{name}_clocks.xdc",
+                         clock_constraints(NODE_CLOCKS_HZ))
         (out / "ip" / "busdefs").mkdir(parents=True, exist_ok=True)
         write_if_changed(out / "ip" / f"package_{name}.tcl",
                          package_tcl(name, args.part, bus_interfaces(node),
@@ -279,12 +282,14 @@ def _run_export_finemb(args):
             "io_description": str(args.io), "application": args.app, "mac": args.mac,
             "serial": args.serial, "page_out_bytes": descriptor.page_out_bytes,
             "page_in_bytes": descriptor.page_in_bytes, "io_ports": ports,
-            "io_descriptor_hex": descriptor.encode().hex()})
+            "io_descriptor_hex": descriptor.encode().hex(),
+            "clocks_mhz": {port: hz / 1e6 for port, hz in NODE_CLOCKS_HZ.items()}})
     except OSError as exc:
         print(f"{PROG} export finemb: error: cannot write {out}: {exc.strerror}")
         return 1
     print(f"wrote {out / 'hdl' / (name + '.v')} (module {name}, {len(top.ports) + 2} ports, "
           f"pages out {descriptor.page_out_bytes} B / in {descriptor.page_in_bytes} B), "
-          f"{out / (name + '.json')} and {out / 'ip' / ('package_' + name + '.tcl')} in "
+          f"{out / (name + '.json')}, {out / 'constraints' / (name + '_clocks.xdc')} and "
+          f"{out / 'ip' / ('package_' + name + '.tcl')} in "
           f"{time.monotonic() - start:.1f} s")
     return 0

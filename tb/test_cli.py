@@ -197,6 +197,14 @@ def test_export_finemb_writes_node_manifest_and_vivado_tcl(tmp_path, app, capsys
     assert [p["offset"] for p in manifest["io_ports"]] == [p.offset for p in io.ports]
     tcl = (out / "ip" / "package_finemb_node.tcl").read_text()
     assert "ipx::package_project" in tcl and "finemb_node.v" in tcl
+    # two clocks, on ports of the Verilog, asynchronous to each other
+    assert manifest["clocks_mhz"] == {"aclk": 62.5, "gmii_clk": 125.0}
+    xdc = (out / "constraints" / "finemb_node_clocks.xdc").read_text().splitlines()
+    assert "create_clock -name aclk -period 16.000 [get_ports aclk]" in xdc
+    assert "create_clock -name gmii_clk -period 8.000 [get_ports gmii_clk]" in xdc
+    assert "set_clock_groups -asynchronous -group [get_clocks aclk] " \
+        "-group [get_clocks gmii_clk]" in xdc
+    assert {"aclk", "gmii_clk"} <= set(ports)
 
 
 def test_export_finemb_names_a_bad_io_file(tmp_path, capsys):

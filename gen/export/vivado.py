@@ -12,7 +12,7 @@ from hdl.reconos.protocol import arch as get_arch
 from .interfaces import reconos_fifo_bus
 
 __all__ = ["BOARDS", "VENDOR", "LIBRARY", "package_tcl", "busdef_xml", "block_design_tcl",
-           "build_tcl", "address_map"]
+           "build_tcl", "address_map", "clock_constraints"]
 
 VENDOR = "cs.upb.de"
 LIBRARY = "reconos"
@@ -277,3 +277,17 @@ def build_tcl(project, cores):
         "",
     ]
     return "\n".join(lines)
+
+
+def clock_constraints(clocks_hz):
+    """Out-of-context XDC for a core's clock ports (``{port: Hz}``): a clock per port and,
+    with several, the clocks asynchronous to each other (the core crosses between them only
+    through its synchronizers and asynchronous FIFOs)."""
+    lines = ["# the core's clocks (out-of-context synthesis; in a design the board's clocks "
+             "replace them)"]
+    for port, hz in clocks_hz.items():
+        lines.append(f"create_clock -name {port} -period {1e9 / hz:.3f} [get_ports {port}]")
+    if len(clocks_hz) > 1:
+        groups = " ".join(f"-group [get_clocks {port}]" for port in clocks_hz)
+        lines.append(f"set_clock_groups -asynchronous {groups}")
+    return "\n".join(lines) + "\n"

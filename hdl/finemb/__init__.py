@@ -4,10 +4,11 @@ machine, the two-port node with layer-2 forwarding, and the PID benchmark applic
 
 from .descriptor import IoDescriptor, IoPort
 from .line import FinembLine, line_mac
-from .node import NODE_COUNTERS, FinembNode
+from .node import NODE_CLOCKS_HZ, NODE_COUNTERS, FinembNode
 from .page import PageAppSignature, PageBuffer
 from .pid_app import PID_PORTS, FinembPidNode, PidApplication
 
-__all__ = ["IoDescriptor", "IoPort", "FinembLine", "line_mac", "NODE_COUNTERS", "FinembNode",
+__all__ = ["IoDescriptor", "IoPort", "FinembLine", "line_mac", "NODE_CLOCKS_HZ", "NODE_COUNTERS",
+           "FinembNode",
            "PageAppSignature", "PageBuffer", "PID_PORTS", "FinembPidNode",
            "PidApplication"]

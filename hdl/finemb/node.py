@@ -13,15 +13,16 @@ from hdl.net.mac import GmiiRx, GmiiSignature, GmiiTx, TxBeatBridge
 from hdl.net.queue import FrameQueue, FrameStreamBridge, FrameStreamSignature, FrameToRxBeats
 from hdl.net.responders import ArpResponder, IcmpEchoResponder, ParsedFrameSignature
 from hdl.net.rx import FrameKind, FrameParser
+from hdl.net.stack import GMII_HZ
 from hdl.net.tx import FrameBuilder
 
 from ..params import ParameterError, check_int
-from .client import CLIENT_EVENTS, FinembClient
+from .client import CLIENT_EVENTS, CLOCK_HZ, FinembClient
 from .descriptor import IoDescriptor
 from .page import PageAppSignature, PageBuffer
 from .protocol import FINEMB_PORT, GROUP_IP, GROUP_MAC, IP_TTL_FINEMB, NodeState
 
-__all__ = ["FinembNode", "NODE_COUNTERS"]
+__all__ = ["FinembNode", "NODE_COUNTERS", "NODE_CLOCKS_HZ"]
 
 #: the node's counters, in the order of ``counter_index``
 NODE_COUNTERS = (("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0", "forwarded1",
@@ -33,6 +34,9 @@ _GMII_EVENTS = ("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0", 
                 "forward_dropped0", "forward_dropped1", "consume_dropped")
 #: bytes the node's protocol side moves per cycle of its core clock
 LANES = 2
+#: the node's clock ports and the frequencies its timers and benches assume: the core clock
+#: (``sync``) and the GMII clock of both ports, asynchronous to each other
+NODE_CLOCKS_HZ = {"aclk": CLOCK_HZ, "gmii_clk": GMII_HZ}
 
 
 class FinembNode(wiring.Component):
