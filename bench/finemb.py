@@ -10,6 +10,7 @@ from pathlib import Path
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.finemb import load_io_description
+from hdl.finemb import NODE_CLOCKS_HZ
 from tb.finemb_line_top import build_finemb_line_bench_top
 from tb.finemb_tb import CLOCK_NS, PID_IO
 from tb.harness import SIM_BUILD, run_bench
@@ -18,6 +19,8 @@ LINES = (1, 2, 4, 8, 16)
 #: P-FIN's PID loop on a Nios II soft core (FINROC framework), and the goals of the issue
 PFIN_HZ = 25_000
 GOALS = {1: 250_000, 16: 40_000}
+#: the nodes' core clock (the benches' cycles are the GMII clock's)
+CORE_MHZ = NODE_CLOCKS_HZ["aclk"] / 1e6
 HOP_GOAL_NS = 200
 SOCKET_NODES = 2
 SOCKET_CYCLES = 200
@@ -94,16 +97,22 @@ def measure_resources(log=print):
 
 def markdown(results, resources):
     lines = ["# FinEmbP benchmark", "",
-             f"Lines of PID nodes under Verilator at {results['clock_mhz']} MHz (GMII, 1 Gbit/s), "
-             "the cycle-accurate master of tb/finemb_tb.py on node 0's port 0. A cycle is the "
+             f"Lines of PID nodes under Verilator, cycles of the {results['clock_mhz']} MHz "
+             f"GMII clock (1 Gbit/s; the nodes' protocol side and application on a "
+             f"{CORE_MHZ} MHz core clock), the cycle-accurate master of tb/finemb_tb.py on node "
+             "0's port 0. A cycle is the "
              "SoC and one ISEND_REQ per node, each answered by an ISEND_RES with the node's "
              "PID output for that cycle (checked against the AVR221 model). *sequential*: the "
              "master asks the next node after the previous answer; *pipelined*: all requests "
              "back to back. The rate is the fastest fixed period at which every answer came "
-             "in time (40 cycles, none late); *wire limit* what the master link could carry "
+             "in time (40 cycles, none late; periods are tried upwards from the longest "
+             "free-running cycle); *wire limit* what the master link could carry "
              "for the same frames (full duplex: the busier direction, 672 ns per minimum "
              "frame); *hop* the first byte into node 0 to the first byte out of its far port "
-             "for a frame it forwards; *jitter* the spread of SoC periods at the last node. "
+             "for a frame it forwards; *jitter* the spread of SoC periods at the last node's "
+             "SoC event, which is on its core clock: a SoC reaches the wire of every node at "
+             "the same cycle of every period (forwarding stays on the GMII clock), and a node "
+             "sees it a core cycle earlier or later with the core clock's phase. "
              f"P-FIN: the PID loop at {PFIN_HZ // 1000} kHz on a Nios II soft core.", "",
              "| nodes | polling | cycle rate kHz | period cycles | wire limit kHz | hop ns | "
              "jitter ns | late | goal kHz | vs P-FIN |",

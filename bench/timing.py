@@ -78,13 +78,15 @@ def catalog():
         add(core, f"LiteEth 2024.12 standalone UDP core (GMII PHY, one UDP port), {width}-bit "
             f"datapath, sys at {sys_mhz:g} MHz", peer, core, sys_mhz)
 
+    from hdl.finemb import NODE_CLOCKS_HZ
+
     def finemb_node():
         from gen.finemb import load_io_description
         from hdl.finemb import FinembPidNode
         from tb.finemb_tb import PID_IO
         return FinembPidNode(load_io_description(PID_IO))
     add("finemb_node", "FinEmbP PID node (2 ports, forwarding, client, page buffer, PID)",
-        finemb_node, "finemb_node", {"aclk": net.CORE_MHZ, "gmii_clk": net.CLOCK_MHZ})
+        finemb_node, "finemb_node", {port: hz / 1e6 for port, hz in NODE_CLOCKS_HZ.items()})
 
     for name, label, build, fallbacks in av_chain_nodes():
         add(f"av_{name}", label, build, f"av_{name}", kernels.CLOCK_MHZ, fallbacks)

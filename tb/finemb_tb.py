@@ -310,7 +310,8 @@ class LineMaster:
             desc += msg["body"][4:]
         assert desc == self.io.encode(), f"node {node_id}: a different IO descriptor"
         self.nodes[node_id] = {"mac": mac_text, "ip": ip, "serial": serial,
-                               "model": None, "values": None}
+                               "model": None, "values": None, "updates": None,
+                               "unanswered": []}
         self.late.setdefault(node_id, 0)
         self.answered.setdefault(node_id, 0)
 
@@ -378,17 +379,32 @@ class LineMaster:
                 if k not in got:
                     break
         for k in ids:
+            node = self.nodes[k]
             if k in got:
                 self.answered[k] += 1
                 msg = got[k]
                 assert not msg["flags"] & Flag.ERROR, msg
                 values = self.io.unpack(Direction.IN, msg["body"])
-                model = self.nodes[k]["model"]
+                model = node["model"]
+                # a request whose answer came too late (or never) may still have run the
+                # node's PID: the count of updates in the answer says how many of them did,
+                # the latest ones (a lost request is older than a late one)
+                ran = 0 if node["updates"] is None else values["updates"] - node["updates"] - 1
+                if check:
+                    assert 0 <= ran <= len(node["unanswered"]), \
+                        (self.cycle_no, k, values["updates"], node["updates"],
+                         len(node["unanswered"]))
+                unanswered = node["unanswered"]
+                for earlier in unanswered[len(unanswered) - max(ran, 0):]:
+                    model.update(earlier["set_point"], earlier["measurement"])
+                node["unanswered"] = []
+                node["updates"] = values["updates"]
                 expected = model.update(sent[k]["set_point"], sent[k]["measurement"])
                 if check:
                     assert values["output"] == expected, (self.cycle_no, k, values, expected)
             else:
                 self.late[k] += 1
+                node["unanswered"].append(sent[k])
         self.cycle_no += 1
         return start, last, got
 
