@@ -10,6 +10,7 @@ from pathlib import Path
 
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
+from hdl.net.mac import DEFAULT_CLOCK_HZ, GMII_HZ
 from tb.harness import SIM_BUILD, run_bench
 from tb.net_bench_tops import (
     NET_BENCH_CONFIGS,
@@ -19,11 +20,11 @@ from tb.net_bench_tops import (
 )
 
 #: the GMII clock, the benches' time base (8 ns per byte on the wire) ...
-CLOCK_MHZ = 125
-#: ... and the engine's core clock: two bytes per cycle
-CORE_MHZ = 62.5
-#: bytes per cycle of the engine the benches measure
+CLOCK_MHZ = GMII_HZ // 1_000_000
+#: bytes per cycle of the engine the benches measure ...
 LANES = 2
+#: ... and its core clock
+CORE_MHZ = DEFAULT_CLOCK_HZ[LANES] / 1e6
 #: where the captures go (the first 400 frames each way of each run, simulated time stamps)
 RESULTS = Path(__file__).resolve().parent / "results"
 CEILING_MBPS = 949.3
@@ -73,8 +74,8 @@ def resource_blocks():
     """(name, label, build) of the blocks whose resources are measured."""
     from hdl.net import FrameBuilder, FrameParser, GmiiRx, GmiiTx, NetStack, RbcpServer, TcpSession
     from hdl.net.counters import EventCounters
-    from hdl.net.stack import GLOBAL_BASE, STACK_COUNTERS
     from hdl.net.mac import RxBeatBridge, TxBeatBridge
+    from hdl.net.stack import GLOBAL_BASE, STACK_COUNTERS
     from hdl.ros1 import TcprosEndpoint
     from hdl.stream import StreamRepacker
     L = LANES

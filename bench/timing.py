@@ -452,7 +452,8 @@ def write_results(results, resources, folder):
 
 def _reference(row):
     """A row of the yardstick (LiteEth's cores), not one of rosgate's."""
-    return row["core"].startswith("liteeth_")
+    from bench.liteeth import CONFIGS
+    return row["core"] in CONFIGS
 
 
 def main(argv=None):

@@ -31,6 +31,7 @@ from gen.export.verilog import (
     manifest_data,
     write_if_changed,
 )
+from hdl.net.mac import DEFAULT_CLOCK_HZ, GMII_HZ
 from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
@@ -413,7 +414,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
 
 #: a GMII port's byte clock (125 MHz) and the core clock of a network engine that moves two
 #: bytes per cycle (62.5 MHz), in nanoseconds
-GMII_NS, CORE_NS = 8, 16
+GMII_NS, CORE_NS = 10**9 // GMII_HZ, 10**9 // DEFAULT_CLOCK_HZ[2]
 
 
 def start_gmii_clocks(dut, port="gmii"):

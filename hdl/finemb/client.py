@@ -8,6 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from hdl.net.checksum import ones_complement_add, ones_complement_fold, word_sum_tree
 from hdl.net.frames import ip_to_int, mac_to_int
+from hdl.net.mac import DEFAULT_CLOCK_HZ
 from hdl.net.responders import ParsedFrameSignature
 from hdl.net.rx import FrameKind
 from hdl.net.tx import TxRequestSignature
@@ -22,7 +23,7 @@ from .protocol import (
 __all__ = ["FinembClient", "CLIENT_EVENTS", "CLOCK_HZ"]
 
 #: the node's core clock: half the GMII byte clock, two bytes per cycle
-CLOCK_HZ = 62_500_000
+CLOCK_HZ = DEFAULT_CLOCK_HZ[2]
 
 #: what the client counts (the node's counters include these)
 CLIENT_EVENTS = ("finemb_rx", "bad_header", "other_node", "bad_page", "overrun", "id_conflict",

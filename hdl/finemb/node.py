@@ -9,11 +9,10 @@ from amaranth.lib.wiring import In, Out
 from hdl.dds.arbiter import TopicArbiter
 from hdl.net.counters import EventCounters
 from hdl.net.frames import DROP_REASONS, ip_to_int, mac_to_int
-from hdl.net.mac import GmiiRx, GmiiSignature, GmiiTx, TxBeatBridge
+from hdl.net.mac import GMII_HZ, GmiiRx, GmiiSignature, GmiiTx, TxBeatBridge
 from hdl.net.queue import FrameQueue, FrameStreamBridge, FrameStreamSignature, FrameToRxBeats
 from hdl.net.responders import ArpResponder, IcmpEchoResponder, ParsedFrameSignature
 from hdl.net.rx import FrameKind, FrameParser
-from hdl.net.stack import GMII_HZ
 from hdl.net.tx import FrameBuilder
 
 from ..params import ParameterError, check_int

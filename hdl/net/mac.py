@@ -11,7 +11,13 @@ from .crc import Crc32
 from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, SFD
 
 __all__ = ["GmiiSignature", "GmiiRx", "GmiiTx", "RxBeatSignature", "FrameStreamSignature",
-           "FrameStatus", "RxBeatBridge", "TxBeatBridge"]
+           "FrameStatus", "RxBeatBridge", "TxBeatBridge", "GMII_HZ", "DEFAULT_CLOCK_HZ"]
+
+#: the GMII byte clock
+GMII_HZ = 125_000_000
+#: the core clock by lanes: GMII's own with one byte per cycle, half of it with two (the
+#: slowest that carries the line rate through an :class:`RxBeatBridge`)
+DEFAULT_CLOCK_HZ = {1: GMII_HZ, 2: GMII_HZ // 2}
 
 _PREAMBLE_BYTE = 0x55
 

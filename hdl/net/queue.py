@@ -9,7 +9,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import keep_count
-from .mac import FrameStatus, FrameStreamSignature, RxBeatSignature
+from .mac import BRIDGE_DEPTH, FrameStatus, FrameStreamSignature, RxBeatSignature
 
 __all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBeats", "FrameStreamBridge"]
 
@@ -248,7 +248,7 @@ class FrameStreamBridge(wiring.Component):
     def elaborate(self, platform):
         m = Module()
         sig = FrameStreamSignature(2)
-        m.submodules.fifo = fifo = AsyncFIFO(width=sig.payload_width, depth=16,
+        m.submodules.fifo = fifo = AsyncFIFO(width=sig.payload_width, depth=BRIDGE_DEPTH,
                                              w_domain=self._domain, r_domain="sync")
         s = self.s_axis
         low = Signal(8)

@@ -19,7 +19,7 @@ from .frames import (
     ip_to_int,
     mac_to_int,
 )
-from .mac import GmiiRx, GmiiTx, RxBeatBridge, TxBeatBridge
+from .mac import DEFAULT_CLOCK_HZ, GMII_HZ, GmiiRx, GmiiTx, RxBeatBridge, TxBeatBridge
 from .rbcp import RbcpBusSignature
 from .registers import (
     GLOBAL_BASE,
@@ -46,10 +46,6 @@ __all__ = ["NetStack", "TcpUserSignature", "STACK_COUNTERS", "GLOBAL_BASE", "GLO
 #: the stack's own requesters on the frame builder, before the sessions'
 RESPONDERS = ("arp", "icmp", "rbcp", "rst")
 
-#: the GMII byte clock
-GMII_HZ = 125_000_000
-#: the core clock by lanes: GMII's own with one byte per cycle, half of it with two
-DEFAULT_CLOCK_HZ = {1: GMII_HZ, 2: GMII_HZ // 2}
 
 
 class TcpUserSignature(wiring.Signature):

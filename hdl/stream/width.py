@@ -198,12 +198,8 @@ class StreamRepacker(wiring.Component):
         take_in = s.tvalid & s.tready
         n_in = keep_count(s.tkeep)
         shifted = [Mux(take_out, buf[j + Bo] if j + Bo < C else 0, buf[j]) for j in range(C)]
-        for j in range(C):
-            value = shifted[j]
-            for a in range(Bo):               # the input lands at byte ``after`` (< Bo)
-                if a <= j < a + Bi:
-                    value = Mux(take_in & (after == a), s.tdata.word_select(j - a, 8), value)
-            m.d.sync += buf[j].eq(value)
+        m.d.sync += [b.eq(v) for b, v in zip(buf, _land_beat(shifted, s.tdata, Bi, after, Bo,
+                                                           take_in))]
         new_count = Signal(range(C + 1))
         m.d.comb += new_count.eq(after + Mux(take_in, n_in, 0))
         m.d.sync += [count.eq(new_count),
@@ -264,11 +260,20 @@ class ByteWindow(wiring.Component):
         for a in range(1, B + 1):          # drop ``taken`` bytes from the front
             shifted = [Mux(taken == a, buf[j + a] if j + a < C else 0, shifted[j])
                        for j in range(C)]
-        for j in range(C):
-            value = shifted[j]
-            for a in range(B):             # the beat lands at byte ``left`` (< B)
-                if a <= j < a + B:
-                    value = Mux(accept & (left == a), s.tdata.word_select(j - a, 8), value)
-            m.d.sync += buf[j].eq(value)
+        m.d.sync += [b.eq(v) for b, v in zip(buf, _land_beat(shifted, s.tdata, B, left, B,
+                                                           accept))]
         m.d.sync += count.eq(left + Mux(accept, keep_count(s.tkeep), 0))
         return m
+
+
+def _land_beat(held, data, nbytes, at, positions, enable):
+    """The bytes of a buffer once an ``nbytes``-byte beat ``data`` has landed behind the
+    ``at`` bytes ``held`` keeps (``at`` < ``positions``), if ``enable``: the byte values,
+    one per byte of ``held``."""
+    values = []
+    for j, value in enumerate(held):
+        for a in range(positions):
+            if a <= j < a + nbytes:
+                value = Mux(enable & (at == a), data.word_select(j - a, 8), value)
+        values.append(value)
+    return values

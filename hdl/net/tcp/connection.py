@@ -7,6 +7,7 @@ from amaranth.lib.wiring import In, Out
 
 from ...params import check_int, check_power_of_two
 from ..frames import TCP_FLAGS, TCP_MSS, TCP_MSS_DEFAULT, TCP_MSS_MIN
+from ..mac import GMII_HZ
 from ..rx import RX_FIELDS, FrameKind
 from .codes import TcpError, TcpRequest, TcpState
 from .sequence_engine import ARRIVAL_FLAGS, SEQUENCE_INTENT
@@ -101,7 +102,7 @@ class TcpConnection(wiring.Component):
         Counted events, this cycle.
     """
 
-    def __init__(self, *, rx_depth=65536, descriptors=64, clock_hz=125_000_000):
+    def __init__(self, *, rx_depth=65536, descriptors=64, clock_hz=GMII_HZ):
         self._rx_depth = check_power_of_two("rx_depth", rx_depth, 2048, 65536)
         self._descriptors = check_power_of_two("descriptors", descriptors, 4, 256)
         self._clock_hz = check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000)

@@ -8,6 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ...params import ParameterError, check_int, check_power_of_two
 from ...stream import AXIStreamSignature
 from ..counters import EventCounters
+from ..mac import GMII_HZ
 from ..rx import RX_FIELDS, FrameKind
 from ..tx import TxRequestSignature
 from .codes import TCP_COUNTERS, TcpRequest, TcpState
@@ -129,7 +130,7 @@ class TcpSession(wiring.Component):
 
     @staticmethod
     def check_parameters(*, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000,
-                         lanes=1, read_lanes=None, clock_hz=125_000_000):
+                         lanes=1, read_lanes=None, clock_hz=GMII_HZ):
         """The parameters, validated (:class:`~hdl.params.ParameterError` names a bad one);
         for containers that build their sessions later, in ``elaborate``."""
         lanes = check_int("lanes", lanes, 1, 2)
@@ -144,7 +145,7 @@ class TcpSession(wiring.Component):
                     clock_hz=check_int("clock_hz", clock_hz, 1_000_000, 1_000_000_000))
 
     def __init__(self, *, tx_depth=65536, rx_depth=65536, descriptors=64, iss_seed=0x1000,
-                 lanes=1, read_lanes=None, clock_hz=125_000_000):
+                 lanes=1, read_lanes=None, clock_hz=GMII_HZ):
         params = self.check_parameters(tx_depth=tx_depth, rx_depth=rx_depth,
                                        descriptors=descriptors, iss_seed=iss_seed, lanes=lanes,
                                        read_lanes=read_lanes, clock_hz=clock_hz)
