@@ -8,6 +8,7 @@ bytes, TCP options, IP options, UDP without checksum, and the checksum verdict; 
 EventCounters bank against a count kept in Python (docs/network.md counters)."""
 
 import random
+import re
 import zlib
 
 import pytest
@@ -15,9 +16,10 @@ from amaranth.hdl import ClockDomain, DomainRenamer, Elaboratable, Module, Signa
 from amaranth.lib import wiring
 from scapy.utils import checksum as scapy_checksum
 
-from hdl.net import Crc32, FrameParser, GmiiRx, InternetChecksum, NetStack
+from hdl.net import Crc32, FrameBuilder, FrameParser, GmiiRx, InternetChecksum, NetStack
 from hdl.net.counters import EventCounters
-from hdl.net.mac import RxBeatBridge
+from hdl.net.mac import RxBeatBridge, RxBeatSignature
+from hdl.net.tcp.banks import ByteBanks
 from hdl.params import ParameterError
 
 from .streamsim import simulate
@@ -107,6 +109,24 @@ def test_bad_parameter_names_the_value():
     with pytest.raises(ParameterError, match=r"user_width must be an integer in 8\.\.1024 and a "
                                              r"multiple of 8, not 12"):
         NetStack(user_width=12)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: NetStack(lanes=3), "lanes must be an integer in 1..2, not 3"),
+    # two lanes need a core clock of at least half the GMII clock for the line rate
+    (lambda: NetStack(lanes=2, clock_hz=50_000_000),
+     "clock_hz must be an integer in 62500000..1000000000, not 50000000"),
+    (lambda: NetStack(lanes=1, clock_hz=100_000_000),
+     "clock_hz must be an integer in 125000000..1000000000, not 100000000"),
+    (lambda: RxBeatSignature(4), "lanes must be an integer in 1..2, not 4"),
+    (lambda: FrameParser(lanes=4), "lanes must be an integer in 1..2, not 4"),
+    (lambda: FrameBuilder(2, lanes=0), "lanes must be an integer in 1..2, not 0"),
+    (lambda: ByteBanks(1000, lanes=2), "depth must be a power of two in 2048..65536, not 1000"),
+    (lambda: ByteBanks(4096, lanes=4), "lanes must be an integer in 1..2, not 4"),
+])
+def test_lane_parameters_name_the_bad_value(make, message):
+    with pytest.raises(ParameterError, match=re.escape(message)):
+        make()
 
 
 class _ResetHarness(Elaboratable):

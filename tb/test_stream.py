@@ -551,6 +551,13 @@ def test_repacker_rejects_bad_sizes():
         StreamRepacker(8, 129)
 
 
+def test_byte_window_rejects_bad_size():
+    with pytest.raises(ParameterError, match=r"nbytes must be an integer in 1\.\.16, not 0"):
+        ByteWindow(0)
+    with pytest.raises(ParameterError, match="not 17"):
+        ByteWindow(17)
+
+
 @pytest.mark.parametrize("converter", [StreamDownsizer, StreamUpsizer])
 def test_converters_full_throughput(converter):
     """One byte per cycle through either converter, whatever the beat width."""
