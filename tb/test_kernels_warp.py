@@ -115,29 +115,42 @@ def test_map_to_infinity_refused():
                         dst_height=DH)
 
 
-def divide_model(n, w):
+def divide_model(n, w, quotient_bits=QUOTIENT_BITS):
     """``floor(2**16 n / w)`` as the divider defines it, and whether its magnitude reaches
-    ``2**QUOTIENT_BITS`` (outside)."""
+    ``2**quotient_bits`` (outside)."""
     mag = (abs(n) << COORD_FRACTION_BITS) // w
     exact = (abs(n) << COORD_FRACTION_BITS) % w == 0
     q = mag if n >= 0 else -mag - (0 if exact else 1)
-    return q, mag >= 1 << QUOTIENT_BITS
+    return q, mag >= 1 << quotient_bits
 
 
-def test_coordinate_divider_shares_its_denominator():
+@pytest.mark.parametrize("width, denominator_width, quotient_bits",
+                         [(40, None, QUOTIENT_BITS), (48, 30, 21), (36, 36, 17)])
+def test_coordinate_divider_shares_its_denominator(width, denominator_width, quotient_bits):
     """Pairs of numerators over one denominator, a new set every cycle: both quotients equal
     exact integer division (floor, negative numerators included), ``outside`` where the
-    quotient's magnitude does not fit, each ``QUOTIENT_BITS + 1`` cycles after its inputs."""
-    width = 40
-    dut = CoordinateDivider(width, 2)
-    rng = np.random.default_rng(11)
+    quotient's magnitude does not fit, each ``latency`` cycles after its inputs; numerators
+    wider than the denominator (the warp's) and fewer quotient bits included."""
+    dut = CoordinateDivider(width, 2, denominator_width=denominator_width,
+                            quotient_bits=quotient_bits)
+    assert dut.latency == quotient_bits + 1
+    wd = denominator_width or width
+    limit = 1 << (quotient_bits - COORD_FRACTION_BITS)
+    rng = np.random.default_rng(11 + quotient_bits)
     cases = []
     for _ in range(120):
-        w = int(rng.integers(1, 1 << int(rng.integers(1, width - 1))))
+        w = int(rng.integers(1, 1 << int(rng.integers(1, wd + 1))))
         ns = [int(rng.integers(-(1 << (width - 2)), 1 << (width - 2))) for _ in range(2)]
         cases.append((ns, w))
-    cases += [([w * 5, -w * 5], w) for w in (1, 3, 1 << 20)]            # exact quotients
-    cases += [([(1 << 30) - 1, -(1 << 30)], 1 << 18)]                    # near the limit
+    for _ in range(60):
+        # quotients around the outside limit, both signs
+        w = int(rng.integers(1, 1 << wd))
+        ns = [min(max(int(w * (limit + int(rng.integers(-2, 2))) + int(rng.integers(-w, w))),
+                      -(1 << (width - 1))), (1 << (width - 1)) - 1) * s for s in (1, -1)]
+        cases.append((ns, w))
+    cases += [([w * 5, -w * 5], w) for w in (1, 3, 1 << 20) if w < 1 << wd]  # exact quotients
+    cases += [([limit * ((1 << 18) - 1), -limit * (1 << 18)], 1 << 18)]      # at the limit
+    cases += [([-(1 << (width - 1)), (1 << (width - 1)) - 1], (1 << wd) - 1)]  # widest
     got = []
 
     async def drive(ctx):
@@ -148,7 +161,7 @@ def test_coordinate_divider_shares_its_denominator():
             ctx.set(dut.valid, 1)
             await ctx.tick()
         ctx.set(dut.valid, 0)
-        await ctx.tick().repeat(QUOTIENT_BITS + 3)
+        await ctx.tick().repeat(dut.latency + 2)
 
     async def watch(ctx):
         async for _, _, valid, q0, q1, o0, o1 in ctx.tick().sample(
@@ -160,13 +173,16 @@ def test_coordinate_divider_shares_its_denominator():
     assert len(got) == len(cases)
     for (ns, w), answer in zip(cases, got):
         for n, (q, outside) in zip(ns, answer):
-            want, want_outside = divide_model(n, w)
+            want, want_outside = divide_model(n, w, quotient_bits)
             assert bool(outside) == want_outside, (n, w)
             if not want_outside:
                 assert q == want, (n, w, q, want)
 
 
-@pytest.mark.parametrize("width, count", [(1, 2), (40, 0), (40, "2")])
-def test_coordinate_divider_refuses_bad_parameters(width, count):
-    with pytest.raises(ParameterError, match="width|count"):
-        CoordinateDivider(width, count)
+@pytest.mark.parametrize("width, count, extra, name", [
+    (1, 2, {}, "width"), (40, 0, {}, "count"), (40, "2", {}, "count"),
+    (40, 2, {"denominator_width": 0}, "denominator_width"),
+    (40, 2, {"quotient_bits": COORD_FRACTION_BITS}, "quotient_bits")])
+def test_coordinate_divider_refuses_bad_parameters(width, count, extra, name):
+    with pytest.raises(ParameterError, match=name):
+        CoordinateDivider(width, count, **extra)

@@ -19,11 +19,11 @@ __all__ = ["PerspectiveWarp", "CoordinateDivider", "MATRIX_FRACTION_BITS", "COOR
 MATRIX_FRACTION_BITS = 64
 #: fraction bits of a source coordinate (OpenCV computes it in float32)
 COORD_FRACTION_BITS = 16
-#: quotient bits of the coordinate division: |x| < 2**(QUOTIENT_BITS - 16) pixels (else
-#: outside)
+#: the most quotient bits a coordinate division needs (a 4096-pixel source): |x| <
+#: 2**(QUOTIENT_BITS - 16) pixels, else outside. A warp takes as many as its source needs
 QUOTIENT_BITS = 28
-#: registers from a beat's coordinates to its output pixels
-PIPELINE_STAGES = QUOTIENT_BITS + 5
+#: registers from a beat's quotients to its output pixels
+PIXEL_STAGES = 4
 
 
 def _fixed(value, what):
@@ -36,71 +36,96 @@ def _fixed(value, what):
 
 class CoordinateDivider(wiring.Component):
     """``floor(2**16 n / w)`` for each of ``count`` numerators over one ``w > 0``, pipelined,
-    one set of divisions per cycle: restoring division of ``|n| 2**16`` by ``w``, one quotient
-    bit per stage, the sign after. ``outside[i]`` when the magnitude of quotient ``i``
-    reaches ``2**QUOTIENT_BITS``. A :class:`PerspectiveWarp` has one per pixel lane (its
-    ``div<p>``), for the lane's x and y over their common denominator: the denominator's
-    pipeline registers serve both.
+    one set of divisions per cycle: long division of ``|n| 2**16`` by ``w``, one quotient bit
+    per stage, the sign after. ``outside[i]`` when the magnitude of quotient ``i`` reaches
+    ``2**quotient_bits``. A :class:`PerspectiveWarp` has one per pixel lane (its ``div<p>``),
+    for the lane's x and y over their common denominator: the denominator's pipeline
+    registers serve both.
+
+    A stage subtracts ``w`` from the partial remainder (below ``w``) with the dividend's next
+    bit shifted in, so each stage is as wide as ``w`` plus one bit, whatever the numerators'
+    width: the numerators' high bits only decide ``outside``, in the first stage.
 
     Parameters
     ----------
     width : int
-        Bits of each ``n`` (signed) and of ``w``.
+        Bits of each ``n`` (signed).
     count : int
         Numerators sharing the denominator.
+    denominator_width : int or None
+        Bits of ``w`` (unsigned); ``width`` if None.
+    quotient_bits : int
+        Bits of a quotient's magnitude, 17 or more (16 of them below the point).
 
     Members
     -------
     n : In(signed(width)).array(count)
         Numerators, taken with ``w`` while ``valid``.
-    w : In(width)
+    w : In(denominator_width)
         The denominator, positive.
     valid : In(1)
-    q : Out(signed(QUOTIENT_BITS + 1)).array(count)
-        Quotients, ``QUOTIENT_BITS + 1`` cycles after their inputs.
+    q : Out(signed(quotient_bits + 1)).array(count)
+        Quotients, :attr:`latency` cycles after their inputs.
     outside : Out(1).array(count)
     q_valid : Out(1)
         ``valid``, delayed with the quotients.
     """
 
-    def __init__(self, width, count=2):
+    def __init__(self, width, count=2, *, denominator_width=None, quotient_bits=QUOTIENT_BITS):
         check_int("width", width, 2, 1 << 12)
         check_int("count", count, 1, 16)
+        if denominator_width is None:
+            denominator_width = width
+        check_int("denominator_width", denominator_width, 1, 1 << 12)
+        check_int("quotient_bits", quotient_bits, COORD_FRACTION_BITS + 1, 64)
         self._width = width
         self._count = count
-        super().__init__({"n": In(signed(width)).array(count), "w": In(width),
-                          "valid": In(1), "q": Out(signed(QUOTIENT_BITS + 1)).array(count),
+        self._den_width = denominator_width
+        self._q = quotient_bits
+        super().__init__({"n": In(signed(width)).array(count), "w": In(denominator_width),
+                          "valid": In(1), "q": Out(signed(quotient_bits + 1)).array(count),
                           "outside": Out(1).array(count), "q_valid": Out(1)})
+
+    #: cycles from a set of inputs to its quotients
+    latency = property(lambda self: self._q + 1)
 
     def elaborate(self, platform):
         m = Module()
-        W, Q, F = self._width, QUOTIENT_BITS, COORD_FRACTION_BITS
-        den, v = Signal(W), Signal()
+        Q, F, D = self._q, COORD_FRACTION_BITS, self._den_width
+        # the dividend |n| 2**16: its bits from Q up are the first partial remainder, the
+        # bits below Q enter one per stage (the lowest F are 0)
+        fed = Q - F
+        den, v = Signal(D), Signal()
         m.d.sync += [den.eq(self.w), v.eq(self.valid)]
-        # per numerator: remainder, quotient so far, sign, outside
         lanes = []
         for i in range(self._count):
             neg = self.n[i] < 0
-            mag = Signal(W + F, name=f"mag{i}")
-            m.d.comb += mag.eq(Mux(neg, -self.n[i], self.n[i]) << F)
-            rem, quo, sign, out = (Signal(W + F, name=f"rem{i}"), Signal(Q, name=f"quo{i}"),
-                                   Signal(name=f"sign{i}"), Signal(name=f"out{i}"))
-            m.d.sync += [rem.eq(mag), sign.eq(neg), out.eq(mag >= (self.w << Q))]
-            lanes.append((rem, quo, sign, out))
+            mag = Signal(self._width, name=f"mag{i}")
+            m.d.comb += mag.eq(Mux(neg, -self.n[i], self.n[i]))
+            rem, low, quo = (Signal(D, name=f"rem{i}"), Signal(fed, name=f"low{i}"),
+                             Signal(Q, name=f"quo{i}"))
+            sign, out = Signal(name=f"sign{i}"), Signal(name=f"out{i}")
+            # below w unless outside (then nothing downstream uses the quotient)
+            m.d.sync += [rem.eq(mag >> fed), low.eq(mag), sign.eq(neg),
+                         out.eq((mag >> fed) >= self.w)]
+            lanes.append((rem, low, quo, sign, out))
         for k in reversed(range(Q)):
-            shifted = den << k
-            den_n, v_n = Signal(W), Signal()
+            den_n, v_n = Signal(D), Signal()
             m.d.sync += [den_n.eq(den), v_n.eq(v)]
             stepped = []
-            for i, (rem, quo, sign, out) in enumerate(lanes):
-                ge = rem >= shifted
-                rem_n, quo_n = Signal(W + F), Signal(Q)
+            for i, (rem, low, quo, sign, out) in enumerate(lanes):
+                bit = low[k - F] if k >= F else Const(0, 1)
+                trial = Cat(bit, rem)
+                ge = trial >= den
+                rem_n, quo_n = Signal(D), Signal(Q)
+                low_n = Signal(max(k - F, 0))
                 sign_n, out_n = Signal(), Signal()
-                m.d.sync += [rem_n.eq(Mux(ge, rem - shifted, rem)),
-                             quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out)]
-                stepped.append((rem_n, quo_n, sign_n, out_n))
+                m.d.sync += [rem_n.eq(Mux(ge, trial - den, trial)),
+                             quo_n.eq(quo | (ge << k)), low_n.eq(low), sign_n.eq(sign),
+                             out_n.eq(out)]
+                stepped.append((rem_n, low_n, quo_n, sign_n, out_n))
             den, v, lanes = den_n, v_n, stepped
-        for i, (rem, quo, sign, out) in enumerate(lanes):
+        for i, (rem, _, quo, sign, out) in enumerate(lanes):
             m.d.comb += [self.q[i].eq(Mux(sign, -quo - (rem != 0), quo)),
                          self.outside[i].eq(out)]
         m.d.comb += self.q_valid.eq(v)
@@ -189,10 +214,32 @@ class PerspectiveWarp(wiring.Component):
 
     pixels_per_beat = property(lambda self: self._p)
 
+    def _register_values(self):
+        """Every value a coordinate register takes: the three sums at the corners of the
+        destination, one row past the last (the row registers step there after the last
+        beat), a linear function's extremes."""
+        dw, dh = self._dst
+        return [[self._m[3 * k] * x + self._m[3 * k + 1] * y + self._m[3 * k + 2]
+                 for x in (0, dw - 1) for y in (0, dh)] for k in range(3)]
+
     @property
     def _divider_width(self):
-        # a numerator m x + m' y + m'' with x, y < 2**13
-        return max(abs(v) for v in self._m).bit_length() + 2 * 13 + 4
+        # the numerators' registers, signed
+        return max(abs(v) for vs in self._register_values() for v in vs).bit_length() + 1
+
+    @property
+    def _denominator_width(self):
+        # the denominator where a pixel is issued (positive there: checked at the corners)
+        dw, dh = self._dst
+        m6, m7, m8 = self._m[6:]
+        return max(m6 * x + m7 * y + m8 for x in (0, dw - 1) for y in (0, dh - 1)).bit_length()
+
+    @property
+    def _quotient_bits(self):
+        # a source coordinate of magnitude 2**k or more has no neighbour inside once
+        # 2**k >= the source's size (a coordinate x has x and x + 1 as neighbours)
+        sw, sh = self._src
+        return max((sw - 1).bit_length(), (sh - 1).bit_length(), 1) + COORD_FRACTION_BITS
 
     #: the names of the :class:`CoordinateDivider` submodules, ``div<p>`` (a regular
     #: expression over a hierarchical module name)
@@ -202,7 +249,9 @@ class PerspectiveWarp(wiring.Component):
         """A new :class:`CoordinateDivider` as this warp instantiates it
         :attr:`coordinate_divider_count` times (one per pixel lane, for x and y): resource
         estimates synthesise it once."""
-        return CoordinateDivider(self._divider_width, 2)
+        return CoordinateDivider(self._divider_width, 2,
+                                 denominator_width=self._denominator_width,
+                                 quotient_bits=self._quotient_bits)
 
     coordinate_divider_count = property(lambda self: self._p)
 
@@ -272,7 +321,8 @@ class PerspectiveWarp(wiring.Component):
         dx, dy = Signal(range(dw + 1)), Signal(range(dh + 1))
         issuing = Signal()
         m.submodules.out_fifo = out_fifo = StreamFIFO(image_stream_signature(3, P), 64)
-        in_flight = Signal(range(PIPELINE_STAGES + 4))
+        latency = self._quotient_bits + 1          # the dividers'
+        in_flight = Signal(range(latency + PIXEL_STAGES + 4))
         room = out_fifo.level + in_flight < 60
         issue = issuing & room
         last_beat = (dx + P == dw) & (dy == dh - 1)
@@ -302,7 +352,7 @@ class PerspectiveWarp(wiring.Component):
         first_flag, last_flag = Signal(), Signal()
         m.d.comb += [first_flag.eq((dx == 0) & (dy == 0)), last_flag.eq(last_beat)]
         flags = Cat(first_flag, last_flag)
-        for _ in range(QUOTIENT_BITS + 1):
+        for _ in range(latency):
             nxt = Signal(2)
             m.d.sync += nxt.eq(flags)
             flags = nxt
@@ -313,8 +363,8 @@ class PerspectiveWarp(wiring.Component):
         lanes = []
         for p in range(P):
             d = divs[p]
-            sx, sy = Signal(signed(QUOTIENT_BITS), name=f"sx{p}"), \
-                Signal(signed(QUOTIENT_BITS), name=f"sy{p}")
+            sx, sy = Signal(signed(self._quotient_bits), name=f"sx{p}"), \
+                Signal(signed(self._quotient_bits), name=f"sy{p}")
             F = COORD_FRACTION_BITS
             ax, ay = Signal(F, name=f"ax{p}"), Signal(F, name=f"ay{p}")
             away = Signal(name=f"away{p}")
