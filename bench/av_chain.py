@@ -157,9 +157,9 @@ def _add(rows, label):
 
 def _node_resources(config, name, log):
     """The estimate of node ``name`` at ``config``'s size: the projection without its
-    coordinate dividers plus one divider's estimate per instance (Yosys maps each of the
-    ``2 P`` identical 105-bit dividers on its own: 230 s each, and the whole projection did
-    not finish within 15 minutes even at 128x96)."""
+    coordinate dividers plus one divider's estimate per instance (the ``P`` identical
+    dividers, each mapped on its own by Yosys, are most of the time of the whole
+    projection)."""
     node = chain_node(config, name, events=True)
     stem = f"av-{name}-p{config.pixels_per_beat}"
     if name != "projection":

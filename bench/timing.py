@@ -22,6 +22,11 @@ FOLDER = SIM_BUILD / "timing"
 #: the device's multipliers and block RAMs: a core needing more is placed in a smaller
 #: configuration (its fallback)
 DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
+#: LUT4+carry cells (after synthesis) above which nextpnr does not place a core within the
+#: flow's time per seed on this machine: a larger core goes to its fallback without the wait
+#: (the projection at 4 px/clk, 41,502: seed 1 still in placement after 45 minutes; the
+#: largest row placed, 2 px/clk, is in docs/timing.md)
+PLACE_BUDGET_LUT4 = 32_000
 #: the engine (TCP and RBCP as well) may be this multiple of LiteEth's 8-bit UDP core
 ENGINE_GOAL = 1.6
 GATEWAY_CFG = Path(__file__).resolve().parents[1] / "examples" / "hwtopic_gateway" / "build.cfg"
@@ -114,11 +119,12 @@ def catalog():
 def av_chain_nodes():
     """``(name, label, build, fallbacks)`` of the lane-following chain's nodes at 4 px/clk
     (docs/av_chain.md) and of one of its ReconOS threads; a node whose frame store exceeds the
-    device's block RAM falls back to a 320x240 camera, then a 128x96 one."""
+    device's block RAM falls back to a 320x240 camera, then a 128x96 one, then that at 2 and
+    at 1 px/clk."""
     from gen.av_chain import chain_node, scaled_config
 
-    def node(name, scale, events=False):
-        return lambda: chain_node(scaled_config(scale, 4), name, events=events)
+    def node(name, scale, events=False, ppc=4):
+        return lambda: chain_node(scaled_config(scale, ppc), name, events=events)
     rows = []
     for name, label, store in (
             ("compensation", "Image Compensation, 640x480 bgr8 frame buffered", True),
@@ -128,8 +134,9 @@ def av_chain_nodes():
             ("lane_control", "Lane Control", False),
             ("red_light", "Traffic light node (detector + events), 640x480", False)):
         fallbacks = [(label.replace("640x480", f"{round(640 * k)}x{round(480 * k)}")
-                      .replace("1000x600", f"{round(1000 * k)}x{round(600 * k)}"),
-                      node(name, k)) for k in (0.5, 0.2)] if store else []
+                      .replace("1000x600", f"{round(1000 * k)}x{round(600 * k)}")
+                      + f", {p} px/clk", node(name, k, ppc=p))
+                     for k, p in ((0.5, 4), (0.2, 4), (0.2, 2), (0.2, 1))] if store else []
         ppc = "" if name == "lane_control" else ", 4 px/clk"
         rows.append((f"{name}_p4" if ppc else name, f"{label}{ppc}",
                      node(name, 1.0, name == "red_light"), fallbacks))
@@ -195,8 +202,11 @@ def _place(core, entry, seeds, log):
             log(f"    {label}: not synthesised ({why})")
             continue
         over = {c: n for c, n in cells.items() if n > DEVICE_LIMITS.get(c, n)}
-        if over:
-            why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items())
+        lut4 = cells.get("LUT4", 0) + 2 * cells.get("CCU2C", 0)
+        if over or lut4 > PLACE_BUDGET_LUT4:
+            why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items()) or (
+                f"{lut4} LUT4+carry fit, but over the {PLACE_BUDGET_LUT4} the flow places "
+                f"within {PNR_TIMEOUT_S // 60} min a seed")
             if k == 0:
                 full = {"full_config": label, "full_does_not_fit": why,
                         "full_mult18": cells.get("MULT18X18D", 0)}

@@ -3,7 +3,7 @@
 
 from fractions import Fraction
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed
 from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -22,8 +22,8 @@ COORD_FRACTION_BITS = 16
 #: the most quotient bits a coordinate division needs (a 4096-pixel source): |x| <
 #: 2**(QUOTIENT_BITS - 16) pixels, else outside. A warp takes as many as its source needs
 QUOTIENT_BITS = 28
-#: registers from a beat's quotients to its output pixels
-PIXEL_STAGES = 4
+#: registers from a beat's quotients to its output pixels (``PerspectiveWarp.elaborate``)
+PIXEL_STAGES = 7
 
 
 def _fixed(value, what):
@@ -323,7 +323,11 @@ class PerspectiveWarp(wiring.Component):
         m.submodules.out_fifo = out_fifo = StreamFIFO(image_stream_signature(3, P), 64)
         latency = self._quotient_bits + 1          # the dividers'
         in_flight = Signal(range(latency + PIXEL_STAGES + 4))
-        room = out_fifo.level + in_flight < 60
+        # the FIFO has room for every beat in flight; decided a cycle ahead (a flip-flop in
+        # front of the coordinate registers' enables): the beats in flight and in the FIFO
+        # grow by at most one a cycle
+        room = Signal()
+        m.d.sync += room.eq(out_fifo.level + in_flight + 1 < 60)
         issue = issuing & room
         last_beat = (dx + P == dw) & (dy == dh - 1)
 
@@ -357,101 +361,113 @@ class PerspectiveWarp(wiring.Component):
             m.d.sync += nxt.eq(flags)
             flags = nxt
 
-        # stage A: pixel, weights, bank addresses and which neighbours are inside
-        a_valid = Signal()
-        m.d.sync += a_valid.eq(divs[0].q_valid)
-        lanes = []
+        # The pixel pipeline behind the dividers, a register stage each (PIXEL_STAGES):
+        #   A  the source pixel (integer parts), its fractions, "far outside"
+        #   N  each bank's neighbour row and column (sy or sy + 1, sx or sx + 1); the weights
+        #   R  the banks' reads (their address registers) and the inside flags
+        #   W  the read words
+        #   V  each neighbour's channel values (chosen by bank parity, 0 outside)
+        #   X  the products value x weight
+        #   S  their sums; rounded into the output FIFO
+        # so that no stage holds more than one carry chain or multiplier behind a choice.
+        F = COORD_FRACTION_BITS
+        one = 1 << F
+
+        def stage(value, name):
+            reg = Signal(Value.cast(value).shape(), name=name)
+            m.d.sync += reg.eq(value)
+            return reg
+
+        valid, beat_flags = divs[0].q_valid, flags
+        valids, flag_stages = [], []
+        for _ in range(PIXEL_STAGES):
+            valid, beat_flags = stage(valid, "pix_valid"), stage(beat_flags, "pix_flags")
+            valids.append(valid)
+            flag_stages.append(beat_flags)
+        out_valid, out_flags = valids[-1], flag_stages[-1]
+
+        out_pixels, none_inside = [], []
         for p in range(P):
             d = divs[p]
-            sx, sy = Signal(signed(self._quotient_bits), name=f"sx{p}"), \
-                Signal(signed(self._quotient_bits), name=f"sy{p}")
-            F = COORD_FRACTION_BITS
-            ax, ay = Signal(F, name=f"ax{p}"), Signal(F, name=f"ay{p}")
-            away = Signal(name=f"away{p}")
-            m.d.sync += [sx.eq(d.q[0] >> F), sy.eq(d.q[1] >> F), ax.eq(d.q[0][:F]),
-                         ay.eq(d.q[1][:F]), away.eq(d.outside[0] | d.outside[1])]
-            lanes.append((sx, sy, ax, ay, away))
-        flags_a = Signal(2)
-        m.d.sync += flags_a.eq(flags)
-
-        # stage B: bank reads (pixel (r, c) of the neighbourhood comes from bank
-        # ((sy + r) & 1, (sx + c) & 1)), weights and the inside flags registered alongside
-        b_valid, flags_b = Signal(), Signal(2)
-        m.d.sync += [b_valid.eq(a_valid), flags_b.eq(flags_a)]
-        picked = []
-        for p, (sx, sy, ax, ay, away) in enumerate(lanes):
+            # A
+            sx = stage((d.q[0] >> F)[:self._quotient_bits].as_signed(), f"sx{p}")
+            sy = stage((d.q[1] >> F)[:self._quotient_bits].as_signed(), f"sy{p}")
+            ax, ay = stage(d.q[0][:F], f"ax{p}"), stage(d.q[1][:F], f"ay{p}")
+            away = stage(d.outside[0] | d.outside[1], f"away{p}")
+            # N: pixel (r, c) of the neighbourhood comes from bank ((sy + r) & 1, (sx + c) & 1)
+            ny = [stage(Mux(sy[0] == r, sy, sy + 1)[:len(sy) + 1].as_signed(), f"ny{p}_{r}")
+                  for r in range(2)]
+            nx = [stage(Mux(sx[0] == c, sx, sx + 1)[:len(sx) + 1].as_signed(), f"nx{p}_{c}")
+                  for c in range(2)]
+            away_n = stage(away, f"away_n{p}")
+            sx0, sy0 = stage(sx[0], f"sx0n{p}"), stage(sy[0], f"sy0n{p}")
+            weights = {}
+            for dyo, wy in ((0, one - ay), (1, ay)):
+                for dxo, wx in ((0, one - ax), (1, ax)):
+                    w = Signal(2 * F + 1, name=f"w{p}_{dyo}{dxo}")
+                    m.d.sync += w.eq(wx * wy)
+                    weights[(dyo, dxo)] = w
+            # R: the reads; the flags and weights travel beside them to W
             reads = {}
             for r in range(2):
                 for c in range(2):
                     port = banks[r][c][p // 2].read_port()
-                    # the neighbour of this parity: row sy or sy + 1, column sx or sx + 1
-                    ny = Mux(sy[0] == r, sy, sy + 1)
-                    nx = Mux(sx[0] == c, sx, sx + 1)
-                    addr = (ny >> 1) * words_per_row + (nx >> 1)[:16] // per_word
+                    addr = (ny[r] >> 1) * words_per_row + (nx[c] >> 1)[:16] // per_word
                     if p % 2 == 0:
                         shared = shared_addr[r][c][p // 2]
                         m.d.comb += [shared.eq(Mux(storing, word_addr, addr)),
                                      port.addr.eq(shared)]
                     else:
                         m.d.comb += port.addr.eq(addr)
-                    inside = Signal(name=f"in{p}_{r}{c}")
-                    m.d.sync += inside.eq(~away & (ny >= 0) & (ny < sh) & (nx >= 0) & (nx < sw))
-                    sel = Signal(range(per_word), name=f"sel{p}_{r}{c}")
-                    if per_word > 1:
-                        m.d.sync += sel.eq((nx >> 1)[:16] % per_word)
-                    reads[(r, c)] = (port, inside, sel)
-            F = COORD_FRACTION_BITS
-            one = 1 << F
-            # the four weights, products of the fractions (they sum to 2**32)
-            wts = {}
-            for dyo, wy in ((0, one - ay), (1, ay)):
-                for dxo, wx in ((0, one - ax), (1, ax)):
-                    w = Signal(2 * F + 1, name=f"w{p}_{dyo}{dxo}")
-                    m.d.sync += w.eq(wx * wy)
-                    wts[(dyo, dxo)] = w
-            sxb, syb = Signal(name=f"sx0b{p}"), Signal(name=f"sy0b{p}")
-            m.d.sync += [sxb.eq(sx[0]), syb.eq(sy[0])]
-            axb, ayb = wts, None
-            picked.append((reads, axb, ayb, sxb, syb))
-
-        # stage C: the weighted sum, registered; stage D: rounded, into the FIFO
-        c_valid, flags_c = Signal(), Signal(2)
-        m.d.sync += [c_valid.eq(b_valid), flags_c.eq(flags_b)]
-        out_pixels = []
-        for p, (reads, weights, _, sx0, sy0) in enumerate(picked):
+                    inside = stage(~away_n & (ny[r] >= 0) & (ny[r] < sh) & (nx[c] >= 0)
+                                   & (nx[c] < sw), f"in{p}_{r}{c}")
+                    sel = (stage((nx[c] >> 1)[:16] % per_word, f"sel{p}_{r}{c}")
+                           if per_word > 1 else None)
+                    # W
+                    word = stage(port.data, f"word{p}_{r}{c}")
+                    inside_w = stage(inside, f"in_w{p}_{r}{c}")
+                    sel_w = stage(sel, f"sel_w{p}_{r}{c}") if sel is not None else None
+                    px = word.word_select(sel_w, 24) if sel_w is not None else word
+                    reads[(r, c)] = (px, inside_w)
+            sx0_w, sy0_w = stage(stage(sx0, f"sx0r{p}"), f"sx0w{p}"), \
+                stage(stage(sy0, f"sy0r{p}"), f"sy0w{p}")
+            weights_w = {k: stage(stage(w, f"{w.name}_r"), f"{w.name}_w")
+                         for k, w in weights.items()}
+            # V, X, S
             channels = []
             for ch in range(3):
-                total = Const(0, 2 * COORD_FRACTION_BITS + 9)
-                for (dyo, dxo), wgt in weights.items():
+                products = []
+                for (dyo, dxo), wgt in weights_w.items():
                     # neighbour (dyo, dxo) is in bank ((sy + dyo) & 1, (sx + dxo) & 1)
                     value = Const(0, 8)
-                    for (r, c), (port, inside, sel) in reads.items():
-                        word = port.data
-                        px = word.word_select(sel, 24) if per_word > 1 else word
-                        mine = ((sy0 ^ dyo) == r) & ((sx0 ^ dxo) == c)
+                    for (r, c), (px, inside) in reads.items():
+                        mine = ((sy0_w ^ dyo) == r) & ((sx0_w ^ dxo) == c)
                         value = Mux(mine & inside, px.word_select(ch, 8), value)
-                    total = total + value * wgt
-                acc = Signal(2 * COORD_FRACTION_BITS + 9, name=f"acc{p}_{ch}")
-                m.d.sync += acc.eq(total)
+                    value_v = stage(value, f"v{p}_{ch}_{dyo}{dxo}")
+                    wgt_v = stage(wgt, f"{wgt.name}_v")
+                    products.append(stage(value_v * wgt_v, f"x{p}_{ch}_{dyo}{dxo}"))
+                acc = Signal(2 * F + 9, name=f"acc{p}_{ch}")
+                m.d.sync += acc.eq((products[0] + products[1]) + (products[2] + products[3]))
                 channels.append(acc)
-            half = 1 << (2 * COORD_FRACTION_BITS - 1)
-            out_pixels.append(Cat(*(((a + half) >> (2 * COORD_FRACTION_BITS))[:8]
-                                    for a in channels)))
-        m.d.comb += [out_fifo.s_axis.tvalid.eq(c_valid), out_fifo.s_axis.tdata.eq(Cat(*out_pixels)),
-                     out_fifo.s_axis.tuser.eq(flags_c[0]), out_fifo.s_axis.tlast.eq(flags_c[1])]
+            half = 1 << (2 * F - 1)
+            out_pixels.append(Cat(*(((a + half) >> (2 * F))[:8] for a in channels)))
+            # the pixels whose neighbourhood is all outside, counted at S
+            none = ~(reads[(0, 0)][1] | reads[(0, 1)][1] | reads[(1, 0)][1] | reads[(1, 1)][1])
+            none_inside.append(stage(stage(stage(none, f"none_v{p}"), f"none_x{p}"),
+                                     f"none_s{p}"))
+        m.d.comb += [out_fifo.s_axis.tvalid.eq(out_valid),
+                     out_fifo.s_axis.tdata.eq(Cat(*out_pixels)),
+                     out_fifo.s_axis.tuser.eq(out_flags[0]),
+                     out_fifo.s_axis.tlast.eq(out_flags[1])]
         wiring.connect(m, out_fifo.m_axis, wiring.flipped(self.o))
-        m.d.sync += in_flight.eq(in_flight + issue - c_valid)
+        m.d.sync += in_flight.eq(in_flight + issue - out_valid)
 
-        # counting the pixels whose neighbourhood is all outside
-        none_inside = Signal(range(P + 1))
-        m.d.sync += none_inside.eq(sum(~(reads[(0, 0)][1] | reads[(0, 1)][1] |
-                                         reads[(1, 0)][1] | reads[(1, 1)][1])
-                                       for reads, *_ in picked))
         outside = Signal(32)
-        with m.If(c_valid):
-            m.d.sync += outside.eq(outside + none_inside)
-            with m.If(flags_c[1]):
-                m.d.sync += [self.outside.eq(outside + none_inside), outside.eq(0)]
+        none_count = sum(none_inside)
+        with m.If(out_valid):
+            m.d.sync += outside.eq(outside + none_count)
+            with m.If(out_flags[1]):
+                m.d.sync += [self.outside.eq(outside + none_count), outside.eq(0)]
 
         # one frame at a time: store the source, issue the destination, let it drain
         with m.FSM():
@@ -467,7 +483,7 @@ class PerspectiveWarp(wiring.Component):
                 with m.If(issue & last_beat):
                     m.next = "DRAIN"
             with m.State("DRAIN"):
-                with m.If((in_flight == 0) & ~c_valid):
+                with m.If((in_flight == 0) & ~out_valid):
                     m.d.sync += storing.eq(1)
                     m.next = "STORE"
         return m
