@@ -11,6 +11,7 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -166,8 +167,11 @@ def unplaced_reason(label, cells, error, larger=None):
     return f"{label} ({size} after synthesis): {error}{before}"
 
 
-def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=print):
-    """Synthesise ``top`` once and place it with each seed (in parallel, ``jobs`` at a time).
+def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=print,
+                 timeout=PNR_TIMEOUT_S):
+    """Synthesise ``top`` once and place it with each seed (in parallel, ``jobs`` at a time,
+    each within ``timeout`` seconds). A seed that fails or does not finish ends the run: the
+    seeds not yet started are not started, and its :class:`TimingError` is raised.
 
     Returns ``{"fmax_mhz", "clock_mhz", "seeds", "per_seed", "lut4", "ff", "bram", "dsp",
     "critical_path", "pass"}``; ``clock_mhz`` and ``fmax_mhz`` are numbers for a core with
@@ -178,9 +182,20 @@ def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=pr
     folder.mkdir(parents=True, exist_ok=True)
     netlist, cells = synthesise(verilog, top, folder)
     jobs = jobs or min(len(seeds), os.cpu_count() or 1)
+    failed = threading.Event()
+
+    def place(seed):
+        if failed.is_set():         # a seed before it failed: the run ends anyway
+            return None
+        try:
+            return place_and_route(netlist, clocks, seed, folder, timeout)
+        except TimingError:
+            failed.set()
+            raise
+
     with ThreadPoolExecutor(jobs) as pool:
-        reports = dict(zip(seeds, pool.map(
-            lambda s: place_and_route(netlist, clocks, s, folder), seeds)))
+        futures = {s: pool.submit(place, s) for s in seeds}
+        reports = {s: f.result() for s, f in futures.items()}
     per_seed, worst = {}, {}
     for seed, report in reports.items():
         fmax = {name: report["fmax"][name]["achieved"] for name in report["fmax"]}

@@ -72,6 +72,27 @@ def test_tool_failure_names_the_log(tmp_path):
         time_verilog(vfile, "no_such_top", {"clk": 100}, tmp_path / "bad", seeds=(1,))
 
 
+def test_a_seed_over_time_ends_the_run_without_the_seeds_after_it(tmp_path, monkeypatch):
+    """A seed that does not finish within the timeout ends the run with its "did not finish"
+    (what bench/timing.py's fallbacks look for), and the seeds queued behind it are never
+    started: a core too slow to place costs one timeout, not one per seed."""
+    import host.timing
+    text, _ = export_verilog(AdderChain(1), "adder_chain")
+    vfile = tmp_path / "adder_chain.v"
+    vfile.write_text(text)
+    started = []
+
+    def place_and_route(netlist, clocks, seed, folder, timeout):
+        started.append((seed, timeout))
+        raise TimingError(f"nextpnr (seed {seed}) did not finish within {timeout / 60:g} min")
+
+    monkeypatch.setattr(host.timing, "place_and_route", place_and_route)
+    with pytest.raises(TimingError, match=r"nextpnr \(seed 1\) did not finish"):
+        time_verilog(vfile, "adder_chain", {"clk": 100}, tmp_path / "slow", seeds=(1, 2, 3),
+                     jobs=1, log=lambda _: None, timeout=90)
+    assert started == [(1, 90)]
+
+
 @pytest.mark.parametrize("cell,name", [
     ("core.total_TRELLIS_FF_Q_30", "core.total"),
     ("kernel.sum_CCU2C_S0_4", "kernel.sum"),

@@ -118,11 +118,13 @@ class CoordinateDivider(wiring.Component):
                 trial = Cat(bit, rem)
                 ge = trial >= den
                 rem_n, quo_n = Signal(D), Signal(Q)
-                low_n = Signal(max(k - F, 0))
+                # the dividend bits still to enter (none below F: those are 0)
+                low_n = Signal(k - F) if k > F else Const(0, 1)
                 sign_n, out_n = Signal(), Signal()
                 m.d.sync += [rem_n.eq(Mux(ge, trial - den, trial)),
-                             quo_n.eq(quo | (ge << k)), low_n.eq(low), sign_n.eq(sign),
-                             out_n.eq(out)]
+                             quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out)]
+                if k > F:
+                    m.d.sync += low_n.eq(low)
                 stepped.append((rem_n, low_n, quo_n, sign_n, out_n))
             den, v, lanes = den_n, v_n, stepped
         for i, (rem, _, quo, sign, out) in enumerate(lanes):
