@@ -24,8 +24,8 @@ FOLDER = SIM_BUILD / "timing"
 DEVICE_LIMITS = {"MULT18X18D": 156, "DP16KD": 208}
 #: LUT4+carry cells (after synthesis) above which nextpnr does not place a core within the
 #: flow's time per seed on this machine: a larger core goes to its fallback without the wait
-#: (the projection at 4 px/clk, 41,502: seed 1 still in placement after 45 minutes; the
-#: largest row placed, 2 px/clk, is in docs/timing.md)
+#: (the projection at 4 px/clk, 41,502: 39 minutes of placement for one seed; the largest
+#: core placed within the time, the sobel_dip system top, has 21,050; docs/timing.md)
 PLACE_BUDGET_LUT4 = 32_000
 #: the engine (TCP and RBCP as well) may be this multiple of LiteEth's 8-bit UDP core
 ENGINE_GOAL = 1.6
