@@ -13,8 +13,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
-from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, synthesise,
-                         synthesise_parts, time_verilog, unplaced_reason)
+from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, lut4_carry,
+                         synthesise, synthesise_parts, time_verilog, unplaced_reason)
 from tb.harness import ROOT, SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -202,7 +202,7 @@ def _place(core, entry, seeds, log):
             log(f"    {label}: not synthesised ({why})")
             continue
         over = {c: n for c, n in cells.items() if n > DEVICE_LIMITS.get(c, n)}
-        lut4 = cells.get("LUT4", 0) + 2 * cells.get("CCU2C", 0)
+        lut4 = lut4_carry(cells)
         if over or lut4 > PLACE_BUDGET_LUT4:
             why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items()) or (
                 f"{lut4} LUT4+carry fit, but over the {PLACE_BUDGET_LUT4} the flow places "

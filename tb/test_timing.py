@@ -10,8 +10,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog
-from host.timing import (MARGIN, TimingError, readable_cell, synthesise_parts, time_verilog,
-                         unplaced_reason)
+from host.timing import (MARGIN, TimingError, lut4_carry, readable_cell, synthesise_parts,
+                         time_verilog, unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -188,3 +188,10 @@ def test_unplaced_reason_names_the_configuration_its_size_and_the_larger_one():
     assert unplaced_reason("only", {"LUT4": 5}, "timed out") == (
         "only (5 LUT4, 0 CCU2C, 0 TRELLIS_FF, 0 DP16KD, 0 MULT18X18D after synthesis): "
         "timed out")
+
+
+def test_lut4_carry_counts_a_carry_cell_as_two():
+    """LUT4+carry as the flow's budget and the part table count it: a CCU2C is two of
+    nextpnr's TRELLIS_COMB, flip-flops and RAMs are not counted."""
+    assert lut4_carry({"LUT4": 5589, "CCU2C": 2287, "TRELLIS_FF": 7440, "DP16KD": 21}) == 10163
+    assert lut4_carry({}) == 0

@@ -8,6 +8,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from ..logic import adder_tree
 from ..params import ParameterError, check_int
 from ..stream import StreamFIFO
 from .image import FrameGuard, check_image_params, image_stream_signature
@@ -216,13 +217,18 @@ class PerspectiveWarp(wiring.Component):
 
     pixels_per_beat = property(lambda self: self._p)
 
+    def _linear(self, k, x, y):
+        """Row ``k`` of the map at destination pixel ``(x, y)``: the x (0) or y (1) numerator,
+        or the denominator (2), as the coordinate registers hold it."""
+        return self._m[3 * k] * x + self._m[3 * k + 1] * y + self._m[3 * k + 2]
+
     def _register_values(self):
         """Every value a coordinate register takes: the three sums at the corners of the
         destination, one row past the last (the row registers step there after the last
         beat), a linear function's extremes."""
         dw, dh = self._dst
-        return [[self._m[3 * k] * x + self._m[3 * k + 1] * y + self._m[3 * k + 2]
-                 for x in (0, dw - 1) for y in (0, dh)] for k in range(3)]
+        return [[self._linear(k, x, y) for x in (0, dw - 1) for y in (0, dh)]
+                for k in range(3)]
 
     @property
     def _divider_width(self):
@@ -233,8 +239,7 @@ class PerspectiveWarp(wiring.Component):
     def _denominator_width(self):
         # the denominator where a pixel is issued (positive there: checked at the corners)
         dw, dh = self._dst
-        m6, m7, m8 = self._m[6:]
-        return max(m6 * x + m7 * y + m8 for x in (0, dw - 1) for y in (0, dh - 1)).bit_length()
+        return max(self._linear(2, x, y) for x in (0, dw - 1) for y in (0, dh - 1)).bit_length()
 
     @property
     def _quotient_bits(self):
@@ -323,7 +328,8 @@ class PerspectiveWarp(wiring.Component):
         dx, dy = Signal(range(dw + 1)), Signal(range(dh + 1))
         issuing = Signal()
         m.submodules.out_fifo = out_fifo = StreamFIFO(image_stream_signature(3, P), 64)
-        latency = self._quotient_bits + 1          # the dividers'
+        divs = [self.coordinate_divider() for _ in range(P)]
+        latency = divs[0].latency
         in_flight = Signal(range(latency + PIXEL_STAGES + 4))
         # the FIFO has room for every beat in flight; decided a cycle ahead (a flip-flop in
         # front of the coordinate registers' enables): the beats in flight and in the FIFO
@@ -333,12 +339,10 @@ class PerspectiveWarp(wiring.Component):
         issue = issuing & room
         last_beat = (dx + P == dw) & (dy == dh - 1)
 
-        divs = []
-        for p in range(P):
-            m.submodules[f"div{p}"] = d = self.coordinate_divider()
+        for p, d in enumerate(divs):
+            m.submodules[f"div{p}"] = d
             m.d.comb += [d.n[0].eq(x_lane[p][0]), d.n[1].eq(x_lane[p][1]),
                          d.w.eq(x_lane[p][2]), d.valid.eq(issue)]
-            divs.append(d)
         with m.If(issue):
             with m.If(dx + P == dw):
                 m.d.sync += [dx.eq(0), dy.eq(dy + 1)]
@@ -354,14 +358,18 @@ class PerspectiveWarp(wiring.Component):
                     for p in range(P):
                         m.d.sync += x_lane[p][k].eq(x_lane[p][k] + P * step[k])
 
+        def delayed(value, name, cycles=1):
+            """``value`` through ``cycles`` registers."""
+            for _ in range(cycles):
+                reg = Signal(Value.cast(value).shape(), name=name)
+                m.d.sync += reg.eq(value)
+                value = reg
+            return value
+
         # the frame's beat flags travel with the division
         first_flag, last_flag = Signal(), Signal()
         m.d.comb += [first_flag.eq((dx == 0) & (dy == 0)), last_flag.eq(last_beat)]
-        flags = Cat(first_flag, last_flag)
-        for _ in range(latency):
-            nxt = Signal(2)
-            m.d.sync += nxt.eq(flags)
-            flags = nxt
+        flags = delayed(Cat(first_flag, last_flag), "div_flags", latency)
 
         # The pixel pipeline behind the dividers, a register stage each (PIXEL_STAGES):
         #   A  the source pixel (integer parts), its fractions, "far outside"
@@ -374,35 +382,24 @@ class PerspectiveWarp(wiring.Component):
         # so that no stage holds more than one carry chain or multiplier behind a choice.
         F = COORD_FRACTION_BITS
         one = 1 << F
-
-        def stage(value, name):
-            reg = Signal(Value.cast(value).shape(), name=name)
-            m.d.sync += reg.eq(value)
-            return reg
-
-        valid, beat_flags = divs[0].q_valid, flags
-        valids, flag_stages = [], []
-        for _ in range(PIXEL_STAGES):
-            valid, beat_flags = stage(valid, "pix_valid"), stage(beat_flags, "pix_flags")
-            valids.append(valid)
-            flag_stages.append(beat_flags)
-        out_valid, out_flags = valids[-1], flag_stages[-1]
+        out_valid = delayed(divs[0].q_valid, "pix_valid", PIXEL_STAGES)
+        out_flags = delayed(flags, "pix_flags", PIXEL_STAGES)
 
         out_pixels, none_inside = [], []
         for p in range(P):
             d = divs[p]
             # A
-            sx = stage((d.q[0] >> F)[:self._quotient_bits].as_signed(), f"sx{p}")
-            sy = stage((d.q[1] >> F)[:self._quotient_bits].as_signed(), f"sy{p}")
-            ax, ay = stage(d.q[0][:F], f"ax{p}"), stage(d.q[1][:F], f"ay{p}")
-            away = stage(d.outside[0] | d.outside[1], f"away{p}")
+            sx = delayed((d.q[0] >> F)[:self._quotient_bits].as_signed(), f"sx{p}")
+            sy = delayed((d.q[1] >> F)[:self._quotient_bits].as_signed(), f"sy{p}")
+            ax, ay = delayed(d.q[0][:F], f"ax{p}"), delayed(d.q[1][:F], f"ay{p}")
+            away = delayed(d.outside[0] | d.outside[1], f"away{p}")
             # N: pixel (r, c) of the neighbourhood comes from bank ((sy + r) & 1, (sx + c) & 1)
-            ny = [stage(Mux(sy[0] == r, sy, sy + 1)[:len(sy) + 1].as_signed(), f"ny{p}_{r}")
+            ny = [delayed(Mux(sy[0] == r, sy, sy + 1)[:len(sy) + 1].as_signed(), f"ny{p}_{r}")
                   for r in range(2)]
-            nx = [stage(Mux(sx[0] == c, sx, sx + 1)[:len(sx) + 1].as_signed(), f"nx{p}_{c}")
+            nx = [delayed(Mux(sx[0] == c, sx, sx + 1)[:len(sx) + 1].as_signed(), f"nx{p}_{c}")
                   for c in range(2)]
-            away_n = stage(away, f"away_n{p}")
-            sx0, sy0 = stage(sx[0], f"sx0n{p}"), stage(sy[0], f"sy0n{p}")
+            away_n = delayed(away, f"away_n{p}")
+            sx0, sy0 = delayed(sx[0], f"sx0n{p}"), delayed(sy[0], f"sy0n{p}")
             weights = {}
             for dyo, wy in ((0, one - ay), (1, ay)):
                 for dxo, wx in ((0, one - ax), (1, ax)):
@@ -421,20 +418,18 @@ class PerspectiveWarp(wiring.Component):
                                      port.addr.eq(shared)]
                     else:
                         m.d.comb += port.addr.eq(addr)
-                    inside = stage(~away_n & (ny[r] >= 0) & (ny[r] < sh) & (nx[c] >= 0)
+                    inside = delayed(~away_n & (ny[r] >= 0) & (ny[r] < sh) & (nx[c] >= 0)
                                    & (nx[c] < sw), f"in{p}_{r}{c}")
-                    sel = (stage((nx[c] >> 1)[:16] % per_word, f"sel{p}_{r}{c}")
+                    sel = (delayed((nx[c] >> 1)[:16] % per_word, f"sel{p}_{r}{c}")
                            if per_word > 1 else None)
                     # W
-                    word = stage(port.data, f"word{p}_{r}{c}")
-                    inside_w = stage(inside, f"in_w{p}_{r}{c}")
-                    sel_w = stage(sel, f"sel_w{p}_{r}{c}") if sel is not None else None
+                    word = delayed(port.data, f"word{p}_{r}{c}")
+                    inside_w = delayed(inside, f"in_w{p}_{r}{c}")
+                    sel_w = delayed(sel, f"sel_w{p}_{r}{c}") if sel is not None else None
                     px = word.word_select(sel_w, 24) if sel_w is not None else word
                     reads[(r, c)] = (px, inside_w)
-            sx0_w, sy0_w = stage(stage(sx0, f"sx0r{p}"), f"sx0w{p}"), \
-                stage(stage(sy0, f"sy0r{p}"), f"sy0w{p}")
-            weights_w = {k: stage(stage(w, f"{w.name}_r"), f"{w.name}_w")
-                         for k, w in weights.items()}
+            sx0_w, sy0_w = delayed(sx0, f"sx0w{p}", 2), delayed(sy0, f"sy0w{p}", 2)
+            weights_w = {k: delayed(w, f"{w.name}_w", 2) for k, w in weights.items()}
             # V, X, S
             channels = []
             for ch in range(3):
@@ -445,18 +440,17 @@ class PerspectiveWarp(wiring.Component):
                     for (r, c), (px, inside) in reads.items():
                         mine = ((sy0_w ^ dyo) == r) & ((sx0_w ^ dxo) == c)
                         value = Mux(mine & inside, px.word_select(ch, 8), value)
-                    value_v = stage(value, f"v{p}_{ch}_{dyo}{dxo}")
-                    wgt_v = stage(wgt, f"{wgt.name}_v")
-                    products.append(stage(value_v * wgt_v, f"x{p}_{ch}_{dyo}{dxo}"))
+                    value_v = delayed(value, f"v{p}_{ch}_{dyo}{dxo}")
+                    wgt_v = delayed(wgt, f"{wgt.name}_v")
+                    products.append(delayed(value_v * wgt_v, f"x{p}_{ch}_{dyo}{dxo}"))
                 acc = Signal(2 * F + 9, name=f"acc{p}_{ch}")
-                m.d.sync += acc.eq((products[0] + products[1]) + (products[2] + products[3]))
+                m.d.sync += acc.eq(adder_tree(products))
                 channels.append(acc)
             half = 1 << (2 * F - 1)
             out_pixels.append(Cat(*(((a + half) >> (2 * F))[:8] for a in channels)))
             # the pixels whose neighbourhood is all outside, counted at S
             none = ~(reads[(0, 0)][1] | reads[(0, 1)][1] | reads[(1, 0)][1] | reads[(1, 1)][1])
-            none_inside.append(stage(stage(stage(none, f"none_v{p}"), f"none_x{p}"),
-                                     f"none_s{p}"))
+            none_inside.append(delayed(none, f"none_s{p}", 3))
         m.d.comb += [out_fifo.s_axis.tvalid.eq(out_valid),
                      out_fifo.s_axis.tdata.eq(Cat(*out_pixels)),
                      out_fifo.s_axis.tuser.eq(out_flags[0]),
