@@ -21,6 +21,7 @@ and its topic ports become ports of the system top, for a core made elsewhere.
 
 import importlib.util
 import sys
+import threading
 from dataclasses import dataclass
 
 from amaranth.hdl import Module
@@ -178,18 +179,25 @@ def thread_module_path(project, thread):
     return project.dir / "src" / thread.core_name / "amaranth" / "thread.py"
 
 
+#: one thread module loaded at a time: a module is in ``sys.modules`` while it executes, and a
+#: second system built meanwhile (the benches build several side by side in threads) would
+#: otherwise take it before its ``build`` exists
+_LOAD_LOCK = threading.Lock()
+
+
 def _load(path, thread):
     name = f"rosgate_project_{thread.core_name}_{abs(hash(str(path)))}"
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    try:
-        spec.loader.exec_module(module)
-    except Exception:
-        del sys.modules[name]
-        raise
+    with _LOAD_LOCK:
+        module = sys.modules.get(name)
+        if module is None:
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            try:
+                spec.loader.exec_module(module)
+            except Exception:
+                del sys.modules[name]
+                raise
     if not callable(getattr(module, "build", None)):
         raise ConfigError(thread.where, f"{path} defines no build(ctx) function")
     return module

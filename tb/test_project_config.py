@@ -240,3 +240,36 @@ def test_examples_parse(example, capsys):
     assert rosgate(["info", str(ROOT / "examples" / example / "build.cfg")]) == 0
     out = capsys.readouterr().out
     assert "slots:" in out and "threads:" in out and "handle  0" in out
+
+
+def test_thread_module_loads_once_across_threads(tmp_path):
+    """Two systems built side by side (the chain bench simulates two in threads) load a
+    thread's Amaranth module once; neither gets it half executed, without its build()."""
+    import threading
+    import types
+
+    from gen.config import Location
+    from gen.system import _load
+
+    path = tmp_path / "thread.py"
+    # the module takes a while to execute, so the second load comes while the first runs
+    path.write_text("import time\ntime.sleep(0.3)\n\n\ndef build(ctx):\n    return None\n")
+    thread = types.SimpleNamespace(core_name="rt_slow",
+                                   where=Location("build.cfg", 1, "HwThread@Slow"))
+    results, errors = [], []
+
+    def load():
+        try:
+            module = _load(path, thread)
+            # what build_thread does next
+            results.append((module, callable(getattr(module, "build", None))))
+        except Exception as exc:      # noqa: BLE001 - reported by the assertion below
+            errors.append(exc)
+    workers = [threading.Thread(target=load) for _ in range(3)]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join()
+    assert not errors, errors
+    assert len(results) == 3 and all(module is results[0][0] for module, _ in results)
+    assert all(has_build for _, has_build in results), results
