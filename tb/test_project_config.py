@@ -1,10 +1,13 @@
 """ReconROS build.cfg parsing (docs/reconos.md, docs/topics.md): the spec's handle examples,
 every example project, and one clear error (file, line, section, key) per kind of bad input."""
 
+import threading
+import types
 
 import pytest
 
-from gen.config import ConfigError, load_project, parse_project
+from gen.config import ConfigError, Location, load_project, parse_project
+from gen.system import _load
 from hdl.reconos.protocol import ResourceType
 from host.cli import main as rosgate
 
@@ -245,12 +248,6 @@ def test_examples_parse(example, capsys):
 def test_thread_module_loads_once_across_threads(tmp_path):
     """Two systems built side by side (the chain bench simulates two in threads) load a
     thread's Amaranth module once; neither gets it half executed, without its build()."""
-    import threading
-    import types
-
-    from gen.config import Location
-    from gen.system import _load
-
     path = tmp_path / "thread.py"
     # the module takes a while to execute, so the second load comes while the first runs
     path.write_text("import time\ntime.sleep(0.3)\n\n\ndef build(ctx):\n    return None\n")
