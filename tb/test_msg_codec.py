@@ -14,12 +14,15 @@ import pytest
 from cocotb.triggers import ClockCycles, with_timeout
 
 from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT, WireError, decode_cdr, default_value
-from hdl.msg import DeserializerError, SerializerError
+from gen.tops import message_plan
+from hdl.msg import DeserializerError, ReconrosDeserializer, ReconrosSerializer, SerializerError
+from hdl.params import ParameterError
 from tb.harness import amount, cocotb_bench
 from tb.models.messages import random_sequence
 from tb.models.msgstream import set_at, value_at
 
-from .msg_codec_tb import ELEMENTS, IMAGE, PARAMS, POINTS, STREAMABLE, MsgCodecTB, config
+from .msg_codec_tb import (ELEMENTS, IMAGE, PARAMS, POINTS, STREAMABLE, TEST_MSGS, MsgCodecTB,
+                           config)
 
 CONFIGS = {
     "image_cdr_w8": config(IMAGE, "cdr", 8, max_count=8192),
@@ -28,6 +31,9 @@ CONFIGS = {
     "streamable_cdr_w64": config(STREAMABLE, "cdr", 64, max_count=4096),
     "streamable_ros1_w8": config(STREAMABLE, "ros1", 8, max_count=4096),
     "streamable_reconros_w64": config(STREAMABLE, "reconros", 64, max_count=4096),
+    "streamable_reconros_beats_w64": config(STREAMABLE, "reconros", 64, max_count=4096,
+                                            beats=True),
+    "image_reconros_beats_w64": config(IMAGE, "reconros", 64, max_count=8192, beats=True),
     "elements_cdr_w64": config(ELEMENTS, "cdr", 64, max_count=4096),
     "elements_cdr_w8": pytest.param(config(ELEMENTS, "cdr", 8, max_count=4096),
                                     marks=pytest.mark.full),
@@ -56,6 +62,22 @@ LONG = [("streamable_ros1_w8", "verilator"), ("streamable_ros1_w8", "icarus"),
         ("elements_cdr_w64", "verilator")]
 
 test_msg_codec = cocotb_bench("msg_codec", CONFIGS, long=LONG)
+
+def test_reconros_codec_refuses_other_plans():
+    """The beat-at-a-time pair takes only the ``reconros`` framing at 64 bits, and says which
+    value it refuses."""
+    folders = [TEST_MSGS]
+    cdr = message_plan(IMAGE, "cdr", folders)
+    with pytest.raises(ParameterError, match="'cdr'"):
+        ReconrosDeserializer(cdr)
+    with pytest.raises(ParameterError, match="'cdr'"):
+        ReconrosSerializer(cdr)
+    reconros = message_plan(IMAGE, "reconros", folders)
+    with pytest.raises(ParameterError, match="data_width.*32"):
+        ReconrosSerializer(reconros, 32)
+    with pytest.raises(ParameterError, match="max_count.*0"):
+        ReconrosDeserializer(reconros, max_count=0)
+
 
 #: the element tests skip every configuration but Elements: only its type has packed element
 #: streams, and their cases name its fields (the other configurations' streams are covered
@@ -98,8 +120,9 @@ async def deserializer_random_messages(dut):
 
 @cocotb.test()
 async def round_trip_full_rate(dut):
-    """Without idle or backpressure, a >= 4 KiB payload moves at W/8 bytes per cycle in both
-    directions (>= 99 %), and the serializer's output deserializes to the input."""
+    """Without idle or backpressure, a >= 4 KiB payload leaves the deserializer at W/8 bytes
+    per cycle (>= 99 %), and the serializer's output for it equals the golden bytes and
+    deserializes to the input."""
     tb = MsgCodecTB(dut)
     await tb.reset()
     B = tb.bytes_per_beat
@@ -224,6 +247,21 @@ def bad_messages(tb):
             data = bytearray(good)
             data[nul] = ord("!")
             cases.append(("string without NUL", bytes(data), DeserializerError.FORMAT, value))
+    if tb.framing == "reconros":
+        fixed = [leaf for leaf in plan.leaves if leaf.length > 1]
+        if fixed:
+            # the size beat of a fixed array is two beats before its first data beat: the
+            # first beat that changes with the array's first element
+            other = _copy(value)
+            items = list(value_at(value, fixed[0].path))
+            items[0] = items[0] ^ 1 if isinstance(items[0], int) else items[0] + 1.0
+            set_at(other, fixed[0].path, items)
+            changed = tb.wire_bytes(other)
+            size_at = next(i for i in range(len(good)) if good[i] != changed[i]) // 8 * 8 - 16
+            data = bytearray(good)
+            data[size_at] ^= 0x01
+            cases.append(("fixed array size beat changed", bytes(data), DeserializerError.FORMAT,
+                          value))
     if tb.framing == "ros1":
         data = bytearray(good)
         data[0:4] = (len(good) - 4 + 1).to_bytes(4, "little")

@@ -5,6 +5,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import Out
 
 from .deserializer import Deserializer
+from .reconros import ReconrosDeserializer, ReconrosSerializer
 from .serializer import Serializer
 
 __all__ = ["MessageCodec"]
@@ -20,11 +21,16 @@ class MessageCodec(wiring.Component):
     data_width : int
     max_count : int
         Passed to the deserializer.
+    beats : bool
+        The ReconROS framing's beat-at-a-time pair (:class:`ReconrosSerializer`,
+        :class:`ReconrosDeserializer`) instead of the byte-granular one.
     """
 
-    def __init__(self, plan, data_width=64, *, max_count=1 << 24):
-        self._ser = Serializer(plan, data_width)
-        self._des = Deserializer(plan, data_width, max_count=max_count)
+    def __init__(self, plan, data_width=64, *, max_count=1 << 24, beats=False):
+        ser, des = ((ReconrosSerializer, ReconrosDeserializer) if beats
+                    else (Serializer, Deserializer))
+        self._ser = ser(plan, data_width)
+        self._des = des(plan, data_width, max_count=max_count)
         self.plan = plan
         super().__init__({"ser": Out(self._ser.signature), "des": Out(self._des.signature)})
 
