@@ -8,7 +8,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from ..dds.topic import HW_TOPIC_STREAM
-from ..msg import Deserializer, Serializer
+from ..msg import ReconrosDeserializer, ReconrosSerializer
 from ..msg.serializer import payload_port
 from ..stream import RegisterSlice
 from .hwt import HardwareThread
@@ -182,7 +182,7 @@ class _Transmitter:
     def __init__(self, thread, m, os, mem, lock, started):
         self.t, self.m, self.os, self.mem, self.lock = thread, m, os, mem, lock
         self.started = started
-        m.submodules.serializer = self.ser = ser = Serializer(thread.plan, 64)
+        m.submodules.serializer = self.ser = ser = ReconrosSerializer(thread.plan)
         out = getattr(thread, thread.out_port)
         m.d.comb += [out.tdata.eq(ser.m_axis.tdata), out.tkeep.eq(ser.m_axis.tkeep),
                      out.tlast.eq(ser.m_axis.tlast), out.tuser.eq(ser.m_axis.tuser),
@@ -322,8 +322,8 @@ class _Receiver:
         self.t, self.m, self.os, self.mem, self.lock = thread, m, os, mem, lock
         self.started = started
         plan = thread.plan
-        m.submodules.deserializer = self.des = des = Deserializer(
-            plan, 64, max_count=thread.max_count)
+        m.submodules.deserializer = self.des = des = ReconrosDeserializer(
+            plan, max_count=thread.max_count)
         _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis,
                     des.signature.members["s_axis"].signature.flip(), thread.publisher_id,
                     plan.publisher_offset)
