@@ -2,7 +2,8 @@
 docs/topics.md).
 
 Simulated cycles of the generated :class:`hdl.msg.Serializer` / :class:`hdl.msg.Deserializer`
-RTL under Verilator at full rate (no idle, no backpressure), each output checked against
+RTL (and of the ReconROS framing's beat-at-a-time pair, :class:`hdl.msg.ReconrosSerializer` /
+:class:`hdl.msg.ReconrosDeserializer`, as the gateway uses it) under Verilator at full rate (no idle, no backpressure), each output checked against
 rosbags (or the ReconROS model), converted to time at 100 MHz. Resources come from Debian's
 Yosys ``synth_xilinx -flatten -family xc7``.
 """
@@ -12,7 +13,7 @@ import json
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
 from gen.tops import message_plan
-from hdl.msg import Deserializer, Serializer
+from hdl.msg import Deserializer, ReconrosDeserializer, ReconrosSerializer, Serializer
 from tb.harness import SIM_BUILD, run_bench
 
 CLOCK_MHZ = 100
@@ -30,14 +31,16 @@ POSES_1000 = {"poses": {"elements": 1000}}
 #: 32 statuses of 4 key/value pairs: strings inside a sequence inside a sequence
 STATUS_32 = {"status": {"elements": 32, "values": 4}}
 
-#: (label, type, framing, width, field values)
+#: (label, type, framing, width, field values[, the beat-at-a-time pair])
 CASES = [
     ("Image 640x480 bgr8", IMAGE, "cdr", 64, IMAGE_640),
     ("Image 640x480 bgr8", IMAGE, "cdr", 512, IMAGE_640),
     ("Image 640x480 bgr8", IMAGE, "reconros", 64, IMAGE_640),
+    ("Image 640x480 bgr8", IMAGE, "reconros", 64, IMAGE_640, True),
     ("uint32[2048]", SORTDATA, "cdr", 64, SEQ_2048),
     ("uint32[2048]", SORTDATA, "cdr", 512, SEQ_2048),
     ("uint32[2048]", SORTDATA, "reconros", 64, SEQ_2048),
+    ("uint32[2048]", SORTDATA, "reconros", 64, SEQ_2048, True),
     ("PoseArray 1000 poses", POSES, "cdr", 64, POSES_1000),
     ("DiagnosticArray 32x4", DIAGNOSTICS, "cdr", 64, STATUS_32),
 ]
@@ -46,19 +49,21 @@ CASES = [
 RECONROS_IMAGE_BEATS = 115217
 
 
-def run_case(label, typename, framing, width, values, *, sim="verilator"):
-    config_id = f"bench-{typename.split('/')[-1].lower()}_{framing}_w{width}"
+def run_case(label, typename, framing, width, values, beats=False, *, sim="verilator"):
+    config_id = (f"bench-{typename.split('/')[-1].lower()}_{framing}{'_beats' if beats else ''}"
+                 f"_w{width}")
     out = SIM_BUILD / f"msg_codec-{config_id}-{sim}" / "record.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     params = dict(type=typename, framing=framing, data_width=width, msg_dirs=DIRS[typename],
-                  max_count=1 << 21)
+                  max_count=1 << 21, beats=beats)
     run_bench("bench.msg_bench", "msg_codec", config_id, params, sim,
               extra_env={"ROSGATE_BENCH_CASE": json.dumps({"set": values}),
                          "ROSGATE_BENCH_OUT": str(out)}, quiet=True, optimise=True)
     record = json.loads(out.read_text())
     limit = width // 8
     record.update(
-        label=label, type=typename, framing=framing, width=width, limit_bytes_per_cycle=limit,
+        label=label, type=typename, framing=framing, beats=beats, width=width,
+        limit_bytes_per_cycle=limit,
         serialize_bytes_per_cycle=record["wire_bytes"] / record["serialize_cycles"],
         deserialize_bytes_per_cycle=record["wire_bytes"] / record["deserialize_cycles"],
         payload_bytes_per_cycle=record["payload_bytes"] / record["payload_cycles"],
@@ -70,20 +75,28 @@ def run_case(label, typename, framing, width, values, *, sim="verilator"):
 def measure(log=print):
     runs = []
     for case in CASES:
-        log(f"  simulating {case[0]} {case[2]} at {case[3]} bits (Verilator)...")
+        pair = " (beat-at-a-time pair)" if case[5:] and case[5] else ""
+        log(f"  simulating {case[0]} {case[2]}{pair} at {case[3]} bits (Verilator)...")
         runs.append(run_case(*case))
     return {"clock_mhz": CLOCK_MHZ, "runs": runs}
 
 
 def resource_blocks():
     """(name, label, build) of the (de)serializers whose resources and timing are measured."""
-    def block(cls, width):
-        return lambda: cls(message_plan(IMAGE, "cdr", DIRS[IMAGE]), width)
-    return [(f"image_{kind.lower()}_w{width}", f"sensor_msgs/Image {kind}, CDR, {width} bit",
-             block(cls, width))
-            for kind, cls, width in (("Deserializer", Deserializer, 64),
-                                     ("Serializer", Serializer, 64),
-                                     ("Deserializer", Deserializer, 512))]
+    def block(cls, framing, width):
+        return lambda: cls(message_plan(IMAGE, framing, DIRS[IMAGE]), width)
+    return [(f"image_{kind.lower()}_w{width}",
+             f"sensor_msgs/Image {kind}, {FRAMING_NAMES[framing]}, {width} bit",
+             block(cls, framing, width))
+            for kind, cls, framing, width in (
+                ("Deserializer", Deserializer, "cdr", 64),
+                ("Serializer", Serializer, "cdr", 64),
+                ("Deserializer", Deserializer, "cdr", 512),
+                ("ReconrosDeserializer", ReconrosDeserializer, "reconros", 64),
+                ("ReconrosSerializer", ReconrosSerializer, "reconros", 64))]
+
+
+FRAMING_NAMES = {"cdr": "CDR", "reconros": "ReconROS"}
 
 
 def measure_resources(log=print):
@@ -111,7 +124,8 @@ def markdown(results, resources):
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results["runs"]:
         lines.append(
-            f"| {r['label']} | {r['framing']} | {r['width']} | {r['wire_bytes']} | "
+            f"| {r['label']} | {r['framing']}{' (beats)' if r.get('beats') else ''} | "
+            f"{r['width']} | {r['wire_bytes']} | "
             f"{r['serialize_cycles']} ({r['serialize_ms']:.4f}) | "
             f"{r['serialize_bytes_per_cycle']:.3f} ({pct(r, 'serialize')}) | "
             f"{r['deserialize_cycles']} ({r['deserialize_ms']:.4f}) | "
@@ -125,7 +139,9 @@ def markdown(results, resources):
               "which is what the DiagnosticArray row shows."]
     lines += ["", f"ReconROS framing (one 64-bit beat per primitive, docs/topics.md): the spec "
               f"derives {RECONROS_IMAGE_BEATS} beats = "
-              f"{RECONROS_IMAGE_BEATS / (CLOCK_MHZ * 1e3):.3f} ms for the 640x480 bgr8 Image.",
+              f"{RECONROS_IMAGE_BEATS / (CLOCK_MHZ * 1e3):.3f} ms for the 640x480 bgr8 Image. "
+              "The rows marked (beats) are the framing's beat-at-a-time pair "
+              "(`ReconrosSerializer`, `ReconrosDeserializer`), which the ROS gateway uses.",
               ]
     lines += resource_table(resources, "config", "block")
     lines.append("")

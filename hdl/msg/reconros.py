@@ -264,7 +264,7 @@ class ReconrosDeserializer(wiring.Component):
             m.d.sync += writes
             for part in beat.parts("count"):
                 v = self.plan.variables[part.var]
-                facts.load(m, data, 1 if v.string else v.element_bytes,
+                facts.load(m, data, v.element_bytes,
                            v.bound or self._max_count)
             with m.If(Cat(*bad_format, Const(0, 1)).any()):
                 fail(DeserializerError.FORMAT, inp.tlast)
@@ -391,7 +391,7 @@ class ReconrosSerializer(wiring.Component):
                                 for part in beat.parts("count"):
                                     v = plan.variables[part.var]
                                     count = fv[v.count.offset:v.count.offset + 32]
-                                    facts.load(m, count, 1 if v.string else v.element_bytes)
+                                    facts.load(m, count, v.element_bytes)
                                 goto(i)
                             continue
                         port = getattr(self, payload_port(plan.variables[beat.var], "s"))
