@@ -10,6 +10,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
+from ..logic import adder_tree
 from ..params import check_choice
 from ..stream import AXIStreamSignature
 
@@ -60,6 +61,67 @@ def _wrap(value, width):
     return value[:width].as_signed()
 
 
+#: cycles from the tilt's table values in registers to the search's first table address,
+#: which is when the plate joint's position (``psx``, ``psz``) reaches the search: three
+#: rounds of products (two cycles each: partial products, their sum), a sum after the
+#: second and third, less the table read. The height's square comes four cycles later and
+#: is used four stages into the search.
+SETUP_CYCLES = 7
+#: a table entry's way through a lane, a register each: its read, the arm's two
+#: coordinates, the partial products of their squares, the squares, their sum, that plus the
+#: height's square (the leg's squared length), the distance to the leg's length, its
+#: magnitude; the comparison with the lane's best ends it
+SEARCH_STAGES = 8
+
+
+def _chunks(value):
+    """``value`` (signed) as ``[(chunk, shift)]``: 17-bit unsigned chunks from bit 0 (as
+    18-bit signed values) and a signed top chunk of at most 18 bits."""
+    value = value.as_signed()
+    if len(value) <= 18:
+        return [(value, 0)]
+    chunks, low = [], 0
+    while len(value) - low > 18:
+        chunks.append((Cat(value[low:low + 17], Const(0, 1)).as_signed(), low))
+        low += 17
+    return chunks + [(value[low:].as_signed(), low)]
+
+
+def product(m, a, b, name):
+    """``a * b`` (signed values) two cycles later: the partial products of :func:`_chunks`
+    registered (at most 18x18 bits each), then their sum."""
+    terms = []
+    for x, sx in _chunks(a):
+        for y, sy in _chunks(b):
+            partial = Signal(signed(len(x) + len(y)), name=f"{name}_p{sx}_{sy}")
+            m.d.sync += partial.eq(x * y)
+            terms.append(partial << (sx + sy))
+    result = Signal(signed(len(a) + len(b)), name=name)
+    m.d.sync += result.eq(adder_tree(terms))
+    return result
+
+
+def square(m, a, name):
+    """``a * a`` (a signed value of 19 to 35 bits) two cycles later from three registered
+    partial products: ``a = h * 2**17 + l`` gives ``h*h * 2**34 + h*l * 2**18 + l*l``, and
+    ``l*l < 2**34`` is placed beside ``h*h`` without an addition."""
+    if not 19 <= len(a) <= 35:
+        raise ValueError(f"square of a {len(a)}-bit value: expected 19 to 35 bits")
+    (low, _), (high, _) = _chunks(a)
+    hh = Signal(2 * len(high), name=f"{name}_hh")
+    hl = Signal(signed(len(high) + 18), name=f"{name}_hl")
+    ll = Signal(34, name=f"{name}_ll")
+    m.d.sync += [hh.eq(high * high), hl.eq(high * low), ll.eq(low * low)]
+    result = Signal(2 * len(a), name=name)
+    m.d.sync += result.eq(Cat(ll, hh) + (hl << 18))
+    return result
+
+
+def times(value, k):
+    """``value * k`` for a constant ``k > 0`` as a sum of shifted copies (no multiplier)."""
+    return adder_tree([value << n for n in range(k.bit_length()) if k >> n & 1])
+
+
 class InverseKinematics(wiring.Component):
     """Arm angle of one leg of the ReconROS Stewart platform for a plate tilt (the
     ``rt_inverse`` node: ``/angle`` UInt32 in, ``legangle`` UInt32 out).
@@ -74,7 +136,13 @@ class InverseKinematics(wiring.Component):
     more are not wrapped (ReconROS computes it in 16 bits).
 
     The table is searched by ``lanes`` parallel lanes (lane j takes entries j, j + lanes,
-    ...); one solution takes ``2048 / lanes + 7`` cycles (16 lanes: 135).
+    ...); one solution takes :meth:`cycles_per_solution` cycles (16 lanes: 159). Every
+    product is split into partial products of at most 18x18 bits (an ECP5 or 7-series
+    multiplier each) registered before their sum, and every sum, comparison and table read
+    has a register stage of its own: the fixed-point chain in front of the search is a
+    pipeline the solution waits out (:data:`SETUP_CYCLES`), the search is a pipeline of
+    :data:`SEARCH_STAGES` stages per lane, and the lanes' minima are reduced one tree level a
+    cycle.
 
     Parameters
     ----------
@@ -102,12 +170,16 @@ class InverseKinematics(wiring.Component):
     lanes = property(lambda self: self._lanes)
 
     def cycles_per_solution(self):
-        return _LUT_SIZE // self._lanes + 7
+        """Cycles from one accepted input word to the next: the angle read, the setup, the
+        search's addresses and pipeline, the reduction and the output."""
+        levels = (self._lanes - 1).bit_length()
+        return 1 + 1 + SETUP_CYCLES + _LUT_SIZE // self._lanes + SEARCH_STAGES + levels + 1
 
     def elaborate(self, platform):
         m = Module()
         lanes = self._lanes
         steps = _LUT_SIZE // lanes
+        levels = (lanes - 1).bit_length()
         sin, cos = _lut()
 
         # angle table for alpha and beta (|index| <= 320)
@@ -118,9 +190,7 @@ class InverseKinematics(wiring.Component):
                                                                        cos[:n_angle])])
         rd_a, rd_b = angle_lut.read_port(), angle_lut.read_port()
 
-        busy = Signal()
         o_valid = Signal()
-        phase = Signal(range(8))
         leg = Signal(3)
         neg_a, neg_b = Signal(), Signal()
         m.d.comb += [self.o.tvalid.eq(o_valid), self.o.tlast.eq(1)]
@@ -129,23 +199,15 @@ class InverseKinematics(wiring.Component):
 
         def angle_index(raw):
             v = Signal(signed(18))
-            m.d.comb += v.eq(raw * 10)
+            m.d.comb += v.eq(times(raw, 10))
             mag = Mux(v < 0, -v, v)
             return v < 0, (mag >> 8)[:9]
 
         raw_a, raw_b = self.i.tdata[17:31].as_signed(), self.i.tdata[3:17].as_signed()
         na, ia = angle_index(raw_a)
         nb, ib = angle_index(raw_b)
-        m.d.comb += [rd_a.addr.eq(ia), rd_b.addr.eq(ib), self.i.tready.eq(~busy)]
-        m.d.sync += self.err_leg.eq(self.i.tvalid & ~busy & (self.i.tdata[:3] >= 6))
-        with m.If(self.i.tvalid & ~busy & (self.i.tdata[:3] < 6)):
-            m.d.sync += [busy.eq(1), phase.eq(0), leg.eq(self.i.tdata[:3]),
-                         neg_a.eq(na), neg_b.eq(nb)]
-
-        def lut_value(port, neg):
-            s = port.data[:22].as_signed()
-            c = port.data[22:].as_signed()
-            return Mux(neg, -s, s), c
+        m.d.comb += [rd_a.addr.eq(ia), rd_b.addr.eq(ib)]
+        m.d.sync += self.err_leg.eq(self.i.tvalid & self.i.tready & (self.i.tdata[:3] >= 6))
 
         # per-leg constants
         def per_leg(values, shape):
@@ -164,13 +226,44 @@ class InverseKinematics(wiring.Component):
         sx = per_leg([v < 0 for v in PLATFORM.sign_x], 1)
         sz = per_leg([v < 0 for v in PLATFORM.sign_z], 1)
 
+        # the setup: a pipeline from the tilt's table values, which stay put while it runs
+        sa, ca, sb, cb = (Signal(signed(22), name=n) for n in ("sa", "ca", "sb", "cb"))
+        ab = product(m, sa, sb, "sa_sb")
+        cab = product(m, ca, sb, "ca_sb")
+        cbpx = product(m, cb, px, "cb_px")
+        capy = product(m, ca, py, "ca_py")
+        sapy = product(m, sa, py, "sa_py")
+        abpx = product(m, ab, px, "sa_sb_px")
+        cabpx = product(m, cab, px, "ca_sb_px")
         pbx, pby, pbz = (Signal(signed(22), name=n) for n in ("pbx", "pby", "pbz"))
+        m.d.sync += [
+            pbx.eq(_wrap(cbpx >> 8, 22)),
+            pby.eq(_wrap((abpx + (capy << 20)) >> 28, 22)),
+            pbz.eq(_wrap((-cabpx + (sapy << 20) +
+                          Const(PLATFORM.z_offset << 40, signed(49))) >> 28, 22))]
+        rcx, rsy = product(m, rc, pbx, "rc_pbx"), product(m, rs, pby, "rs_pby")
+        rsx, rcy = product(m, rs, pbx, "rs_pbx"), product(m, rc, pby, "rc_pby")
         psx, psy, psz = (Signal(signed(22), name=n) for n in ("psx", "psy", "psz"))
+        # +-(rcx - rsy) + tx: both signs side by side, so that two additions are in series
+        m.d.sync += [
+            psx.eq(_wrap(Mux(sx, rsy - rcx + (tx << 20), rcx - rsy + (tx << 20)) >> 8, 22)),
+            psy.eq(_wrap((rsx + rcy + (ty << 20)) >> 8, 22)),
+            psz.eq(_wrap(Mux(sz, -pbz, pbz), 22))]
         psy2 = Signal(64)
-        t = Signal(range(steps + 2))
+        m.d.comb += psy2.eq(product(m, psy, psy, "psy_psy") << 16)
+
+        # the search: lane j reads entries j, j + lanes, ... at address t; each stage of
+        # its pipeline carries a valid bit and the address it came from
+        t = Signal(range(steps + 1))
+        searching = Signal()
         best = [Signal(33, name=f"best{j}") for j in range(lanes)]
         best_i = [Signal(11, name=f"best_i{j}") for j in range(lanes)]
-        banks = []
+        valid = [Signal(name=f"search_valid{k}") for k in range(SEARCH_STAGES)]
+        where = [Signal(range(steps), name=f"search_t{k}") for k in range(SEARCH_STAGES)]
+        m.d.sync += [valid[0].eq(searching & (t < steps)), where[0].eq(t)]
+        m.d.sync += [v.eq(u) for u, v in zip(valid, valid[1:])]
+        m.d.sync += [v.eq(u) for u, v in zip(where, where[1:])]
+        length_offset = PLATFORM.leg_squared << 12
         for j in range(lanes):
             bank = Memory(shape=44, depth=steps,
                           init=[(sin[i] & 0x3FFFFF) | (cos[i] & 0x3FFFFF) << 22
@@ -178,66 +271,74 @@ class InverseKinematics(wiring.Component):
             m.submodules[f"arm_lut{j}"] = bank
             port = bank.read_port()
             m.d.comb += port.addr.eq(t)
-            banks.append(port)
+            s = port.data[:22].as_signed()
+            c = port.data[22:].as_signed()
+            a = Signal(signed(34), name=f"a{j}")
+            cc = Signal(signed(34), name=f"c{j}")
+            m.d.sync += [a.eq((psx << 8) - times(s, PLATFORM.arm)),
+                         cc.eq((psz << 8) - times(c, PLATFORM.arm))]
+            aa, ccc = square(m, a, f"a{j}_sq"), square(m, cc, f"c{j}_sq")
+            both = Signal(69, name=f"squares{j}")
+            m.d.sync += both.eq(aa + ccc)
+            length = Signal(signed(32), name=f"len{j}")
+            m.d.sync += length.eq(_wrap((both + psy2) >> 28, 32))
+            diff = Signal(signed(34), name=f"diff{j}")
+            m.d.sync += diff.eq(length - length_offset)
+            d = Signal(33, name=f"d{j}")
+            m.d.sync += d.eq(Mux(diff < 0, -diff, diff))
+            with m.If(valid[-1] & (d < best[j])):
+                m.d.sync += [best[j].eq(d), best_i[j].eq(where[-1] * lanes + j)]
 
-        with m.If(busy):
-            with m.Switch(phase):
-                with m.Case(0):
-                    # table data of alpha and beta are on the read ports
-                    sa, ca = lut_value(rd_a, neg_a)
-                    sb, cb = lut_value(rd_b, neg_b)
-                    m.d.sync += [
-                        pbx.eq(_wrap((cb * px) >> 8, 22)),
-                        pby.eq(_wrap((sa * sb * px + ((ca * py) << 20)) >> 28, 22)),
-                        pbz.eq(_wrap((-(ca * sb * px) + ((sa * py) << 20) +
-                                      Const(PLATFORM.z_offset << 40, signed(49))) >> 28, 22)),
-                        phase.eq(1)]
-                with m.Case(1):
-                    x = rc * pbx - rs * pby
-                    m.d.sync += [
-                        psx.eq(_wrap((Mux(sx, -x, x) + (tx << 20)) >> 8, 22)),
-                        psy.eq(_wrap((rs * pbx + rc * pby + (ty << 20)) >> 8, 22)),
-                        psz.eq(_wrap(Mux(sz, -pbz, pbz), 22)),
-                        t.eq(0), phase.eq(2)]
+        # the reduction: the smallest distance, the lowest index on ties; a level a cycle
+        level = list(zip(best, best_i))
+        depth = 0
+        while len(level) > 1:
+            nxt = []
+            for n in range(0, len(level), 2):
+                (da, ia_), (db, ib_) = level[n], level[n + 1]
+                dd = Signal(33, name=f"red{depth}_{n}_d")
+                ii = Signal(11, name=f"red{depth}_{n}_i")
+                take_b = (db < da) | ((db == da) & (ib_ < ia_))
+                m.d.sync += [dd.eq(Mux(take_b, db, da)), ii.eq(Mux(take_b, ib_, ia_))]
+                nxt.append((dd, ii))
+            level, depth = nxt, depth + 1
+        win_i = level[0][1]
+
+        wait = Signal(range(max(SETUP_CYCLES, SEARCH_STAGES + levels) + 1))
+        with m.FSM(name="ik"):
+            with m.State("IDLE"):
+                m.d.comb += self.i.tready.eq(1)
+                with m.If(self.i.tvalid & (self.i.tdata[:3] < 6)):
+                    m.d.sync += [leg.eq(self.i.tdata[:3]), neg_a.eq(na), neg_b.eq(nb)]
+                    m.next = "ANGLES"
+            with m.State("ANGLES"):
+                # table data of alpha and beta are on the read ports
+                m.d.sync += [sa.eq(Mux(neg_a, -rd_a.data[:22].as_signed(),
+                                       rd_a.data[:22].as_signed())),
+                             ca.eq(rd_a.data[22:].as_signed()),
+                             sb.eq(Mux(neg_b, -rd_b.data[:22].as_signed(),
+                                       rd_b.data[:22].as_signed())),
+                             cb.eq(rd_b.data[22:].as_signed()),
+                             wait.eq(SETUP_CYCLES - 1)]
+                m.next = "SETUP"
+            with m.State("SETUP"):
+                m.d.sync += wait.eq(wait - 1)
+                with m.If(wait == 0):
+                    m.d.sync += [t.eq(0), searching.eq(1)]
                     m.d.sync += [b.eq(524287 << 12) for b in best]
                     m.d.sync += [b.eq(0) for b in best_i]
-                with m.Case(2):
-                    # search: address t now, data of t - 1 on the ports
-                    m.d.sync += [psy2.eq((psy * psy) << 16), t.eq(t + 1)]
-                    with m.If(t == steps):
-                        m.d.sync += phase.eq(3)
-                    with m.If(t != 0):
-                        for j, port in enumerate(banks):
-                            s = port.data[:22].as_signed()
-                            c = port.data[22:].as_signed()
-                            a = Signal(signed(34), name=f"a{j}")
-                            cc = Signal(signed(34), name=f"c{j}")
-                            m.d.comb += [a.eq((psx << 8) - PLATFORM.arm * s),
-                                         cc.eq((psz << 8) - PLATFORM.arm * c)]
-                            length = Signal(signed(32), name=f"len{j}")
-                            m.d.comb += length.eq(_wrap((a * a + cc * cc + psy2) >> 28, 32))
-                            diff = Signal(signed(34), name=f"diff{j}")
-                            m.d.comb += diff.eq(length - (PLATFORM.leg_squared << 12))
-                            d = Signal(33, name=f"d{j}")
-                            m.d.comb += d.eq(Mux(diff < 0, -diff, diff))
-                            with m.If(d < best[j]):
-                                m.d.sync += [best[j].eq(d), best_i[j].eq((t - 1) * lanes + j)]
-                with m.Case(3):
-                    # reduce: the smallest distance, the lowest index on ties
-                    level = list(zip(best, best_i))
-                    depth = 0
-                    while len(level) > 1:
-                        nxt = []
-                        for n in range(0, len(level), 2):
-                            (da, ia), (db, ib) = level[n], level[n + 1]
-                            d = Signal(33, name=f"red{depth}_{n}_d")
-                            i = Signal(11, name=f"red{depth}_{n}_i")
-                            take_b = (db < da) | ((db == da) & (ib < ia))
-                            m.d.comb += [d.eq(Mux(take_b, db, da)), i.eq(Mux(take_b, ib, ia))]
-                            nxt.append((d, i))
-                        level, depth = nxt, depth + 1
-                    win_i = level[0][1]
-                    with m.If(~o_valid | self.o.tready):
-                        m.d.sync += [o_valid.eq(1), busy.eq(0),
-                                     self.o.tdata.eq(Cat(Const(0, 18), leg, win_i))]
+                    m.next = "SEARCH"
+            with m.State("SEARCH"):
+                m.d.sync += t.eq(t + 1)
+                with m.If(t == steps - 1):
+                    m.d.sync += [searching.eq(0), wait.eq(SEARCH_STAGES + levels - 1)]
+                    m.next = "DRAIN"
+            with m.State("DRAIN"):
+                m.d.sync += wait.eq(wait - 1)
+                with m.If(wait == 0):
+                    m.next = "OUTPUT"
+            with m.State("OUTPUT"):
+                with m.If(~o_valid | self.o.tready):
+                    m.d.sync += [o_valid.eq(1), self.o.tdata.eq(Cat(Const(0, 18), leg, win_i))]
+                    m.next = "IDLE"
         return m
