@@ -98,6 +98,18 @@ def resource_blocks():
 
 FRAMING_NAMES = {"cdr": "CDR", "reconros": "ReconROS"}
 
+#: blocks over the timing flow's placement budget (bench/timing.py), and the narrower widths
+#: placed instead, largest first
+TIMING_FALLBACKS = {"image_deserializer_w512": (256, 128)}
+
+
+def timing_fallbacks(name):
+    """``(label, build)`` of the configurations bench/timing.py places when block ``name`` is
+    too large for its flow."""
+    return [(f"sensor_msgs/Image Deserializer, CDR, {width} bit",
+             lambda width=width: Deserializer(message_plan(IMAGE, "cdr", DIRS[IMAGE]), width))
+            for width in TIMING_FALLBACKS.get(name, ())]
+
 
 def measure_resources(log=print):
     rows = []
