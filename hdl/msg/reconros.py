@@ -367,12 +367,13 @@ class ReconrosSerializer(wiring.Component):
         def report(reason):
             m.d.sync += [self.error.valid.eq(1), code.eq(reason)]
 
-        def emit(i, data, keep=0xFF):
+        def emit(i, data):
             last = i == len(program) - 1
-            m.d.sync += [out.tvalid.eq(1), out.tdata.eq(data), out.tkeep.eq(keep),
+            m.d.sync += [out.tvalid.eq(1), out.tdata.eq(data), out.tkeep.eq(0xFF),
                          out.tlast.eq(last), out.tuser.eq(i != 0 and not last)]
 
-        def goto(i):
+        def finish(i):
+            """Beat (or payload) ``i`` is out: on to the next, or to the next message."""
             if i == len(program) - 1:
                 m.d.comb += self.fields.ready.eq(1)
                 m.d.sync += op.eq(0)
@@ -392,27 +393,27 @@ class ReconrosSerializer(wiring.Component):
                                     v = plan.variables[part.var]
                                     count = fv[v.count.offset:v.count.offset + 32]
                                     facts.load(m, count, v.element_bytes)
-                                goto(i)
+                                finish(i)
                             continue
                         port = getattr(self, payload_port(plan.variables[beat.var], "s"))
                         with m.If(draining):
                             m.d.comb += port.tready.eq(1)
                             with m.If(port.tvalid & port.tlast):
                                 m.d.sync += draining.eq(0)
-                                goto(i)
+                                finish(i)
                         with m.Elif(filling):
                             with m.If(load):
                                 emit(i, 0)
                                 facts.step(m)
                                 with m.If(facts.one):
                                     m.d.sync += filling.eq(0)
-                                    goto(i)
+                                    finish(i)
                         with m.Elif(facts.empty):
                             # the field's one beat, data ignored
                             m.d.comb += port.tready.eq(1)
                             with m.If(port.tvalid):
                                 with m.If(port.tlast):
-                                    goto(i)
+                                    finish(i)
                                 with m.Else():
                                     report(SerializerError.PAYLOAD_LONG)
                                     m.d.sync += draining.eq(1)
@@ -430,7 +431,7 @@ class ReconrosSerializer(wiring.Component):
                                     with m.Else():
                                         with m.If(keep != facts.keep):
                                             report(SerializerError.PAYLOAD_SHORT)
-                                        goto(i)
+                                        finish(i)
                                 with m.Elif(port.tlast):
                                     report(SerializerError.PAYLOAD_SHORT)
                                     m.d.sync += filling.eq(1)
