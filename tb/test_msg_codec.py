@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Bench of the exported ``msg_codec`` top: hdl.msg.Serializer and Deserializer
 (docs/messages.md; docs/topics.md; issue: ROS messages in hardware).
 
