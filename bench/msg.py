@@ -3,9 +3,10 @@ docs/topics.md).
 
 Simulated cycles of the generated :class:`hdl.msg.Serializer` / :class:`hdl.msg.Deserializer`
 RTL (and of the ReconROS framing's beat-at-a-time pair, :class:`hdl.msg.ReconrosSerializer` /
-:class:`hdl.msg.ReconrosDeserializer`, as the gateway uses it) under Verilator at full rate (no idle, no backpressure), each output checked against
-rosbags (or the ReconROS model), converted to time at 100 MHz. Resources come from Debian's
-Yosys ``synth_xilinx -flatten -family xc7``.
+:class:`hdl.msg.ReconrosDeserializer`, as the gateway uses it) under Verilator at full rate
+(no idle, no backpressure), each output checked against rosbags (or the ReconROS model),
+converted to time at 100 MHz. Resources come from Debian's Yosys
+``synth_xilinx -flatten -family xc7``.
 """
 
 import json
@@ -81,34 +82,34 @@ def measure(log=print):
     return {"clock_mhz": CLOCK_MHZ, "runs": runs}
 
 
-def resource_blocks():
-    """(name, label, build) of the (de)serializers whose resources and timing are measured."""
-    def block(cls, framing, width):
-        return lambda: cls(message_plan(IMAGE, framing, DIRS[IMAGE]), width)
-    return [(f"image_{kind.lower()}_w{width}",
-             f"sensor_msgs/Image {kind}, {FRAMING_NAMES[framing]}, {width} bit",
-             block(cls, framing, width))
-            for kind, cls, framing, width in (
-                ("Deserializer", Deserializer, "cdr", 64),
-                ("Serializer", Serializer, "cdr", 64),
-                ("Deserializer", Deserializer, "cdr", 512),
-                ("ReconrosDeserializer", ReconrosDeserializer, "reconros", 64),
-                ("ReconrosSerializer", ReconrosSerializer, "reconros", 64))]
-
-
 FRAMING_NAMES = {"cdr": "CDR", "reconros": "ReconROS"}
+
+#: the (de)serializers whose resources and timing are measured: (class, framing, width)
+BLOCKS = [(Deserializer, "cdr", 64), (Serializer, "cdr", 64), (Deserializer, "cdr", 512),
+          (ReconrosDeserializer, "reconros", 64), (ReconrosSerializer, "reconros", 64)]
 
 #: blocks over the timing flow's placement budget (bench/timing.py), and the narrower widths
 #: placed instead, largest first
 TIMING_FALLBACKS = {"image_deserializer_w512": (256, 128)}
 
 
+def _block(cls, framing, width):
+    """``(name, label, build)`` of ``cls`` for the Image in ``framing`` at ``width`` bits."""
+    return (f"image_{cls.__name__.lower()}_w{width}",
+            f"sensor_msgs/Image {cls.__name__}, {FRAMING_NAMES[framing]}, {width} bit",
+            lambda: cls(message_plan(IMAGE, framing, DIRS[IMAGE]), width))
+
+
+def resource_blocks():
+    """(name, label, build) of the (de)serializers whose resources and timing are measured."""
+    return [_block(*block) for block in BLOCKS]
+
+
 def timing_fallbacks(name):
     """``(label, build)`` of the configurations bench/timing.py places when block ``name`` is
     too large for its flow."""
-    return [(f"sensor_msgs/Image Deserializer, CDR, {width} bit",
-             lambda width=width: Deserializer(message_plan(IMAGE, "cdr", DIRS[IMAGE]), width))
-            for width in TIMING_FALLBACKS.get(name, ())]
+    cls, framing, _ = next(b for b in BLOCKS if _block(*b)[0] == name)
+    return [_block(cls, framing, width)[1:] for width in TIMING_FALLBACKS.get(name, ())]
 
 
 def measure_resources(log=print):

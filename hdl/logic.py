@@ -1,8 +1,9 @@
 """Logic idioms the packages share, for the way synthesis maps them."""
 
-from amaranth.hdl import Signal
+from amaranth.hdl import Cat, Const, Signal, Value, signed
 
-__all__ = ["Countdown", "adder_tree", "kept"]
+__all__ = ["Countdown", "adder_tree", "kept", "shifted_sum", "split_product",
+           "split_square"]
 
 
 def adder_tree(values):
@@ -13,6 +14,58 @@ def adder_tree(values):
         values = [values[k] + values[k + 1] if k + 1 < len(values) else values[k]
                   for k in range(0, len(values), 2)]
     return values[0]
+
+
+def shifted_sum(terms):
+    """``sum(weight * value)`` for ``(weight, value)`` pairs with constant non-negative integer
+    weights, exact: one shifted copy of a value per set bit of its weight, added in a
+    balanced tree. (A product with a constant would otherwise take a multiplier block, and
+    Python's ``sum`` chains its additions one after the other.)"""
+    return adder_tree([Value.cast(value) << bit for weight, value in terms
+                       for bit in range(weight.bit_length()) if weight >> bit & 1])
+
+
+def _chunks(value):
+    """``value`` (signed) as ``[(chunk, shift)]``: 17-bit unsigned chunks from bit 0 (as
+    18-bit signed values) and a signed top chunk of at most 18 bits."""
+    value = value.as_signed()
+    if len(value) <= 18:
+        return [(value, 0)]
+    chunks, low = [], 0
+    while len(value) - low > 18:
+        chunks.append((Cat(value[low:low + 17], Const(0, 1)).as_signed(), low))
+        low += 17
+    return chunks + [(value[low:].as_signed(), low)]
+
+
+def split_product(m, a, b, name):
+    """``a * b`` (signed values) two cycles later: partial products of at most 18x18 bits
+    (one ECP5 or 7-series multiplier each) registered, then their sum registered."""
+    terms = []
+    for x, sx in _chunks(a):
+        for y, sy in _chunks(b):
+            partial = Signal(signed(len(x) + len(y)), name=f"{name}_p{sx}_{sy}")
+            m.d.sync += partial.eq(x * y)
+            terms.append(partial << (sx + sy))
+    result = Signal(signed(len(a) + len(b)), name=name)
+    m.d.sync += result.eq(adder_tree(terms))
+    return result
+
+
+def split_square(m, a, name):
+    """``a * a`` (a signed value of 19 to 35 bits) two cycles later from three registered
+    partial products: ``a = h * 2**17 + l`` gives ``h*h * 2**34 + h*l * 2**18 + l*l``, and
+    ``l*l < 2**34`` is placed beside ``h*h`` without an addition."""
+    if not 19 <= len(a) <= 35:
+        raise ValueError(f"square of a {len(a)}-bit value: expected 19 to 35 bits")
+    (low, _), (high, _) = _chunks(a)
+    hh = Signal(2 * len(high), name=f"{name}_hh")
+    hl = Signal(signed(len(high) + 18), name=f"{name}_hl")
+    ll = Signal(34, name=f"{name}_ll")
+    m.d.sync += [hh.eq(high * high), hl.eq(high * low), ll.eq(low * low)]
+    result = Signal(2 * len(a), name=name)
+    m.d.sync += result.eq(Cat(ll, hh) + (hl << 18))
+    return result
 
 
 def kept(m, value, name):

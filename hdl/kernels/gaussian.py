@@ -1,8 +1,8 @@
 """Gaussian blur, bit-exact with ``cv2.GaussianBlur(sigma=0)`` (docs/kernels.md)."""
 
-from amaranth.hdl import Cat, Value
+from amaranth.hdl import Cat
 
-from ..logic import adder_tree
+from ..logic import shifted_sum
 from ..params import check_choice
 from .window import WindowFilter
 
@@ -11,15 +11,6 @@ __all__ = ["GaussianBlur", "GAUSSIAN_TAPS"]
 #: ksize -> (binomial taps, rounding shift): ``(sum(K * p) + 2**(s-1)) >> s`` with
 #: ``K = outer(taps, taps)``
 GAUSSIAN_TAPS = {3: ((1, 2, 1), 4), 5: ((1, 4, 6, 4, 1), 8)}
-
-
-def _weighted_sum(terms):
-    """``sum(weight * value)`` for ``(weight, value)`` pairs with small non-negative integer
-    weights, exact: one shifted copy of a value per set bit of its weight, added in a
-    balanced tree. (A product with a constant would otherwise take a multiplier block, and
-    Python's ``sum`` chains its additions one after the other.)"""
-    return adder_tree([Value.cast(value) << bit for weight, value in terms
-                       for bit in range(weight.bit_length()) if weight >> bit & 1])
 
 
 class GaussianBlur(WindowFilter):
@@ -62,10 +53,10 @@ class GaussianBlur(WindowFilter):
         for p in range(self.pixels_per_beat):
             lanes = []
             for c in range(self.channels):
-                columns = [ctx.register(_weighted_sum(
+                columns = [ctx.register(shifted_sum(
                     [(taps[dy], pixel(p, dy, dx).word_select(c, 8)) for dy in range(k)]),
                     f"column{dx}_p{p}_c{c}") for dx in range(k)]
-                total = ctx.register(_weighted_sum(list(zip(taps, columns))),
+                total = ctx.register(shifted_sum(list(zip(taps, columns))),
                                      f"total_p{p}_c{c}")
                 lanes.append(((total + (1 << (shift - 1))) >> shift)[:8])
             outputs.append(Cat(*lanes))

@@ -10,7 +10,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..logic import adder_tree
+from ..logic import shifted_sum, split_product, split_square
 from ..params import check_choice
 from ..stream import AXIStreamSignature
 
@@ -72,54 +72,6 @@ SETUP_CYCLES = 7
 #: height's square (the leg's squared length), the distance to the leg's length, its
 #: magnitude; the comparison with the lane's best ends it
 SEARCH_STAGES = 8
-
-
-def _chunks(value):
-    """``value`` (signed) as ``[(chunk, shift)]``: 17-bit unsigned chunks from bit 0 (as
-    18-bit signed values) and a signed top chunk of at most 18 bits."""
-    value = value.as_signed()
-    if len(value) <= 18:
-        return [(value, 0)]
-    chunks, low = [], 0
-    while len(value) - low > 18:
-        chunks.append((Cat(value[low:low + 17], Const(0, 1)).as_signed(), low))
-        low += 17
-    return chunks + [(value[low:].as_signed(), low)]
-
-
-def product(m, a, b, name):
-    """``a * b`` (signed values) two cycles later: the partial products of :func:`_chunks`
-    registered (at most 18x18 bits each), then their sum."""
-    terms = []
-    for x, sx in _chunks(a):
-        for y, sy in _chunks(b):
-            partial = Signal(signed(len(x) + len(y)), name=f"{name}_p{sx}_{sy}")
-            m.d.sync += partial.eq(x * y)
-            terms.append(partial << (sx + sy))
-    result = Signal(signed(len(a) + len(b)), name=name)
-    m.d.sync += result.eq(adder_tree(terms))
-    return result
-
-
-def square(m, a, name):
-    """``a * a`` (a signed value of 19 to 35 bits) two cycles later from three registered
-    partial products: ``a = h * 2**17 + l`` gives ``h*h * 2**34 + h*l * 2**18 + l*l``, and
-    ``l*l < 2**34`` is placed beside ``h*h`` without an addition."""
-    if not 19 <= len(a) <= 35:
-        raise ValueError(f"square of a {len(a)}-bit value: expected 19 to 35 bits")
-    (low, _), (high, _) = _chunks(a)
-    hh = Signal(2 * len(high), name=f"{name}_hh")
-    hl = Signal(signed(len(high) + 18), name=f"{name}_hl")
-    ll = Signal(34, name=f"{name}_ll")
-    m.d.sync += [hh.eq(high * high), hl.eq(high * low), ll.eq(low * low)]
-    result = Signal(2 * len(a), name=name)
-    m.d.sync += result.eq(Cat(ll, hh) + (hl << 18))
-    return result
-
-
-def times(value, k):
-    """``value * k`` for a constant ``k > 0`` as a sum of shifted copies (no multiplier)."""
-    return adder_tree([value << n for n in range(k.bit_length()) if k >> n & 1])
 
 
 class InverseKinematics(wiring.Component):
@@ -199,7 +151,7 @@ class InverseKinematics(wiring.Component):
 
         def angle_index(raw):
             v = Signal(signed(18))
-            m.d.comb += v.eq(times(raw, 10))
+            m.d.comb += v.eq(shifted_sum([(10, raw)]))
             mag = Mux(v < 0, -v, v)
             return v < 0, (mag >> 8)[:9]
 
@@ -228,21 +180,21 @@ class InverseKinematics(wiring.Component):
 
         # the setup: a pipeline from the tilt's table values, which stay put while it runs
         sa, ca, sb, cb = (Signal(signed(22), name=n) for n in ("sa", "ca", "sb", "cb"))
-        ab = product(m, sa, sb, "sa_sb")
-        cab = product(m, ca, sb, "ca_sb")
-        cbpx = product(m, cb, px, "cb_px")
-        capy = product(m, ca, py, "ca_py")
-        sapy = product(m, sa, py, "sa_py")
-        abpx = product(m, ab, px, "sa_sb_px")
-        cabpx = product(m, cab, px, "ca_sb_px")
+        ab = split_product(m, sa, sb, "sa_sb")
+        cab = split_product(m, ca, sb, "ca_sb")
+        cbpx = split_product(m, cb, px, "cb_px")
+        capy = split_product(m, ca, py, "ca_py")
+        sapy = split_product(m, sa, py, "sa_py")
+        abpx = split_product(m, ab, px, "sa_sb_px")
+        cabpx = split_product(m, cab, px, "ca_sb_px")
         pbx, pby, pbz = (Signal(signed(22), name=n) for n in ("pbx", "pby", "pbz"))
         m.d.sync += [
             pbx.eq(_wrap(cbpx >> 8, 22)),
             pby.eq(_wrap((abpx + (capy << 20)) >> 28, 22)),
             pbz.eq(_wrap((-cabpx + (sapy << 20) +
                           Const(PLATFORM.z_offset << 40, signed(49))) >> 28, 22))]
-        rcx, rsy = product(m, rc, pbx, "rc_pbx"), product(m, rs, pby, "rs_pby")
-        rsx, rcy = product(m, rs, pbx, "rs_pbx"), product(m, rc, pby, "rc_pby")
+        rcx, rsy = split_product(m, rc, pbx, "rc_pbx"), split_product(m, rs, pby, "rs_pby")
+        rsx, rcy = split_product(m, rs, pbx, "rs_pbx"), split_product(m, rc, pby, "rc_pby")
         psx, psy, psz = (Signal(signed(22), name=n) for n in ("psx", "psy", "psz"))
         # +-(rcx - rsy) + tx: both signs side by side, so that two additions are in series
         m.d.sync += [
@@ -250,7 +202,7 @@ class InverseKinematics(wiring.Component):
             psy.eq(_wrap((rsx + rcy + (ty << 20)) >> 8, 22)),
             psz.eq(_wrap(Mux(sz, -pbz, pbz), 22))]
         psy2 = Signal(64)
-        m.d.comb += psy2.eq(product(m, psy, psy, "psy_psy") << 16)
+        m.d.comb += psy2.eq(split_product(m, psy, psy, "psy_psy") << 16)
 
         # the search: lane j reads entries j, j + lanes, ... at address t; each stage of
         # its pipeline carries a valid bit and the address it came from
@@ -275,9 +227,9 @@ class InverseKinematics(wiring.Component):
             c = port.data[22:].as_signed()
             a = Signal(signed(34), name=f"a{j}")
             cc = Signal(signed(34), name=f"c{j}")
-            m.d.sync += [a.eq((psx << 8) - times(s, PLATFORM.arm)),
-                         cc.eq((psz << 8) - times(c, PLATFORM.arm))]
-            aa, ccc = square(m, a, f"a{j}_sq"), square(m, cc, f"c{j}_sq")
+            m.d.sync += [a.eq((psx << 8) - shifted_sum([(PLATFORM.arm, s)])),
+                         cc.eq((psz << 8) - shifted_sum([(PLATFORM.arm, c)]))]
+            aa, ccc = split_square(m, a, f"a{j}_sq"), split_square(m, cc, f"c{j}_sq")
             both = Signal(69, name=f"squares{j}")
             m.d.sync += both.eq(aa + ccc)
             length = Signal(signed(32), name=f"len{j}")

@@ -10,5 +10,5 @@ from .reconros import ReconrosDeserializer, ReconrosSerializer
 from .codec import MessageCodec
 
 __all__ = ["BytePacker", "ByteUnpacker", "ChunkSignature", "ErrorSignature", "Serializer",
-           "SerializerError", "payload_port", "Deserializer", "DeserializerError", "ReconrosSerializer",
-           "ReconrosDeserializer", "MessageCodec"]
+           "SerializerError", "payload_port", "Deserializer", "DeserializerError",
+           "ReconrosSerializer", "ReconrosDeserializer", "MessageCodec"]

@@ -18,10 +18,12 @@ from amaranth.lib.wiring import In, Out
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 from .deserializer import DeserializerError
-from .serializer import ErrorSignature, SerializerError, _extend, count_errors, payload_port
+from .serializer import (ErrorSignature, SerializerError, _extend, check_plan_width,
+                         count_errors, payload_port)
 
 __all__ = ["ReconrosSerializer", "ReconrosDeserializer", "beat_program"]
 
+#: bytes per beat of the framing (its plan's ``data_width``, checked by :func:`beat_program`)
 BEAT = 8
 
 
@@ -57,6 +59,7 @@ def beat_program(plan):
     if plan.framing != "reconros":
         raise ParameterError("plan", plan.typename,
                              f"in the 'reconros' framing (this one is in {plan.framing!r})")
+    check_plan_width(plan, 8 * BEAT)
     beats = []
     for s in plan.steps:
         if s.kind == "payload":
@@ -165,9 +168,9 @@ class ReconrosDeserializer(wiring.Component):
     """
 
     def __init__(self, plan, data_width=64, *, max_count=1 << 24):
-        check_int("data_width", data_width, 64, 64)
-        check_int("max_count", max_count, 1, (1 << 32) - 2)
         self.program = beat_program(plan)
+        check_plan_width(plan, data_width)
+        check_int("max_count", max_count, 1, (1 << 32) - 2)
         self.plan = plan
         self._max_count = max_count
         members = {"s_axis": In(AXIStreamSignature(64)),
@@ -329,8 +332,8 @@ class ReconrosSerializer(wiring.Component):
     """
 
     def __init__(self, plan, data_width=64):
-        check_int("data_width", data_width, 64, 64)
         self.program = beat_program(plan)
+        check_plan_width(plan, data_width)
         self.plan = plan
         members = {"fields": In(stream.Signature(plan.layout))}
         for v in plan.streams:
