@@ -94,7 +94,7 @@ RESOURCE_SPECS = {"equalize_p1": (dict(kind="equalize", max_width=128, max_heigh
 
 #: kernels too large for the timing device (bench/timing.py), and the smaller configurations
 #: placed instead, largest first: (parameter, value)
-TIMING_FALLBACKS = {"ik": (("lanes", 8),), "mnist": (("pixels_per_beat", 1),)}
+TIMING_FALLBACKS = {"ik": (("lanes", 8),)}
 
 
 def measure_resources(log=print):

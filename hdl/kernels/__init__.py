@@ -9,7 +9,7 @@ from .gaussian import GaussianBlur
 from .image import FrameGuard
 from .inverse_kinematics import InverseKinematics
 from .lane import LaneControl, LaneDetector, LightEvent, LightNode
-from .mnist import MnistCnn
+from .mnist import MnistCnn, MnistMacArray
 from .pid import PidController
 from .servo_pwm import ServoPwm
 from .sobel import Sobel, SobelByteLanes
@@ -18,6 +18,6 @@ from .warp import PerspectiveWarp
 from .window import WindowFilter
 
 __all__ = ["BallControl", "BgrToGray", "BgrToHsv", "EqualizeHist", "FrameGuard", "GaussianBlur",
-           "ImageCompensation", "InRange", "InverseKinematics", "LaneControl", "LaneDetector", "LightEvent", "LightNode", "MergeSorter", "MnistCnn", "PerspectiveWarp", "PidController",
+           "ImageCompensation", "InRange", "InverseKinematics", "LaneControl", "LaneDetector", "LightEvent", "LightNode", "MergeSorter", "MnistCnn", "MnistMacArray", "PerspectiveWarp", "PidController",
            "PixelKernel", "ServoPwm", "Sobel", "SobelByteLanes", "TrafficLightDetector",
            "WindowFilter"]

@@ -1,22 +1,27 @@
 """Integer MNIST CNN: 3 x (conv3x3 + ReLU + maxpool2), FC + ReLU, FC (docs/kernels.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from ..params import ParameterError, check_choice
+from ..params import ParameterError, check_choice, check_int
 from ..stream import AXIStreamSignature
 from .image import FrameGuard, image_stream_signature
 
-__all__ = ["MnistCnn", "MNIST_RESULT"]
+__all__ = ["MnistCnn", "MnistMacArray", "MNIST_RESULT"]
 
 #: the result beat (176 bits, first member lowest)
 MNIST_RESULT = data.StructLayout({"digit": 8, "reserved": 8,
                                   "scores": data.ArrayLayout(signed(16), 10)})
 
+#: the network's layers: (name, input channels, output channels, input side)
 _CONVS = (("conv1", 1, 8, 28), ("conv2", 8, 16, 14), ("conv3", 16, 32, 7))
-_FCS = (("fc1", 288, 64), ("fc2", 64, 10))
+_SHAPES = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
+           "fc1": (64, 288), "fc2": (10, 64)}
+
+LANES = 16
+TAPS = 9
 
 
 def _pack(values, bits):
@@ -26,16 +31,116 @@ def _pack(values, bits):
     return word
 
 
+class MnistMacArray(wiring.Component):
+    """``lanes`` dot products of ``taps`` terms per cycle, accumulated over beats.
+
+    Every beat multiplies one activation vector (``taps`` unsigned bytes, shared by all lanes)
+    by each lane's ``taps`` signed weights and adds the lane's sum to its accumulator; the
+    first beat of an accumulation starts from zero. Inputs, products and every level of the
+    adder trees are registered, so no path holds more than one multiplier or one adder.
+
+    Members
+    -------
+    valid : In(1)
+        A beat is presented this cycle.
+    first, last : In(1)
+        The beat starts, ends an accumulation (both for a one-beat accumulation).
+    tag : In(tag_width)
+        Carried to ``out_tag`` with the accumulation's last beat.
+    act : In(ArrayLayout(unsigned(8), taps))
+        The activations.
+    weights : In(ArrayLayout(signed(8), lanes * taps))
+        Lane ``o``'s weight for tap ``t`` at index ``o * taps + t``.
+    out_valid : Out(1)
+        ``sums`` hold a finished accumulation this cycle, :attr:`LATENCY` cycles after its
+        last beat was presented; the next cycle they may change.
+    sums : Out(ArrayLayout(signed(32), lanes))
+    out_tag : Out(tag_width)
+    """
+
+    def __init__(self, lanes=LANES, taps=TAPS, *, tag_width=1):
+        self.lanes = check_int("lanes", lanes, 1)
+        self.taps = check_int("taps", taps, 1)
+        self.tag_width = check_int("tag_width", tag_width, 1)
+        super().__init__({
+            "valid": In(1), "first": In(1), "last": In(1), "tag": In(tag_width),
+            "act": In(data.ArrayLayout(unsigned(8), taps)),
+            "weights": In(data.ArrayLayout(signed(8), lanes * taps)),
+            "out_valid": Out(1),
+            "sums": Out(data.ArrayLayout(signed(32), lanes)),
+            "out_tag": Out(tag_width),
+        })
+
+    @property
+    def LATENCY(self):
+        """Cycles from a last beat at the inputs to ``out_valid``: input registers, products,
+        one per adder-tree level, the accumulator."""
+        return 3 + (self.taps - 1).bit_length()
+
+    def elaborate(self, platform):
+        m = Module()
+        lanes, taps = self.lanes, self.taps
+        depth = self.LATENCY - 1
+        ctrl = [Cat(self.valid, self.first, self.last, self.tag)]
+        for k in range(depth):
+            reg = Signal(len(ctrl[0]), name=f"ctrl{k}")
+            m.d.sync += reg.eq(ctrl[-1])
+            ctrl.append(reg)
+        valid, first, last, tag = (ctrl[-1][0], ctrl[-1][1], ctrl[-1][2], ctrl[-1][3:])
+
+        act = [Signal(8, name=f"act{t}") for t in range(taps)]
+        m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
+        for o in range(lanes):
+            acc = Signal(signed(32), name=f"acc{o}")
+            m.d.comb += self.sums[o].eq(acc)
+            terms = []
+            for t in range(taps):
+                w = Signal(signed(8), name=f"w{o}_{t}")
+                p = Signal(signed(17), name=f"p{o}_{t}")
+                m.d.sync += [w.eq(self.weights[o * taps + t]), p.eq(w * act[t])]
+                terms.append(p)
+            level = 0
+            while len(terms) > 1:
+                pairs = []
+                for k in range(0, len(terms), 2):
+                    value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
+                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}")
+                    m.d.sync += reg.eq(value)
+                    pairs.append(reg)
+                terms, level = pairs, level + 1
+            with m.If(valid):
+                m.d.sync += acc.eq(Mux(first, 0, acc) + terms[0])
+        m.d.sync += [self.out_valid.eq(valid & last), self.out_tag.eq(tag)]
+        return m
+
+
+def _table(m, index, values, shape, name):
+    """A signal equal to ``values[index]`` (constants, ``index`` a register)."""
+    sig = Signal(shape, name=name)
+    with m.Switch(index):
+        for k, value in enumerate(values):
+            with m.Case(k):
+                m.d.comb += sig.eq(value)
+    return sig
+
+
 class MnistCnn(wiring.Component):
     """Classifies 28x28 ``mono8`` digits with the integer network of :mod:`gen.mnist`.
 
-    Layers run one after the other, each with its own multipliers: a convolution takes one
-    input channel of one output position per cycle (output channels x 9 multipliers), 2x2
-    max-pooling on the fly, so conv1/2/3 take 784, 1568 and 576 cycles (conv3 computes only
-    the 6x6 positions its floor pooling keeps); FC layers take one input per cycle (64 and 10
-    multipliers): 288 and 64 cycles. With the image in (784 / P cycles) about 3,500 cycles
-    per digit. Activations are block RAMs with a position per word (all channels) and nine
-    read ports for the 3x3 window; the weights are ROMs with one input channel per word.
+    All layers share one :class:`MnistMacArray` of 16 lanes x 9 taps (144 multipliers) and
+    run one after the other in nine passes: conv1 (output channels 0-7), conv2 (0-15),
+    conv3 in two passes of 16 output channels, fc1 in four passes of 16 outputs, fc2. A
+    convolution pass takes one input channel of one output position per cycle (the 3x3
+    window as the nine taps), 2x2 max-pooling on the fly: 784, 1568 and 2 x 576 cycles
+    (conv3 computes only the 6x6 positions its floor pooling keeps). fc1 is a convolution of
+    the 3x3x32 map at its one centre position (its input ``i`` is channel ``i // 9`` at
+    position ``i % 9``): 4 x 32 cycles; fc2 takes nine hidden values per cycle: 8 cycles.
+    Each pass drains the pipeline (about 20 cycles) before the next starts. With the image
+    in (784 / P cycles) about 4,000 cycles per digit at P = 4.
+
+    Between the layers the activations live in block RAMs with nine read ports (the window),
+    two channels a word, and in registers (conv3's 3x3 output, the 64 hidden values); the
+    weights in a ROM of one 144-byte word per pass and input channel.
 
     Parameters
     ----------
@@ -59,9 +164,7 @@ class MnistCnn(wiring.Component):
 
     def __init__(self, weights, *, pixels_per_beat=4):
         check_choice("pixels_per_beat", pixels_per_beat, (1, 4))
-        shapes = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
-                  "fc1": (64, 288), "fc2": (10, 64)}
-        for name, shape in shapes.items():
+        for name, shape in _SHAPES.items():
             if name not in weights or tuple(weights[name][0].shape) != shape:
                 raise ParameterError(f"weights[{name!r}]", None if name not in weights
                                      else tuple(weights[name][0].shape), f"of shape {shape}")
@@ -74,230 +177,322 @@ class MnistCnn(wiring.Component):
             "err_long": Out(1),
         })
 
+    def _passes(self):
+        """The passes in order, each a dict of its constants (see the class docstring)."""
+        passes = []
+        for n, (name, c_in, c_out, size) in enumerate(_CONVS):
+            w, b, shift = self._weights[name]
+            for group in range(0, c_out, LANES):
+                outs = range(group, group + LANES)
+                passes.append(dict(
+                    src=n, dst=n + 1, group=group // LANES, size=size, centre=0, fc=False,
+                    channels=c_in, side=size // 2, subs=4, shift=shift, lo=0, hi=127,
+                    bias=[int(b[o]) if o < c_out else 0 for o in outs],
+                    words=[[int(w[o, c, t // 3, t % 3]) if o < c_out else 0
+                            for o in outs for t in range(TAPS)] for c in range(c_in)]))
+        w, b, shift = self._weights["fc1"]
+        for group in range(4):
+            outs = range(16 * group, 16 * group + 16)
+            passes.append(dict(
+                src=3, dst=4, group=group, size=3, centre=4, fc=True, channels=32, side=1,
+                subs=1, shift=shift, lo=0, hi=127, bias=[int(b[o]) for o in outs],
+                words=[[int(w[o, 9 * c + t]) for o in outs for t in range(TAPS)]
+                       for c in range(32)]))
+        w, b, shift = self._weights["fc2"]
+        passes.append(dict(
+            src=4, dst=5, group=0, size=3, centre=4, fc=True, channels=8, side=1, subs=1,
+            shift=shift, lo=-32768, hi=32767, bias=[int(b[o]) if o < 10 else 0
+                                                    for o in range(LANES)],
+            words=[[int(w[o, 9 * c + t]) if o < 10 and 9 * c + t < 64 else 0
+                    for o in range(LANES) for t in range(TAPS)] for c in range(8)]))
+        base = 0
+        for p in passes:
+            p["wbase"], base = base, base + p["channels"]
+        return passes
+
     def elaborate(self, platform):
         m = Module()
         P = self._p
+        passes = self._passes()
+        last_pass = len(passes) - 1
+
         m.submodules.guard = guard = FrameGuard(1, P, 28, 28)
         wiring.connect(m, wiring.flipped(self.i), guard.i)
         m.d.comb += [guard.width.eq(28), guard.height.eq(28),
                      self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long)]
 
-        # activation memories: the image, then each pooled conv output
+        # activations in block RAMs with nine read ports (each a copy of the memory): the
+        # image, P pixels a word; conv1's and conv2's outputs two channels a word, the word
+        # of channel c at position p at p * C/2 + c // 2, so that each copy reads out only
+        # the 16 bits it needs (a word of all channels made the copies 224 bits wide each
+        # and congested the router). conv3's 3x3 output is a memory of a channel per word
+        # (nine positions), since fc1's tap t reads position t of one channel
         acts = [Memory(shape=8 * P, depth=784 // P, init=[])]
-        for name, _, c_out, size in _CONVS:
-            acts.append(Memory(shape=8 * c_out, depth=(size // 2) ** 2, init=[]))
+        for name, _, c_out, size in _CONVS[:2]:
+            acts.append(Memory(shape=16, depth=(size // 2) ** 2 * c_out // 2, init=[]))
         for n, mem in enumerate(acts):
             m.submodules[f"act{n}"] = mem
+        conv3_out = Memory(shape=8 * TAPS, depth=32, init=[])
+        m.submodules.conv3_out = conv3_out
+        hidden = [Signal(7, name=f"hidden{k}") for k in range(64)]
+        scores = [Signal(signed(16), name=f"score{k}") for k in range(10)]
+        rom = Memory(shape=8 * LANES * TAPS, depth=sum(p["channels"] for p in passes),
+                     init=[_pack(word, 8) for p in passes for word in p["words"]])
+        m.submodules.weights = rom
+        m.submodules.mac = mac = MnistMacArray(tag_width=12)
 
-        # loading the image
+        # the sequence: image load, passes, argmax, result
+        pass_ = Signal(range(len(passes)))
+        launch = Signal()        # load the counters of pass_ next cycle
+        running = Signal()       # issuing beats of pass_
+        pass_done = Signal()     # the last result of pass_ is written this cycle
+        scan = Signal()          # the argmax runs over the scores
+        busy = Signal()          # an image is taken; cleared when its result leaves
+
         load_addr = Signal(range(784 // P + 1))
-        start = [Signal(name=f"start_{n}") for n in range(len(_CONVS) + len(_FCS))]
-        done = [Signal(name=f"done_{n}") for n in range(len(_CONVS) + len(_FCS))]
-        busy = Signal()
         wr_img = acts[0].write_port()
+        take = guard.o.tvalid & ~busy
+        m.d.sync += launch.eq(0)
         m.d.comb += [guard.o.tready.eq(~busy), wr_img.addr.eq(load_addr),
-                     wr_img.data.eq(guard.o.tdata), wr_img.en.eq(guard.o.tvalid & ~busy)]
-        with m.If(guard.o.tvalid & ~busy):
+                     wr_img.data.eq(guard.o.tdata), wr_img.en.eq(take)]
+        with m.If(take):
             m.d.sync += load_addr.eq(load_addr + 1)
             with m.If(guard.o.tlast):
-                m.d.sync += [load_addr.eq(0), busy.eq(1)]
-                m.d.comb += start[0].eq(1)
+                m.d.sync += [load_addr.eq(0), busy.eq(1), pass_.eq(0), launch.eq(1)]
 
-        for n, (name, c_in, c_out, size) in enumerate(_CONVS):
-            self._conv(m, n, acts[n], acts[n + 1], c_in, c_out, size, start[n], done[n],
-                       in_pixels_per_word=P if n == 0 else c_in)
-            m.d.comb += start[n + 1].eq(done[n])
+        def cfg(field, shape):
+            return _table(m, pass_, [p[field] for p in passes], shape, f"cfg_{field}")
 
-        fc_out = self._fcs(m, acts[-1], start[3], done[3], done[4])
-        digit, scores = fc_out
+        size = cfg("size", range(29))
+        channels_last = _table(m, pass_, [p["channels"] - 1 for p in passes], range(32),
+                               "cfg_channels_last")
+        side_last = _table(m, pass_, [p["side"] - 1 for p in passes], range(14),
+                           "cfg_side_last")
+        subs_last = _table(m, pass_, [p["subs"] - 1 for p in passes], 2, "cfg_subs_last")
+        centre = cfg("centre", range(5))
+        is_fc = cfg("fc", 1)
+        src = cfg("src", range(5))
+        dst = cfg("dst", range(6))
+        group = cfg("group", range(4))
+        wbase = cfg("wbase", range(rom.depth))
+
+        # S0: counters, one beat per cycle: channel, then the 2x2 pooling window, then the
+        # pooled position
+        py, px = Signal(range(14)), Signal(range(14))
+        sub, c = Signal(2), Signal(range(32))
+        row0 = Signal(11)          # the first pixel of the pooling window's top row
+        out_addr = Signal(range(196))
+        with m.If(launch):
+            m.d.sync += [running.eq(1), py.eq(0), px.eq(0), sub.eq(0), c.eq(0),
+                         row0.eq(centre), out_addr.eq(0)]
+        with m.Elif(running):
+            m.d.sync += c.eq(c + 1)
+            with m.If(c == channels_last):
+                m.d.sync += [c.eq(0), sub.eq(sub + 1)]
+                with m.If(sub == subs_last):
+                    m.d.sync += [sub.eq(0), px.eq(px + 1), out_addr.eq(out_addr + 1)]
+                    with m.If(px == side_last):
+                        m.d.sync += [px.eq(0), py.eq(py + 1), row0.eq(row0 + 2 * size)]
+                        with m.If(py == side_last):
+                            m.d.sync += running.eq(0)
+        with m.If(pass_done):
+            with m.If(pass_ == last_pass):
+                m.d.sync += scan.eq(1)
+            with m.Else():
+                m.d.sync += [pass_.eq(pass_ + 1), launch.eq(1)]
+
+        # S1: the window's centre and where it touches the border
+        v1, first1, last1 = Signal(), Signal(), Signal()
+        centre1 = Signal(11)
+        top1, bottom1, left1, right1 = Signal(), Signal(), Signal(), Signal()
+        c1 = Signal(range(32))
+        tag1 = Signal(12)       # pooling starts, pooled value complete, pass ends, address
+        y, x = Cat(sub[1], py), Cat(sub[0], px)
+        m.d.sync += [
+            v1.eq(running), first1.eq(c == 0), last1.eq(c == channels_last), c1.eq(c),
+            centre1.eq(row0 + Mux(sub[1], size, 0) + x),
+            top1.eq(~is_fc & (y == 0)), bottom1.eq(~is_fc & (y == size - 1)),
+            left1.eq(~is_fc & (x == 0)), right1.eq(~is_fc & (x == size - 1)),
+            tag1.eq(Cat(sub == 0, sub == subs_last,
+                        (sub == subs_last) & (px == side_last) & (py == side_last),
+                        out_addr, Const(0, 1))),
+        ]
+
+        # S2: the nine addresses and which of them lie inside the map; the weight address
+        v2, first2, last2 = Signal(), Signal(), Signal()
+        c2 = Signal(range(32))
+        tag2 = Signal(12)
+        addr2 = [Signal(11, name=f"addr2_{t}") for t in range(TAPS)]
+        inside2 = Signal(TAPS)
+        waddr2 = Signal(range(rom.depth))
+        m.d.sync += [v2.eq(v1), first2.eq(first1), last2.eq(last1), c2.eq(c1), tag2.eq(tag1),
+                     waddr2.eq(wbase + c1)]
+        for t in range(TAPS):
+            dy, dx = t // 3 - 1, t % 3 - 1
+            offset = (size if dy > 0 else -size if dy < 0 else 0) + dx
+            outside = ((top1 if dy < 0 else 0) | (bottom1 if dy > 0 else 0) |
+                       (left1 if dx < 0 else 0) | (right1 if dx > 0 else 0))
+            m.d.sync += [addr2[t].eq(centre1 + offset), inside2[t].eq(~outside)]
+
+        # S3: the read data (memory output registers)
+        ports = [[mem.read_port() for _ in range(TAPS)] for mem in acts]
+        shift = (P - 1).bit_length()
+        for t in range(TAPS):
+            m.d.comb += ports[0][t].addr.eq(addr2[t] >> shift)
+            for n in range(1, len(acts)):
+                word_bits = (_CONVS[n - 1][2] // 2 - 1).bit_length()
+                m.d.comb += ports[n][t].addr.eq(Cat(c2[1:1 + word_bits], addr2[t]))
+        v3, first3, last3 = Signal(), Signal(), Signal()
+        c3 = Signal(range(32))
+        tag3 = Signal(12)
+        lane3 = [Signal(max(shift, 1), name=f"lane3_{t}") for t in range(TAPS)]
+        inside3 = Signal(TAPS)
+        waddr3 = Signal(range(rom.depth))
+        m.d.sync += [v3.eq(v2), first3.eq(first2), last3.eq(last2), c3.eq(c2), tag3.eq(tag2),
+                     inside3.eq(inside2), waddr3.eq(waddr2)]
+        m.d.sync += [lane3[t].eq(addr2[t][:shift] if shift else 0) for t in range(TAPS)]
+        # the weights are addressed at S3, to reach the array with the activations
+        w_rd = rom.read_port()
+        conv3_rd = conv3_out.read_port()
+        m.d.comb += conv3_rd.addr.eq(c2)
+        m.d.comb += w_rd.addr.eq(waddr3)
+
+        # S4: the activation of each tap, 0 outside the map
+        v4, first4, last4 = Signal(), Signal(), Signal()
+        tag4 = Signal(12)
+        act4 = [Signal(8, name=f"act4_{t}") for t in range(TAPS)]
+        m.d.sync += [v4.eq(v3), first4.eq(first3), last4.eq(last3), tag4.eq(tag3)]
+        for t in range(TAPS):
+            value = Signal(8, name=f"value3_{t}")
+            with m.Switch(src):
+                with m.Case(0):
+                    m.d.comb += value.eq(ports[0][t].data.word_select(lane3[t], 8))
+                for n in range(1, len(acts)):
+                    with m.Case(n):
+                        m.d.comb += value.eq(ports[n][t].data.word_select(c3[0], 8))
+                with m.Case(3):
+                    m.d.comb += value.eq(conv3_rd.data.word_select(t, 8))
+                with m.Case(4):
+                    with m.Switch(c3[:3]):
+                        for k in range(8):
+                            if 9 * k + t < 64:
+                                with m.Case(k):
+                                    m.d.comb += value.eq(hidden[9 * k + t])
+            m.d.sync += act4[t].eq(Mux(inside3[t], value, 0))
+        m.d.comb += [mac.valid.eq(v4), mac.first.eq(first4), mac.last.eq(last4),
+                     mac.tag.eq(tag4), mac.weights.eq(w_rd.data),
+                     *[mac.act[t].eq(a) for t, a in enumerate(act4)]]
+
+        # R1: the bias added; R2: requantised and clamped; R3: pooled, written
+        r1 = [Signal(signed(32), name=f"total{o}") for o in range(LANES)]
+        v5 = Signal()
+        tag5 = Signal(12)
+        m.d.sync += [v5.eq(mac.out_valid), tag5.eq(mac.out_tag)]
+        for o in range(LANES):
+            bias = _table(m, pass_, [p["bias"][o] for p in passes], signed(32), f"bias{o}")
+            m.d.sync += r1[o].eq(mac.sums[o] + bias)
+        v6 = Signal()
+        tag6 = Signal(12)
+        r2 = [Signal(signed(16), name=f"requant{o}") for o in range(LANES)]
+        m.d.sync += [v6.eq(v5), tag6.eq(tag5)]
+        shifts = sorted({p["shift"] for p in passes})
+        shift_index = _table(m, pass_, [shifts.index(p["shift"]) for p in passes],
+                             range(len(shifts)), "cfg_shift")
+        to_scores = dst == 5
+        for o in range(LANES):
+            q = Signal(signed(32), name=f"shifted{o}")
+            with m.Switch(shift_index):
+                for k, amount in enumerate(shifts):
+                    with m.Case(k):
+                        m.d.comb += q.eq(r1[o] >> amount)
+            relu = Mux(q < 0, 0, Mux(q > 127, 127, q))
+            score = Mux(q < -32768, -32768, Mux(q > 32767, 32767, q))
+            m.d.sync += r2[o].eq(Mux(to_scores, score, relu))
+        pool_start, pooled_done, end = tag6[0], tag6[1], tag6[2]
+        addr6 = tag6[3:11]
+        best = [Signal(signed(16), name=f"best{o}") for o in range(LANES)]
+        pooled = [Signal(signed(16), name=f"pooled{o}") for o in range(LANES)]
+        for o in range(LANES):
+            m.d.comb += pooled[o].eq(Mux(pool_start | (r2[o] > best[o]), r2[o], best[o]))
+            with m.If(v6):
+                m.d.sync += best[o].eq(pooled[o])
+        write = v6 & pooled_done
+        # conv1's and conv2's outputs: the first two channels at once, the rest two a cycle
+        # from the outbox (conv1 writes a position every 4 cycles, conv2 every 32)
+        outbox = Signal(8 * (LANES - 2))
+        outbox_left = Signal(range(LANES // 2))
+        outbox_word = Signal(range(LANES // 2))
+        outbox_pos = Signal(8)
+        with m.If(write & ((dst == 1) | (dst == 2))):
+            m.d.sync += [outbox.eq(Cat(*[pooled[o][:8] for o in range(2, LANES)])),
+                         outbox_left.eq(Mux(dst == 1, _CONVS[0][2] // 2 - 1,
+                                            _CONVS[1][2] // 2 - 1)),
+                         outbox_word.eq(1), outbox_pos.eq(addr6)]
+        with m.Elif(outbox_left != 0):
+            m.d.sync += [outbox.eq(outbox >> 16), outbox_left.eq(outbox_left - 1),
+                         outbox_word.eq(outbox_word + 1)]
+        for n in range(1, len(acts)):
+            word_bits = (_CONVS[n - 1][2] // 2 - 1).bit_length()
+            wr = acts[n].write_port()
+            with m.If(write):
+                m.d.comb += [wr.addr.eq(Cat(Const(0, word_bits), addr6)),
+                             wr.data.eq(Cat(pooled[0][:8], pooled[1][:8])),
+                             wr.en.eq(dst == n)]
+            with m.Else():
+                m.d.comb += [wr.addr.eq(Cat(outbox_word[:word_bits], outbox_pos)),
+                             wr.data.eq(outbox[:16]), wr.en.eq((outbox_left != 0) & (dst == n))]
+        # conv3's output: a channel a cycle (conv3 writes a position every 64 cycles)
+        channel_box = Signal(8 * LANES)
+        channel_left = Signal(range(LANES + 1))
+        channel_k = Signal(range(LANES))
+        channel_pos = Signal(range(TAPS))
+        wr3 = conv3_out.write_port(granularity=8)
+        m.d.comb += [wr3.addr.eq(Cat(channel_k, group[0])),
+                     wr3.data.eq(Cat(*[channel_box[:8]] * TAPS))]
+        with m.If(channel_left != 0):
+            m.d.comb += wr3.en.eq(1 << channel_pos)
+            m.d.sync += [channel_box.eq(channel_box >> 8), channel_left.eq(channel_left - 1),
+                         channel_k.eq(channel_k + 1)]
+        with m.If(write & (dst == 3)):
+            m.d.sync += [channel_box.eq(Cat(*[pooled[o][:8] for o in range(LANES)])),
+                         channel_left.eq(LANES), channel_k.eq(0), channel_pos.eq(addr6)]
+        with m.If(write & (dst == 4)):
+            with m.Switch(group):
+                for g in range(4):
+                    with m.Case(g):
+                        m.d.sync += [hidden[16 * g + o].eq(pooled[o][:7]) for o in range(16)]
+        with m.If(write & (dst == 5)):
+            m.d.sync += [score.eq(pooled[k]) for k, score in enumerate(scores)]
+        # a pass ends once its last result is written, the outbox's words too
+        ending = Signal()
+        with m.If(write & end):
+            m.d.sync += ending.eq(1)
+        with m.If(pass_done):
+            m.d.sync += ending.eq(0)
+        m.d.comb += pass_done.eq(ending & (outbox_left == 0) & (channel_left == 0))
+
+        # the argmax, one score per cycle (the first maximum wins), then the result
+        k = Signal(range(11))
+        top, top_k = Signal(signed(16)), Signal(4)
+        candidate = Signal(signed(16))
+        with m.Switch(k):
+            for n in range(10):
+                with m.Case(n):
+                    m.d.comb += candidate.eq(scores[n])
         o_valid = Signal()
         m.d.comb += [self.o.tvalid.eq(o_valid), self.o.tlast.eq(1)]
         with m.If(self.o.tvalid & self.o.tready):
-            m.d.sync += o_valid.eq(0)
-        with m.If(done[4]):
+            m.d.sync += [o_valid.eq(0), busy.eq(0)]
+        with m.If(scan):
+            m.d.sync += k.eq(k + 1)
+            with m.If((k == 0) | (candidate > top)):
+                m.d.sync += [top.eq(candidate), top_k.eq(k)]
+            with m.If(k == 9):
+                m.d.sync += [scan.eq(0), k.eq(0)]
+        finished = Signal()
+        m.d.sync += finished.eq(scan & (k == 9))
+        with m.If(finished):
             result = data.View(MNIST_RESULT, self.o.tdata)
-            m.d.sync += [o_valid.eq(1), busy.eq(0), result.digit.eq(digit),
-                         *[result.scores[k].eq(score) for k, score in enumerate(scores)]]
-        # a new image is taken only once the result has left
-        with m.If(o_valid & ~(self.o.tready)):
-            m.d.comb += guard.o.tready.eq(0)
-            m.d.comb += wr_img.en.eq(0)
+            m.d.sync += [o_valid.eq(1), result.digit.eq(top_k),
+                         *[result.scores[n].eq(score) for n, score in enumerate(scores)]]
         return m
-
-    def _conv(self, m, n, src, dst, c_in, c_out, size, start, done, in_pixels_per_word):
-        """One convolution layer with pooling (see the class docstring)."""
-        w, b, shift = self._weights[f"conv{n + 1}"]
-        pooled = size // 2
-        # at least two entries: a one-entry ROM would have a zero-width address
-        rom = Memory(shape=8 * 9 * c_out, depth=max(c_in, 2),
-                     init=[_pack([w[o, c, dy, dx] for o in range(c_out) for dy in range(3)
-                                  for dx in range(3)], 8) for c in range(c_in)])
-        m.submodules[f"conv{n + 1}_w"] = rom
-        w_rd = rom.read_port()
-        ports = [src.read_port() for _ in range(9)]
-        wr = dst.write_port()
-
-        run = Signal(name=f"c{n}_run")
-        py, px = Signal(range(pooled), name=f"c{n}_py"), Signal(range(pooled), name=f"c{n}_px")
-        sub = Signal(2, name=f"c{n}_sub")
-        c = Signal(range(max(c_in, 2)), name=f"c{n}_c")
-        y = Cat(sub[1], py)
-        x = Cat(sub[0], px)
-        m.d.comb += w_rd.addr.eq(c)
-        valid0 = []
-        for t, port in enumerate(ports):
-            dy, dx = t // 3 - 1, t % 3 - 1
-            yy = Signal(signed(8), name=f"c{n}_y{t}")
-            xx = Signal(signed(8), name=f"c{n}_x{t}")
-            m.d.comb += [yy.eq(y + dy), xx.eq(x + dx)]
-            pos = yy * size + xx
-            if in_pixels_per_word == c_in:
-                m.d.comb += port.addr.eq(pos)
-            else:                      # the image: P pixels per word
-                m.d.comb += port.addr.eq(pos >> (in_pixels_per_word.bit_length() - 1))
-            valid0.append((yy >= 0) & (yy < size) & (xx >= 0) & (xx < size))
-        # stage 1 registers: what the read data belong to
-        v1 = Signal(name=f"c{n}_v1")
-        ok1 = Signal(9, name=f"c{n}_ok1")
-        sel1 = [Signal(range(max(c_in, in_pixels_per_word)), name=f"c{n}_sel1_{t}")
-                for t in range(9)]
-        first1, last1, sub1 = Signal(name=f"c{n}_first1"), Signal(name=f"c{n}_last1"), \
-            Signal(2, name=f"c{n}_sub1")
-        addr1 = Signal(range(pooled * pooled), name=f"c{n}_addr1")
-        m.d.sync += [v1.eq(run), ok1.eq(Cat(*valid0)), first1.eq(c == 0),
-                     last1.eq(c == c_in - 1), sub1.eq(sub), addr1.eq(py * pooled + px)]
-        for t in range(9):
-            if in_pixels_per_word == c_in:
-                m.d.sync += sel1[t].eq(c)
-            else:
-                dx = t % 3 - 1
-                m.d.sync += sel1[t].eq((x + dx)[:in_pixels_per_word.bit_length() - 1])
-        with m.If(start):
-            m.d.sync += [run.eq(1), py.eq(0), px.eq(0), sub.eq(0), c.eq(0)]
-        with m.Elif(run):
-            m.d.sync += c.eq(c + 1)
-            with m.If(c == c_in - 1):
-                m.d.sync += [c.eq(0), sub.eq(sub + 1)]
-                with m.If(sub == 3):
-                    m.d.sync += px.eq(px + 1)
-                    with m.If(px == pooled - 1):
-                        m.d.sync += [px.eq(0), py.eq(py + 1)]
-                        with m.If(py == pooled - 1):
-                            m.d.sync += run.eq(0)
-
-        # stage 1: multiply-accumulate, requantize, pool, write
-        acc = [Signal(signed(32), name=f"c{n}_acc{o}") for o in range(c_out)]
-        best = [Signal(7, name=f"c{n}_max{o}") for o in range(c_out)]
-        a = []
-        for t, port in enumerate(ports):
-            width = 8
-            value = port.data.word_select(sel1[t], width)
-            a.append(Mux(ok1[t], value, 0))
-        results = []
-        for o in range(c_out):
-            products = [w_rd.data.word_select(o * 9 + t, 8).as_signed() * a[t]
-                        for t in range(9)]
-            total = Signal(signed(32), name=f"c{n}_sum{o}")
-            m.d.comb += total.eq(Mux(first1, int(b[o]), acc[o]) + sum(products))
-            q = Signal(signed(32), name=f"c{n}_q{o}")
-            m.d.comb += q.eq(total >> int(shift))
-            r = Signal(7, name=f"c{n}_r{o}")
-            m.d.comb += r.eq(Mux(q < 0, 0, Mux(q > 127, 127, q)))
-            pooled_r = Signal(7, name=f"c{n}_p{o}")
-            m.d.comb += pooled_r.eq(Mux((sub1 == 0) | (r > best[o]), r, best[o]))
-            results.append(pooled_r)
-            with m.If(v1):
-                m.d.sync += acc[o].eq(total)
-                with m.If(last1):
-                    m.d.sync += best[o].eq(pooled_r)
-        m.d.comb += [wr.addr.eq(addr1), wr.data.eq(Cat(*[Cat(r, Const(0, 1)) for r in results])),
-                     wr.en.eq(v1 & last1 & (sub1 == 3))]
-        m.d.sync += done.eq(v1 & last1 & (sub1 == 3) & (addr1 == pooled * pooled - 1))
-
-    def _fcs(self, m, src, start, done1, done2):
-        """fc1 (ReLU, int8) and fc2 (int16 scores), one input per cycle; returns
-        ``(digit, scores)`` valid when ``done2`` pulses."""
-        w1, b1, s1 = self._weights["fc1"]
-        w2, b2, s2 = self._weights["fc2"]
-        rom1 = Memory(shape=8 * 64, depth=288,
-                      init=[_pack(w1[:, i], 8) for i in range(288)])
-        rom2 = Memory(shape=8 * 10, depth=64, init=[_pack(w2[:, j], 8) for j in range(64)])
-        m.submodules.fc1_w, m.submodules.fc2_w = rom1, rom2
-        r1, r2 = rom1.read_port(), rom2.read_port()
-        port = src.read_port()
-
-        # fc1: input i = channel i // 9 at position i % 9 (channel-major flatten)
-        run1, i = Signal(), Signal(range(288))
-        ch, pos = Signal(range(32)), Signal(range(9))
-        m.d.comb += [r1.addr.eq(i), port.addr.eq(pos)]
-        v1, ch1, last1 = Signal(), Signal(range(32)), Signal()
-        m.d.sync += [v1.eq(run1), ch1.eq(ch), last1.eq(i == 287)]
-        with m.If(start):
-            m.d.sync += [run1.eq(1), i.eq(0), ch.eq(0), pos.eq(0)]
-        with m.Elif(run1):
-            m.d.sync += [i.eq(i + 1), pos.eq(pos + 1)]
-            with m.If(pos == 8):
-                m.d.sync += [pos.eq(0), ch.eq(ch + 1)]
-            with m.If(i == 287):
-                m.d.sync += run1.eq(0)
-        a = port.data.word_select(ch1, 8)
-        acc1 = [Signal(signed(32), name=f"fc1_acc{o}") for o in range(64)]
-        hidden = [Signal(7, name=f"fc1_h{o}") for o in range(64)]
-        first = Signal()
-        m.d.sync += first.eq(i == 0)
-        for o in range(64):
-            total = Mux(first, int(b1[o]), acc1[o]) + r1.data.word_select(o, 8).as_signed() * a
-            tsig = Signal(signed(32), name=f"fc1_sum{o}")
-            m.d.comb += tsig.eq(total)
-            q = tsig >> int(s1)
-            with m.If(v1):
-                m.d.sync += acc1[o].eq(tsig)
-                with m.If(last1):
-                    m.d.sync += hidden[o].eq(Mux(q < 0, 0, Mux(q > 127, 127, q)))
-        m.d.sync += done1.eq(v1 & last1)
-
-        # fc2
-        run2, j = Signal(), Signal(range(64))
-        m.d.comb += r2.addr.eq(j)
-        v2, j1, last2 = Signal(), Signal(range(64)), Signal()
-        m.d.sync += [v2.eq(run2), j1.eq(j), last2.eq(j == 63)]
-        with m.If(done1):
-            m.d.sync += [run2.eq(1), j.eq(0)]
-        with m.Elif(run2):
-            m.d.sync += j.eq(j + 1)
-            with m.If(j == 63):
-                m.d.sync += run2.eq(0)
-        h = Signal(7)
-        with m.Switch(j1):
-            for k in range(64):
-                with m.Case(k):
-                    m.d.comb += h.eq(hidden[k])
-        first2 = Signal()
-        m.d.sync += first2.eq(j == 0)
-        acc2 = [Signal(signed(32), name=f"fc2_acc{k}") for k in range(10)]
-        scores = [Signal(signed(16), name=f"score{k}") for k in range(10)]
-        for k in range(10):
-            tsig = Signal(signed(32), name=f"fc2_sum{k}")
-            m.d.comb += tsig.eq(Mux(first2, int(b2[k]), acc2[k]) +
-                                r2.data.word_select(k, 8).as_signed() * h)
-            q = Signal(signed(32), name=f"fc2_q{k}")
-            m.d.comb += q.eq(tsig >> int(s2))
-            with m.If(v2):
-                m.d.sync += acc2[k].eq(tsig)
-                with m.If(last2):
-                    m.d.sync += scores[k].eq(Mux(q < -32768, -32768, Mux(q > 32767, 32767, q)))
-        done2_r = Signal()
-        m.d.sync += done2_r.eq(v2 & last2)
-        m.d.comb += done2.eq(done2_r)
-        digit = Signal(4)
-        best = scores[0]
-        idx = Const(0, 4)
-        for k in range(1, 10):
-            better = Signal(name=f"better{k}")
-            m.d.comb += better.eq(scores[k] > best)
-            nb = Signal(signed(16), name=f"best{k}")
-            ni = Signal(4, name=f"bidx{k}")
-            m.d.comb += [nb.eq(Mux(better, scores[k], best)), ni.eq(Mux(better, k, idx))]
-            best, idx = nb, ni
-        m.d.comb += digit.eq(idx)
-        return digit, scores
