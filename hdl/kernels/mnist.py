@@ -22,6 +22,8 @@ _SHAPES = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3
 
 LANES = 16
 TAPS = 9
+#: where a pass reads its activations and writes its results
+_IMAGE, _CONV1_OUT, _CONV2_OUT, _CONV3_OUT, _HIDDEN, _SCORES = range(6)
 
 
 def _pack(values, bits):
@@ -194,13 +196,13 @@ class MnistCnn(wiring.Component):
         for group in range(4):
             outs = range(16 * group, 16 * group + 16)
             passes.append(dict(
-                src=3, dst=4, group=group, size=3, centre=4, fc=True, channels=32, side=1,
+                src=_CONV3_OUT, dst=_HIDDEN, group=group, size=3, centre=4, fc=True, channels=32, side=1,
                 subs=1, shift=shift, lo=0, hi=127, bias=[int(b[o]) for o in outs],
                 words=[[int(w[o, 9 * c + t]) for o in outs for t in range(TAPS)]
                        for c in range(32)]))
         w, b, shift = self._weights["fc2"]
         passes.append(dict(
-            src=4, dst=5, group=0, size=3, centre=4, fc=True, channels=8, side=1, subs=1,
+            src=_HIDDEN, dst=_SCORES, group=0, size=3, centre=4, fc=True, channels=8, side=1, subs=1,
             shift=shift, lo=-32768, hi=32767, bias=[int(b[o]) if o < 10 else 0
                                                     for o in range(LANES)],
             words=[[int(w[o, 9 * c + t]) if o < 10 and 9 * c + t < 64 else 0
@@ -271,8 +273,8 @@ class MnistCnn(wiring.Component):
         subs_last = _table(m, pass_, [p["subs"] - 1 for p in passes], 2, "cfg_subs_last")
         centre = cfg("centre", range(5))
         is_fc = cfg("fc", 1)
-        src = cfg("src", range(5))
-        dst = cfg("dst", range(6))
+        src = cfg("src", range(_HIDDEN + 1))
+        dst = cfg("dst", range(_SCORES + 1))
         group = cfg("group", range(4))
         wbase = cfg("wbase", range(rom.depth))
 
@@ -365,14 +367,14 @@ class MnistCnn(wiring.Component):
         for t in range(TAPS):
             value = Signal(8, name=f"value3_{t}")
             with m.Switch(src):
-                with m.Case(0):
+                with m.Case(_IMAGE):
                     m.d.comb += value.eq(ports[0][t].data.word_select(lane3[t], 8))
                 for n in range(1, len(acts)):
                     with m.Case(n):
                         m.d.comb += value.eq(ports[n][t].data.word_select(c3[0], 8))
-                with m.Case(3):
+                with m.Case(_CONV3_OUT):
                     m.d.comb += value.eq(conv3_rd.data.word_select(t, 8))
-                with m.Case(4):
+                with m.Case(_HIDDEN):
                     with m.Switch(c3[:3]):
                         for k in range(8):
                             if 9 * k + t < 64:
@@ -398,7 +400,7 @@ class MnistCnn(wiring.Component):
         shifts = sorted({p["shift"] for p in passes})
         shift_index = _table(m, pass_, [shifts.index(p["shift"]) for p in passes],
                              range(len(shifts)), "cfg_shift")
-        to_scores = dst == 5
+        to_scores = dst == _SCORES
         for o in range(LANES):
             q = Signal(signed(32), name=f"shifted{o}")
             with m.Switch(shift_index):
@@ -423,9 +425,9 @@ class MnistCnn(wiring.Component):
         outbox_left = Signal(range(LANES // 2))
         outbox_word = Signal(range(LANES // 2))
         outbox_pos = Signal(8)
-        with m.If(write & ((dst == 1) | (dst == 2))):
+        with m.If(write & ((dst == _CONV1_OUT) | (dst == _CONV2_OUT))):
             m.d.sync += [outbox.eq(Cat(*[pooled[o][:8] for o in range(2, LANES)])),
-                         outbox_left.eq(Mux(dst == 1, _CONVS[0][2] // 2 - 1,
+                         outbox_left.eq(Mux(dst == _CONV1_OUT, _CONVS[0][2] // 2 - 1,
                                             _CONVS[1][2] // 2 - 1)),
                          outbox_word.eq(1), outbox_pos.eq(addr6)]
         with m.Elif(outbox_left != 0):
@@ -453,15 +455,15 @@ class MnistCnn(wiring.Component):
             m.d.comb += wr3.en.eq(1 << channel_pos)
             m.d.sync += [channel_box.eq(channel_box >> 8), channel_left.eq(channel_left - 1),
                          channel_k.eq(channel_k + 1)]
-        with m.If(write & (dst == 3)):
+        with m.If(write & (dst == _CONV3_OUT)):
             m.d.sync += [channel_box.eq(Cat(*[pooled[o][:8] for o in range(LANES)])),
                          channel_left.eq(LANES), channel_k.eq(0), channel_pos.eq(addr6)]
-        with m.If(write & (dst == 4)):
+        with m.If(write & (dst == _HIDDEN)):
             with m.Switch(group):
                 for g in range(4):
                     with m.Case(g):
                         m.d.sync += [hidden[16 * g + o].eq(pooled[o][:7]) for o in range(16)]
-        with m.If(write & (dst == 5)):
+        with m.If(write & (dst == _SCORES)):
             m.d.sync += [score.eq(pooled[k]) for k, score in enumerate(scores)]
         # a pass ends once its last result is written, the outbox's words too
         ending = Signal()
