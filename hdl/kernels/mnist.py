@@ -234,6 +234,8 @@ class MnistCnn(wiring.Component):
             acts.append(Memory(shape=16, depth=(size // 2) ** 2 * c_out // 2, init=[]))
         for n, mem in enumerate(acts):
             m.submodules[f"act{n}"] = mem
+        # address bits of a channel pair within a position, per activation memory
+        pair_bits = [0] + [(c_out // 2 - 1).bit_length() for _, _, c_out, _ in _CONVS[:2]]
         conv3_out = Memory(shape=8 * TAPS, depth=32, init=[])
         m.submodules.conv3_out = conv3_out
         hidden = [Signal(7, name=f"hidden{k}") for k in range(64)]
@@ -262,15 +264,14 @@ class MnistCnn(wiring.Component):
             with m.If(guard.o.tlast):
                 m.d.sync += [load_addr.eq(0), busy.eq(1), pass_.eq(0), launch.eq(1)]
 
-        def cfg(field, shape):
-            return _table(m, pass_, [p[field] for p in passes], shape, f"cfg_{field}")
+        def cfg(field, shape, value=None):
+            value = value or (lambda p: p[field])
+            return _table(m, pass_, [value(p) for p in passes], shape, f"cfg_{field}")
 
         size = cfg("size", range(29))
-        channels_last = _table(m, pass_, [p["channels"] - 1 for p in passes], range(32),
-                               "cfg_channels_last")
-        side_last = _table(m, pass_, [p["side"] - 1 for p in passes], range(14),
-                           "cfg_side_last")
-        subs_last = _table(m, pass_, [p["subs"] - 1 for p in passes], 2, "cfg_subs_last")
+        channels_last = cfg("channels_last", range(32), lambda p: p["channels"] - 1)
+        side_last = cfg("side_last", range(14), lambda p: p["side"] - 1)
+        subs_last = cfg("subs_last", 2, lambda p: p["subs"] - 1)
         centre = cfg("centre", range(5))
         is_fc = cfg("fc", 1)
         src = cfg("src", range(_HIDDEN + 1))
@@ -342,8 +343,7 @@ class MnistCnn(wiring.Component):
         for t in range(TAPS):
             m.d.comb += ports[0][t].addr.eq(addr2[t] >> shift)
             for n in range(1, len(acts)):
-                word_bits = (_CONVS[n - 1][2] // 2 - 1).bit_length()
-                m.d.comb += ports[n][t].addr.eq(Cat(c2[1:1 + word_bits], addr2[t]))
+                m.d.comb += ports[n][t].addr.eq(Cat(c2[1:1 + pair_bits[n]], addr2[t]))
         v3, first3, last3 = Signal(), Signal(), Signal()
         c3 = Signal(range(32))
         tag3 = Signal(12)
@@ -434,7 +434,7 @@ class MnistCnn(wiring.Component):
             m.d.sync += [outbox.eq(outbox >> 16), outbox_left.eq(outbox_left - 1),
                          outbox_word.eq(outbox_word + 1)]
         for n in range(1, len(acts)):
-            word_bits = (_CONVS[n - 1][2] // 2 - 1).bit_length()
+            word_bits = pair_bits[n]
             wr = acts[n].write_port()
             with m.If(write):
                 m.d.comb += [wr.addr.eq(Cat(Const(0, word_bits), addr6)),
