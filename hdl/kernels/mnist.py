@@ -39,7 +39,8 @@ class MnistMacArray(wiring.Component):
     Every beat multiplies one activation vector (``taps`` unsigned bytes, shared by all lanes)
     by each lane's ``taps`` signed weights and adds the lane's sum to its accumulator; the
     first beat of an accumulation starts from zero. Inputs, products and every level of the
-    adder trees are registered, so no path holds more than one multiplier or one adder.
+    adder trees are registered, so no path holds more than one multiplier or one adder; only
+    the control (``valid``, ``first``, ``last``, ``tag`` and ``out_valid``) is reset.
 
     Members
     -------
@@ -90,15 +91,15 @@ class MnistMacArray(wiring.Component):
             ctrl.append(reg)
         valid, first, last, tag = (ctrl[-1][0], ctrl[-1][1], ctrl[-1][2], ctrl[-1][3:])
 
-        act = [Signal(8, name=f"act{t}") for t in range(taps)]
+        act = [Signal(8, name=f"act{t}", reset_less=True) for t in range(taps)]
         m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
         for o in range(lanes):
-            acc = Signal(signed(32), name=f"acc{o}")
+            acc = Signal(signed(32), name=f"acc{o}", reset_less=True)
             m.d.comb += self.sums[o].eq(acc)
             terms = []
             for t in range(taps):
-                w = Signal(signed(8), name=f"w{o}_{t}")
-                p = Signal(signed(17), name=f"p{o}_{t}")
+                w = Signal(signed(8), name=f"w{o}_{t}", reset_less=True)
+                p = Signal(signed(17), name=f"p{o}_{t}", reset_less=True)
                 m.d.sync += [w.eq(self.weights[o * taps + t]), p.eq(w * act[t])]
                 terms.append(p)
             level = 0
@@ -106,7 +107,7 @@ class MnistMacArray(wiring.Component):
                 pairs = []
                 for k in range(0, len(terms), 2):
                     value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
-                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}")
+                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}", reset_less=True)
                     m.d.sync += reg.eq(value)
                     pairs.append(reg)
                 terms, level = pairs, level + 1
@@ -218,6 +219,8 @@ class MnistCnn(wiring.Component):
         passes = self._passes()
         last_pass = len(passes) - 1
 
+        # registers that carry data have no reset: each is written before it is read, and
+        # resetting all of them made the reset the most congested net in the router
         m.submodules.guard = guard = FrameGuard(1, P, 28, 28)
         wiring.connect(m, wiring.flipped(self.i), guard.i)
         m.d.comb += [guard.width.eq(28), guard.height.eq(28),
@@ -238,8 +241,8 @@ class MnistCnn(wiring.Component):
         pair_bits = [0] + [(c_out // 2 - 1).bit_length() for _, _, c_out, _ in _CONVS[:2]]
         conv3_out = Memory(shape=8 * TAPS, depth=32, init=[])
         m.submodules.conv3_out = conv3_out
-        hidden = [Signal(7, name=f"hidden{k}") for k in range(64)]
-        scores = [Signal(signed(16), name=f"score{k}") for k in range(10)]
+        hidden = [Signal(7, name=f"hidden{k}", reset_less=True) for k in range(64)]
+        scores = [Signal(signed(16), name=f"score{k}", reset_less=True) for k in range(10)]
         rom = Memory(shape=8 * LANES * TAPS, depth=sum(p["channels"] for p in passes),
                      init=[_pack(word, 8) for p in passes for word in p["words"]])
         m.submodules.weights = rom
@@ -281,10 +284,10 @@ class MnistCnn(wiring.Component):
 
         # S0: counters, one beat per cycle: channel, then the 2x2 pooling window, then the
         # pooled position
-        py, px = Signal(range(14)), Signal(range(14))
-        sub, c = Signal(2), Signal(range(32))
-        row0 = Signal(11)          # the first pixel of the pooling window's top row
-        out_addr = Signal(range(196))
+        py, px = Signal(range(14), reset_less=True), Signal(range(14), reset_less=True)
+        sub, c = Signal(2, reset_less=True), Signal(range(32), reset_less=True)
+        row0 = Signal(11, reset_less=True)     # the first pixel of the pooling window's top row
+        out_addr = Signal(range(196), reset_less=True)
         with m.If(launch):
             m.d.sync += [running.eq(1), py.eq(0), px.eq(0), sub.eq(0), c.eq(0),
                          row0.eq(centre), out_addr.eq(0)]
@@ -305,11 +308,13 @@ class MnistCnn(wiring.Component):
                 m.d.sync += [pass_.eq(pass_ + 1), launch.eq(1)]
 
         # S1: the window's centre and where it touches the border
-        v1, first1, last1 = Signal(), Signal(), Signal()
-        centre1 = Signal(11)
-        top1, bottom1, left1, right1 = Signal(), Signal(), Signal(), Signal()
-        c1 = Signal(range(32))
-        tag1 = Signal(12)       # pooling starts, pooled value complete, pass ends, address
+        v1 = Signal()
+        first1, last1 = Signal(reset_less=True), Signal(reset_less=True)
+        centre1 = Signal(11, reset_less=True)
+        top1, bottom1 = Signal(reset_less=True), Signal(reset_less=True)
+        left1, right1 = Signal(reset_less=True), Signal(reset_less=True)
+        c1 = Signal(range(32), reset_less=True)
+        tag1 = Signal(12, reset_less=True)     # pooling starts, pooled value complete, pass ends, address
         y, x = Cat(sub[1], py), Cat(sub[0], px)
         m.d.sync += [
             v1.eq(running), first1.eq(c == 0), last1.eq(c == channels_last), c1.eq(c),
@@ -322,12 +327,13 @@ class MnistCnn(wiring.Component):
         ]
 
         # S2: the nine addresses and which of them lie inside the map; the weight address
-        v2, first2, last2 = Signal(), Signal(), Signal()
-        c2 = Signal(range(32))
-        tag2 = Signal(12)
-        addr2 = [Signal(11, name=f"addr2_{t}") for t in range(TAPS)]
-        inside2 = Signal(TAPS)
-        waddr2 = Signal(range(rom.depth))
+        v2 = Signal()
+        first2, last2 = Signal(reset_less=True), Signal(reset_less=True)
+        c2 = Signal(range(32), reset_less=True)
+        tag2 = Signal(12, reset_less=True)
+        addr2 = [Signal(11, name=f"addr2_{t}", reset_less=True) for t in range(TAPS)]
+        inside2 = Signal(TAPS, reset_less=True)
+        waddr2 = Signal(range(rom.depth), reset_less=True)
         m.d.sync += [v2.eq(v1), first2.eq(first1), last2.eq(last1), c2.eq(c1), tag2.eq(tag1),
                      waddr2.eq(wbase + c1)]
         for t in range(TAPS):
@@ -344,12 +350,13 @@ class MnistCnn(wiring.Component):
             m.d.comb += ports[0][t].addr.eq(addr2[t] >> shift)
             for n in range(1, len(acts)):
                 m.d.comb += ports[n][t].addr.eq(Cat(c2[1:1 + pair_bits[n]], addr2[t]))
-        v3, first3, last3 = Signal(), Signal(), Signal()
-        c3 = Signal(range(32))
-        tag3 = Signal(12)
-        lane3 = [Signal(max(shift, 1), name=f"lane3_{t}") for t in range(TAPS)]
-        inside3 = Signal(TAPS)
-        waddr3 = Signal(range(rom.depth))
+        v3 = Signal()
+        first3, last3 = Signal(reset_less=True), Signal(reset_less=True)
+        c3 = Signal(range(32), reset_less=True)
+        tag3 = Signal(12, reset_less=True)
+        lane3 = [Signal(max(shift, 1), name=f"lane3_{t}", reset_less=True) for t in range(TAPS)]
+        inside3 = Signal(TAPS, reset_less=True)
+        waddr3 = Signal(range(rom.depth), reset_less=True)
         m.d.sync += [v3.eq(v2), first3.eq(first2), last3.eq(last2), c3.eq(c2), tag3.eq(tag2),
                      inside3.eq(inside2), waddr3.eq(waddr2)]
         m.d.sync += [lane3[t].eq(addr2[t][:shift] if shift else 0) for t in range(TAPS)]
@@ -360,9 +367,10 @@ class MnistCnn(wiring.Component):
         m.d.comb += w_rd.addr.eq(waddr3)
 
         # S4: the activation of each tap, 0 outside the map
-        v4, first4, last4 = Signal(), Signal(), Signal()
-        tag4 = Signal(12)
-        act4 = [Signal(8, name=f"act4_{t}") for t in range(TAPS)]
+        v4 = Signal()
+        first4, last4 = Signal(reset_less=True), Signal(reset_less=True)
+        tag4 = Signal(12, reset_less=True)
+        act4 = [Signal(8, name=f"act4_{t}", reset_less=True) for t in range(TAPS)]
         m.d.sync += [v4.eq(v3), first4.eq(first3), last4.eq(last3), tag4.eq(tag3)]
         for t in range(TAPS):
             value = Signal(8, name=f"value3_{t}")
@@ -386,21 +394,26 @@ class MnistCnn(wiring.Component):
                      *[mac.act[t].eq(a) for t, a in enumerate(act4)]]
 
         # R1: the bias added; R2: requantised and clamped; R3: pooled, written
-        r1 = [Signal(signed(32), name=f"total{o}") for o in range(LANES)]
+        r1 = [Signal(signed(32), name=f"total{o}", reset_less=True) for o in range(LANES)]
         v5 = Signal()
-        tag5 = Signal(12)
+        tag5 = Signal(12, reset_less=True)
         m.d.sync += [v5.eq(mac.out_valid), tag5.eq(mac.out_tag)]
+        # the pass's constants are registered (pass_ holds still from launch to pass_done),
+        # so that pass_ drives only the tables, not the lanes' adders and shifters
         for o in range(LANES):
-            bias = _table(m, pass_, [p["bias"][o] for p in passes], signed(32), f"bias{o}")
-            m.d.sync += r1[o].eq(mac.sums[o] + bias)
+            bias = Signal(signed(32), name=f"bias{o}", reset_less=True)
+            m.d.sync += [bias.eq(cfg("bias", signed(32), lambda p: p["bias"][o])),
+                         r1[o].eq(mac.sums[o] + bias)]
         v6 = Signal()
-        tag6 = Signal(12)
-        r2 = [Signal(signed(16), name=f"requant{o}") for o in range(LANES)]
+        tag6 = Signal(12, reset_less=True)
+        r2 = [Signal(signed(16), name=f"requant{o}", reset_less=True) for o in range(LANES)]
         m.d.sync += [v6.eq(v5), tag6.eq(tag5)]
         shifts = sorted({p["shift"] for p in passes})
-        shift_index = _table(m, pass_, [shifts.index(p["shift"]) for p in passes],
-                             range(len(shifts)), "cfg_shift")
-        to_scores = dst == _SCORES
+        shift_index = Signal(range(len(shifts)), reset_less=True)
+        to_scores = Signal(reset_less=True)
+        m.d.sync += [shift_index.eq(cfg("shift", range(len(shifts)),
+                                        lambda p: shifts.index(p["shift"]))),
+                     to_scores.eq(dst == _SCORES)]
         for o in range(LANES):
             q = Signal(signed(32), name=f"shifted{o}")
             with m.Switch(shift_index):
@@ -412,7 +425,7 @@ class MnistCnn(wiring.Component):
             m.d.sync += r2[o].eq(Mux(to_scores, score, relu))
         pool_start, pooled_done, end = tag6[0], tag6[1], tag6[2]
         addr6 = tag6[3:11]
-        best = [Signal(signed(16), name=f"best{o}") for o in range(LANES)]
+        best = [Signal(signed(16), name=f"best{o}", reset_less=True) for o in range(LANES)]
         pooled = [Signal(signed(16), name=f"pooled{o}") for o in range(LANES)]
         for o in range(LANES):
             m.d.comb += pooled[o].eq(Mux(pool_start | (r2[o] > best[o]), r2[o], best[o]))
@@ -421,10 +434,10 @@ class MnistCnn(wiring.Component):
         write = v6 & pooled_done
         # conv1's and conv2's outputs: the first two channels at once, the rest two a cycle
         # from the outbox (conv1 writes a position every 4 cycles, conv2 every 32)
-        outbox = Signal(8 * (LANES - 2))
+        outbox = Signal(8 * (LANES - 2), reset_less=True)
         outbox_left = Signal(range(LANES // 2))
-        outbox_word = Signal(range(LANES // 2))
-        outbox_pos = Signal(8)
+        outbox_word = Signal(range(LANES // 2), reset_less=True)
+        outbox_pos = Signal(8, reset_less=True)
         with m.If(write & ((dst == _CONV1_OUT) | (dst == _CONV2_OUT))):
             m.d.sync += [outbox.eq(Cat(*[pooled[o][:8] for o in range(2, LANES)])),
                          outbox_left.eq(Mux(dst == _CONV1_OUT, _CONVS[0][2] // 2 - 1,
@@ -444,10 +457,10 @@ class MnistCnn(wiring.Component):
                 m.d.comb += [wr.addr.eq(Cat(outbox_word[:word_bits], outbox_pos)),
                              wr.data.eq(outbox[:16]), wr.en.eq((outbox_left != 0) & (dst == n))]
         # conv3's output: a channel a cycle (conv3 writes a position every 64 cycles)
-        channel_box = Signal(8 * LANES)
+        channel_box = Signal(8 * LANES, reset_less=True)
         channel_left = Signal(range(LANES + 1))
-        channel_k = Signal(range(LANES))
-        channel_pos = Signal(range(TAPS))
+        channel_k = Signal(range(LANES), reset_less=True)
+        channel_pos = Signal(range(TAPS), reset_less=True)
         wr3 = conv3_out.write_port(granularity=8)
         m.d.comb += [wr3.addr.eq(Cat(channel_k, group[0])),
                      wr3.data.eq(Cat(*[channel_box[:8]] * TAPS))]
@@ -475,7 +488,7 @@ class MnistCnn(wiring.Component):
 
         # the argmax, one score per cycle (the first maximum wins), then the result
         k = Signal(range(11))
-        top, top_k = Signal(signed(16)), Signal(4)
+        top, top_k = Signal(signed(16), reset_less=True), Signal(4, reset_less=True)
         candidate = Signal(signed(16))
         with m.Switch(k):
             for n in range(10):
