@@ -191,12 +191,14 @@ def _place(core, entry, seeds, log):
         write_if_changed(vfile, text)
         try:
             _, cells = synthesise(vfile, entry["top"], folder)
-        except TimingError:
+        except TimingError as error:
             if k == len(entry["configs"]) - 1:
                 raise
             # YoWASP's Yosys runs in 4 GiB of WebAssembly memory: a frame store too large
-            # for the device can also be too large to map
-            why = "Yosys (YoWASP) ran out of memory mapping its RAM"
+            # for the device can also be too large to map, and then the log has no ERROR
+            errors = [line for line in str(error).splitlines() if line.startswith("ERROR")]
+            why = (f"Yosys failed: {errors[-1]}" if errors
+                   else "Yosys (YoWASP) ran out of memory mapping its RAM")
             if k == 0:
                 full = {"full_config": label, "full_does_not_fit": why, "full_mult18": None}
             log(f"    {label}: not synthesised ({why})")

