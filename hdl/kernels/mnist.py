@@ -199,14 +199,14 @@ class MnistCnn(wiring.Component):
         for group in range(4):
             outs = range(16 * group, 16 * group + 16)
             passes.append(dict(
-                src=_CONV3_OUT, dst=_HIDDEN, group=group, size=3, centre=4, fc=True, channels=32, side=1,
-                subs=1, shift=shift, lo=0, hi=127, bias=[int(b[o]) for o in outs],
+                src=_CONV3_OUT, dst=_HIDDEN, group=group, size=3, centre=4, fc=True, channels=32,
+                side=1, subs=1, shift=shift, lo=0, hi=127, bias=[int(b[o]) for o in outs],
                 words=[[int(w[o, 9 * c + t]) for o in outs for t in range(TAPS)]
                        for c in range(32)]))
         w, b, shift = self._weights["fc2"]
         passes.append(dict(
-            src=_HIDDEN, dst=_SCORES, group=0, size=3, centre=4, fc=True, channels=8, side=1, subs=1,
-            shift=shift, lo=-32768, hi=32767, bias=[int(b[o]) if o < 10 else 0
+            src=_HIDDEN, dst=_SCORES, group=0, size=3, centre=4, fc=True, channels=8, side=1,
+            subs=1, shift=shift, lo=-32768, hi=32767, bias=[int(b[o]) if o < 10 else 0
                                                     for o in range(LANES)],
             words=[[int(w[o, 9 * c + t]) if o < 10 and 9 * c + t < 64 else 0
                     for o in range(LANES) for t in range(TAPS)] for c in range(8)]))
@@ -316,7 +316,8 @@ class MnistCnn(wiring.Component):
         top1, bottom1 = Signal(reset_less=True), Signal(reset_less=True)
         left1, right1 = Signal(reset_less=True), Signal(reset_less=True)
         c1 = Signal(range(32), reset_less=True)
-        tag1 = Signal(12, reset_less=True)     # pooling starts, pooled value complete, pass ends, address
+        # pooling starts, pooled value complete, pass ends, address
+        tag1 = Signal(12, reset_less=True)
         y, x = Cat(sub[1], py), Cat(sub[0], px)
         m.d.sync += [
             v1.eq(running), first1.eq(c == 0), last1.eq(c == channels_last), c1.eq(c),
