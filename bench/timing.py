@@ -14,7 +14,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
 from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, lut4_carry,
-                         synthesise, synthesise_parts, time_verilog, unplaced_reason)
+                         synthesis_failure, synthesise, synthesise_parts, time_verilog,
+                         unplaced_reason)
 from tb.harness import ROOT, SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -194,11 +195,7 @@ def _place(core, entry, seeds, log):
         except TimingError as error:
             if k == len(entry["configs"]) - 1:
                 raise
-            # YoWASP's Yosys runs in 4 GiB of WebAssembly memory: a frame store too large
-            # for the device can also be too large to map, and then the log has no ERROR
-            errors = [line for line in str(error).splitlines() if line.startswith("ERROR")]
-            why = (f"Yosys failed: {errors[-1]}" if errors
-                   else "Yosys (YoWASP) ran out of memory mapping its RAM")
+            why = synthesis_failure(error)
             if k == 0:
                 full = {"full_config": label, "full_does_not_fit": why, "full_mult18": None}
             log(f"    {label}: not synthesised ({why})")

@@ -167,6 +167,16 @@ def _critical_path(report, clock):
     return None
 
 
+def synthesis_failure(error):
+    """Why a configuration was not synthesised, from the :class:`TimingError` of
+    :func:`synthesise`: Yosys' last ``ERROR`` line, or, when its log has none, that the
+    WebAssembly build ran out of its 4 GiB (a frame store too large for the device can also
+    be too large to map)."""
+    errors = [line for line in str(error).splitlines() if line.startswith("ERROR")]
+    return (f"Yosys failed: {errors[-1]}" if errors
+            else "Yosys (YoWASP) ran out of memory mapping its RAM")
+
+
 def unplaced_reason(label, cells, error, larger=None):
     """Why the configuration ``label`` has no Fmax: its size after synthesis (``cells``, Yosys'
     cell counts), the flow's ``error``, and ``larger`` = (label, reason) of the configuration

@@ -10,8 +10,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog
-from host.timing import (MARGIN, TimingError, lut4_carry, readable_cell, synthesise_parts,
-                         time_verilog, unplaced_reason)
+from host.timing import (MARGIN, TimingError, lut4_carry, readable_cell, synthesis_failure,
+                         synthesise_parts, time_verilog, unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -68,8 +68,14 @@ def test_tool_failure_names_the_log(tmp_path):
     text, _ = export_verilog(AdderChain(1), "adder_chain")
     vfile = tmp_path / "adder_chain.v"
     vfile.write_text(text)
-    with pytest.raises(TimingError, match=r"yosys on no_such_top failed \(log .*yosys.log\)"):
+    with pytest.raises(TimingError, match=r"yosys on no_such_top failed \(log .*yosys.log\)") as \
+            failed:
         time_verilog(vfile, "no_such_top", {"clk": 100}, tmp_path / "bad", seeds=(1,))
+    # the row of a configuration that was not synthesised gives Yosys' own error
+    why = synthesis_failure(failed.value)
+    assert why.startswith("Yosys failed: ERROR: ") and "no_such_top" in why, why
+    assert synthesis_failure(TimingError("yosys on x failed (log y):\nkilled")) == (
+        "Yosys (YoWASP) ran out of memory mapping its RAM")
 
 
 def test_a_seed_over_time_ends_the_run_without_the_seeds_after_it(tmp_path, monkeypatch):
