@@ -10,6 +10,7 @@ converted to time at 100 MHz. Resources come from Debian's Yosys
 """
 
 import json
+from pathlib import Path
 
 from bench.report import component_resources, resource_table, write_report
 from gen.export.resources import YOSYS_COMMAND
@@ -125,7 +126,32 @@ def pct(record, what):
     return f"{100 * record[f'{what}_bytes_per_cycle'] / record['limit_bytes_per_cycle']:.2f} %"
 
 
-def markdown(results, resources):
+def timing_note(results, timing):
+    """The 512-bit rows beside what the timing flow (``timing``: bench/results/timing.json)
+    showed of that width: its largest placed configuration and the clock it reached."""
+    cores = {r["core"]: r for r in timing.get("cores", ())}
+    wide = cores.get("msg_image_deserializer_w512")
+    image = next((r for r in results["runs"]
+                  if r["type"] == IMAGE and r["framing"] == "cdr" and r["width"] == 512), None)
+    if wide is None or image is None or wide.get("pass") or not wide.get("fmax_mhz"):
+        return []
+    narrow = [r for name, r in cores.items()
+              if name.startswith("msg_image_") and name.endswith("_w64")]
+    closed = (f"the 64-bit blocks close {CLOCK_MHZ} MHz on the open ECP5 flow (all "
+              f"{min(r['fmax_mhz'] for r in narrow)} MHz or more); " if narrow
+              and all(r["pass"] for r in narrow) else "")
+    placed = wide.get("placed_config", wide["label"])
+    why = wide.get("full_does_not_fit")
+    return ["", f"Timing (bench/results/timing.json, docs/timing.md): {closed}the 512-bit "
+            f"deserializer is not placed{f' ({why})' if why else ''}, and its largest placed "
+            f"configuration, {placed}, reaches {wide['fmax_mhz']} MHz. So the 512-bit rows' "
+            f"times are not shown to hold at {CLOCK_MHZ} MHz on this device: at "
+            f"{wide['fmax_mhz']} MHz the 640x480 Image deserializes in "
+            f"{image['deserialize_cycles'] / (wide['fmax_mhz'] * 1e3):.4f} ms, not "
+            f"{image['deserialize_ms']:.4f}."]
+
+
+def markdown(results, resources, timing=None):
     lines = ["# Message (de)serializer benchmark", "",
              f"Simulated cycles of the generated RTL (Verilator), time at {CLOCK_MHZ} MHz, full "
              "rate (no idle, no backpressure), every output checked against rosbags or the "
@@ -156,6 +182,7 @@ def markdown(results, resources):
               "The rows marked (beats) are the framing's beat-at-a-time pair "
               "(`ReconrosSerializer`, `ReconrosDeserializer`), which the ROS gateway uses.",
               ]
+    lines += timing_note(results, timing or {})
     lines += resource_table(resources, "config", "block")
     lines.append("")
     return "\n".join(lines)
@@ -163,4 +190,6 @@ def markdown(results, resources):
 
 def write_results(results, resources, folder):
     data = dict(results, resources=resources, reconros_image_beats=RECONROS_IMAGE_BEATS)
-    return write_report(folder, "msg", data, markdown(results, resources))
+    timing = Path(folder) / "timing.json"
+    timing = json.loads(timing.read_text()) if timing.exists() else None
+    return write_report(folder, "msg", data, markdown(results, resources, timing))
