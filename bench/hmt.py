@@ -107,14 +107,16 @@ RESOURCE_CONFIGS = (
     ("4x4_w64_mon", "4:4 64 b, no FIFO, monitor counters", dict(fifo_depth=0, monitor=True)),
     ("4x4_w64_fifo", "4:4 64 b, 512-deep FIFOs, no monitor", dict(fifo_depth=512, monitor=False)),
     ("4x4_w64_fifo_mon", "4:4 64 b, 512-deep FIFOs, monitor counters",
-     dict(fifo_depth=512, monitor=True)))
+     dict(fifo_depth=512, monitor=True)),
+    ("4x4_w512", "4:4 512 b, no FIFO, no monitor",
+     dict(fifo_depth=0, monitor=False, data_width=512)))
 
 
 def resource_configs():
     """(name, {"label", "build"}) of each configuration of :data:`RESOURCE_CONFIGS`."""
     return [(name, {"label": label,
-                    "build": lambda p=params: build_top("topic", pubs=4, subs=4, data_width=64,
-                                                        **p)})
+                    "build": lambda p=params: build_top("topic", pubs=4, subs=4,
+                                                        **{"data_width": 64, **p})})
             for name, label, params in RESOURCE_CONFIGS]
 
 
