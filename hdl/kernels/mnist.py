@@ -402,9 +402,7 @@ class MnistCnn(wiring.Component):
         tag5 = Signal(12, reset_less=True)
         m.d.sync += [v5.eq(mac.out_valid), tag5.eq(mac.out_tag)]
         # the pass's constants are registered (pass_ holds still from launch to pass_done),
-        # so that pass_ drives only the tables, not the lanes' adders and shifters. These
-        # keep their reset: without it Yosys makes each table a ROM in LUT RAM, and its ABC9
-        # step then fails on the design
+        # so that pass_ drives only the tables, not the lanes' adders and shifters
         for o in range(LANES):
             bias = Signal(signed(32), name=f"bias{o}")
             m.d.sync += [bias.eq(cfg("bias", signed(32), lambda p: p["bias"][o])),
