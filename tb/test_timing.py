@@ -68,8 +68,8 @@ def test_tool_failure_names_the_log(tmp_path):
     text, _ = export_verilog(AdderChain(1), "adder_chain")
     vfile = tmp_path / "adder_chain.v"
     vfile.write_text(text)
-    with pytest.raises(TimingError, match=r"yosys on no_such_top failed \(log .*yosys.log\)") as \
-            failed:
+    failure = r"yosys on no_such_top failed \(log .*yosys.log\)"
+    with pytest.raises(TimingError, match=failure) as failed:
         time_verilog(vfile, "no_such_top", {"clk": 100}, tmp_path / "bad", seeds=(1,))
     # the row of a configuration that was not synthesised gives Yosys' own error
     why = synthesis_failure(failed.value)
