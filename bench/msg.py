@@ -126,29 +126,41 @@ def pct(record, what):
     return f"{100 * record[f'{what}_bytes_per_cycle'] / record['limit_bytes_per_cycle']:.2f} %"
 
 
+def timing_core(name):
+    """The timing flow's core name (bench/timing.py) of block ``name``."""
+    return f"msg_{name}"
+
+
 def timing_note(results, timing):
-    """The 512-bit rows beside what the timing flow (``timing``: bench/results/timing.json)
-    showed of that width: its largest placed configuration and the clock it reached."""
+    """The rows of the blocks in :data:`TIMING_FALLBACKS` beside what the timing flow
+    (``timing``: bench/results/timing.json) showed of them: their largest placed
+    configuration and the clock it reached."""
     cores = {r["core"]: r for r in timing.get("cores", ())}
-    wide = cores.get("msg_image_deserializer_w512")
-    image = next((r for r in results["runs"]
-                  if r["type"] == IMAGE and r["framing"] == "cdr" and r["width"] == 512), None)
-    if wide is None or image is None or wide.get("pass") or not wide.get("fmax_mhz"):
-        return []
-    narrow = [r for name, r in cores.items()
-              if name.startswith("msg_image_") and name.endswith("_w64")]
+    blocks = {_block(*b)[0]: b for b in BLOCKS}
+    narrow = [cores.get(timing_core(name)) for name, (_, _, width) in blocks.items()
+              if width == 64]
     closed = (f"the 64-bit blocks close {CLOCK_MHZ} MHz on the open ECP5 flow (all "
-              f"{min(r['fmax_mhz'] for r in narrow)} MHz or more); " if narrow
-              and all(r["pass"] for r in narrow) else "")
-    placed = wide.get("placed_config", wide["label"])
-    why = wide.get("full_does_not_fit")
-    return ["", f"Timing (bench/results/timing.json, docs/timing.md): {closed}the 512-bit "
-            f"deserializer is not placed{f' ({why})' if why else ''}, and its largest placed "
-            f"configuration, {placed}, reaches {wide['fmax_mhz']} MHz. So the 512-bit rows' "
-            f"times are not shown to hold at {CLOCK_MHZ} MHz on this device: at "
-            f"{wide['fmax_mhz']} MHz the 640x480 Image deserializes in "
-            f"{image['deserialize_cycles'] / (wide['fmax_mhz'] * 1e3):.4f} ms, not "
-            f"{image['deserialize_ms']:.4f}."]
+              f"{min(r['fmax_mhz'] for r in narrow)} MHz or more); "
+              if narrow and all(r and r["pass"] for r in narrow) else "")
+    lines = []
+    for name in TIMING_FALLBACKS:
+        cls, framing, width = blocks[name]
+        row = cores.get(timing_core(name))
+        run = next((r for r in results["runs"] if r["type"] == IMAGE
+                    and r["framing"] == framing and r["width"] == width), None)
+        if row is None or run is None or row.get("pass") or not row.get("fmax_mhz"):
+            continue
+        why = row.get("full_does_not_fit")
+        side = "deserialize" if issubclass(cls, Deserializer) else "serialize"
+        cycles, ms = run[f"{side}_cycles"], run[f"{side}_ms"]
+        lines += ["", f"Timing (bench/results/timing.json, docs/timing.md): {closed}the "
+                  f"{width}-bit {cls.__name__.lower()} is not placed"
+                  f"{f' ({why})' if why else ''}, and its largest placed configuration, "
+                  f"{row.get('placed_config', row['label'])}, reaches {row['fmax_mhz']} MHz. "
+                  f"So the {width}-bit rows' times are not shown to hold at {CLOCK_MHZ} MHz "
+                  f"on this device: at {row['fmax_mhz']} MHz the 640x480 Image {side}s in "
+                  f"{cycles / (row['fmax_mhz'] * 1e3):.4f} ms, not {ms:.4f}."]
+    return lines
 
 
 def markdown(results, resources, timing=None):

@@ -58,7 +58,8 @@ def catalog():
         add(f"topic_{name}", f"Topic {params['label']}", params["build"], "topic",
             hmt.CLOCK_MHZ)
     for name, label, build in msg.resource_blocks():
-        add(f"msg_{name}", label, build, "msg_block", msg.CLOCK_MHZ, msg.timing_fallbacks(name))
+        add(msg.timing_core(name), label, build, "msg_block", msg.CLOCK_MHZ,
+            msg.timing_fallbacks(name))
     for arch in ("r32", "r64"):
         def infra(arch=arch):
             from hdl.reconos import ReconosSystem
