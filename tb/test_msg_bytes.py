@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Unit tests of hdl.msg.bytes (amaranth.sim): the byte packer under random chunk sizes,
 random idle and random backpressure, against a model of its output written from its contract
 (every beat full except a message's last; a message of no bytes is one beat with tkeep 0); the
@@ -7,7 +8,8 @@ import random
 
 import pytest
 
-from hdl.msg.bytes import BytePacker, ByteUnpacker
+from hdl.msg.bytes import BytePacker, ByteUnpacker, WideByteUnpacker, byte_unpacker_class
+from hdl.params import ParameterError
 from tb.streamsim import StreamSource, simulate
 
 
@@ -118,12 +120,15 @@ def test_packer_moves_a_beat_per_cycle(nbytes):
     assert cycles["last"] - cycles["first"] + 1 == len(want) + len(messages) - 1
 
 
-@pytest.mark.parametrize("nbytes", [1, 8])
+@pytest.mark.parametrize("unpacker,nbytes", [(ByteUnpacker, 1), (ByteUnpacker, 8),
+                                             (WideByteUnpacker, 2), (WideByteUnpacker, 8),
+                                             (WideByteUnpacker, 16)])
 @pytest.mark.parametrize("idle", [0.0, 0.4])
-def test_unpacker_random_takes_and_flushes(nbytes, idle):
+def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     """The consumer takes random amounts (0..min(avail, B)) at random: the bytes taken are
-    each message's bytes in order; a flush in mid-message drops the rest of that message and
-    the next message starts whole; ``ended`` comes once the last beat is absorbed."""
+    each message's bytes in order, the window's bytes past ``avail`` are zero; a flush in
+    mid-message drops the rest of that message and the next message starts whole; ``ended``
+    comes once the last beat is absorbed."""
     rng = random.Random(nbytes * 10 + int(10 * idle))
     messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
                 for _ in range(50)]
@@ -131,7 +136,7 @@ def test_unpacker_random_takes_and_flushes(nbytes, idle):
     beats = [(int.from_bytes(bytes(msg[i:i + nbytes]), "little"), int(i + nbytes >= len(msg)),
               (1 << len(msg[i:i + nbytes])) - 1)
              for msg in messages for i in range(0, len(msg), nbytes)]
-    dut = ByteUnpacker(8 * nbytes)
+    dut = unpacker(8 * nbytes)
     source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
     got = []
 
@@ -141,6 +146,7 @@ def test_unpacker_random_takes_and_flushes(nbytes, idle):
             while True:
                 avail, ended, window = ctx.get(dut.avail), ctx.get(dut.ended), ctx.get(dut.window)
                 assert avail <= 2 * nbytes
+                assert window >> 8 * min(avail, nbytes) == 0
                 if (ended and avail == 0) or len(taken) == cut.get(k, -1):
                     ctx.set(dut.flush, 1)
                     ctx.set(dut.take, 0)
@@ -159,3 +165,13 @@ def test_unpacker_random_takes_and_flushes(nbytes, idle):
 
     simulate(dut, consumer, background=[source.run])
     assert got == [msg[:cut.get(k, len(msg))] for k, msg in enumerate(messages)]
+
+
+def test_wide_unpacker_refuses_other_widths():
+    """The wide unpacker's ring wraps at a power of two: another width is refused by name,
+    and :func:`byte_unpacker_class` gives such a width the shifting unpacker."""
+    with pytest.raises(ParameterError, match="data_width.*96"):
+        WideByteUnpacker(96)
+    assert byte_unpacker_class(96) is ByteUnpacker
+    assert byte_unpacker_class(64) is ByteUnpacker
+    assert byte_unpacker_class(512) is WideByteUnpacker

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import check_int
 from ..stream import AXIStreamSignature
-from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
+from .bytes import BytePacker, ChunkRegisterSlice, byte_mask, byte_unpacker_class
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
 from .steps import (RuntimeStep, StepRemainder, chunk_facts, count_chunk_bytes, count_chunks,
                     count_step, next_element, pad_bytes, payload_bytes, registered_facts,
@@ -147,7 +147,7 @@ class Deserializer(wiring.Component):
         plan, W, B = self.plan, self._width, self._width // 8
         steps = plan.steps
         reconros = plan.framing == "reconros"
-        m.submodules.unpacker = unpacker = ByteUnpacker(W)
+        m.submodules.unpacker = unpacker = byte_unpacker_class(W)(W)
         wiring.connect(m, wiring.flipped(self.s_axis), unpacker.s_axis)
         window, avail, ended = unpacker.window, unpacker.avail, unpacker.ended
 

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature, keep_count
-from .bytes import BytePacker, ByteUnpacker, ChunkRegisterSlice, byte_mask
+from .bytes import BytePacker, ChunkRegisterSlice, byte_mask, byte_unpacker_class
 from .steps import (RuntimeStep, StepRemainder, count_chunks, count_step, next_element,
                     pad_bytes, payload_bytes, registered_facts, send_count_chunk)
 
@@ -191,7 +191,7 @@ class Serializer(wiring.Component):
         unpackers, reported = {}, {}
         for v in plan.streams:
             if v.elements:
-                unpacker = m.submodules[f"unpacker{v.index}"] = ByteUnpacker(W)
+                unpacker = m.submodules[f"unpacker{v.index}"] = byte_unpacker_class(W)(W)
                 wiring.connect(m, wiring.flipped(ports[v.index]), unpacker.s_axis)
                 unpackers[v.index] = unpacker
                 reported[v.index] = Signal(name=f"reported{v.index}")
