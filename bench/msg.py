@@ -153,10 +153,12 @@ def timing_note(results, timing):
         why = row.get("full_does_not_fit")
         side = "deserialize" if issubclass(cls, Deserializer) else "serialize"
         cycles, ms = run[f"{side}_cycles"], run[f"{side}_ms"]
+        placed = (f"is not placed{f' ({why})' if why else ''}, and its largest placed "
+                  f"configuration, {row['placed_config']}, reaches {row['fmax_mhz']} MHz"
+                  if row.get("placed_config") else
+                  f"places ({row['lut4']} LUT4+carry) and reaches {row['fmax_mhz']} MHz")
         lines += ["", f"Timing (bench/results/timing.json, docs/timing.md): {closed}the "
-                  f"{width}-bit {cls.__name__.lower()} is not placed"
-                  f"{f' ({why})' if why else ''}, and its largest placed configuration, "
-                  f"{row.get('placed_config', row['label'])}, reaches {row['fmax_mhz']} MHz. "
+                  f"{width}-bit {cls.__name__.lower()} {placed}. "
                   f"So the {width}-bit rows' times are not shown to hold at {CLOCK_MHZ} MHz "
                   f"on this device: at {row['fmax_mhz']} MHz the 640x480 Image {side}s in "
                   f"{cycles / (row['fmax_mhz'] * 1e3):.4f} ms, not {ms:.4f}."]
