@@ -273,7 +273,7 @@ def _shift_bytes_up(m, value, by, width, name):
     return value
 
 
-class WideByteUnpacker(wiring.Component):
+class WideByteUnpacker(ByteUnpacker):
     """:class:`ByteUnpacker` for wide datapaths: the same ports and contract, built so that
     its logic grows with the window, not with twice the window times its shift.
 
@@ -300,12 +300,7 @@ class WideByteUnpacker(wiring.Component):
 
     def __init__(self, data_width):
         check_power_of_two("data_width", data_width, 16, 1024)
-        B = data_width // 8
-        super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
-                          "window": Out(data_width), "avail": Out(range(2 * B + 1)),
-                          "ended": Out(1), "amount": In(range(B + 1)), "take": In(1),
-                          "flush": In(1), "dropping": Out(1)})
-        self._width = data_width
+        super().__init__(data_width)
 
     def elaborate(self, platform):
         m = Module()
