@@ -324,7 +324,7 @@ class WideByteUnpacker(ByteUnpacker):
         m.d.comb += left.eq(count - self.amount)
         room_taken = ~ended & (left <= B)
         room_kept = ~ended & (count <= B)
-        # rd + amount wraps at 2B bytes: the ring's size is a power of two
+        # ``read + amount`` wraps at 2B bytes: the ring's size is a power of two
         to = Signal(range(2 * B))
         m.d.comb += to.eq(read + self.amount)
         # the beat accepted last cycle, and the ring as if it were written already
@@ -370,6 +370,7 @@ class WideByteUnpacker(ByteUnpacker):
 
 def byte_unpacker_class(data_width):
     """The byte unpacker to build at ``data_width``: :class:`WideByteUnpacker` above 64 bits
-    at a power of two, where it is the smaller, else :class:`ByteUnpacker`."""
+    at a power of two (where it is the smaller in LUT4 cells; in LUT6 cells it is about the
+    same), else :class:`ByteUnpacker`."""
     return WideByteUnpacker if data_width > 64 and not data_width & (data_width - 1) \
         else ByteUnpacker
