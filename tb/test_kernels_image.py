@@ -92,8 +92,11 @@ async def bad_frames_are_flagged_and_resynchronised(dut):
         pixels = k.frame_image(image)
         data = pixels.tobytes()
         row = pixels.shape[1] * k.channels
-        short = data[:len(data) // 2 // row * row + row // 2 // k.p * k.p]
-        assert 0 < len(short) < len(data), (name, pixels.shape, len(short))
+        # half the frame's beats, less half a beat of pixels: the kernel's stream has no
+        # tkeep, so a cut inside the frame's last beat would not be short at all
+        beat = k.p * k.channels
+        short = data[:len(data) // beat // 2 * beat - k.p // 2 * k.channels]
+        assert 0 < len(short) <= len(data) - beat, (name, pixels.shape, len(short))
         long_ = data + bytes(reversed(data[:row]))
         frames[name] = [(image, {"data": short}), (tb.random_image(k), {}),
                         (image, {"data": long_}), (tb.random_image(k), {}),
