@@ -204,6 +204,19 @@ class ByteUnpacker(wiring.Component):
                           "flush": In(1), "dropping": Out(1)})
         self._width = data_width
 
+    def _arrival(self, m, count, ended):
+        """What the input beat brings, given the window's byte ``count`` and ``ended``:
+        ``(n, beat, left, room_taken, room_kept)``, its byte count, its bytes with those past
+        ``n`` zero, the bytes left after taking ``amount``, and whether it is absorbed when
+        ``amount`` is taken and when nothing is."""
+        B = self._width // 8
+        s = self.s_axis
+        n = keep_count(s.tkeep)
+        left = Signal(range(2 * B + 1))
+        m.d.comb += left.eq(count - self.amount)
+        return (n, byte_mask(s.tdata, B, n), left, ~ended & (left <= B),
+                ~ended & (count <= B))
+
     def elaborate(self, platform):
         m = Module()
         W, B = self._width, self._width // 8
@@ -217,12 +230,8 @@ class ByteUnpacker(wiring.Component):
 
         # both next states, taking ``amount`` bytes and taking none, from registers and the
         # input beat; ``take`` chooses
-        n = keep_count(s.tkeep)
-        beat = Cat(byte_mask(s.tdata, B, n), Const(0, W))
-        left = Signal(range(2 * B + 1))
-        m.d.comb += left.eq(count - self.amount)
-        room_taken = ~ended & (left <= B)
-        room_kept = ~ended & (count <= B)
+        n, beat, left, room_taken, room_kept = self._arrival(m, count, ended)
+        beat = Cat(beat, Const(0, W))
         shifted = buf >> (self.amount * 8)
         # A beat enters only at a byte offset of at most B (``room_*``), so the shifts take
         # the offsets' low bits: a shifter of B + 1 positions, not 2B + 1.
@@ -317,13 +326,8 @@ class WideByteUnpacker(ByteUnpacker):
         m.d.comb += [self.window.eq(window), self.avail.eq(count), self.ended.eq(ended),
                      self.dropping.eq(dropping)]
 
-        n = keep_count(s.tkeep)
-        beat = byte_mask(s.tdata, B, n)
+        n, beat, left, room_taken, room_kept = self._arrival(m, count, ended)
         nb = len(self.amount)
-        left = Signal(range(2 * B + 1))
-        m.d.comb += left.eq(count - self.amount)
-        room_taken = ~ended & (left <= B)
-        room_kept = ~ended & (count <= B)
         # ``read + amount`` wraps at 2B bytes: the ring's size is a power of two
         to = Signal(range(2 * B))
         m.d.comb += to.eq(read + self.amount)
