@@ -287,11 +287,14 @@ class WideByteUnpacker(ByteUnpacker):
     its logic grows with the window, not with twice the window times its shift.
 
     Beats land unshifted in a ring of two beat slots: a message's beats are full but its
-    last, so each one starts at a slot boundary. The window is a register. Taking ``amount``
-    bytes, its next value is the ring rotated to the new read position, the bytes beyond those
-    still held cleared, and the arriving beat's bytes placed after them; taking none, it is
-    the window with the arriving beat's bytes placed after the ones it holds. ``take`` only
-    chooses between the two, as in :class:`ByteUnpacker`.
+    last, so each one starts at a slot boundary. Taking ``amount`` bytes, the next window is
+    the ring rotated to the new read position, the bytes beyond those still held cleared, and
+    the arriving beat's bytes placed after them; taking none, it is the window with the
+    arriving beat's bytes placed after the ones it holds. Both are built every cycle, from
+    registers and the input beat, into flip-flops of their own, and the window is the one of
+    the two that ``take`` chose in the cycle before (or empty after a ``flush``): ``take`` and
+    ``flush`` reach two flip-flops instead of every bit of the window, and the window shows
+    each move in the next cycle, as in :class:`ByteUnpacker`.
 
     A beat is written into its slot a cycle after it is accepted, from a register that samples
     the input every cycle, and is read from that register meanwhile: ``take``, which decides
@@ -316,7 +319,14 @@ class WideByteUnpacker(ByteUnpacker):
         W, B = self._width, self._width // 8
         # the slots hold bytes only while ``count`` says so: no reset needed
         ring = Signal(2 * W, reset_less=True)
+        # both next windows in flip-flops, and which of them is the window
+        window_taken_r = Signal(W)
+        window_kept_r = Signal(W)
+        chose_taken = Signal()
+        chose_empty = Signal()
         window = Signal(W)
+        m.d.comb += window.eq(Mux(chose_empty, 0,
+                                  Mux(chose_taken, window_taken_r, window_kept_r)))
         read = Signal(range(2 * B))      # ring position of the window's first byte
         write = Signal()                 # the slot the next beat goes to
         count = Signal(range(2 * B + 1))
@@ -344,10 +354,11 @@ class WideByteUnpacker(ByteUnpacker):
         held = byte_mask(_rotate_bytes(m, ring_now, to, "ring_at")[:W], B, left)
         after_left = _shift_bytes_up(m, beat, left[:nb], W, "beat_after_left")
         after_count = _shift_bytes_up(m, beat, count[:nb], W, "beat_after_count")
-        window_taken = kept(m, held | Mux(s.tvalid & room_taken, after_left, 0),
-                            "window_taken")
-        window_kept = kept(m, window | Mux(s.tvalid & room_kept, after_count, 0),
-                           "window_kept")
+        m.d.sync += [
+            window_taken_r.eq(held | Mux(s.tvalid & room_taken, after_left, 0)),
+            window_kept_r.eq(window | Mux(s.tvalid & room_kept & ~dropping, after_count, 0)),
+            chose_taken.eq(self.take & ~self.flush & ~dropping),
+            chose_empty.eq(self.flush & ~dropping)]
 
         def absorb(room):
             m.d.comb += s.tready.eq(room)
@@ -359,16 +370,14 @@ class WideByteUnpacker(ByteUnpacker):
             with m.If(s.tvalid & s.tlast):
                 m.d.sync += dropping.eq(0)
         with m.Elif(self.flush):
-            m.d.sync += [count.eq(0), window.eq(0), read.eq(0), write.eq(0), ended.eq(0),
+            m.d.sync += [count.eq(0), read.eq(0), write.eq(0), ended.eq(0),
                          dropping.eq(~ended)]
         with m.Elif(self.take):
             absorb(room_taken)
-            m.d.sync += [window.eq(window_taken), read.eq(to),
-                         count.eq(left + Mux(s.tvalid & room_taken, n, 0))]
+            m.d.sync += [read.eq(to), count.eq(left + Mux(s.tvalid & room_taken, n, 0))]
         with m.Else():
             absorb(room_kept)
-            m.d.sync += [window.eq(window_kept),
-                         count.eq(count + Mux(s.tvalid & room_kept, n, 0))]
+            m.d.sync += count.eq(count + Mux(s.tvalid & room_kept, n, 0))
         return m
 
 
