@@ -216,7 +216,7 @@ def resource_lines(resources):
     lines += ["", f"The XCZU7EV has {XCZU7EV['BRAM36']} BRAM36 and {XCZU7EV['URAM']} UltraRAMs "
               "(288 Kb each; Yosys' xc7 flow maps no UltraRAM, so every store counts as "
               "BRAM36 here). The projection's coordinate dividers are estimated once and "
-              "counted per instance (two per px/clk)."]
+              "counted per instance (one per px/clk, for a pixel's x and y)."]
     return lines
 
 
