@@ -8,7 +8,8 @@ import random
 
 import pytest
 
-from hdl.msg.bytes import BytePacker, ByteUnpacker, WideByteUnpacker, byte_unpacker_class
+from hdl.msg.bytes import (BytePacker, ByteUnpacker, SettlingByteUnpacker, WideByteUnpacker,
+                           byte_unpacker_class)
 from hdl.params import ParameterError
 from tb.streamsim import StreamSource, simulate
 
@@ -122,13 +123,17 @@ def test_packer_moves_a_beat_per_cycle(nbytes):
 
 @pytest.mark.parametrize("unpacker,nbytes", [(ByteUnpacker, 1), (ByteUnpacker, 8),
                                              (WideByteUnpacker, 2), (WideByteUnpacker, 8),
-                                             (WideByteUnpacker, 16)])
+                                             (WideByteUnpacker, 16),
+                                             (SettlingByteUnpacker, 2),
+                                             (SettlingByteUnpacker, 8),
+                                             (SettlingByteUnpacker, 16)])
 @pytest.mark.parametrize("idle", [0.0, 0.4])
 def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
-    """The consumer takes random amounts (0..min(avail, B)) at random: the bytes taken are
-    each message's bytes in order, the window's bytes past ``avail`` are zero; a flush in
-    mid-message drops the rest of that message and the next message starts whole; ``ended``
-    comes once the last beat is absorbed."""
+    """The consumer takes random amounts (0..min(avail, B)) at random, and with the settling
+    unpacker whole windows (``take_full``) too: the bytes taken are each message's bytes in
+    order, the window's bytes past ``avail`` are zero (but while a settling window shows
+    nothing); a flush in mid-message drops the rest of that message and the next message
+    starts whole; ``ended`` comes once the last beat is absorbed."""
     rng = random.Random(nbytes * 10 + int(10 * idle))
     messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
                 for _ in range(50)]
@@ -137,6 +142,7 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
               (1 << len(msg[i:i + nbytes])) - 1)
              for msg in messages for i in range(0, len(msg), nbytes)]
     dut = unpacker(8 * nbytes)
+    settling = unpacker is SettlingByteUnpacker
     source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
     got = []
 
@@ -145,19 +151,34 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
             taken = []
             while True:
                 avail, ended, window = ctx.get(dut.avail), ctx.get(dut.ended), ctx.get(dut.window)
-                assert avail <= 2 * nbytes
-                assert window >> 8 * min(avail, nbytes) == 0
+                assert avail <= (nbytes if settling else 2 * nbytes)
+                if avail or not settling:
+                    assert window >> 8 * min(avail, nbytes) == 0
                 if (ended and avail == 0) or len(taken) == cut.get(k, -1):
                     ctx.set(dut.flush, 1)
                     ctx.set(dut.take, 0)
+                    if settling:
+                        # a flush comes first
+                        ctx.set(dut.take_full, rng.random() < 0.5)
                     await ctx.tick()
                     ctx.set(dut.flush, 0)
+                    if settling:
+                        ctx.set(dut.take_full, 0)
                     break
                 room = cut[k] - len(taken) if k in cut else nbytes
                 amount = rng.randint(0, min(avail, nbytes, room))
                 take = rng.random() < 0.7
-                ctx.set(dut.amount, amount)
-                ctx.set(dut.take, take)
+                full = settling and take and min(avail, room) >= nbytes and rng.random() < 0.5
+                if full:
+                    # take_full moves a window whatever take and amount say
+                    amount = nbytes
+                    ctx.set(dut.take, rng.random() < 0.5)
+                    ctx.set(dut.amount, rng.randint(0, nbytes))
+                else:
+                    ctx.set(dut.take, take)
+                    ctx.set(dut.amount, amount)
+                if settling:
+                    ctx.set(dut.take_full, full)
                 if take:
                     taken += list(window.to_bytes(nbytes, "little")[:amount])
                 await ctx.tick()
@@ -167,11 +188,44 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     assert got == [msg[:cut.get(k, len(msg))] for k, msg in enumerate(messages)]
 
 
+@pytest.mark.parametrize("nbytes", [2, 64])
+def test_settling_unpacker_moves_a_window_per_cycle(nbytes):
+    """Whole windows taken (``take_full``) whenever shown, beats offered every cycle: after the
+    first window, one window per cycle, the bytes in order, ``ended`` with the last."""
+    rng = random.Random(nbytes)
+    msg = [rng.getrandbits(8) for _ in range(40 * nbytes + nbytes // 2)]
+    beats = [(int.from_bytes(bytes(msg[i:i + nbytes]), "little"), int(i + nbytes >= len(msg)),
+              (1 << len(msg[i:i + nbytes])) - 1) for i in range(0, len(msg), nbytes)]
+    dut = SettlingByteUnpacker(8 * nbytes)
+    source = StreamSource(dut.s_axis, beats, idle=0.0, seed=1)
+    taken, cycles = [], []
+
+    async def consumer(ctx):
+        for cycle in range(200):
+            avail, window = ctx.get(dut.avail), ctx.get(dut.window)
+            ctx.set(dut.take_full, avail == nbytes)
+            if avail == nbytes:
+                taken.extend(window.to_bytes(nbytes, "little"))
+                cycles.append(cycle)
+            elif ctx.get(dut.ended):
+                taken.extend(window.to_bytes(nbytes, "little")[:avail])
+                return
+            await ctx.tick()
+
+    simulate(dut, consumer, background=[source.run])
+    assert taken == msg
+    assert cycles[-1] - cycles[0] + 1 == len(cycles) == 40
+
+
 def test_wide_unpacker_refuses_other_widths():
     """The wide unpacker's ring wraps at a power of two: another width is refused by name,
     and :func:`byte_unpacker_class` gives such a width the shifting unpacker."""
     with pytest.raises(ParameterError, match="data_width.*96"):
         WideByteUnpacker(96)
+    with pytest.raises(ParameterError, match="data_width.*96"):
+        SettlingByteUnpacker(96)
+    assert byte_unpacker_class(512, settling=True) is SettlingByteUnpacker
+    assert byte_unpacker_class(64, settling=True) is ByteUnpacker
     assert byte_unpacker_class(96) is ByteUnpacker
     assert byte_unpacker_class(64) is ByteUnpacker
     assert byte_unpacker_class(512) is WideByteUnpacker

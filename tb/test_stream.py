@@ -5,7 +5,8 @@ converters."""
 import random
 
 import pytest
-from amaranth.hdl import ClockDomain, Module
+from amaranth.hdl import ClockDomain, Module, Signal
+from amaranth.sim import Simulator
 
 from hdl.params import ParameterError
 from hdl.stream import (
@@ -20,6 +21,7 @@ from hdl.stream import (
     StreamFIFO,
     StreamRepacker,
     StreamUpsizer,
+    keep_count_shallow,
 )
 from tb.streamsim import StreamSink, StreamSource, beats_to_messages, messages_to_beats, simulate
 
@@ -584,3 +586,23 @@ def test_converters_reject_byte_width(converter):
     with pytest.raises(ParameterError, match=r"data_width must be an integer in 16\.\.1024 and "
                                              r"a multiple of 8, not 8"):
         converter(8)
+
+
+@pytest.mark.parametrize("nbits", [1, 2, 3, 8, 16, 64])
+def test_keep_count_shallow_counts_every_contiguous_keep(nbits):
+    """For every contiguous ``tkeep`` (0..nbits ones from bit 0), the shallow count is the
+    number of ones."""
+    m = Module()
+    keep, count = Signal(nbits), Signal(range(nbits + 1))
+    m.d.comb += count.eq(keep_count_shallow(keep))
+    got = []
+
+    async def bench(ctx):
+        for ones in range(nbits + 1):
+            ctx.set(keep, (1 << ones) - 1)
+            got.append(ctx.get(count))
+
+    sim = Simulator(m)
+    sim.add_testbench(bench)
+    sim.run()
+    assert got == list(range(nbits + 1))

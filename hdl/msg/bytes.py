@@ -7,10 +7,10 @@ from amaranth.lib.wiring import In, Out
 
 from ..logic import kept
 from ..params import check_int, check_power_of_two
-from ..stream import AXIStreamSignature, keep_count, skid_buffer
+from ..stream import AXIStreamSignature, keep_count, keep_count_shallow, skid_buffer
 
 __all__ = ["ChunkSignature", "ChunkRegisterSlice", "BytePacker", "ByteUnpacker",
-           "WideByteUnpacker", "byte_unpacker_class", "byte_mask"]
+           "WideByteUnpacker", "SettlingByteUnpacker", "byte_unpacker_class", "byte_mask"]
 
 
 def byte_mask(value, nbytes, count):
@@ -197,12 +197,16 @@ class ByteUnpacker(wiring.Component):
     """
 
     def __init__(self, data_width):
-        B = data_width // 8
-        super().__init__({"s_axis": In(AXIStreamSignature(data_width)),
-                          "window": Out(data_width), "avail": Out(range(2 * B + 1)),
-                          "ended": Out(1), "amount": In(range(B + 1)), "take": In(1),
-                          "flush": In(1), "dropping": Out(1)})
+        super().__init__(self._members(data_width))
         self._width = data_width
+
+    @staticmethod
+    def _members(data_width):
+        B = data_width // 8
+        return {"s_axis": In(AXIStreamSignature(data_width)),
+                "window": Out(data_width), "avail": Out(range(2 * B + 1)),
+                "ended": Out(1), "amount": In(range(B + 1)), "take": In(1),
+                "flush": In(1), "dropping": Out(1)}
 
     def _arrival(self, m, count, ended):
         """What the input beat brings, given the window's byte ``count`` and ``ended``:
@@ -271,6 +275,15 @@ def _rotate_bytes(m, value, by, name):
         m.d.comb += level.eq(Mux(by[k], value.rotate_right(8 << k), value))
         value = level
     return value
+
+
+def _shift_bytes_down(m, value, by, width, name):
+    """``value`` moved down by ``by`` bytes, cut to ``width`` bits (zeros come in on top)."""
+    for k in range(len(by)):
+        level = Signal(len(value), name=f"{name}{k}")
+        m.d.comb += level.eq(Mux(by[k], value >> (8 << k), value))
+        value = level
+    return value[:width]
 
 
 def _shift_bytes_up(m, value, by, width, name):
@@ -381,9 +394,137 @@ class WideByteUnpacker(ByteUnpacker):
         return m
 
 
-def byte_unpacker_class(data_width):
-    """The byte unpacker to build at ``data_width``: :class:`WideByteUnpacker` above 64 bits
-    at a power of two (where it is the smaller in LUT4 cells; in LUT6 cells it is about the
-    same), else :class:`ByteUnpacker`."""
-    return WideByteUnpacker if data_width > 64 and not data_width & (data_width - 1) \
-        else ByteUnpacker
+class SettlingByteUnpacker(ByteUnpacker):
+    """:class:`ByteUnpacker` whose window comes from flip-flops, for a consumer that decides
+    from the window's bytes: a take of any amount is absorbed in two cycles of settling, a
+    take of a whole window decided without looking at it (``take_full``) moves on at once.
+
+    The window and its ``avail`` and ``ended`` are registers, built every cycle from
+    registers: the beats, held unshifted in a ring of four beat slots, and copies of the read
+    position and byte count that only a ``take_full`` moves at once (the others follow them a
+    cycle later). ``take`` and ``flush`` reach the position, the counts and the flags, not the
+    window's bits nor the logic that builds them; ``take_full`` chooses between the two
+    windows built in every cycle, the one at the read position and the one a window further
+    on. So after a take of ``amount`` bytes or a ``flush`` ``avail`` is 0 for two cycles
+    (``ended`` then says whether nothing is left: 0 unless the take emptied an ended message);
+    a beat shows in the window a cycle after it is accepted; a run of ``take_full`` moves W/8
+    bytes per cycle, with ``tready`` from a register, while the ring is three slots deep.
+    While ``avail`` is 0 the window's bytes are undefined.
+
+    ``data_width`` must be a power of two (the ring's positions wrap).
+
+    Members
+    -------
+    As :class:`ByteUnpacker`, with ``avail`` at most ``data_width // 8`` and
+    take_full : In(1)
+        Consume ``data_width // 8`` bytes this cycle (at most ``avail``), whatever ``take``
+        and ``amount`` say; ``flush`` comes first. Decided without the window, it keeps the
+        window's flip-flops out of the decision's path.
+    """
+
+    SLOTS = 4
+
+    def __init__(self, data_width):
+        check_power_of_two("data_width", data_width, 16, 1024)
+        wiring.Component.__init__(self, {**self._members(data_width), "take_full": In(1)})
+        self._width = data_width
+
+    def elaborate(self, platform):
+        m = Module()
+        W, B = self._width, self._width // 8
+        nb = B.bit_length() - 1
+        ring = Signal(self.SLOTS * W, reset_less=True)
+        read = Signal(nb + 2)            # ring position of the window's first byte
+        write = Signal(2)                # the slot the next beat goes to
+        count = Signal(range(self.SLOTS * B + 1))   # bytes held from ``read`` on
+        # what the window is built from: ``read`` and ``count`` as they were a cycle before,
+        # or as they are after a ``take_full`` (the window is not shown while they differ)
+        view_read = Signal.like(read)
+        view_count = Signal.like(count)
+        stale = Signal()                 # a take or a flush moved ``read`` or ``count``
+        ended = Signal()
+        dropping = Signal()
+        window = Signal(W)
+        avail = Signal(range(B + 1))
+        shown_ended = Signal()
+        s = self.s_axis
+        m.d.comb += [self.window.eq(window), self.avail.eq(avail), self.ended.eq(shown_ended),
+                     self.dropping.eq(dropping)]
+
+        # the three slots from the viewed read position on, shifted down to it: the window
+        # there (bytes 0..B-1) and a window further (B..2B-1), each cut to the bytes held
+        phase, slot = view_read[:nb], view_read[nb:]
+        slots = Cat(*(ring.word_select((slot + k)[:2], W) for k in range(3)))
+        ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
+        ahead = Cat(*(Mux(view_count > j, ahead.word_select(j, 8), 0) for j in range(2 * B)))
+        m.d.sync += window.eq(Mux(self.take_full, ahead[W:], ahead[:W]))
+
+        # every beat but a message's last is full: the slots in use end at a slot boundary,
+        # and a beat is accepted while one of the four is free (``room``, a flip-flop whose
+        # next value is built for each move below, like the position and the count)
+        room = Signal(init=1)
+        accepted = Signal()
+        m.d.comb += [s.tready.eq(dropping | room), accepted.eq(s.tvalid & room & ~dropping)]
+        arrived = Mux(accepted, keep_count_shallow(s.tkeep), 0)
+        with m.If(accepted):
+            m.d.sync += [ring.word_select(write, W).eq(s.tdata), ended.eq(s.tlast)]
+        written = Signal.like(write)
+        m.d.comb += written.eq(write + accepted)
+        m.d.sync += [write.eq(written),
+                     view_read.eq(Mux(self.take_full, view_read + B, read)),
+                     view_count.eq(Mux(self.take_full, view_count - B, count) + arrived)]
+
+        # ``ended`` is shown while settling too when nothing is left: a consumer that took a
+        # message's last bytes sees its end in the next cycle
+        def show(held, name):
+            m.d.sync += [avail.eq(kept(m, Mux(stale, 0, Mux(held >= B, B, held)),
+                                       f"avail_{name}")),
+                         shown_ended.eq(kept(m, ended & Mux(stale, held == 0, held <= B),
+                                             f"ended_{name}")),
+                         stale.eq(0)]
+
+        ended_after = Mux(accepted, s.tlast, ended)
+
+        def fits(position, held, name):
+            return ~ended_after & kept(m, position[:nb] + held <= (self.SLOTS - 1) * B,
+                                       f"fits_{name}")
+
+        # each move's next position and count on a kept wire: the late ``take`` and ``flush``
+        # choose between them instead of an operand of one shared adder
+        read_full = kept(m, read + B, "read_full")
+        read_taken = kept(m, read + self.amount, "read_taken")
+        count_full = kept(m, count - B + arrived, "count_full")
+        count_taken = kept(m, count - self.amount + arrived, "count_taken")
+        count_kept = kept(m, count + arrived, "count_kept")
+        emptied = kept(m, ended & (count == self.amount), "emptied")
+        with m.If(dropping):
+            m.d.sync += room.eq(1)
+            with m.If(s.tvalid & s.tlast):
+                m.d.sync += dropping.eq(0)
+        with m.Elif(self.flush):
+            # the next message starts at the slot of its first beat
+            m.d.sync += [count.eq(0), read.eq(Cat(Const(0, nb), written)), ended.eq(0),
+                         dropping.eq(~ended & ~(accepted & s.tlast)), room.eq(1),
+                         avail.eq(0), shown_ended.eq(0), stale.eq(1)]
+        with m.Elif(self.take_full):
+            m.d.sync += [read.eq(read_full), count.eq(count_full),
+                         room.eq(fits(read_full, count_full, "full"))]
+            show((count - B)[:len(count)], "full")
+        with m.Elif(self.take):
+            m.d.sync += [read.eq(read_taken), count.eq(count_taken), avail.eq(0),
+                         room.eq(fits(read_taken, count_taken, "taken")),
+                         shown_ended.eq(emptied), stale.eq(1)]
+        with m.Else():
+            m.d.sync += [count.eq(count_kept), room.eq(fits(read, count_kept, "kept"))]
+            show(count, "kept")
+        return m
+
+
+def byte_unpacker_class(data_width, *, settling=False):
+    """The byte unpacker to build at ``data_width``: above 64 bits at a power of two,
+    :class:`SettlingByteUnpacker` if ``settling`` (for a consumer that decides from the
+    window's bytes) else :class:`WideByteUnpacker` (where it is the smaller in LUT4 cells; in
+    LUT6 cells it is about the same); else :class:`ByteUnpacker`."""
+    if data_width > 64 and not data_width & (data_width - 1):
+        return SettlingByteUnpacker if settling else WideByteUnpacker
+    return ByteUnpacker

@@ -6,9 +6,11 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from ..logic import kept
 from ..params import check_int
 from ..stream import AXIStreamSignature
-from .bytes import BytePacker, ChunkRegisterSlice, byte_mask, byte_unpacker_class
+from .bytes import (BytePacker, ChunkRegisterSlice, SettlingByteUnpacker, byte_mask,
+                    byte_unpacker_class)
 from .serializer import ErrorSignature, check_plan_width, count_errors, payload_port
 from .steps import (RuntimeStep, StepRemainder, chunk_facts, count_chunk_bytes, count_chunks,
                     count_step, next_element, pad_bytes, payload_bytes, registered_facts,
@@ -86,7 +88,10 @@ class _Offer:
 class Deserializer(wiring.Component):
     """Deserializes AXI4-Stream messages of one type in one framing.
 
-    Nothing is buffered beyond two beats: each variable-length field streams out as it arrives.
+    Nothing is buffered beyond two beats (four above 64 bits): each variable-length field
+    streams out as it arrives. Above 64 bits (at a power of two) the byte window is a
+    :class:`~hdl.msg.bytes.SettlingByteUnpacker`: a payload's full chunks move a beat per
+    cycle, every other take costs a cycle more.
 
     Parameters
     ----------
@@ -147,7 +152,11 @@ class Deserializer(wiring.Component):
         plan, W, B = self.plan, self._width, self._width // 8
         steps = plan.steps
         reconros = plan.framing == "reconros"
-        m.submodules.unpacker = unpacker = byte_unpacker_class(W)(W)
+        # Wide, the decisions that read the window's bytes would reach every bit of a window
+        # chosen by the take before: the settling unpacker's window is a register, and a
+        # payload's full chunks, decided from registers, still move a beat per cycle
+        m.submodules.unpacker = unpacker = byte_unpacker_class(W, settling=True)(W)
+        settling = isinstance(unpacker, SettlingByteUnpacker)
         wiring.connect(m, wiring.flipped(self.s_axis), unpacker.s_axis)
         window, avail, ended = unpacker.window, unpacker.avail, unpacker.ended
 
@@ -306,10 +315,19 @@ class Deserializer(wiring.Component):
                         continue
                     first = first_facts[i]
                     length = pad_bytes(plan, s, pos, empty) if s.kind == "pad" else lengths[s.var]
+                    # Wide, the remainder loads on every chunk, both chunk sizes are compared
+                    # before the step's choice and a padding that fits a chunk goes on from
+                    # its first (at 64 bits the netlist the cores that embed it were timed
+                    # with stays)
                     walk = RuntimeStep(m, i, B, step=step, remainder=remainder, length=length,
-                                       next_step=next_op, first=first)
+                                       next_step=next_op, first=first, load_always=settling)
                     k, final, advance = walk.k, walk.final, walk.advance
-                    have = avail >= k
+                    have = walk.covered(avail) if settling else avail >= k
+                    if settling and s.kind == "pad" and s.align - 1 <= B:
+                        k, have = first.k, kept(m, avail >= first.k, f"covered_pad{i}")
+
+                        def advance(i=i):
+                            next_op(i)
                     short = ~have & ended
                     # a payload that ends early ends the message: what it takes then does not
                     # matter (the window is flushed), so the offer stays k
@@ -366,6 +384,12 @@ class Deserializer(wiring.Component):
                                 fail(DeserializerError.EARLY_END)
                             with m.Else():
                                 advance()
+                    if settling:
+                        # a full chunk and a full window: k and avail are at most B, so their
+                        # top bits say it, without a comparison behind the decode; a bad count
+                        # flushes, and a flush comes first
+                        top = B.bit_length() - 1
+                        m.d.comb += unpacker.take_full.eq(k[top] & avail[top] & ready)
             with m.Case(END):
                 ok = ended & (avail == 0)
                 if plan.framing == "ros1":

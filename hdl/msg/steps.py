@@ -5,6 +5,8 @@ from typing import NamedTuple
 
 from amaranth.hdl import Const, Mux, Signal, Value
 
+from ..logic import kept
+
 __all__ = ["payload_bytes", "pad_bytes", "chunk_bytes", "last_chunk", "ChunkFacts",
            "chunk_facts", "chunk_facts_value", "StepRemainder",
            "RuntimeStep", "COUNT_BYTES", "count_chunks", "run_chunk_bytes",
@@ -154,14 +156,15 @@ class RuntimeStep:
     ``first`` gives :func:`chunk_facts` of ``length`` when the caller keeps them in
     flip-flops beside it; otherwise they are computed from ``length``. ``advance()``
     (inside the condition that the chunk moved) goes to the next step through ``next_step``
-    or keeps counting.
+    or keeps counting; with ``load_always`` it loads the remainder on the last chunk as well.
     """
 
     def __init__(self, m, index, bytes_per_beat, *, step, remainder, length, next_step,
-                 first=None):
+                 first=None, load_always=False):
         B = bytes_per_beat
         assert B & (B - 1) == 0, "bytes per beat is a power of two"
         self._m, self._step, self._remainder, self._next = m, step, remainder, next_step
+        self._load_always = load_always
         self.index = index
         remaining = remainder.value
         self.left = Signal(len(remaining), name=f"left{index}")
@@ -177,16 +180,29 @@ class RuntimeStep:
         # subtraction behind the step decode
         m.d.comb += [self.k.eq(Mux(later, remainder.k, first.k)),
                      self.final.eq(Mux(later, remainder.final, first.final))]
+        self._later, self._first = later, first
         remainder.propose(Mux(later, remaining - B, length - B),
                           Mux(later, remainder.after.k_after, first.k_after),
                           Mux(later, remainder.after.final_after, first.final_after))
 
+    def covered(self, avail):
+        """``avail >= k``, each source of ``k`` compared on a kept wire before the choice
+        between them (merged, the choice would come first and the comparison after it)."""
+        m, i = self._m, self.index
+        return Mux(self._later, kept(m, avail >= self._remainder.k, f"covered_rest{i}"),
+                   kept(m, avail >= self._first.k, f"covered_first{i}"))
+
     def advance(self):
         m = self._m
+        # ``load_always``: the last chunk loads the remainder too (no step reads it before
+        # its own first chunk loads it), which keeps ``final`` out of the load's logic
+        if self._load_always:
+            self._remainder.load_proposed()
         with m.If(self.final):
             self._next(self.index)
         with m.Else():
-            self._remainder.load_proposed()
+            if not self._load_always:
+                self._remainder.load_proposed()
             m.d.sync += self._step.eq(1)
 
 

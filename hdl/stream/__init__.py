@@ -13,6 +13,8 @@ from .monitor import StreamMonitorSignature, StreamMonitor
 
 __all__ += ["StreamMonitorSignature", "StreamMonitor"]
 
-from .width import ByteWindow, StreamDownsizer, StreamRepacker, StreamUpsizer, keep_count
+from .width import (ByteWindow, StreamDownsizer, StreamRepacker, StreamUpsizer, keep_count,
+                    keep_count_shallow)
 
-__all__ += ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count"]
+__all__ += ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count",
+            "keep_count_shallow"]

@@ -7,7 +7,8 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from .signature import AXIStreamSignature
 
-__all__ = ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count"]
+__all__ = ["StreamDownsizer", "StreamUpsizer", "StreamRepacker", "ByteWindow", "keep_count",
+           "keep_count_shallow"]
 
 
 def keep_count(tkeep):
@@ -16,6 +17,22 @@ def keep_count(tkeep):
     for i in range(len(tkeep)):
         count = Mux(tkeep[i], i + 1, count)
     return count
+
+
+def keep_count_shallow(tkeep):
+    """:func:`keep_count` of a ``tkeep`` contiguous from bit 0, in logic of logarithmic depth
+    (for wide beats): bit ``j`` of the count is set where the ones end inside an odd block of
+    ``2**j`` bits."""
+    nbits = len(tkeep)
+    width = nbits.bit_length()
+    ones = [tkeep[i] for i in range(nbits)] + [Const(0)]
+    bits = []
+    for j in range(width):
+        size = 1 << j
+        ends = [ones[start - 1] & ~ones[min(start + size, nbits + 1) - 1]
+                for start in range(size, nbits + 1, 2 * size)]
+        bits.append(Cat(*ends).any())
+    return Cat(*bits)
 
 
 def _check_width(data_width):
