@@ -91,7 +91,7 @@ class Deserializer(wiring.Component):
     Nothing is buffered beyond two beats (four above 64 bits): each variable-length field
     streams out as it arrives. Above 64 bits (at a power of two) the byte window is a
     :class:`~hdl.msg.bytes.SettlingByteUnpacker`: a payload's full chunks move a beat per
-    cycle, every other take costs a cycle more.
+    cycle, every other take costs two cycles more.
 
     Parameters
     ----------
