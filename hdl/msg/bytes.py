@@ -422,6 +422,7 @@ class SettlingByteUnpacker(ByteUnpacker):
         window's flip-flops out of the decision's path.
     """
 
+    #: beat slots of the ring (a power of two): one more than a window and the next need
     SLOTS = 4
 
     def __init__(self, data_width):
@@ -433,9 +434,10 @@ class SettlingByteUnpacker(ByteUnpacker):
         m = Module()
         W, B = self._width, self._width // 8
         nb = B.bit_length() - 1
+        ns = self.SLOTS.bit_length() - 1
         ring = Signal(self.SLOTS * W, reset_less=True)
-        read = Signal(nb + 2)            # ring position of the window's first byte
-        write = Signal(2)                # the slot the next beat goes to
+        read = Signal(nb + ns)           # ring position of the window's first byte
+        write = Signal(ns)               # the slot the next beat goes to
         count = Signal(range(self.SLOTS * B + 1))   # bytes held from ``read`` on
         # what the window is built from: ``read`` and ``count`` as they were a cycle before,
         # or as they are after a ``take_full`` (the window is not shown while they differ)
@@ -454,7 +456,7 @@ class SettlingByteUnpacker(ByteUnpacker):
         # the three slots from the viewed read position on, shifted down to it: the window
         # there (bytes 0..B-1) and a window further (B..2B-1), each cut to the bytes held
         phase, slot = view_read[:nb], view_read[nb:]
-        slots = Cat(*(ring.word_select((slot + k)[:2], W) for k in range(3)))
+        slots = Cat(*(ring.word_select((slot + k)[:ns], W) for k in range(self.SLOTS - 1)))
         ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
         ahead = Cat(*(Mux(view_count > j, ahead.word_select(j, 8), 0) for j in range(2 * B)))
         m.d.sync += window.eq(Mux(self.take_full, ahead[W:], ahead[:W]))
