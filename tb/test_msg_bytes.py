@@ -132,8 +132,9 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     """The consumer takes random amounts (0..min(avail, B)) at random, and with the settling
     unpacker whole windows (``take_full``) too: the bytes taken are each message's bytes in
     order, the window's bytes past ``avail`` are zero (but while a settling window shows
-    nothing); a flush in mid-message drops the rest of that message and the next message
-    starts whole; ``ended`` comes once the last beat is absorbed."""
+    nothing: it shows ``settling`` with ``avail`` 0 in exactly the cycle after a take of
+    ``amount`` bytes or a flush); a flush in mid-message drops the rest of that message and
+    the next message starts whole; ``ended`` comes once the last beat is absorbed."""
     rng = random.Random(nbytes * 10 + int(10 * idle))
     messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
                 for _ in range(50)]
@@ -145,18 +146,25 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     settling = unpacker is SettlingByteUnpacker
     source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
     got = []
+    moved = False      # the last cycle took ``amount`` bytes or flushed
 
     async def consumer(ctx):
+        nonlocal moved
         for k, msg in enumerate(messages):
             taken = []
             while True:
                 avail, ended, window = ctx.get(dut.avail), ctx.get(dut.ended), ctx.get(dut.window)
                 assert avail <= (nbytes if settling else 2 * nbytes)
+                if settling:
+                    assert ctx.get(dut.settling) == moved
+                    assert avail == 0 or not moved
                 if avail or not settling:
                     assert window >> 8 * min(avail, nbytes) == 0
+                moved = False
                 if (ended and avail == 0) or len(taken) == cut.get(k, -1):
                     ctx.set(dut.flush, 1)
                     ctx.set(dut.take, 0)
+                    moved = True
                     if settling:
                         # a flush comes first
                         ctx.set(dut.take_full, rng.random() < 0.5)
@@ -181,6 +189,7 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
                     ctx.set(dut.take_full, full)
                 if take:
                     taken += list(window.to_bytes(nbytes, "little")[:amount])
+                moved = take and not full
                 await ctx.tick()
             got.append(taken)
 

@@ -406,10 +406,11 @@ class SettlingByteUnpacker(ByteUnpacker):
     window's bits nor the logic that builds them; ``take_full`` chooses between the two
     windows built in every cycle, the one at the read position and the one a window further
     on. So after a take of ``amount`` bytes or a ``flush`` ``avail`` is 0 for two cycles
-    (``ended`` then says whether nothing is left: 0 unless the take emptied an ended message);
-    a beat shows in the window a cycle after it is accepted; a run of ``take_full`` moves W/8
-    bytes per cycle, with ``tready`` from a register, while the ring is three slots deep.
-    While ``avail`` is 0 the window's bytes are undefined.
+    (``ended`` then says whether nothing is left: 0 unless the take emptied an ended message;
+    ``settling`` marks the first of them); a beat shows in the window a cycle after it is
+    accepted; a run of ``take_full`` moves W/8 bytes per cycle, with ``tready`` from a
+    register, while the ring is three slots deep. While ``avail`` is 0 the window's bytes are
+    undefined.
 
     ``data_width`` must be a power of two (the ring's positions wrap).
 
@@ -420,6 +421,9 @@ class SettlingByteUnpacker(ByteUnpacker):
         Consume ``data_width // 8`` bytes this cycle (at most ``avail``), whatever ``take``
         and ``amount`` say; ``flush`` comes first. Decided without the window, it keeps the
         window's flip-flops out of the decision's path.
+    settling : Out(1)
+        The first cycle after a take of ``amount`` bytes or a ``flush``: a consumer may let
+        registers that follow the taken bytes a cycle later catch up (``avail`` is 0).
     """
 
     #: beat slots of the ring (a power of two): one more than a window and the next need
@@ -427,7 +431,8 @@ class SettlingByteUnpacker(ByteUnpacker):
 
     def __init__(self, data_width):
         check_power_of_two("data_width", data_width, 16, 1024)
-        wiring.Component.__init__(self, {**self._members(data_width), "take_full": In(1)})
+        wiring.Component.__init__(self, {**self._members(data_width), "take_full": In(1),
+                                         "settling": Out(1)})
         self._width = data_width
 
     def elaborate(self, platform):
@@ -451,19 +456,10 @@ class SettlingByteUnpacker(ByteUnpacker):
         shown_ended = Signal()
         s = self.s_axis
         m.d.comb += [self.window.eq(window), self.avail.eq(avail), self.ended.eq(shown_ended),
-                     self.dropping.eq(dropping)]
-
-        # the three slots from the viewed read position on, shifted down to it: the window
-        # there (bytes 0..B-1) and a window further (B..2B-1), each cut to the bytes held
-        phase, slot = view_read[:nb], view_read[nb:]
-        slots = Cat(*(ring.word_select((slot + k)[:ns], W) for k in range(self.SLOTS - 1)))
-        ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
-        ahead = Cat(*(Mux(view_count > j, ahead.word_select(j, 8), 0) for j in range(2 * B)))
-        m.d.sync += window.eq(Mux(self.take_full, ahead[W:], ahead[:W]))
+                     self.dropping.eq(dropping), self.settling.eq(stale)]
 
         # every beat but a message's last is full: the slots in use end at a slot boundary,
-        # and a beat is accepted while one of the four is free (``room``, a flip-flop whose
-        # next value is built for each move below, like the position and the count)
+        # and a beat is accepted while one of the four is free (``room``, a flip-flop)
         room = Signal(init=1)
         accepted = Signal()
         m.d.comb += [s.tready.eq(dropping | room), accepted.eq(s.tvalid & room & ~dropping)]
@@ -473,8 +469,23 @@ class SettlingByteUnpacker(ByteUnpacker):
         written = Signal.like(write)
         m.d.comb += written.eq(write + accepted)
         m.d.sync += [write.eq(written),
-                     view_read.eq(Mux(self.take_full, view_read + B, read)),
-                     view_count.eq(Mux(self.take_full, view_count - B, count) + arrived)]
+                     view_read.eq(Mux(self.take_full, view_read + B, read))]
+
+        # the three slots from the viewed read position on, shifted down to it: the window
+        # there (bytes 0..B-1) and a window further (B..2B-1), each cut to the bytes held
+        phase, slot = view_read[:nb], view_read[nb:]
+        slots = Cat(*(ring.word_select((slot + k)[:ns], W) for k in range(self.SLOTS - 1)))
+        ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
+        # the bytes held there, as a mask of 2B bytes in flip-flops built beside the view:
+        # one gate after the shift, no comparison on the window's path
+        held = Signal(2 * B)
+        held_full = kept(m, view_count - B + arrived, "view_count_full")
+        held_read = count_kept = kept(m, count + arrived, "count_kept")
+        m.d.sync += [view_count.eq(Mux(self.take_full, held_full, held_read)),
+                     held.eq(Mux(self.take_full, Cat(*(held_full > j for j in range(2 * B))),
+                                 Cat(*(held_read > j for j in range(2 * B)))))]
+        ahead = Cat(*(Mux(held[j], ahead.word_select(j, 8), 0) for j in range(2 * B)))
+        m.d.sync += window.eq(Mux(self.take_full, ahead[W:], ahead[:W]))
 
         # ``ended`` is shown while settling too when nothing is left: a consumer that took a
         # message's last bytes sees its end in the next cycle
@@ -485,11 +496,20 @@ class SettlingByteUnpacker(ByteUnpacker):
                                              f"ended_{name}")),
                          stale.eq(0)]
 
+        # Room after a move, without the arriving beat's byte count: a beat that is not its
+        # message's last is full, and a last one ends the room. ``fill``, the bytes from the
+        # read slot's start to the last one held, must stay within three slots: a take that
+        # crosses into the next slot frees one, a full beat fills one.
+        fill = Signal(range((self.SLOTS + 1) * B))
+        m.d.comb += fill.eq(read[:nb] + count)
+        within_two = kept(m, fill <= 2 * B, "fill_within_two")
+        within_three = kept(m, fill <= 3 * B, "fill_within_three")
+        crosses = kept(m, (read[:nb] + self.amount)[nb], "take_crosses")
         ended_after = Mux(accepted, s.tlast, ended)
 
-        def fits(position, held, name):
-            return ~ended_after & kept(m, position[:nb] + held <= (self.SLOTS - 1) * B,
-                                       f"fits_{name}")
+        def room_after(crossed):
+            return ~ended_after & Mux(accepted, Mux(crossed, within_three, within_two),
+                                      crossed | within_three)
 
         # each move's next position and count on a kept wire: the late ``take`` and ``flush``
         # choose between them instead of an operand of one shared adder
@@ -497,7 +517,6 @@ class SettlingByteUnpacker(ByteUnpacker):
         read_taken = kept(m, read + self.amount, "read_taken")
         count_full = kept(m, count - B + arrived, "count_full")
         count_taken = kept(m, count - self.amount + arrived, "count_taken")
-        count_kept = kept(m, count + arrived, "count_kept")
         emptied = kept(m, ended & (count == self.amount), "emptied")
         with m.If(dropping):
             m.d.sync += room.eq(1)
@@ -509,15 +528,13 @@ class SettlingByteUnpacker(ByteUnpacker):
                          dropping.eq(~ended & ~(accepted & s.tlast)), room.eq(1),
                          avail.eq(0), shown_ended.eq(0), stale.eq(1)]
         with m.Elif(self.take_full):
-            m.d.sync += [read.eq(read_full), count.eq(count_full),
-                         room.eq(fits(read_full, count_full, "full"))]
+            m.d.sync += [read.eq(read_full), count.eq(count_full), room.eq(room_after(1))]
             show((count - B)[:len(count)], "full")
         with m.Elif(self.take):
             m.d.sync += [read.eq(read_taken), count.eq(count_taken), avail.eq(0),
-                         room.eq(fits(read_taken, count_taken, "taken")),
-                         shown_ended.eq(emptied), stale.eq(1)]
+                         room.eq(room_after(crosses)), shown_ended.eq(emptied), stale.eq(1)]
         with m.Else():
-            m.d.sync += [count.eq(count_kept), room.eq(fits(read, count_kept, "kept"))]
+            m.d.sync += [count.eq(count_kept), room.eq(room_after(0))]
             show(count, "kept")
         return m
 

@@ -71,6 +71,10 @@ class _Offer:
         r = self._runtime.get(op)
         return self._const.get((op, step), 0), 0 if r is None else 1 << r
 
+    def at(self, op):
+        """The flip-flop that is set while the position is in runtime step ``op``."""
+        return self.runtime[self._runtime[op]]
+
     def move(self, op, step=0):
         """The writes (sync domain) of a move to chunk ``step`` of step ``op``."""
         const, runtime = self._facts(op, step)
@@ -180,8 +184,8 @@ class Deserializer(wiring.Component):
         # of the count in every cycle, from flip-flops rather than the count's arithmetic. A
         # count is always read at least one step before it is used.
         count_next = [Signal(count_width, name=f"count_next{v.index}") for v in plan.variables]
-        empty, count_bad, count_bad_code, lengths, firsts = self._count_facts(m, counts,
-                                                                             count_next)
+        empty, count_bad, count_bad_code, lengths, firsts = self._count_facts(
+            m, counts, count_next, lagged=settling)
         ports = {v.index: getattr(self, payload_port(v, "m")) for v in plan.streams}
         length_prefix = Signal(32)
 
@@ -274,6 +278,8 @@ class Deserializer(wiring.Component):
                 then()
 
         stream_at = plan.step_streams()
+        full_bit = B.bit_length() - 1
+        full_chunks = []
 
         with m.Switch(op):
             for i, s in enumerate(steps):
@@ -281,7 +287,8 @@ class Deserializer(wiring.Component):
                     chunk = chunks.get(stream_at[i])
                     if s.kind == "run":
                         self._run(m, s, i, window, avail, ended, fields, count_next,
-                                  length_prefix, step, take, go, fail, next_op, chunk)
+                                  length_prefix, step, take, go, fail, next_op, chunk,
+                                  unchecked_writes=settling)
                         continue
                     if s.kind == "count":
                         self._count(m, s, i, window, avail, ended, counts, count_next, step,
@@ -377,7 +384,11 @@ class Deserializer(wiring.Component):
                                 port.tlast.eq(final | short),
                                 port.tuser.eq(step == 0),
                             ]
-                        m.d.comb += valid.eq(have | ended)
+                        # wide, the chunk facts of a count follow it a cycle later: the
+                        # step waits out the first cycle of the window's settling (a count
+                        # is read by a take, which settles)
+                        m.d.comb += valid.eq((have | ended) & ~unpacker.settling
+                                             if settling else have | ended)
                         with m.If(valid & ready):
                             take(n)
                             with m.If(short):
@@ -386,10 +397,12 @@ class Deserializer(wiring.Component):
                                 advance()
                     if settling:
                         # a full chunk and a full window: k and avail are at most B, so their
-                        # top bits say it, without a comparison behind the decode; a bad count
+                        # top bits say it; the step is told by its offer flip-flop and k's top
+                        # bit is chosen from flip-flops, so no decode of the step and no
+                        # comparison comes before the window's multiplexers. A bad count
                         # flushes, and a flush comes first
-                        top = B.bit_length() - 1
-                        m.d.comb += unpacker.take_full.eq(k[top] & avail[top] & ready)
+                        full_chunks.append(offer.at(i) & ready & Mux(
+                            step != 0, remainder.k[full_bit], first.k[full_bit]))
             with m.Case(END):
                 ok = ended & (avail == 0)
                 if plan.framing == "ros1":
@@ -411,14 +424,18 @@ class Deserializer(wiring.Component):
                           & ~Cat(Const(0, 1), *opened.values()).any()):
                     m.d.sync += pos.eq(0)
                     go(0)
+        if settling:
+            m.d.comb += unpacker.take_full.eq(avail[full_bit]
+                                              & Cat(Const(0, 1), *full_chunks).any())
         return m
 
-    def _count_facts(self, m, counts, count_next):
+    def _count_facts(self, m, counts, count_next, *, lagged=False):
         """Registers beside each count, from its next value: (empty, bad, bad_code, lengths,
         firsts), per variable: no elements; a bad count (above its bound or ``max_count``:
         LENGTH, or a CDR string count of 0: FORMAT) and its code; the bytes of its field and
         their :class:`ChunkFacts` (``RuntimeStep``'s ``first``; ``None`` for packed
-        elements, which have no payload step)."""
+        elements, which have no payload step). ``lagged``: the chunk facts follow the field's
+        length a cycle later, and a bad count is a comparison with a constant."""
         width = len(counts[0]) if counts else 32
         B = self._width // 8
         empty, bad, bad_code, lengths, firsts = [], [], [], [], []
@@ -432,7 +449,8 @@ class Deserializer(wiring.Component):
             is_bad = Signal(name=f"bad_count{v.index}", init=v.nul)
             code = Signal(3, name=f"bad_code{v.index}",
                           init=DeserializerError.FORMAT if v.nul else DeserializerError.LENGTH)
-            too_many = nxt - nul > bound
+            # (lagged, a string's count of 0 is bad anyway: no subtraction of its NUL)
+            too_many = nxt > bound + nul if lagged else nxt - nul > bound
             m.d.sync += is_empty.eq(nxt == 0)
             if v.nul:
                 m.d.sync += [is_bad.eq((nxt == 0) | too_many),
@@ -454,8 +472,8 @@ class Deserializer(wiring.Component):
             m.d.comb += length_next.eq(payload_bytes(v, nxt - nul)[:length_width])
             m.d.sync += length.eq(length_next)
             lengths.append(length)
-            firsts.append(registered_facts(m, length_next, B, name=f"length{v.index}",
-                                           init=init))
+            firsts.append(registered_facts(m, length if lagged else length_next, B,
+                                           name=f"length{v.index}", init=init))
         return empty, bad, bad_code, lengths, firsts
 
     def _count(self, m, s, i, window, avail, ended, counts, count_next, step, take, go, fail,
@@ -486,9 +504,12 @@ class Deserializer(wiring.Component):
         count_step(m, step, B, read, write, then=lambda: next_op(i), to_step=lambda j: go(i, j))
 
     def _run(self, m, s, i, window, avail, ended, fields, count_next, length_prefix, step,
-             take, go, fail, next_op, chunk=None):
+             take, go, fail, next_op, chunk=None, *, unchecked_writes=False):
         """One ``run`` step: static byte ranges land in fixed registers, checks per byte;
-        inside a loop, element bytes go to the stream's ``chunk``."""
+        inside a loop, element bytes go to the stream's ``chunk``. ``unchecked_writes``: the
+        registers are written while the bytes are in the window, before the checks and the
+        take decide (a message that fails is not offered, a count is read again before it is
+        used, and a write repeated while the step waits writes the same bytes)."""
         B = self._width // 8
         sizes = run_chunk_bytes(s.nbytes, B)
         nsteps = len(sizes)
@@ -527,6 +548,10 @@ class Deserializer(wiring.Component):
                                     (byte & part.mask[index]) != part.value[index])
                         start += part.nbytes
                     with m.If(avail >= k):
+                        if unchecked_writes:
+                            m.d.sync += writes
+                            m.d.comb += count_writes
+                            writes, count_writes = [], []
                         with m.If(Cat(*bad_format, Const(0, 1)).any()):
                             fail(DeserializerError.FORMAT)
                         with m.Elif(Cat(*bad_padding, Const(0, 1)).any()):
