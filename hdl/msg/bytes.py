@@ -477,7 +477,10 @@ class SettlingByteUnpacker(ByteUnpacker):
         slots = Cat(*(ring.word_select((slot + k)[:ns], W) for k in range(self.SLOTS - 1)))
         ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
         # the bytes held there, as a mask of 2B bytes in flip-flops built beside the view:
-        # one gate after the shift, no comparison on the window's path
+        # one gate after the shift, no comparison on the window's path. (``view_count``
+        # equals ``count`` whenever a ``take_full`` can come, but the mask built from
+        # ``count - B`` instead placed at 80.2 MHz, not 97.9: a shallower mask path lets
+        # synthesis map the shift into wider, larger levels.)
         held = Signal(2 * B)
         held_full = kept(m, view_count - B + arrived, "view_count_full")
         held_read = count_kept = kept(m, count + arrived, "count_kept")

@@ -551,7 +551,6 @@ class Deserializer(wiring.Component):
                         if unchecked_writes:
                             m.d.sync += writes
                             m.d.comb += count_writes
-                            writes, count_writes = [], []
                         with m.If(Cat(*bad_format, Const(0, 1)).any()):
                             fail(DeserializerError.FORMAT)
                         with m.Elif(Cat(*bad_padding, Const(0, 1)).any()):
@@ -561,8 +560,9 @@ class Deserializer(wiring.Component):
                                 m.d.comb += [chunk.valid.eq(1), chunk.data.eq(Cat(*emitted)),
                                              chunk.len.eq(len(emitted)), chunk.last.eq(0)]
                             with m.If(chunk.ready if emitted else Const(1)):
-                                m.d.sync += writes
-                                m.d.comb += count_writes
+                                if not unchecked_writes:
+                                    m.d.sync += writes
+                                    m.d.comb += count_writes
                                 take(k)
                                 if j == nsteps - 1:
                                     next_op(i)
