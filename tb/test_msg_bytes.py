@@ -133,7 +133,8 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     unpacker whole windows (``take_full``) too: the bytes taken are each message's bytes in
     order, the window's bytes past ``avail`` are zero (but while a settling window shows
     nothing: it shows ``settling`` with ``avail`` 0 in exactly the cycle after a take of
-    ``amount`` bytes or a flush); a flush in mid-message drops the rest of that message and
+    ``amount`` bytes or a flush, and its ``settled_window`` is the window but in a cycle after
+    a ``take_full``); a flush in mid-message drops the rest of that message and
     the next message starts whole; ``ended`` comes once the last beat is absorbed."""
     rng = random.Random(nbytes * 10 + int(10 * idle))
     messages = [[rng.getrandbits(8) for _ in range(rng.choice([1, nbytes, rng.randint(1, 40)]))]
@@ -147,9 +148,10 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
     source = StreamSource(dut.s_axis, beats, idle=idle, seed=5)
     got = []
     moved = False      # the last cycle took ``amount`` bytes or flushed
+    moved_full = False     # the last cycle took a whole window (``take_full``)
 
     async def consumer(ctx):
-        nonlocal moved
+        nonlocal moved, moved_full
         for k, msg in enumerate(messages):
             taken = []
             while True:
@@ -158,9 +160,11 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
                 if settling:
                     assert ctx.get(dut.settling) == moved
                     assert avail == 0 or not moved
+                    if avail and not moved_full:
+                        assert ctx.get(dut.settled_window) == window
                 if avail or not settling:
                     assert window >> 8 * min(avail, nbytes) == 0
-                moved = False
+                moved = moved_full = False
                 if (ended and avail == 0) or len(taken) == cut.get(k, -1):
                     ctx.set(dut.flush, 1)
                     ctx.set(dut.take, 0)
@@ -189,7 +193,7 @@ def test_unpacker_random_takes_and_flushes(unpacker, nbytes, idle):
                     ctx.set(dut.take_full, full)
                 if take:
                     taken += list(window.to_bytes(nbytes, "little")[:amount])
-                moved = take and not full
+                moved, moved_full = take and not full, full
                 await ctx.tick()
             got.append(taken)
 

@@ -277,11 +277,12 @@ def _rotate_bytes(m, value, by, name):
     return value
 
 
-def _shift_bytes_down(m, value, by, width, name):
-    """``value`` moved down by ``by`` bytes, cut to ``width`` bits (zeros come in on top)."""
+def _shift_down(m, value, by, element, width, name):
+    """``value`` moved down by ``by`` elements of ``element`` bits, cut to ``width`` bits
+    (zeros come in on top)."""
     for k in range(len(by)):
         level = Signal(len(value), name=f"{name}{k}")
-        m.d.comb += level.eq(Mux(by[k], value >> (8 << k), value))
+        m.d.comb += level.eq(Mux(by[k], value >> (element << k), value))
         value = level
     return value[:width]
 
@@ -399,18 +400,20 @@ class SettlingByteUnpacker(ByteUnpacker):
     from the window's bytes: a take of any amount is absorbed in two cycles of settling, a
     take of a whole window decided without looking at it (``take_full``) moves on at once.
 
-    The window and its ``avail`` and ``ended`` are registers, built every cycle from
+    The window and its ``avail`` and ``ended`` come from registers, built every cycle from
     registers: the beats, held unshifted in a ring of four beat slots, and copies of the read
     position and byte count that only a ``take_full`` moves at once (the others follow them a
     cycle later). ``take`` and ``flush`` reach the position, the counts and the flags, not the
-    window's bits nor the logic that builds them; ``take_full`` chooses between the two
-    windows built in every cycle, the one at the read position and the one a window further
-    on. So after a take of ``amount`` bytes or a ``flush`` ``avail`` is 0 for two cycles
-    (``ended`` then says whether nothing is left: 0 unless the take emptied an ended message;
-    ``settling`` marks the first of them); a beat shows in the window a cycle after it is
-    accepted; a run of ``take_full`` moves W/8 bytes per cycle, with ``tready`` from a
-    register, while the ring is three slots deep. While ``avail`` is 0 the window's bytes are
-    undefined.
+    window's bits nor the logic that builds them. Both windows built in every cycle, the one
+    at the read position and the one a window further on, are registered; a flip-flop that
+    follows ``take_full`` chooses between them, so ``take_full`` reaches one flip-flop instead
+    of every bit of the window, and the window at the read position (``settled_window``) is
+    a register for the consumer's decisions. So after a take of ``amount`` bytes or a
+    ``flush`` ``avail`` is 0 for two cycles (``ended`` then says whether nothing is left: 0
+    unless the take emptied an ended message; ``settling`` marks the first of them); a beat
+    shows in the window a cycle after it is accepted; a run of ``take_full`` moves W/8 bytes
+    per cycle, with ``tready`` from a register, while the ring is three slots deep. While
+    ``avail`` is 0 the window's bytes are undefined.
 
     ``data_width`` must be a power of two (the ring's positions wrap).
 
@@ -424,6 +427,10 @@ class SettlingByteUnpacker(ByteUnpacker):
     settling : Out(1)
         The first cycle after a take of ``amount`` bytes or a ``flush``: a consumer may let
         registers that follow the taken bytes a cycle later catch up (``avail`` is 0).
+    settled_window : Out(data_width)
+        ``window`` straight from flip-flops, in every cycle but one that follows a
+        ``take_full`` (it then shows the bytes that were taken): for a consumer that decides
+        from the window's bytes only after a take of ``amount`` bytes or a ``flush``.
     """
 
     #: beat slots of the ring (a power of two): one more than a window and the next need
@@ -432,7 +439,8 @@ class SettlingByteUnpacker(ByteUnpacker):
     def __init__(self, data_width):
         check_power_of_two("data_width", data_width, 16, 1024)
         wiring.Component.__init__(self, {**self._members(data_width), "take_full": In(1),
-                                         "settling": Out(1)})
+                                         "settling": Out(1),
+                                         "settled_window": Out(data_width)})
         self._width = data_width
 
     def elaborate(self, platform):
@@ -445,8 +453,13 @@ class SettlingByteUnpacker(ByteUnpacker):
         write = Signal(ns)               # the slot the next beat goes to
         count = Signal(range(self.SLOTS * B + 1))   # bytes held from ``read`` on
         # what the window is built from: ``read`` and ``count`` as they were a cycle before,
-        # or as they are after a ``take_full`` (the window is not shown while they differ)
-        view_read = Signal.like(read)
+        # or as they are after a ``take_full`` (the window is not shown while they differ).
+        # A byte shift moves each bit of a byte on its own lane, and the viewed slot, which
+        # a ``take_full`` advances, has a copy per lane: each copy chooses for an eighth of
+        # the multiplexers. (The byte within the slot, which a ``take_full`` keeps, has one:
+        # synthesis would merge copies of a register that only loads.)
+        view_phase = Signal(nb)
+        view_slots = [Signal(ns, name=f"view_slot_lane{b}") for b in range(8)]
         view_count = Signal.like(count)
         stale = Signal()                 # a take or a flush moved ``read`` or ``count``
         ended = Signal()
@@ -468,14 +481,22 @@ class SettlingByteUnpacker(ByteUnpacker):
             m.d.sync += [ring.word_select(write, W).eq(s.tdata), ended.eq(s.tlast)]
         written = Signal.like(write)
         m.d.comb += written.eq(write + accepted)
-        m.d.sync += [write.eq(written),
-                     view_read.eq(Mux(self.take_full, view_read + B, read))]
+        m.d.sync += [write.eq(written), view_phase.eq(Mux(self.take_full, view_phase, read[:nb]))]
+        m.d.sync += [view_slot.eq(Mux(self.take_full, view_slot + 1, read[nb:]))
+                     for view_slot in view_slots]
 
         # the three slots from the viewed read position on, shifted down to it: the window
         # there (bytes 0..B-1) and a window further (B..2B-1), each cut to the bytes held
-        phase, slot = view_read[:nb], view_read[nb:]
-        slots = Cat(*(ring.word_select((slot + k)[:ns], W) for k in range(self.SLOTS - 1)))
-        ahead = _shift_bytes_down(m, slots, phase, 2 * W, "ring_ahead")
+        lanes = []
+        for b, slot in enumerate(view_slots):
+            # (named wires here and below: a simulator then slices them, not a long Cat)
+            ring_lane = Signal(self.SLOTS * B, name=f"ring_lane{b}")
+            m.d.comb += ring_lane.eq(Cat(*(ring[8 * j + b] for j in range(self.SLOTS * B))))
+            slots = Cat(*(ring_lane.word_select((slot + k)[:ns], B)
+                          for k in range(self.SLOTS - 1)))
+            lanes.append(_shift_down(m, slots, view_phase, 1, 2 * B, f"ring_ahead_lane{b}_"))
+        ahead = Signal(2 * W)
+        m.d.comb += ahead.eq(Cat(*(lanes[b][j] for j in range(2 * B) for b in range(8))))
         # the bytes held there, as a mask of 2B bytes in flip-flops built beside the view:
         # one gate after the shift, no comparison on the window's path. (``view_count``
         # equals ``count`` whenever a ``take_full`` can come, but the mask built from
@@ -488,7 +509,14 @@ class SettlingByteUnpacker(ByteUnpacker):
                      held.eq(Mux(self.take_full, Cat(*(held_full > j for j in range(2 * B))),
                                  Cat(*(held_read > j for j in range(2 * B)))))]
         ahead = Cat(*(Mux(held[j], ahead.word_select(j, 8), 0) for j in range(2 * B)))
-        m.d.sync += window.eq(Mux(self.take_full, ahead[W:], ahead[:W]))
+        # both windows in flip-flops, chosen after them by a flip-flop: ``take_full`` reaches
+        # one flip-flop, not every bit of the window
+        settled = Signal(W)
+        further = Signal(W)
+        moved_full = Signal()
+        m.d.sync += [settled.eq(ahead[:W]), further.eq(ahead[W:]), moved_full.eq(self.take_full)]
+        m.d.comb += [window.eq(Mux(moved_full, further, settled)),
+                     self.settled_window.eq(settled)]
 
         # ``ended`` is shown while settling too when nothing is left: a consumer that took a
         # message's last bytes sees its end in the next cycle

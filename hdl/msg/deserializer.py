@@ -1,6 +1,7 @@
 """Message deserializer generated from a stream plan (``gen.msg.plan``)."""
 
 import enum
+from contextlib import ExitStack
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal
 from amaranth.lib import stream, wiring
@@ -95,7 +96,7 @@ class Deserializer(wiring.Component):
     Nothing is buffered beyond two beats (four above 64 bits): each variable-length field
     streams out as it arrives. Above 64 bits (at a power of two) the byte window is a
     :class:`~hdl.msg.bytes.SettlingByteUnpacker`: a payload's full chunks move a beat per
-    cycle, every other take costs two cycles more.
+    cycle but its last, every other take costs two cycles more.
 
     Parameters
     ----------
@@ -163,6 +164,10 @@ class Deserializer(wiring.Component):
         settling = isinstance(unpacker, SettlingByteUnpacker)
         wiring.connect(m, wiring.flipped(self.s_axis), unpacker.s_axis)
         window, avail, ended = unpacker.window, unpacker.avail, unpacker.ended
+        # the steps that decide from the window's bytes begin after a take of ``amount``
+        # bytes (a payload's last chunk is never a ``take_full``): wide, they read the window
+        # as built at the read position, which no ``take_full`` chooses
+        decided = unpacker.settled_window if settling else window
 
         # Registers hold the wire values; the output shows element counts (a CDR string count
         # includes the NUL) and the ReconROS publisher id (beat 0 is id + 1000).
@@ -217,7 +222,14 @@ class Deserializer(wiring.Component):
         offered = Signal()     # fields offered for this message (until accepted)
         with m.If(self.fields.valid & self.fields.ready):
             m.d.sync += offered.eq(0)
-        m.d.comb += self.fields.valid.eq(offered)
+        # Wide, a run or padding step takes its bytes whatever their checks say and a bad
+        # verdict fails the message in the next cycle, before anything else (the window is
+        # settling then): the checks of the window's bytes reach two flip-flops, not the
+        # take. Nothing leaves meanwhile: the fields are held back, and a step that emits
+        # elements keeps its checks before its take.
+        late_bad = Signal()
+        late_code = Signal(3)
+        m.d.comb += self.fields.valid.eq(offered & ~late_bad if settling else offered)
 
         last_writer = max([i for i, s in enumerate(steps)
                            if any(p.kind in ("field", "extend", "publisher", "count")
@@ -252,6 +264,10 @@ class Deserializer(wiring.Component):
             m.d.sync += error_code.eq(code)
             go(WAIT)
 
+        def fail_next_cycle(bad, code):
+            """Fail with ``code`` in the next cycle if ``bad`` (wide only)."""
+            m.d.sync += [late_bad.eq(bad), late_code.eq(code)]
+
         def take(n):
             """Take ``n`` bytes, the amount this position offers (``_Offer``), in the cycle
             its condition holds."""
@@ -279,20 +295,29 @@ class Deserializer(wiring.Component):
 
         stream_at = plan.step_streams()
         full_bit = B.bit_length() - 1
-        full_chunks = []
+        full_chunks, loads = [], []
 
+        late = ExitStack()
+        if settling:
+            m.d.sync += late_bad.eq(0)
+            with m.If(late_bad):
+                fail(late_code)
+                m.d.sync += offered.eq(0)
+            late.enter_context(m.Else())
         with m.Switch(op):
             for i, s in enumerate(steps):
                 with m.Case(i):
                     chunk = chunks.get(stream_at[i])
                     if s.kind == "run":
-                        self._run(m, s, i, window, avail, ended, fields, count_next,
+                        self._run(m, s, i, decided, avail, ended, fields, count_next,
                                   length_prefix, step, take, go, fail, next_op, chunk,
-                                  unchecked_writes=settling)
+                                  unchecked_writes=settling,
+                                  fail_next_cycle=fail_next_cycle if settling else None)
                         continue
                     if s.kind == "count":
-                        self._count(m, s, i, window, avail, ended, counts, count_next, step,
-                                    take, go, fail, next_op, chunk, count_error)
+                        self._count(m, s, i, decided, avail, ended, counts, count_next, step,
+                                    take, go, fail, next_op, chunk, count_error,
+                                    unchecked_writes=settling)
                         continue
                     if s.kind == "loop":
                         top = plan.variables[s.var].into is None
@@ -343,7 +368,7 @@ class Deserializer(wiring.Component):
                         # a bad count of the sequence this padding aligns is reported as
                         # such, not as the padding it implies (the count came first)
                         bad_pad = Signal(name=f"bad_pad_{i}")
-                        nonzero = (byte_mask(window, B, k) != 0) if s.check else Const(0)
+                        nonzero = (byte_mask(decided, B, k) != 0) if s.check else Const(0)
                         if s.var is not None:
                             bad_count, bad_code = count_error(s.var)
                             bad_pad_code = Mux(bad_count, bad_code, DeserializerError.PADDING)
@@ -352,11 +377,16 @@ class Deserializer(wiring.Component):
                             bad_pad_code = DeserializerError.PADDING
                             m.d.comb += bad_pad.eq(nonzero)
                         with m.If(have):
-                            with m.If(bad_pad):
-                                fail(bad_pad_code)
-                            with m.Else():
+                            if settling:
                                 take(k)
                                 advance()
+                                fail_next_cycle(bad_pad, bad_pad_code)
+                            else:
+                                with m.If(bad_pad):
+                                    fail(bad_pad_code)
+                                with m.Else():
+                                    take(k)
+                                    advance()
                         with m.Elif(short):
                             fail(Mux(bad_count, bad_code, DeserializerError.EARLY_END)
                                  if s.var is not None else DeserializerError.EARLY_END)
@@ -394,15 +424,22 @@ class Deserializer(wiring.Component):
                             with m.If(short):
                                 fail(DeserializerError.EARLY_END)
                             with m.Else():
-                                advance()
+                                advance(load=not settling)
                     if settling:
+                        # the remainder loads whenever the step could move a chunk, told by
+                        # its offer flip-flop: a bad count or an early end fails the message,
+                        # and the next one's first chunk loads it again (no decode of the step
+                        # and no verdict before the remainder's enable)
+                        loads.append(offer.at(i) & (have | ended) & ~unpacker.settling
+                                     & ready)
                         # a full chunk and a full window: k and avail are at most B, so their
                         # top bits say it; the step is told by its offer flip-flop and k's top
                         # bit is chosen from flip-flops, so no decode of the step and no
                         # comparison comes before the window's multiplexers. A bad count
                         # flushes, and a flush comes first
                         full_chunks.append(offer.at(i) & ready & Mux(
-                            step != 0, remainder.k[full_bit], first.k[full_bit]))
+                            step != 0, remainder.k[full_bit] & ~remainder.final,
+                            first.k[full_bit] & ~first.final))
             with m.Case(END):
                 ok = ended & (avail == 0)
                 if plan.framing == "ros1":
@@ -424,7 +461,10 @@ class Deserializer(wiring.Component):
                           & ~Cat(Const(0, 1), *opened.values()).any()):
                     m.d.sync += pos.eq(0)
                     go(0)
+        late.close()
         if settling:
+            with m.If(Cat(Const(0, 1), *loads).any()):
+                remainder.load_proposed()
             m.d.comb += unpacker.take_full.eq(avail[full_bit]
                                               & Cat(Const(0, 1), *full_chunks).any())
         return m
@@ -477,9 +517,9 @@ class Deserializer(wiring.Component):
         return empty, bad, bad_code, lengths, firsts
 
     def _count(self, m, s, i, window, avail, ended, counts, count_next, step, take, go, fail,
-               next_op, chunk, count_error):
+               next_op, chunk, count_error, *, unchecked_writes=False):
         """The count of an inner variable: read into its register, checked, then written to
-        the stream as an element count."""
+        the stream as an element count. ``unchecked_writes``: as in :meth:`_run`."""
         B = self._width // 8
         v = self.plan.variables[s.var]
         count = counts[s.var]
@@ -487,9 +527,13 @@ class Deserializer(wiring.Component):
         bad_count, bad_code = count_error(s.var)
 
         def read(j, offset, k, moved):
+            writes = [count_next[s.var].word_select(offset + x, 8).eq(window.word_select(x, 8))
+                      for x in range(k)]
+            if unchecked_writes:
+                m.d.comb += writes
             with m.If(avail >= k):
-                m.d.comb += [count_next[s.var].word_select(offset + x, 8)
-                             .eq(window.word_select(x, 8)) for x in range(k)]
+                if not unchecked_writes:
+                    m.d.comb += writes
                 take(k)
                 moved()
             with m.Elif(ended):
@@ -504,15 +548,26 @@ class Deserializer(wiring.Component):
         count_step(m, step, B, read, write, then=lambda: next_op(i), to_step=lambda j: go(i, j))
 
     def _run(self, m, s, i, window, avail, ended, fields, count_next, length_prefix, step,
-             take, go, fail, next_op, chunk=None, *, unchecked_writes=False):
+             take, go, fail, next_op, chunk=None, *, unchecked_writes=False,
+             fail_next_cycle=None):
         """One ``run`` step: static byte ranges land in fixed registers, checks per byte;
         inside a loop, element bytes go to the stream's ``chunk``. ``unchecked_writes``: the
-        registers are written while the bytes are in the window, before the checks and the
-        take decide (a message that fails is not offered, a count is read again before it is
-        used, and a write repeated while the step waits writes the same bytes)."""
+        registers are written in every cycle of the step from whatever the window shows,
+        whatever its checks and its take decide; the write of the cycle that takes the bytes
+        is the one that stays (a message that fails is not offered, and a count is read again
+        before it is used).
+        ``fail_next_cycle(bad, code)``: a chunk that emits no elements is taken whatever its
+        checks say, which report it a cycle later."""
         B = self._width // 8
         sizes = run_chunk_bytes(s.nbytes, B)
         nsteps = len(sizes)
+
+        def move(j, k):
+            take(k)
+            if j == nsteps - 1:
+                next_op(i)
+            else:
+                go(i, j + 1)
         with m.Switch(step):
             for j, k in enumerate(sizes):
                 with m.Case(j):
@@ -547,26 +602,30 @@ class Deserializer(wiring.Component):
                                 bad_format.append(
                                     (byte & part.mask[index]) != part.value[index])
                         start += part.nbytes
+                    format_bad = Cat(*bad_format, Const(0, 1)).any()
+                    padding_bad = Cat(*bad_padding, Const(0, 1)).any()
+                    if unchecked_writes:
+                        m.d.sync += writes
+                        m.d.comb += count_writes
                     with m.If(avail >= k):
-                        if unchecked_writes:
-                            m.d.sync += writes
-                            m.d.comb += count_writes
-                        with m.If(Cat(*bad_format, Const(0, 1)).any()):
-                            fail(DeserializerError.FORMAT)
-                        with m.Elif(Cat(*bad_padding, Const(0, 1)).any()):
-                            fail(DeserializerError.PADDING)
-                        with m.Else():
-                            if emitted:
-                                m.d.comb += [chunk.valid.eq(1), chunk.data.eq(Cat(*emitted)),
-                                             chunk.len.eq(len(emitted)), chunk.last.eq(0)]
-                            with m.If(chunk.ready if emitted else Const(1)):
-                                if not unchecked_writes:
-                                    m.d.sync += writes
-                                    m.d.comb += count_writes
-                                take(k)
-                                if j == nsteps - 1:
-                                    next_op(i)
-                                else:
-                                    go(i, j + 1)
+                        if fail_next_cycle is not None and not emitted:
+                            move(j, k)
+                            fail_next_cycle(format_bad | padding_bad,
+                                            Mux(format_bad, DeserializerError.FORMAT,
+                                                DeserializerError.PADDING))
+                        else:
+                            with m.If(format_bad):
+                                fail(DeserializerError.FORMAT)
+                            with m.Elif(padding_bad):
+                                fail(DeserializerError.PADDING)
+                            with m.Else():
+                                if emitted:
+                                    m.d.comb += [chunk.valid.eq(1), chunk.data.eq(Cat(*emitted)),
+                                                 chunk.len.eq(len(emitted)), chunk.last.eq(0)]
+                                with m.If(chunk.ready if emitted else Const(1)):
+                                    if not unchecked_writes:
+                                        m.d.sync += writes
+                                        m.d.comb += count_writes
+                                    move(j, k)
                     with m.Elif(ended):
                         fail(DeserializerError.EARLY_END)

@@ -192,11 +192,13 @@ class RuntimeStep:
         return Mux(self._later, kept(m, avail >= self._remainder.k, f"covered_rest{i}"),
                    kept(m, avail >= self._first.k, f"covered_first{i}"))
 
-    def advance(self):
+    def advance(self, *, load=True):
+        """Next chunk or next step; ``load=False`` (with ``load_always``): the caller loads
+        the remainder itself, under a condition of its own."""
         m = self._m
         # ``load_always``: the last chunk loads the remainder too (no step reads it before
         # its own first chunk loads it), which keeps ``final`` out of the load's logic
-        if self._load_always:
+        if self._load_always and load:
             self._remainder.load_proposed()
         with m.If(self.final):
             self._next(self.index)
