@@ -175,9 +175,11 @@ async def deserializer_bad_input_recovers(dut):
     await run_bad_input(tb, cases, lambda: [tb.random_message()])
 
 
+ENDS_IN_FIXED_FIELD = "ends early in a fixed field"
+BIG_ENDIAN = "big-endian encapsulation"
 #: bad cases that fail in or before the step that reads the message's first field, so offer
 #: no fields (a case that fails later may have offered them: once the last one is read)
-FAIL_BEFORE_FIELDS = ("ends early in a fixed field", "big-endian encapsulation")
+FAIL_BEFORE_FIELDS = (ENDS_IN_FIXED_FIELD, BIG_ENDIAN)
 
 
 async def run_bad_input(tb, cases, next_values):
@@ -217,7 +219,7 @@ def bad_messages(tb):
         if v.string:
             set_at(value, v.path, "abcdefghijk"[:v.bound or 11])
     good = tb.wire_bytes(value)
-    cases.append(("ends early in a fixed field", good[:6], DeserializerError.EARLY_END, value))
+    cases.append((ENDS_IN_FIXED_FIELD, good[:6], DeserializerError.EARLY_END, value))
     big = tb.random_message()
     seq = primitive_sequences(plan)[-1]
     n = 64
@@ -244,7 +246,7 @@ def bad_messages(tb):
     if tb.framing == "cdr":
         data = bytearray(good)
         data[0:2] = b"\x00\x00"   # CDR_BE
-        cases.append(("big-endian encapsulation", bytes(data), DeserializerError.FORMAT, value))
+        cases.append((BIG_ENDIAN, bytes(data), DeserializerError.FORMAT, value))
         pad = padding_offsets(tb, good)
         if pad:
             data = bytearray(good)

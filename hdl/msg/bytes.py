@@ -491,7 +491,7 @@ class SettlingByteUnpacker(ByteUnpacker):
         for b, slot in enumerate(view_slots):
             # (named wires here and below: a simulator then slices them, not a long Cat)
             ring_lane = Signal(self.SLOTS * B, name=f"ring_lane{b}")
-            m.d.comb += ring_lane.eq(Cat(*(ring[8 * j + b] for j in range(self.SLOTS * B))))
+            m.d.comb += ring_lane.eq(ring[b::8])
             slots = Cat(*(ring_lane.word_select((slot + k)[:ns], B)
                           for k in range(self.SLOTS - 1)))
             lanes.append(_shift_down(m, slots, view_phase, 1, 2 * B, f"ring_ahead_lane{b}_"))

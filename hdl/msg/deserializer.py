@@ -392,6 +392,11 @@ class Deserializer(wiring.Component):
                                  if s.var is not None else DeserializerError.EARLY_END)
                         continue
                     bad_count, bad_code = count_error(s.var)
+                    # wide, the chunk facts of a count follow it a cycle later: the step
+                    # waits out the first cycle of the window's settling (a count is read by
+                    # a take, which settles)
+                    movable = ((have | ended) & ~unpacker.settling if settling
+                               else have | ended)
                     with m.If((step == 0) & bad_count):
                         fail(bad_code)
                     with m.Else():
@@ -414,11 +419,7 @@ class Deserializer(wiring.Component):
                                 port.tlast.eq(final | short),
                                 port.tuser.eq(step == 0),
                             ]
-                        # wide, the chunk facts of a count follow it a cycle later: the
-                        # step waits out the first cycle of the window's settling (a count
-                        # is read by a take, which settles)
-                        m.d.comb += valid.eq((have | ended) & ~unpacker.settling
-                                             if settling else have | ended)
+                        m.d.comb += valid.eq(movable)
                         with m.If(valid & ready):
                             take(n)
                             with m.If(short):
@@ -430,6 +431,8 @@ class Deserializer(wiring.Component):
                         # its offer flip-flop: a bad count or an early end fails the message,
                         # and the next one's first chunk loads it again (no decode of the step
                         # and no verdict before the remainder's enable)
+                        # (spelled out: ``offer.at(i) & movable`` groups the same terms
+                        # differently, and this grouping is the netlist that was timed)
                         loads.append(offer.at(i) & (have | ended) & ~unpacker.settling
                                      & ready)
                         # a full chunk and a full window: k and avail are at most B, so their
