@@ -36,15 +36,19 @@ import signal
 import sys
 import threading
 import traceback
+import warnings
 from pathlib import Path
 
 import cocotb
-from cocotb.triggers import ClockCycles, Event, First
+from amaranth.hdl import UnusedElaboratable
+from cocotb.triggers import Event, First
 
+from .compiled import memory_harness
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
-from .simulator import SimulationFailed, export_top, run_top, top_params
+from .simulator import (SimulationFailed, clock_cycles, export_top, run_top, source_digest,
+                        top_params)
 from .toolchain import cache_dir
 
 __all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "model_resources",
@@ -166,7 +170,7 @@ class SimContext:
         """Sleep ``n`` system clock cycles (the stall check waits while a node sleeps)."""
         self._sleeping += 1
         try:
-            await ClockCycles(self.cosim.dut.aclk, n)
+            await clock_cycles(self.cosim.dut.aclk, n)
         finally:
             self._sleeping -= 1
 
@@ -234,7 +238,7 @@ async def _watch_progress(cosim, ctx, stall_cycles, running, failures, ended, pe
         return (cosim.runtime.commands, cosim.memory_accesses, cosim.broker.events)
     last, quiet = activity(), 0
     while True:
-        await ClockCycles(cosim.dut.aclk, period)
+        await clock_cycles(cosim.dut.aclk, period)
         now = activity()
         if now != last or ctx._sleeping:
             last, quiet = now, 0
@@ -330,7 +334,7 @@ async def run_project(dut):
             stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
             watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running,
                                                       failures, ended))
-            await First(ended.wait(), ClockCycles(dut.aclk, limit_cycles))
+            await First(ended.wait(), clock_cycles(dut.aclk, limit_cycles))
             watch.cancel()
             if failures:
                 raise failures[0]
@@ -436,7 +440,11 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{sim}"
     # the Verilog first (seconds): the threads' parameters are final, and check() may read
     # them before minutes go into the simulator build
-    vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus")
+    vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
+                       key=_system_key(project, thread_params))
+    # a cached conversion leaves ``system`` (kept for check() and its ports) unelaborated:
+    # Amaranth would warn about it when it is collected
+    warnings.filterwarnings("ignore", category=UnusedElaboratable)
     if module is not None and hasattr(module, "check"):
         try:
             module.check(CheckContext(project, args, thread_components(project, system)))
@@ -478,7 +486,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         run_top(__name__, TOP, system, sim, build_dir, params=params, seed=seed,
                 extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)},
                 log_file=out / LOG if quiet else None, waves=waves, progress=progress,
-                exported=vfile)
+                exported=vfile, harness=memory_harness())
     except SimulationFailed as exc:
         if (out / ERROR).is_file():
             raise ProjectError(json.loads((out / ERROR).read_text())["error"]) from None
@@ -493,6 +501,17 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         if follower is not None:
             follower.join()
     return json.loads((out / RESULTS).read_text())
+
+
+def _system_key(project, thread_params):
+    """A fingerprint of the project's system Verilog: rosgate's hardware and generators, the
+    project's folder (build.cfg, messages, threads) and the thread parameters."""
+    import gen
+    import hdl
+    package = Path(hdl.__file__).resolve().parent.parent
+    return source_digest(Path(hdl.__file__).parent, Path(gen.__file__).parent, project.dir,
+                         extra=json.dumps(sorted(thread_params)).encode(),
+                         root=package)[:32]
 
 
 def _forward_stop(stop_file):

@@ -14,6 +14,7 @@ the exported top module (the ports), so Verilator optimises the component below 
 
 import contextlib
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -38,7 +39,7 @@ from .lint import LINT_ARGS
 
 __all__ = ["SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
            "top_manifest", "environment_seed", "failed_seeds", "start_clock",
-           "start_gmii_clocks", "GMII_NS", "CORE_NS"]
+           "start_gmii_clocks", "clock_cycles", "source_digest", "GMII_NS", "CORE_NS"]
 
 SIMULATORS = ("icarus", "verilator")
 
@@ -56,10 +57,11 @@ VERILATOR_TOP_ARGS = [*LINT_ARGS, *VERILATOR_X_ARGS]
 VERILATOR_BENCH_ARGS = ["-Wno-fatal", "-Wno-lint", "-Wno-style", *VERILATOR_X_ARGS]
 
 
-def verilator_public_config(top):
-    """A Verilator control file that makes the variables of module ``top`` readable and
-    writable through VPI, and nothing below it."""
-    return f'`verilator_config\npublic_flat_rw -module "{top}" -var "*"\n'
+def verilator_public_config(top, names=None):
+    """A Verilator control file that makes the variables ``names`` of module ``top`` (default:
+    all of them) readable and writable through VPI, and nothing below it."""
+    return "`verilator_config\n" + "".join(f'public_flat_rw -module "{top}" -var "{name}"\n'
+                                            for name in (names or ["*"]))
 
 
 def _top_only_runner():
@@ -150,6 +152,23 @@ def _cached_conversion(make, top, key):
                 for other in (".json", ".lock"):
                     old.with_suffix(other).unlink(missing_ok=True)
     return text, manifest
+
+
+def source_digest(*paths, extra=b"", root=None):
+    """A SHA-256 hex digest of every file under ``paths`` (folders or files; ``__pycache__``
+    left out) by path (relative to ``root`` when under it) and content, the Amaranth version
+    and ``extra``: a fingerprint of the sources a Verilog conversion depends on, for
+    :func:`export_top`'s ``key``, the same in every clone of the repository."""
+    import amaranth
+
+    digest = hashlib.sha256(amaranth.__version__.encode() + b"\0" + extra)
+    files = []
+    for path in map(Path, paths):
+        files += [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
+    for path in sorted(p for p in files if "__pycache__" not in p.parts):
+        name = path.relative_to(root) if root is not None and path.is_relative_to(root) else path
+        digest.update(str(name).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
 
 
 def export_top(component, top, build_dir, *, icarus=False, key=None):
@@ -271,7 +290,8 @@ def environment_seed():
 
 def run_top(module, top, component, sim, build_dir, *, params=None, testcase=None, seed=None,
             extra_env=None, log_file=None, run_name=None, lint=True, cxx_opt=DEFAULT_CXX_OPT,
-            waves=False, progress=None, exported=None, internals=False, verilog_key=None):
+            waves=False, progress=None, exported=None, internals=False, verilog_key=None,
+            harness=None):
     """Export ``component`` as ``top``, build it for ``sim`` and run the cocotb tests of
     ``module`` against it; return the results file.
 
@@ -319,6 +339,11 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
         A fingerprint of everything the Verilog depends on (the design's sources, its
         parameters): the conversion is then shared through rosgate's cache, see
         :func:`converted_verilog`. ``None`` converts ``component`` every time.
+    harness : callable or None
+        Verilator: ``harness(vfile, build_dir)`` returns ``(toplevel, sources, build_args,
+        ports)``, a simulation top around ``top`` (its Verilog files, the Verilator options it
+        needs and the signals the cocotb side sees) that the cocotb tests then run against,
+        as :func:`host.compiled.memory_harness` puts compiled models beside the design.
 
     Raises
     ------
@@ -354,16 +379,20 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
         try:
             vfile = exported or export_top(component, top, build_dir, icarus=sim == "icarus",
                                               key=verilog_key)
-            sources = [vfile]
+            sources, toplevel, visible = [vfile], top, None
+            if harness is not None and sim == "verilator":
+                toplevel, more, args, visible = harness(vfile, build_dir)
+                sources += list(more)
+                build_args += list(args)
             if top_only:
                 from cocotb_tools.runner import VerilatorControlFile
-                control = build_dir / f"{top}.vlt"
-                write_if_changed(control, verilator_public_config(top))
+                control = build_dir / f"{toplevel}.vlt"
+                write_if_changed(control, verilator_public_config(toplevel, visible))
                 # first: cocotb takes the language of the top from the last source
                 sources.insert(0, VerilatorControlFile(str(control)))
             with _verilator_make_fix(sim, cxx_opt), \
                     _watch_build(obj_dir, progress if sim == "verilator" else None):
-                runner.build(sources=sources, hdl_toplevel=top, build_dir=obj_dir,
+                runner.build(sources=sources, hdl_toplevel=toplevel, build_dir=obj_dir,
                              build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
                              log_file=build_dir / "build.log")
         except RuntimeError as e:
@@ -389,7 +418,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
         **(extra_env or {}),
     }
     try:
-        runner.test(test_module=module, hdl_toplevel=top, build_dir=obj_dir,
+        runner.test(test_module=module, hdl_toplevel=toplevel, build_dir=obj_dir,
                     test_dir=build_dir, results_xml=str(results), extra_env=env, waves=waves,
                     test_args=test_args, plusargs=plusargs, testcase=testcase, seed=seed,
                     timescale=("1ns", "1ps"), log_file=log_file)
@@ -436,6 +465,10 @@ def start_gmii_clocks(dut, port="gmii"):
     return clocks
 
 
+#: clock handle path -> period in picoseconds, of the clocks :func:`start_clock` started
+_CLOCK_PERIODS_PS = {}
+
+
 def start_clock(signal, period_ns):
     """Inside a cocotb test: drive ``signal`` as a free-running clock of ``period_ns``
     nanoseconds (50 % duty); return its task.
@@ -446,7 +479,31 @@ def start_clock(signal, period_ns):
     the design's outputs have left their initial ``x`` (Icarus).
     """
     from cocotb.clock import Clock
+    _CLOCK_PERIODS_PS[signal._path] = round(period_ns * 1000)
     return Clock(signal, period_ns, unit="ns", impl="gpi").start(start_high=False)
+
+
+def clock_cycles(signal, n):
+    """Inside a cocotb test: an awaitable that returns at the ``n``-th rising edge of
+    ``signal`` from now, exactly as ``ClockCycles(signal, n)``.
+
+    cocotb's ``ClockCycles`` wakes Python at every edge on the way. For a clock started with
+    :func:`start_clock` this one wakes it three times: at the first edge, half a period before
+    the last (a timer over the edges between) and at the last. Usable in ``First``."""
+    from cocotb.triggers import ClockCycles, RisingEdge, Timer
+
+    class _TimedClockCycles(ClockCycles):
+        async def _wait(self):
+            period = _CLOCK_PERIODS_PS.get(self._signal._path)
+            if period is None or self._num_cycles < 4:
+                return await super()._wait()
+            edge = RisingEdge(self._signal)
+            await edge
+            await Timer(period * (self._num_cycles - 2) + period // 2, unit="ps")
+            await edge
+            return self
+
+    return _TimedClockCycles(signal, n)
 
 
 def top_params():

@@ -37,6 +37,7 @@ from host.simulator import (
     export_top,
     failed_seeds,
     run_top,
+    source_digest,
     top_manifest,
     top_params,
 )
@@ -84,12 +85,9 @@ _DESIGN_FOLDERS, _PYTHON_FOLDERS = ("hdl", "gen"), ("tb", "bench", "host")
 
 @functools.cache
 def _design_digest():
-    digest = hashlib.sha256(amaranth.__version__.encode())
-    files = [p for folder in _DESIGN_FOLDERS for p in (ROOT / folder).rglob("*")]
-    files += [p for folder in _PYTHON_FOLDERS for p in (ROOT / folder).rglob("*.py")]
-    for path in sorted(p for p in files if p.is_file() and "__pycache__" not in p.parts):
-        digest.update(str(path.relative_to(ROOT)).encode() + b"\0" + path.read_bytes())
-    return digest.hexdigest()
+    return source_digest(*(ROOT / folder for folder in _DESIGN_FOLDERS),
+                         *(p for folder in _PYTHON_FOLDERS for p in (ROOT / folder).rglob("*.py")),
+                         root=ROOT)
 
 
 def _named_files(value):

@@ -4,9 +4,10 @@ AXI4-Lite masters of the CPU, the process memory behind the AXI4 port, and the r
 import logging
 
 from cocotb.triggers import ClockCycles
-from cocotbext.axi import AxiBus, AxiLiteBus, AxiLiteMaster, AxiRam
+from cocotbext.axi import AxiLiteBus, AxiLiteMaster
 
 from hdl.reconos.protocol import arch as get_arch
+from host.compiled import attach_memory
 from host.simulator import start_clock
 
 from .broker import Broker
@@ -53,36 +54,24 @@ class ReconosCosim:
         self.osif, self.intc, self.proc = (
             AxiLiteMaster(AxiLiteBus.from_prefix(dut, f"s_axi_{name}"), dut.aclk, dut.aresetn,
                           reset_active_level=False) for name in ("osif", "intc", "proc"))
-        self.ram = AxiRam(AxiBus.from_prefix(dut, "m_axi_mem"), dut.aclk, dut.aresetn,
-                          reset_active_level=False, size=ram_size)
-        for m in (self.osif, self.intc, self.proc, self.ram):
+        #: the compiled memory of a Verilator harness, or cocotbext-axi's AxiRam on the port
+        self.ram = attach_memory(dut, ram_size)
+        for m in (self.osif, self.intc, self.proc):
             for part in ("write_if", "read_if"):
                 if hasattr(m, part):
                     getattr(m, part).log.setLevel(logging.WARNING)
             if hasattr(m, "log"):
                 m.log.setLevel(logging.WARNING)
         self.ram_size = ram_size
-        #: memory accesses of the hardware so far (a measure of progress)
-        self.memory_accesses = 0
-        self._decode_window(ram_size)
         self.memory = ProcessMemory(self.arch, self.ram, ram_size)
         self.broker = Broker()
         self.messages = None
         self.runtime = None
 
-    def _decode_window(self, size):
-        """AxiRam wraps addresses modulo its size; a real interconnect answers an access with
-        no memory behind it with an error. Accesses at or above ``size`` raise here, which
-        cocotbext-axi answers with SLVERR."""
-        for port, name in ((self.ram.read_if, "_read"), (self.ram.write_if, "_write")):
-            inner = getattr(port, name)
-
-            async def checked(address, arg, _inner=inner):
-                if address >= size:
-                    raise IndexError(f"no memory at 0x{address:x}")
-                self.memory_accesses += 1
-                return await _inner(address, arg)
-            setattr(port, name, checked)
+    @property
+    def memory_accesses(self):
+        """Memory accesses of the hardware so far (a measure of progress)."""
+        return self.ram.accesses
 
     async def reset(self):
         self.dut.aresetn.value = 0
