@@ -12,8 +12,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import (av_chain, ball_on_plate, finemb, hmt, kernels, msg, net,  # noqa: E402
-                   reconos, reconos_apps, ros2, services, timing)
+from bench import (av_chain, ball_on_plate, cosim, finemb, hmt, kernels, msg,  # noqa: E402
+                   net, reconos, reconos_apps, ros2, services, timing)
 from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -35,6 +35,7 @@ BENCHES = [
     ("the fpgaDDS lane-following chain: chain alpha over 100 scene frames", av_chain),
     ("services and actions over hardware topics against ReconROS' memory-based services",
      services),
+    ("co-simulation pace: rosgate sim against the bare Verilator model", cosim),
     ("timing: every core placed and routed on ECP5 (LFE5UM5G-85F-8), 3 seeds", timing),
 ]
 

@@ -35,6 +35,7 @@ import os
 import signal
 import sys
 import threading
+import time
 import traceback
 import warnings
 from pathlib import Path
@@ -52,7 +53,7 @@ from .simulator import (SimulationFailed, clock_cycles, export_top, run_top, sou
 from .toolchain import cache_dir
 
 __all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "model_resources",
-           "top_ports", "load_sim_module"]
+           "top_ports", "load_sim_module", "project_build_dir"]
 
 TOP = "rosgate_system"
 #: files the simulation writes into the output folder, besides the nodes' own
@@ -322,6 +323,7 @@ async def run_project(dut):
         if ros2:
             bridge = start_bridge(ctx, module, ros2)
         ctx._start = cocotb.utils.get_sim_time("ns")
+        cpu_start = time.process_time()
         running.update((node, cocotb.start_soon(guarded(node))) for node in nodes)
         if ros2:
             await serve_ros2(cosim, ctx, bridge, ros2, failures, created)
@@ -361,6 +363,8 @@ async def run_project(dut):
         _write_error(out, message)
         raise ProjectError(message)
     ctx.results.setdefault("cycles", ctx.now())
+    # the simulator process's CPU time while the nodes ran: the co-simulation's pace
+    ctx.results.setdefault("cpu_seconds", round(time.process_time() - cpu_start, 3))
     ctx.results.setdefault("slots_running", created)
     (out / RESULTS).write_text(json.dumps(ctx.results, indent=2) + "\n")
 
@@ -435,9 +439,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     args = dict(args or {})
     module = load_sim_module(project)
     system = build_system(project)
-    digest = hashlib.sha1(f"{build_cfg} {sorted(thread_params)}".encode()).hexdigest()[:8]
-    build_dir = Path(build_dir) if build_dir else \
-        cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{sim}"
+    build_dir = Path(build_dir) if build_dir else project_build_dir(project, thread_params, sim)
     # the Verilog first (seconds): the threads' parameters are final, and check() may read
     # them before minutes go into the simulator build
     vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
@@ -501,6 +503,13 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         if follower is not None:
             follower.join()
     return json.loads((out / RESULTS).read_text())
+
+
+def project_build_dir(project, thread_params, sim):
+    """The folder of the per-user cache a project's system is built in for ``sim``."""
+    digest = hashlib.sha1(f"{Path(project.path).resolve()} {sorted(thread_params)}"
+                          .encode()).hexdigest()[:8]
+    return cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{sim}"
 
 
 def _system_key(project, thread_params):

@@ -3,6 +3,8 @@
 // FIXED and WRAP, 1 to 16 beats, full-width and narrow, some at addresses past the memory.
 // W beats may run ahead of their AW; every valid idles and every ready backpressures at
 // random. Every handshake, with its cycle and payload, is folded into ``signature``.
+// Writes go to pages 0-3 and reads to pages 4-7: AXI leaves the order of a read and a write
+// of one word in the same cycle open, and AxiRam's follows its coroutines' order.
 module axi_traffic_master(aclk, aresetn, seed, bursts, done, signature, cycles, errors, m_axi_mem_awid, m_axi_mem_awaddr, m_axi_mem_awlen, m_axi_mem_awsize, m_axi_mem_awburst, m_axi_mem_awvalid, m_axi_mem_awready, m_axi_mem_wdata, m_axi_mem_wstrb, m_axi_mem_wlast, m_axi_mem_wvalid, m_axi_mem_wready, m_axi_mem_bid, m_axi_mem_bresp, m_axi_mem_bvalid, m_axi_mem_bready, m_axi_mem_arid, m_axi_mem_araddr, m_axi_mem_arlen, m_axi_mem_arsize, m_axi_mem_arburst, m_axi_mem_arvalid, m_axi_mem_arready, m_axi_mem_rid, m_axi_mem_rdata, m_axi_mem_rresp, m_axi_mem_rlast, m_axi_mem_rvalid, m_axi_mem_rready);
     // ports with numeric widths, as Yosys writes them: host.compiled reads them
     localparam int DATA_W = 64;
@@ -75,7 +77,8 @@ module axi_traffic_master(aclk, aresetn, seed, bursts, done, signature, cycles, 
         bytes = 16'(b.len + 1) << b.size;
         room = 16'd4096 - bytes;
         offset = 16'(h[34:20] % (32'(room) + 1));
-        b.addr = 40'(h[39:37]) * 40'h1000 + 40'(offset) + (h[44:41] == 0 ? 40'(OUTSIDE) : 40'd0);
+        b.addr = 40'({which, h[38:37]}) * 40'h1000 + 40'(offset) +
+                 (h[44:41] == 0 ? 40'(OUTSIDE) : 40'd0);
         if (b.burst == 2'd2) b.addr = b.addr & ~40'((1 << b.size) - 1);
         return b;
     endfunction

@@ -3,7 +3,8 @@ random traffic (``axi_traffic_master.sv``: INCR, FIXED and WRAP bursts, narrow b
 strobes, W ahead of AW, addresses past the memory, random idle on every valid and random
 backpressure on every ready) takes the same cycles, sees every handshake in the same cycle
 with the same payload (the master's signature), gets the same SLVERR answers and leaves the
-same bytes, seed for seed. One Verilator build of each runs every seed; the cocotb test below
+same bytes, seed for seed. Reads and writes go to different pages: the order of a read and a
+write of one word at the same edge is left open by AXI (and found to differ). One Verilator build of each runs every seed; the cocotb test below
 runs only when the pytest test of this module starts it."""
 
 import hashlib

@@ -7,6 +7,8 @@
 // count before the burst process takes from it), and the burst processes run after the
 // channels at every edge, reading a beat when it enters the R queue and writing a beat when
 // it leaves the W queue. Addresses outside the memory answer SLVERR (reads return zero).
+// A word written and read at the same edge is read as written: AXI leaves the order of the
+// two channels open there, and AxiRam's depends on the order its coroutines last woke in.
 // The bytes live in C++ (axi_ram.cpp), which Python reads and writes in place.
 /* verilator lint_off BLKSEQ */
 /* verilator lint_off UNUSEDSIGNAL */
