@@ -18,9 +18,9 @@ import uuid
 import zlib
 
 import cocotb
-from cocotb.triggers import ClockCycles
 
 from hdl.net.frames import ETHERTYPE_IPV4, ETHERTYPE_IPV6, IP_PROTO_TCP
+from host.simulator import clock_cycles
 
 __all__ = ["namespace_unavailable", "network_namespace", "TapBridge", "KERNEL_IP", "TAP_NAME"]
 
@@ -186,7 +186,7 @@ class TapBridge:
                     self.stats["to_design"] += 1
                     self._record(f)
                     self.source.send_nowait(GmiiFrame.from_payload(f))
-            await ClockCycles(self.clock, self.poll_cycles)
+            await clock_cycles(self.clock, self.poll_cycles)
 
     async def _design_to_kernel(self):
         while True:

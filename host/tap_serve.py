@@ -13,7 +13,7 @@ import cocotb
 from cocotb.triggers import ClockCycles
 from cocotbext.eth import GmiiSink, GmiiSource
 
-from host.simulator import start_gmii_clocks, top_params
+from host.simulator import clock_cycles, start_gmii_clocks, top_params
 from host.tap import TapBridge
 
 #: cycles between looks at the stop file and status updates
@@ -47,7 +47,7 @@ async def serve(dut):
     cycles = 0
     started = time.monotonic()
     while not stop.exists():
-        await ClockCycles(dut.aclk, POLL_CYCLES)
+        await clock_cycles(dut.aclk, POLL_CYCLES)
         cycles += POLL_CYCLES
         report = {"cycles": cycles, "wall_s": time.monotonic() - started,
                   "bridge": bridge.stats,
