@@ -14,7 +14,6 @@ measure; they are kept here as measured.
 """
 
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -22,7 +21,7 @@ from bench.report import write_report
 from host.compiled import SOURCES
 from gen.config import apply_parameters, load_project
 from host.project_sim import project_build_dir, run_project_sim
-from host.simulator import DEFAULT_CXX_OPT, VERILATOR_TOP_ARGS
+from host.simulator import DEFAULT_CXX_OPT, VERILATOR_TOP_ARGS, verilator_make_env
 from host.toolchain import put_verilator_on_path
 from tb.harness import ROOT, SIM_BUILD
 
@@ -53,9 +52,9 @@ def bare_model(build_dir, cycles, log):
     command = [verilator, "-cc", "--exe", "--build", "-j", "2", "-Mdir", str(exe_dir),
                "--top-module", "rosgate_system_cosim", "--prefix", "Vtop", "-o", "bare",
                *VERILATOR_TOP_ARGS, "--timescale", "1ns/1ps", *map(str, sources)]
-    env = dict(os.environ, MAKEFLAGS=f"-- CFG_CXXFLAGS_PCH_I=-include OPT_FAST={DEFAULT_CXX_OPT}")
     log(f"    building the bare model in {exe_dir}")
-    subprocess.run(command, check=True, env=env, capture_output=True, text=True)
+    with verilator_make_env("verilator", DEFAULT_CXX_OPT):
+        subprocess.run(command, check=True, capture_output=True, text=True)
     run = subprocess.run([str(exe_dir / "bare"), str(cycles)], check=True, capture_output=True,
                          text=True)
     return json.loads(run.stdout.strip().splitlines()[-1])

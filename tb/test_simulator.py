@@ -15,8 +15,8 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 from cocotb.triggers import ClockCycles, RisingEdge
 
-from host.simulator import (QUICK_CXX_OPT, VERILOG_CACHE_DAYS, export_top, run_top,
-                            start_clock)
+from host.simulator import (QUICK_CXX_OPT, VERILOG_CACHE_DAYS, clock_cycles, export_top,
+                            run_top, start_clock)
 
 
 class _Accumulator(wiring.Component):
@@ -78,12 +78,56 @@ async def sums_and_reports_what_it_sees(dut):
         "seen": visible("core", "seen"), "inner": visible("core", "inner", "total")}))
 
 
+@cocotb.test()
+async def clock_cycles_ends_where_clockcycles_ends(dut):
+    """``clock_cycles(clk, n)`` and cocotb's ``ClockCycles(clk, n)``, started at the same
+    instant (on an edge, or at a random point of a cycle), return at the same simulated time,
+    for short and long waits; writes the mismatches to ``ROSGATE_SEEN``."""
+    import random
+
+    from cocotb.triggers import Timer
+    from cocotb.utils import get_sim_time
+
+    start_clock(dut.aclk, 10)
+    mismatches, checked = [], 0
+
+    async def reference(n, ends):
+        await ClockCycles(dut.aclk, n)
+        ends.append(get_sim_time("ps"))
+    for n in [1, 2, 3, 4, 5, 7, 64, 1000, 20_000] + [random.randrange(1, 300) for _ in range(20)]:
+        if random.random() < 0.5:
+            await Timer(random.randrange(1, 10_000), unit="ps")
+        else:
+            await RisingEdge(dut.aclk)
+        ends = []
+        task = cocotb.start_soon(reference(n, ends))
+        await clock_cycles(dut.aclk, n)
+        mine = get_sim_time("ps")
+        await task
+        checked += 1
+        if ends[0] != mine:
+            mismatches.append([n, ends[0], mine])
+    Path(os.environ["ROSGATE_SEEN"]).write_text(json.dumps({"checked": checked,
+                                                             "mismatches": mismatches}))
+
+
+@pytest.mark.parametrize("sim", ["icarus", "verilator"])
+def test_clock_cycles_equals_clockcycles(tmp_path, sim):
+    seen = tmp_path / "seen.json"
+    run_top(__name__, "accumulator_top", _Top(), sim, tmp_path / "build",
+            extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, cxx_opt=QUICK_CXX_OPT,
+            log_file=tmp_path / "sim.log", testcase=["clock_cycles_ends_where_clockcycles_ends"])
+    report = json.loads(seen.read_text())
+    assert report["checked"] == 29 and report["mismatches"] == []
+
+
 @pytest.mark.parametrize("internals", [False, True], ids=["top_only", "internals"])
 def test_verilator_model_shows_the_top_module(tmp_path, internals):
     seen = tmp_path / "seen.json"
     run_top(__name__, "accumulator_top", _Top(), "verilator", tmp_path / "build",
             extra_env={"ROSGATE_SEEN": str(seen)}, lint=False, cxx_opt=QUICK_CXX_OPT,
-            log_file=tmp_path / "sim.log", internals=internals)
+            log_file=tmp_path / "sim.log", internals=internals,
+            testcase=["sums_and_reports_what_it_sees"])
     report = json.loads(seen.read_text())
     assert report["total"] == sum(range(1, 11))
     assert report["port"] is True

@@ -180,6 +180,6 @@ def memory_harness(memory="m_axi_mem"):
         name, verilog = cosim_wrapper(text, vfile.stem, memory=memory)
         wrapper = Path(build_dir) / f"{name}.v"
         write_if_changed(wrapper, verilog)
-        ports = [p for p in verilog_ports(verilog, name)]
-        return name, [wrapper, SOURCES[0]], [str(SOURCES[1]), *LINK_ARGS], ports
+        return (name, [wrapper, SOURCES[0]], [str(SOURCES[1]), *LINK_ARGS],
+                list(verilog_ports(verilog, name)))
     return make

@@ -65,6 +65,15 @@ module rosgate_axi_ram #(
     localparam int CHUNKS = (LANES + 7) / 8;
     localparam logic [1:0] FIXED = 2'd0, WRAP = 2'd2, OKAY = 2'd0, SLVERR = 2'd2;
 
+    // an AR or AW request as its channel queue keeps it
+    typedef struct packed {
+        logic [ID_W-1:0] id;
+        logic [63:0] addr;
+        logic [7:0] len;
+        logic [2:0] size;
+        logic [1:0] burst;
+    } request_t;
+
     // a burst's address sequence, as AxiSlaveRead/AxiSlaveWrite step it
     typedef struct packed {
         logic [ID_W-1:0] id;
@@ -75,24 +84,23 @@ module rosgate_axi_ram #(
         logic [63:0] lower, upper;
     } burst_t;
 
-    function automatic burst_t start_burst(input logic [ID_W-1:0] id, input logic [63:0] addr,
-                                           input logic [7:0] len, input logic [2:0] size,
-                                           input logic [1:0] burst, input string channel);
+    function automatic burst_t start_burst(input request_t q, input string channel);
         burst_t b;
-        logic [63:0] bytes, total;
-        bytes = 64'd1 << size;
-        total = bytes * (len + 1);
+        logic [63:0] bytes, total, addr;
+        addr = q.addr;
+        bytes = 64'd1 << q.size;
+        total = bytes * (q.len + 1);
         if (bytes > LANES)
             $fatal(1, "rosgate_axi_ram: %s size %0d is wider than the %0d-bit bus", channel,
-                   size, DATA_W);
-        if (burst != FIXED && burst != WRAP && 64'h1000 - ((addr & ~(bytes - 1)) & 64'hfff) < total)
+                   q.size, DATA_W);
+        if (q.burst != FIXED && q.burst != WRAP && 64'h1000 - ((addr & ~(bytes - 1)) & 64'hfff) < total)
             $fatal(1, "rosgate_axi_ram: %s burst at 0x%0h of %0d bytes crosses a 4 KiB boundary",
                    channel, addr, total);
-        b.id = id;
+        b.id = q.id;
         b.addr = addr & ~(bytes - 1);
-        b.left = len + 1;
+        b.left = q.len + 1;
         b.step = bytes[7:0];
-        b.burst = burst;
+        b.burst = q.burst;
         b.lower = addr / total * total;
         b.upper = addr / total * total + total;
         return b;
@@ -128,11 +136,9 @@ module rosgate_axi_ram #(
     endfunction
 
     // the channel queues (entries, head, count): state of this block only
-    logic [ID_W-1:0] arq_id[2], awq_id[2], rq_id[2], bq_id[2];
-    logic [63:0] arq_addr[2], awq_addr[2];
-    logic [7:0] arq_len[2], awq_len[2];
-    logic [2:0] arq_size[2], awq_size[2];
-    logic [1:0] arq_burst[2], awq_burst[2], rq_resp[2], bq_resp[2];
+    request_t arq[2], awq[2];
+    logic [ID_W-1:0] rq_id[2], bq_id[2];
+    logic [1:0] rq_resp[2], bq_resp[2];
     logic [DATA_W-1:0] rq_data[2], wq_data[2];
     logic [LANES-1:0] wq_strb[2];
     logic rq_last[2], wq_last[2];
@@ -154,16 +160,12 @@ module rosgate_axi_ram #(
             // the channels at the edge: sinks take what their ready and valid agreed on, and
             // say ready while fewer than two wait; sources drive their next entry
             if (arready && arvalid) begin
-                arq_id[arq_head ^ arq_n[0]] = arid; arq_addr[arq_head ^ arq_n[0]] = 64'(araddr);
-                arq_len[arq_head ^ arq_n[0]] = arlen; arq_size[arq_head ^ arq_n[0]] = arsize;
-                arq_burst[arq_head ^ arq_n[0]] = arburst;
+                arq[arq_head ^ arq_n[0]] = '{arid, 64'(araddr), arlen, arsize, arburst};
                 arq_n = arq_n + 1;
             end
             arready <= arq_n < 2;
             if (awready && awvalid) begin
-                awq_id[awq_head ^ awq_n[0]] = awid; awq_addr[awq_head ^ awq_n[0]] = 64'(awaddr);
-                awq_len[awq_head ^ awq_n[0]] = awlen; awq_size[awq_head ^ awq_n[0]] = awsize;
-                awq_burst[awq_head ^ awq_n[0]] = awburst;
+                awq[awq_head ^ awq_n[0]] = '{awid, 64'(awaddr), awlen, awsize, awburst};
                 awq_n = awq_n + 1;
             end
             awready <= awq_n < 2;
@@ -194,8 +196,7 @@ module rosgate_axi_ram #(
             for (int i = 0; i < 8; i++) begin
                 if (!w_busy && !w_respond) begin
                     if (awq_n == 0) break;
-                    wb = start_burst(awq_id[awq_head], awq_addr[awq_head], awq_len[awq_head],
-                                     awq_size[awq_head], awq_burst[awq_head], "write");
+                    wb = start_burst(awq[awq_head], "write");
                     awq_head = !awq_head; awq_n = awq_n - 1;
                     w_busy = 1; w_resp = OKAY;
                 end
@@ -229,8 +230,7 @@ module rosgate_axi_ram #(
                 logic [63:0] word;
                 if (!r_busy) begin
                     if (arq_n == 0) break;
-                    rb = start_burst(arq_id[arq_head], arq_addr[arq_head], arq_len[arq_head],
-                                     arq_size[arq_head], arq_burst[arq_head], "read");
+                    rb = start_burst(arq[arq_head], "read");
                     arq_head = !arq_head; arq_n = arq_n - 1;
                     r_busy = 1;
                 end
