@@ -24,7 +24,6 @@ import os
 import sys
 from pathlib import Path
 
-import amaranth
 import pytest
 
 from gen.tops import build_top
