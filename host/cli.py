@@ -15,6 +15,7 @@ from gen.msg.model import MessageDefinitionError
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
+from .compiled import DEFAULT_MEMORY_MB
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -252,6 +253,9 @@ def _add_project_commands(commands):
     p.add_argument("--stall-ms", type=float, default=10.0,
                    help="end the run when nothing happens (no OS call, memory access or "
                         "message) for this long in simulated time (default 10 ms)")
+    p.add_argument("--memory-mb", type=_memory_mb, default=DEFAULT_MEMORY_MB,
+                   help="physical memory behind the system's AXI4 port, in MiB (default "
+                        f"{DEFAULT_MEMORY_MB})")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="folder for the nodes' files (default build/<name>/sim)")
     p.add_argument("--ros2", action="store_true",
@@ -344,6 +348,18 @@ def _run_export_msg(args):
     return 0
 
 
+def _memory_mb(text):
+    """``--memory-mb``: a whole number of MiB from 1 to 4095 (the r32 bus addresses 4 GiB)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 4095:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of MiB from 1 "
+                                         f"to 4095")
+    return value
+
+
 def _key_values(items, option):
     out = {}
     for item in items:
@@ -385,7 +401,7 @@ def _run_sim(args):
             results = run_project_sim(
                 p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
                 thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
-                waves=args.waves, progress=console.progress, ros2=ros2,
+                memory_mb=args.memory_mb, waves=args.waves, progress=console.progress, ros2=ros2,
                 record=args.record, trace=args.trace,
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:

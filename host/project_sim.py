@@ -37,14 +37,12 @@ import sys
 import threading
 import time
 import traceback
-import warnings
 from pathlib import Path
 
 import cocotb
-from amaranth.hdl import UnusedElaboratable
 from cocotb.triggers import Event, First
 
-from .compiled import memory_harness
+from .compiled import DEFAULT_MEMORY_MB, memory_harness
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
@@ -278,7 +276,7 @@ async def run_project(dut):
                          clock_ns=p["clock_ns"],
                          slot_clocks={int(k): v for k, v in p["slot_clock_ns"].items()
                                       if int(k) in p["async_slots"]},
-                         ram_size=p.get("ram_size", 1 << 25))
+                         ram_size=p["memory_mb"] << 20)
     for name in os.environ.get("ROSGATE_EXTERNAL_INPUTS", "").split():
         getattr(dut, name).value = 0     # ports of slots without a thread: idle
     await cosim.reset()
@@ -336,8 +334,11 @@ async def run_project(dut):
             stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
             watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running,
                                                       failures, ended))
-            await First(ended.wait(), clock_cycles(dut.aclk, limit_cycles))
+            await First(ended.wait(), cosim.runtime.failed.wait(),
+                        clock_cycles(dut.aclk, limit_cycles))
             watch.cancel()
+            if cosim.runtime.fatal is not None:
+                raise cosim.runtime.fatal
             if failures:
                 raise failures[0]
             if running:
@@ -365,6 +366,7 @@ async def run_project(dut):
     ctx.results.setdefault("cycles", ctx.now())
     # the simulator process's CPU time while the nodes ran: the co-simulation's pace
     ctx.results.setdefault("cpu_seconds", round(time.process_time() - cpu_start, 3))
+    ctx.results.setdefault("memory", cosim.memory.usage())
     ctx.results.setdefault("slots_running", created)
     (out / RESULTS).write_text(json.dumps(ctx.results, indent=2) + "\n")
 
@@ -388,9 +390,9 @@ def _follow(path, show, stop):
 
 
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
-                    limit_ms=1000.0, stall_ms=10.0, seed=None, build_dir=None, quiet=True,
-                    waves=False, progress=None, log=None, ros2=None, record=None,
-                    trace=None):
+                    limit_ms=1000.0, stall_ms=10.0, memory_mb=DEFAULT_MEMORY_MB, seed=None,
+                    build_dir=None, quiet=True, waves=False, progress=None, log=None, ros2=None,
+                    record=None, trace=None):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
     Parameters
@@ -407,6 +409,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     limit_ms, stall_ms : float
         Simulated time after which the run ends unfinished; simulated time without any
         activity after which it ends as stalled.
+    memory_mb : int
+        MiB of physical memory behind the system's AXI4 port (``--memory-mb``).
     build_dir : path or None
         Where the Verilog and the simulator build go (default: the per-user cache).
     quiet : bool
@@ -444,9 +448,6 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     # them before minutes go into the simulator build
     vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
                        key=_system_key(project, thread_params))
-    # a cached conversion leaves ``system`` (kept for check() and its ports) unelaborated:
-    # Amaranth would warn about it when it is collected
-    warnings.filterwarnings("ignore", category=UnusedElaboratable)
     if module is not None and hasattr(module, "check"):
         try:
             module.check(CheckContext(project, args, thread_components(project, system)))
@@ -459,7 +460,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
               "clock_ns": _period_ns(project.system_clock.freq),
               "slot_clock_ns": {str(s.id): _period_ns(s.clock.freq) for s in project.slots},
               "args": args, "thread_params": list(thread_params), "out": str(out),
-              "limit_ms": float(limit_ms),
+              "limit_ms": float(limit_ms), "memory_mb": int(memory_mb),
               "stall_ms": float(stall_ms)}
     if record is not None:
         if Path(record).exists():

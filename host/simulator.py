@@ -172,6 +172,26 @@ def source_digest(*paths, extra=b"", root=None):
     return digest.hexdigest()
 
 
+def _mark_used(component):
+    """Mark ``component`` and the elaboratables it holds (in attributes, lists, dicts) as
+    used: its Verilog came from the cache, so Amaranth never elaborated it and would warn
+    that each was "created but never used" when collected."""
+    from amaranth._unused import MustUse
+    seen, todo = set(), [component]
+    while todo:
+        obj = todo.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, (list, tuple)):
+            todo.extend(obj)
+        elif isinstance(obj, dict):
+            todo.extend(obj.values())
+        elif isinstance(obj, MustUse):
+            obj._MustUse__used = True
+            todo.extend(vars(obj).values())
+
+
 def export_top(component, top, build_dir, *, icarus=False, key=None):
     """Write ``component`` as Verilog module ``top`` and its manifest into ``build_dir``;
     return the Verilog path (left untouched when its text is unchanged).
@@ -183,12 +203,14 @@ def export_top(component, top, build_dir, *, icarus=False, key=None):
     again. Converting is most of a small bench's build (a message codec: 13 s, mostly
     Amaranth's netlist), and one configuration is often built for both simulators or by
     several test modules."""
-    make = component if callable(component) and not isinstance(component, Elaboratable) \
-        else lambda: component
+    made = not (callable(component) and not isinstance(component, Elaboratable))
+    make = (lambda: component) if made else component
     if key is None:
         text, manifest = _converted(make(), top)
     else:
         text, manifest = _cached_conversion(make, top, key)
+        if made:
+            _mark_used(component)
     vfile = Path(build_dir) / f"{top}.v"
     write_if_changed(vfile, fix_icarus_t0(text, delay=icarus))
     write_if_changed(Path(build_dir) / f"{top}.json", json.dumps(manifest, indent=2) + "\n")

@@ -58,6 +58,42 @@ def rng_image(rng, width, height):
     return np.frombuffer(rng.randbytes(width * height * 3), np.uint8).reshape(height, width, 3)
 
 
+def test_sobel_dip_runs_more_images_than_its_memory_holds_without_freeing(tmp_path):
+    """40 photographs of 96x72 through a system with 1 MiB of physical memory: each takes
+    about 83 KB of message buffers (the image, the service request and response), 3.3 MB in
+    all, so the run completes only because a message stored again frees what the struct held;
+    every image equals OpenCV's and the heap ends as small as after the first."""
+    out = tmp_path / "out"
+    images = ",".join(["chelsea_96x72.png"] * 40)
+    assert rosgate(["sim", str(SOBEL_DIP), "--arg", f"images={images}", "--memory-mb", "1",
+                    "--limit-ms", "50", "-o", str(out)]) == 0
+    got = json.loads((out / "sim_results.json").read_text())
+    assert len(got["images"]) == 40 and all(r["bit_exact"] for r in got["images"])
+    memory = got["memory"]
+    assert memory["size"] == 1 << 20 and memory["physical"] < memory["size"]
+    assert memory["peak"] < 4 * 96 * 72 * 3 * 2
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "abc", "4096"])
+def test_memory_size_option_refuses_bad_values(value, capsys):
+    """``--memory-mb`` takes a whole number of MiB from 1 to 4095; anything else exits 2
+    naming the value, before anything is built."""
+    with pytest.raises(SystemExit) as info:
+        rosgate(["sim", str(SOBEL_DIP), "--memory-mb", value])
+    assert info.value.code == 2
+    assert f"--memory-mb: {value!r}" in capsys.readouterr().err
+
+
+def test_exhausted_memory_names_the_option(tmp_path, capsys):
+    """A photograph bigger than the memory given: the run ends with exit 2 and a message
+    that says how much memory there was, what used it and which option gives more."""
+    out = tmp_path / "out"
+    assert rosgate(["sim", str(SOBEL_DIP), "--arg", "images=coffee_640x480.png",
+                    "--memory-mb", "1", "--limit-ms", "50", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "physical memory is exhausted: 1048576 bytes" in err and "--memory-mb" in err
+
+
 @pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
 def test_sobel_dip_equals_opencv(sim, tmp_path):
     """Every image through ``rosgate sim`` comes back equal to OpenCV's Sobel edge image

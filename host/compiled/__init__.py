@@ -16,8 +16,12 @@ import ctypes
 import re
 from pathlib import Path
 
-__all__ = ["SOURCES", "LINK_ARGS", "CompiledAxiRam", "attach_memory", "cosim_wrapper",
+__all__ = ["DEFAULT_MEMORY_MB", "SOURCES", "LINK_ARGS", "CompiledAxiRam", "attach_memory", "cosim_wrapper",
            "memory_harness", "verilog_ports"]
+
+#: MiB of physical memory behind a system's AXI4 port in ``rosgate sim`` unless
+#: ``--memory-mb`` says otherwise (only what is written is backed by the host's memory)
+DEFAULT_MEMORY_MB = 256
 
 HERE = Path(__file__).resolve().parent
 #: the files a Verilator build with the compiled memory adds to the exported Verilog

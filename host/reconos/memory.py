@@ -5,14 +5,18 @@ the RTL: the process's virtual memory in physical memory behind the system's AXI
 object with ``read(addr, n)`` and ``write(addr, data)``, such as cocotbext-axi's ``AxiRam``),
 with a page table the model builds (ARMv8 4 KiB / 39-bit, three levels, for r64; ARMv7 short
 descriptors with pages and 1 MiB sections for r32), demand-mapped pages and a page-fault
-handler.
+handler. Its heap is a first-fit allocator: :meth:`ProcessMemory.free` gives a block back,
+and a later :meth:`~ProcessMemory.malloc` reuses it (its pages stay mapped, as a C heap keeps
+them), so a run that frees what it no longer needs runs in bounded memory.
 """
 
 from hdl.reconos.protocol import arch as get_arch
 
-__all__ = ["ProcessMemory", "PAGE"]
+__all__ = ["ProcessMemory", "PAGE", "MEMORY_OPTION"]
 
 PAGE = 4096
+#: how a user of ``rosgate sim`` sets the physical memory (named when it runs out)
+MEMORY_OPTION = "--memory-mb"
 
 class ProcessMemory:
     """Virtual memory of one process in ``ram`` (an object with ``read(addr, n)`` and
@@ -41,6 +45,10 @@ class ProcessMemory:
         self.mapped = set()    # vpns present in the hardware page table
         self.sections = {}     # r32: 1 MiB section index -> physical base
         self.faults = []       # VAs the fault handler was called for
+        self.blocks = {}       # va -> size of the live heap blocks
+        self._free = []        # [va, size] of freed heap extents, by address, coalesced
+        #: bytes in live heap blocks now, and the most there were
+        self.in_use = self.peak = 0
         self.pgd = self._frame(align=16 * 1024 if self.arch.name == "r32" else PAGE,
                                size=16 * 1024 if self.arch.name == "r32" else PAGE)
         self._tables = {}
@@ -49,7 +57,11 @@ class ProcessMemory:
     def _frame(self, *, align=PAGE, size=PAGE):
         base = -(-self._next_frame // align) * align
         if base + size > self.ram_size:
-            raise MemoryError("the co-simulation's physical memory is exhausted")
+            raise MemoryError(
+                f"the co-simulation's physical memory is exhausted: {self.ram_size} bytes, "
+                f"{self.in_use} of them in {len(self.blocks)} live heap blocks (most "
+                f"{self.peak}), {sum(n for _, n in self._free)} freed for reuse; more with "
+                f"{MEMORY_OPTION}")
         self._next_frame = base + size
         self.ram.write(base, bytes(size))
         return base
@@ -113,17 +125,79 @@ class ProcessMemory:
 
     # ---- the process's view ----
     def malloc(self, size, *, populate=True, align=64):
-        """Allocate ``size`` bytes (zeroed) and return the VA. With ``populate=False`` the pages
-        exist but are missing from the hardware page table until the first fault."""
-        va = -(-self._next_va // align) * align
-        end = va + max(size, 1)
-        for vpn in range(va // PAGE, -(-end // PAGE)):
+        """Allocate ``size`` bytes (zeroed) and return the VA. A freed extent that fits is
+        reused first. With ``populate=False`` the block gets new pages that are missing from
+        the hardware page table until the first fault."""
+        if size < 0:
+            raise ValueError(f"malloc of {size} bytes")
+        size = max(size, 1)
+        va = self._reuse(size, align) if populate else None
+        if va is None:
+            va = -(-self._next_va // align) * align
+            if va > self._next_va:
+                self._give_back(self._next_va, va - self._next_va)
+            self._next_va = va + size
+        self._back(va, size, populate)
+        self.write(va, bytes(size))
+        self.blocks[va] = size
+        self.in_use += size
+        self.peak = max(self.peak, self.in_use)
+        return va
+
+    def _back(self, va, size, populate):
+        """Give the pages of ``[va, va + size)`` frames, and map them unless
+        ``populate=False`` asks for a page fault first."""
+        for vpn in range(va // PAGE, -(-(va + size) // PAGE)):
             if vpn not in self.pages:
                 self.pages[vpn] = self._frame() // PAGE
                 if populate:
                     self._map(vpn, self.pages[vpn])
-        self._next_va = end
-        return va
+            elif populate and vpn not in self.mapped:
+                self._map(vpn, self.pages[vpn])
+
+    def _reuse(self, size, align):
+        """The VA of ``size`` bytes at ``align`` cut from the first freed extent that holds
+        them (the rest stays free), or ``None``."""
+        for i, (start, length) in enumerate(self._free):
+            va = -(-start // align) * align
+            if va + size > start + length:
+                continue
+            rest = [[start, va - start]] if va > start else []
+            if va + size < start + length:
+                rest.append([va + size, start + length - va - size])
+            self._free[i:i + 1] = rest
+            return va
+        return None
+
+    def owns(self, va):
+        """Whether ``va`` is the start of a live heap block."""
+        return va in self.blocks
+
+    def free(self, va):
+        """Give the block at ``va`` back for reuse (``free``); ``va`` must be a live block's
+        start."""
+        size = self.blocks.pop(va, None)
+        if size is None:
+            raise ValueError(f"free of 0x{va:x}: not the start of a live heap block")
+        self.in_use -= size
+        self._give_back(va, size)
+
+    def _give_back(self, va, size):
+        """Put ``[va, va + size)`` on the free list, merged with its free neighbours."""
+        i = next((k for k, (start, _) in enumerate(self._free) if start > va),
+                 len(self._free))
+        self._free.insert(i, [va, size])
+        if i + 1 < len(self._free) and va + size == self._free[i + 1][0]:
+            self._free[i][1] += self._free.pop(i + 1)[1]
+        if i > 0 and sum(self._free[i - 1]) == va:
+            self._free[i - 1][1] += self._free.pop(i)[1]
+
+    def usage(self):
+        """What the heap holds: bytes in live blocks now and at most, live blocks, bytes
+        freed for reuse, physical bytes handed out of the memory's size."""
+        return {"in_use": self.in_use, "peak": self.peak, "blocks": len(self.blocks),
+                "free": sum(n for _, n in self._free), "physical": self._next_frame,
+                "size": self.ram_size}
 
     def translate(self, va):
         vpn = va // PAGE

@@ -3,6 +3,7 @@
 
 import struct
 
+from gen.msg.model import Array, Named, Primitive
 from gen.msg.wire import BYTE_ELEMENTS
 from gen.msg.wire import STRUCT_FORMAT as _FMT
 
@@ -15,6 +16,12 @@ class MessageMemory:
     Values are dicts of field name to value: primitives as ints/floats, strings as ``str``,
     nested messages as dicts, ``uint8``/``byte``/``char`` sequences and arrays as ``bytes``,
     other sequences and arrays of primitives as lists.
+
+    As rosidl's generated functions do, storing a value into a struct (``__assign``, a take)
+    first frees the strings and sequences the struct held (``__fini``), and resizing a
+    sequence (``ROS_MESSAGE_SET_SIZE``) frees its old buffer once the elements are copied. A
+    pointer that is not the start of a heap block (the hardware wrote it) is left alone and
+    counted in :attr:`foreign`.
     """
 
     def __init__(self, memory, library):
@@ -23,6 +30,8 @@ class MessageMemory:
         self.library = library
         self.layout = CLayout(library, "arm64" if memory.arch.name == "r64" else "arm32")
         self.p = self.layout.pointer
+        #: pointers found in a struct being finalised that no heap block starts at
+        self.foreign = 0
 
     def sizeof(self, type_name):
         return self.layout.struct(type_name).size
@@ -54,6 +63,7 @@ class MessageMemory:
             data = self.mem.malloc(count * elem_size) if count else 0
             if old and data:
                 self.mem.write(data, self.mem.read(old, min(size, count) * elem_size))
+            self._release(old)
             self._ptr(va, data)
         self._ptr(va + self.p, count)
         self._ptr(va + 2 * self.p, count)
@@ -62,18 +72,62 @@ class MessageMemory:
     def _primitive_size(self, name):
         return struct.calcsize("<" + _FMT[name])
 
+    def _release(self, ptr):
+        if not ptr:
+            return
+        if self.mem.owns(ptr):
+            self.mem.free(ptr)
+        else:
+            self.foreign += 1
+
+    def fini(self, va, type_name):
+        """``pkg__msg__Type__fini``: free every string and sequence the struct at ``va``
+        holds (nested ones first) and zero their pointers; the struct itself stays."""
+        self._fini_value(va, Named(type_name))
+
+    def _fini_value(self, at, t):
+        if isinstance(t, Named):
+            for m in self.layout.struct(t.typename).members:
+                self._fini_value(at + m.offset, m.type)
+        elif isinstance(t, Primitive) and t.is_string:
+            self._release(self._ptr(at))
+            for k in range(3):
+                self._ptr(at + k * self.p, 0)
+        elif isinstance(t, Primitive):
+            return
+        elif isinstance(t.element, Primitive) and not t.element.is_string:
+            if not isinstance(t, Array):
+                self._release(self._ptr(at))
+                for k in range(3):
+                    self._ptr(at + k * self.p, 0)
+        else:
+            size, _ = self.layout.size_align(t.element)
+            base, n = (at, t.length) if isinstance(t, Array) else \
+                (self._ptr(at), self._ptr(at + self.p))
+            if base and (isinstance(t, Array) or self.mem.owns(base)):
+                for i in range(n):
+                    self._fini_value(base + i * size, t.element)
+            if not isinstance(t, Array):
+                self._release(base)
+                for k in range(3):
+                    self._ptr(at + k * self.p, 0)
+
     def write(self, va, type_name, value):
-        """Store ``value`` in the struct at ``va``: strings and sequences get new buffers
-        (``malloc``), as rosidl's ``__init`` and ``__assign`` functions give them."""
+        """Store ``value`` in the struct at ``va``: what the struct held is freed
+        (:meth:`fini`), strings and sequences get new buffers (``malloc``), as rosidl's
+        ``__assign`` functions do."""
+        self.fini(va, type_name)
+        self._store(va, type_name, value)
+
+    def _store(self, va, type_name, value):
         for m in self.layout.struct(type_name).members:
             if m.name == "structure_needs_at_least_one_member":
                 continue
             self._write_value(va + m.offset, m.type, value[m.name])
 
     def _write_value(self, at, t, v):
-        from gen.msg.model import Array, Named, Primitive
         if isinstance(t, Named):
-            self.write(at, t.typename, v)
+            self._store(at, t.typename, v)
         elif isinstance(t, Primitive) and t.is_string:
             if t.name == "wstring":
                 raise TypeError("the co-simulation model does not store wstring")
@@ -124,7 +178,6 @@ class MessageMemory:
         return out
 
     def _read_value(self, at, t):
-        from gen.msg.model import Array, Named, Primitive
         if isinstance(t, Named):
             return self.read(at, t.typename)
         if isinstance(t, Primitive) and t.is_string:

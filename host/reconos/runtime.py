@@ -169,6 +169,10 @@ class ReconosRuntime:
         self.bus_accesses = 0
         self.pending = {}
         self._threads = {}
+        #: set when a delegate fails for a reason other than the hardware's protocol (the
+        #: model ran out of memory, say): the exception, and the event a run waits on
+        self.fatal = None
+        self.failed = Event()
 
     # ---- registers ----
     async def _read(self, bus, offset):
@@ -373,6 +377,12 @@ class ReconosRuntime:
                 self.ignored[slot].append((word, args, str(exc)))
                 self.errors.append(str(exc))
                 continue
+            except Exception as exc:
+                # the delegate cannot go on: the run ends with this exception, not a crash
+                # of the simulator's task
+                self.fatal = exc
+                self.failed.set()
+                return
             finally:
                 self.pending.pop(slot, None)
             self.log[slot].append((c.method, tuple(args), tuple(replies)))
@@ -444,6 +454,10 @@ class ReconosRuntime:
         return [ptr]
 
     async def do_memory_free(self, slot, ptr):
+        if not self.mem.owns(ptr):
+            raise ProtocolError(f"slot {slot}: MEMORY_FREE of 0x{ptr:x}, which no MEMORY_MALLOC "
+                                f"returned (or already freed)")
+        self.mem.free(ptr)
         return []
 
     async def do_memory_getobjaddr(self, slot, h):
