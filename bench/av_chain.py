@@ -1,9 +1,9 @@
 """The fpgaDDS lane-following chain benchmark (docs/av_chain.md): chain alpha over 100 scene
 frames for the hardware-topic (fpgaDDS) variant at 1 and 4 pixels per clock under Verilator,
-over a few full-size frames and over the scene's 100 frames at a fifth of the size for the
-ReconROS variant (examples/av_chain: the same nodes as ReconOS threads, topics through memory
-and the broker) at 1 and 4 pixels per clock, and the software variant (the OpenCV nodes of
-host/autorace.py on this machine), beside the fpgaDDS paper's Table III; the whole chain's
+over the scene's 100 frames at full size and at a fifth of the size for the ReconROS variant
+(examples/av_chain: the same nodes as ReconOS threads, topics through memory and the broker)
+at 1 and 4 pixels per clock (``python -m bench.av_chain --reconros`` re-measures only those),
+and the software variant (the OpenCV nodes of host/autorace.py on this machine), beside the fpgaDDS paper's Table III; the whole chain's
 Yosys resources beside its Table II. Writes ``bench/results/av_chain.json`` with the
 ``chain_alpha`` list (and ``reconros_scaled``, ``resources``), the Markdown tables and the
 plots (latency per frame, the lane overlay of one frame)."""
@@ -25,10 +25,9 @@ import scene  # noqa: E402
 
 #: scene frames per variant (``ROSGATE_AV_FRAMES`` for a shorter trial)
 FRAMES = int(os.environ.get("ROSGATE_AV_FRAMES", 100))
-#: full-size frames of the ReconROS variant per px/clk (``ROSGATE_AV_RECONROS_FRAMES``): its
-#: model (seven threads, the ReconOS infrastructure, memory in cocotb) simulates about 6,000
-#: cycles/s at 4 px/clk, a frame there is 1.4 million cycles
-RECONROS_FRAMES = int(os.environ.get("ROSGATE_AV_RECONROS_FRAMES", 4))
+#: full-size frames of the ReconROS variant per px/clk (``ROSGATE_AV_RECONROS_FRAMES``): the
+#: scene's 100, 1.4 million cycles each at 4 px/clk, 2.7 million at 1 px/clk
+RECONROS_FRAMES = int(os.environ.get("ROSGATE_AV_RECONROS_FRAMES", 100))
 #: the ReconROS variant's frames and frame scale for the spread over the scene: 100 frames at
 #: a fifth of the size (128x96 camera, 200x120 view), 16 to 19 min each, side by side
 RECONROS_SCALED = (int(os.environ.get("ROSGATE_AV_RECONROS_SCALED_FRAMES", 100)), 0.2)
@@ -66,16 +65,18 @@ def _reconros(ppcs, log, frames=RECONROS_FRAMES, scale=1.0):
     """The ReconROS variant under ``rosgate sim``, the px/clk settings side by side: its
     results per px/clk."""
     def simulate(p):
-        return p, run_project_sim(PROJECT, "verilator",
+        start = time.monotonic()
+        results = run_project_sim(PROJECT, "verilator",
                                   out=SIM_BUILD / f"bench-av_chain-p{p}-s{scale}",
                                   args={"frames": str(frames)},
                                   thread_params=[f"*.pixels_per_beat={p}"] +
                                   ([f"*.scale={scale}"] if scale != 1 else []),
-                                  limit_ms=1000)
+                                  limit_ms=100 * frames)
+        results["wall_s"] = round(time.monotonic() - start, 1)
+        return p, results
     size = "full-size" if scale == 1 else f"{scale:g}-scale"
     log(f"  simulating the ReconROS variant (examples/av_chain) at {' and '.join(map(str, ppcs))}"
-        f" px/clk over {frames} {size} frames each, side by side (Verilator; "
-        "about half an hour)...")
+        f" px/clk over {frames} {size} frames each, side by side (Verilator)...")
     with ThreadPoolExecutor(len(ppcs)) as pool:
         return dict(pool.map(simulate, ppcs))
 
@@ -94,6 +95,9 @@ def reconros_entries(runs, scale=1.0):
                         "stages_bit_exact": rec["stages_bit_exact"],
                         "cycles": round(rec["mean_cycles"]),
                         "stops": rec["stops"], "starts": rec["starts"],
+                        "simulation": {"wall_s": rec["wall_s"],
+                                       "cpu_seconds": rec["cpu_seconds"],
+                                       "cycles": rec["cycles"]},
                         "note": "the broker and the delegate threads in software take no "
                                 "simulated time: a lower bound"})
         if scale != 1:
@@ -131,12 +135,8 @@ def measure(log=print):
                             r["off_by_one"] for r in rec["frames"] if "off_by_one" in r),
                         "stops": rec["stops"], "starts": rec["starts"]})
         per_frame[f"fpgadds_p{p}"] = ms
-    reconros, reconros_ms = reconros_entries(_reconros(ppcs, log))
-    entries += reconros
-    per_frame.update(reconros_ms)
-    frames_scaled, scale = RECONROS_SCALED
-    scaled, scaled_ms = reconros_entries(_reconros(ppcs, log, frames_scaled, scale), scale)
-    per_frame.update(scaled_ms)
+    results = {"chain_alpha": entries, "per_frame_ms": per_frame}
+    measure_reconros(results, log)
     times, errors = _software(frames, log)
     mean, sd = _stats(times)
     entries.append({"variant": "software", "ppc": None, "clock_mhz": None,
@@ -144,9 +144,22 @@ def measure(log=print):
                     "lane_centre_max_error_px": round(max(errors), 3),
                     "stages_bit_exact": True, "note": "wall-clock on this machine"})
     per_frame["software"] = times
-    return {"chain_alpha": entries, "reconros_scaled": scaled, "per_frame_ms": per_frame,
-            "paper": PAPER,
-            "paper_lut": PAPER_LUT, "overlay_frame": 50}
+    return {**results, "paper": PAPER, "paper_lut": PAPER_LUT, "overlay_frame": 50}
+
+
+def measure_reconros(results, log=print, ppcs=(4, 1)):
+    """Measure the ReconROS variant's rows (full size and at a fifth of the size) into
+    ``results`` (a ``measure()`` result), replacing the ones it has."""
+    full, full_ms = reconros_entries(_reconros(ppcs, log))
+    frames_scaled, scale = RECONROS_SCALED
+    scaled, scaled_ms = reconros_entries(_reconros(ppcs, log, frames_scaled, scale), scale)
+    rows = [e for e in results["chain_alpha"] if e["variant"] != "reconros"]
+    at = next((i for i, e in enumerate(rows) if e["variant"] == "software"), len(rows))
+    results["chain_alpha"] = rows[:at] + full + rows[at:]
+    results["reconros_scaled"] = scaled
+    results["per_frame_ms"] = {k: v for k, v in results["per_frame_ms"].items()
+                               if not k.startswith("reconros")} | full_ms | scaled_ms
+    return results
 
 
 def _add(rows, label):
@@ -244,10 +257,9 @@ def markdown(r, resources=()):
               "takes a whole frame from memory and writes its result back before the next "
               "node starts, through one 64-bit memory port. The software side (broker, "
               "delegate threads) takes no simulated time there, so they are a lower bound; "
-              f"they cover {RECONROS_FRAMES} full-size frames per px/clk because the "
-              "simulation costs minutes per frame; the rows at a fifth of the size (128x96 "
-              "camera, 200x120 view) cover the scene's 100 frames and show the spread over "
-              "it. At that size the lane centre is further from the scene's truth in its "
+              f"they cover {RECONROS_FRAMES} full-size frames per px/clk; the rows at a "
+              "fifth of the size (128x96 camera, 200x120 view) cover the scene's 100 frames "
+              "too and show the spread over it. At that size the lane centre is further from the scene's truth in its "
               "200-pixel view, in the software chain as in hardware: every frame's lane "
               "result equals the software chain's.", "",
               "![chain alpha per frame](av_chain.png)", ""]
@@ -298,3 +310,22 @@ def write_results(results, resources, folder):
     overlay(results, folder / "av_chain_overlay.png")
     return write_report(folder, "av_chain", {**results, "resources": resources},
                         markdown(results, resources))
+
+
+def main(argv=None):
+    """``python -m bench.av_chain --reconros``: measure only the ReconROS rows again, into the
+    saved results (the hardware-topic and software rows and the resources are kept)."""
+    args = sys.argv[1:] if argv is None else argv
+    if args != ["--reconros"]:
+        raise SystemExit("usage: python -m bench.av_chain --reconros (all rows: "
+                         "python bench/run.py av_chain)")
+    folder = ROOT / "bench" / "results"
+    saved = json.loads((folder / "av_chain.json").read_text())
+    resources = saved.pop("resources")
+    print(write_results(measure_reconros(saved), resources, folder))
+    print(f"wrote {folder / 'av_chain.json'}, {folder / 'av_chain.md'} and the plots")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -21,7 +21,7 @@ from bench.report import write_report
 from host.compiled import SOURCES
 from gen.config import apply_parameters, load_project
 from host.project_sim import project_build_dir, run_project_sim
-from host.simulator import DEFAULT_CXX_OPT, VERILATOR_TOP_ARGS, verilator_make_env
+from host.simulator import PROJECT_CXX_OPT, VERILATOR_TOP_ARGS, verilator_make_env
 from host.toolchain import put_verilator_on_path
 from tb.harness import ROOT, SIM_BUILD
 
@@ -53,7 +53,7 @@ def bare_model(build_dir, cycles, log):
                "--top-module", "rosgate_system_cosim", "--prefix", "Vtop", "-o", "bare",
                *VERILATOR_TOP_ARGS, "--timescale", "1ns/1ps", *map(str, sources)]
     log(f"    building the bare model in {exe_dir}")
-    with verilator_make_env("verilator", DEFAULT_CXX_OPT):
+    with verilator_make_env("verilator", PROJECT_CXX_OPT):
         subprocess.run(command, check=True, capture_output=True, text=True)
     run = subprocess.run([str(exe_dir / "bare"), str(cycles)], check=True, capture_output=True,
                          text=True)

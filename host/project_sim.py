@@ -46,8 +46,8 @@ from .compiled import DEFAULT_MEMORY_MB, memory_harness
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
-from .simulator import (SimulationFailed, clock_cycles, export_top, run_top, source_digest,
-                        top_params)
+from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
+                        source_digest, top_params)
 from .toolchain import cache_dir
 
 __all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "model_resources",
@@ -392,7 +392,7 @@ def _follow(path, show, stop):
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, memory_mb=DEFAULT_MEMORY_MB, seed=None,
                     build_dir=None, quiet=True, waves=False, progress=None, log=None, ros2=None,
-                    record=None, trace=None):
+                    record=None, trace=None, cxx_opt=PROJECT_CXX_OPT):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
     Parameters
@@ -426,6 +426,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     record, trace : path or None
         Write every message on the project's topics to a rosbag2 (MCAP) at ``record`` (a new
         folder), and one line per message to the text file ``trace``.
+    cxx_opt : str or None
+        The C++ optimisation of a Verilator model (:func:`host.simulator.run_top`); a build
+        folder is built with one.
 
     Raises
     ------
@@ -443,7 +446,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     args = dict(args or {})
     module = load_sim_module(project)
     system = build_system(project)
-    build_dir = Path(build_dir) if build_dir else project_build_dir(project, thread_params, sim)
+    build_dir = Path(build_dir) if build_dir else \
+        project_build_dir(project, thread_params, sim, cxx_opt)
     # the Verilog first (seconds): the threads' parameters are final, and check() may read
     # them before minutes go into the simulator build
     vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
@@ -489,7 +493,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         run_top(__name__, TOP, system, sim, build_dir, params=params, seed=seed,
                 extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)},
                 log_file=out / LOG if quiet else None, waves=waves, progress=progress,
-                exported=vfile, harness=memory_harness())
+                exported=vfile, harness=memory_harness(), cxx_opt=cxx_opt)
     except SimulationFailed as exc:
         if (out / ERROR).is_file():
             raise ProjectError(json.loads((out / ERROR).read_text())["error"]) from None
@@ -506,11 +510,13 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     return json.loads((out / RESULTS).read_text())
 
 
-def project_build_dir(project, thread_params, sim):
-    """The folder of the per-user cache a project's system is built in for ``sim``."""
+def project_build_dir(project, thread_params, sim, cxx_opt=PROJECT_CXX_OPT):
+    """The folder of the per-user cache a project's system is built in for ``sim`` (and, for
+    Verilator, at C++ optimisation ``cxx_opt``: make does not rebuild for another)."""
     digest = hashlib.sha1(f"{Path(project.path).resolve()} {sorted(thread_params)}"
                           .encode()).hexdigest()[:8]
-    return cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{sim}"
+    opt = f"{cxx_opt.lstrip('-')}-" if sim == "verilator" and cxx_opt else ""
+    return cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{opt}{sim}"
 
 
 def _system_key(project, thread_params):
