@@ -8,11 +8,12 @@ import os
 import random
 
 import cocotb
-from cocotb.triggers import ClockCycles, First, RisingEdge, Timer
+from cocotb.triggers import First, RisingEdge, Timer
 from cocotb.utils import get_sim_time
 from scapy.layers.l2 import Ether
 from scapy.packet import Raw
 
+from host.simulator import clock_cycles
 from tb.finemb_tb import CLOCK_NS, LineMaster
 
 NODES = int(os.environ["ROSGATE_FINEMB_NODES"])
@@ -39,7 +40,7 @@ async def soc_times(dut, times, stop):
 async def hop_latency(dut, master):
     """First byte into node 0 to first byte out of its far port, for a frame it forwards only
     (another node's MAC), on an idle line."""
-    await ClockCycles(dut.gmii_clk, 2000)
+    await clock_cycles(dut.gmii_clk, 2000)
     master.send(Ether(src="02:00:00:00:00:01", dst="02:00:00:00:46:99", type=0x88B5) /
                 Raw(bytes(100)))
     await RisingEdge(dut.hop_in)
@@ -57,7 +58,7 @@ async def fixed_cycles(dut, master, rng, polling, period):
     first = master.now() + 10
     sizes = None
     for k in range(FIXED):
-        await ClockCycles(dut.gmii_clk, first + k * period - master.now())
+        await clock_cycles(dut.gmii_clk, first + k * period - master.now())
         start, last, got = await master.cycle(rng, polling=polling,
                                               deadline=first + (k + 1) * period)
         assert start == first + k * period, (start, first + k * period)
@@ -66,7 +67,7 @@ async def fixed_cycles(dut, master, rng, polling, period):
                      "rx": [14 + 20 + 8 + 16 + len(m["body"]) for m in got.values()]}
     stop.append(True)
     # the last cycle's late answers arrive in this one: let them pass before the next try
-    await ClockCycles(dut.gmii_clk, 2 * period)
+    await clock_cycles(dut.gmii_clk, 2 * period)
     return sum(master.late.values()) - late_before, times, sizes
 
 

@@ -17,7 +17,7 @@ from hdl.finemb.protocol import (
     ReinitReason,
 )
 from hdl.net.frames import int_to_mac, mac_to_int
-from host.simulator import GMII_NS, start_gmii_clocks
+from host.simulator import GMII_NS, clock_cycles, start_gmii_clocks
 
 from .harness import ROOT, bench_params
 from .models.finemb import body_of, finemb_frame, parse_finemb
@@ -125,7 +125,7 @@ class NodeTB:
     async def drain(self, port, cycles=200):
         """Frames sent on ``port`` within ``cycles`` (scapy)."""
         out = []
-        await ClockCycles(self.dut.gmii_clk, cycles)
+        await clock_cycles(self.dut.gmii_clk, cycles)
         while (got := self.ports[port].take()) is not None:
             out.append(got[1])
         return out

@@ -8,8 +8,8 @@ import random
 import time
 
 import cocotb
-from cocotb.triggers import ClockCycles
 
+from host.simulator import clock_cycles
 from host.tap import KERNEL_IP, TAP_NAME, TapBridge, namespace_unavailable, network_namespace
 
 from .net_tb import ENGINE_IP, PEER_IP, NetTB
@@ -47,7 +47,7 @@ class LinuxTB(NetTB):
                 raise AssertionError(f"wall-clock limit: {what}; {await self.diagnostics()}")
             if k and k % ((1 << 22) // step) == 0:
                 self.dut._log.info("%s: %s", what, await self.diagnostics())
-            await ClockCycles(self.dut.aclk, step)
+            await clock_cycles(self.dut.aclk, step)
         raise AssertionError(f"{what}: not within {limit_cycles} cycles; "
                              f"{await self.diagnostics()}")
 

@@ -13,7 +13,7 @@ from scapy.packet import Raw
 from hdl.net.frames import DEFAULT_RBCP_PORT, int_to_ip, int_to_mac
 from hdl.net.stack import STACK_COUNTERS
 from hdl.net.tcp import TCP_COUNTERS
-from host.simulator import CORE_NS, GMII_NS, start_gmii_clocks
+from host.simulator import CORE_NS, GMII_NS, clock_cycles, start_gmii_clocks
 from tb.harness import bench_params
 from tb.streams import StreamPort, reset_aresetn
 
@@ -78,7 +78,7 @@ class RegisterBusModel:
             addr = int(dut.rbcp_addr.value)
             write = int(dut.rbcp_we.value)
             data = int(dut.rbcp_wd.value)
-            await ClockCycles(dut.aclk, self.latency)
+            await clock_cycles(dut.aclk, self.latency)
             if addr >= self.size:
                 continue
             if write:
@@ -169,7 +169,7 @@ class NetTB:
         assert frame is None, f"unexpected frame {frame!r}"
 
     async def idle(self, cycles):
-        await ClockCycles(self.dut.aclk, cycles)
+        await clock_cycles(self.dut.aclk, cycles)
 
     async def put(self, frame, *, fcs=True, error=False):
         """Send a frame of a peer model (:meth:`send`; benches count or learn here)."""

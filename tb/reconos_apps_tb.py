@@ -7,10 +7,11 @@ from pathlib import Path
 
 import cocotb
 import cv2
-from cocotb.triggers import ClockCycles, with_timeout
+from cocotb.triggers import with_timeout
 
 from host.reconos import Resource
 from host.reconos.messages import image_message as image_msg
+from host.simulator import clock_cycles
 
 from .models.sobel import sobel_byte_lanes
 from .reconos_tb import ReconosTB, slot_of
@@ -99,7 +100,7 @@ async def run_sobel(tb, pixels, seq, *, step=None):
     value = image_msg(pixels, step=step, seq=seq)
     tb.broker.publish("/image_raw", value)
     if step is not None and step != pixels.shape[1] * 3:
-        await ClockCycles(tb.dut.aclk, 200_000)
+        await clock_cycles(tb.dut.aclk, 200_000)
         return None
     return await tb.within(tb.filtered.get(), f"filtered image {seq}", limit_us=100_000)
 

@@ -8,10 +8,10 @@ import random
 
 import cocotb
 import numpy as np
-from cocotb.triggers import ClockCycles, RisingEdge
+from cocotb.triggers import RisingEdge
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSource
 
-from host.simulator import start_clock
+from host.simulator import clock_cycles, start_clock
 from tb.harness import ROOT, bench_params
 from tb.models.messages import golden_store
 from tb.models.services import parse_header
@@ -133,7 +133,7 @@ class ServicesTB:
         raise AssertionError(f"timeout after {timeout_cycles} cycles waiting for {what}")
 
     async def cycles(self, n):
-        await ClockCycles(self.dut.aclk, n)
+        await clock_cycles(self.dut.aclk, n)
 
 
 PARAMS = bench_params() if "ROSGATE_PARAMS" in os.environ else {}

@@ -10,9 +10,9 @@ import random
 
 import cocotb
 import pytest
-from cocotb.triggers import ClockCycles
 
 from hdl.finemb.protocol import NODE_ALL, MsgType, NodeState, ReinitReason
+from host.simulator import clock_cycles
 from tb.harness import SIMULATORS, run_bench
 from tb.models.finemb import body_of
 
@@ -85,7 +85,7 @@ async def hot_join_while_the_others_cycle(dut):
                 await master.join(newcomer, mac)       # the address, then the descriptor
                 steps.pop(0)
             assert master.now() < start + SLOW_PERIOD, "the join overran the cycle"
-        await ClockCycles(dut.gmii_clk, max(0, start + SLOW_PERIOD - master.now()))
+        await clock_cycles(dut.gmii_clk, max(0, start + SLOW_PERIOD - master.now()))
     assert newcomer in master.nodes and master.answered[newcomer] >= 4
     assert states(dut) == [NodeState.OP] * NODES
     assert all(v == 0 for v in master.late.values()), master.late
@@ -141,7 +141,7 @@ async def master_restart_mid_operation(dut):
         assert len(got) == NODES
     master.send(master.request(MsgType.REINIT, NODE_ALL,
                                body_of(MsgType.REINIT, ReinitReason.MASTER_RESTART)))
-    await ClockCycles(dut.gmii_clk, 2000)
+    await clock_cycles(dut.gmii_clk, 2000)
     assert states(dut) == [NodeState.INIT] * NODES
     master.nodes.clear()
     master.cycle_no = 0

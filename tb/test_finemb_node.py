@@ -18,6 +18,7 @@ from hdl.finemb import IoDescriptor
 from hdl.finemb.protocol import (
     BROADCAST_IP, BROADCAST_MAC, NODE_ALL, Direction, Flag, MsgType, NodeState,
 )
+from host.simulator import clock_cycles
 from tb.harness import cocotb_bench
 from tb.models.finemb import MASTER_IP, MASTER_MAC, body_of, finemb_frame
 from tb.models.pid import AvrPid
@@ -118,7 +119,7 @@ async def forwarding_is_byte_exact_and_cut_through(dut):
     # a bad FCS: forwarded, ended with TX_ER
     await tb.ports[0].send(None, raw=bytes(Ether(dst="02:bb:00:00:00:02") / Raw(bytes(80))) +
                            b"\x00\x00\x00\x00")
-    await ClockCycles(dut.gmii_clk, 400)
+    await clock_cycles(dut.gmii_clk, 400)
     gf, frame = tb.ports[1].take()
     assert frame is None and any(gf.error), "a bad frame left without TX_ER"
     counters = await tb.counters()
@@ -182,7 +183,7 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
                                       dst_mac="01:00:5e:7f:46:46", dst_ip="239.255.70.70"))]
     for _, frame in bad:
         await tb.send(frame)
-        await ClockCycles(dut.gmii_clk, 200)
+        await clock_cycles(dut.gmii_clk, 200)
     await tb.ports[0].send(None, raw=bytes(bad_ip)[:30])           # truncated (runt)
     # wrong page size: ERROR, nothing written
     res = await tb.exchange(tb.request(MsgType.ISEND_REQ, 1, page + b"\0\0", **unicast))
@@ -194,7 +195,7 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
                           ARP(op=1, psrc="198.18.0.99", pdst=f"198.18.0.{100 + k}"), port)
         await tb.send(Ether(src="02:aa:00:00:00:09", dst=BROADCAST_MAC, type=0x88CC) /
                       Raw(bytes(50)), port)
-    await ClockCycles(dut.gmii_clk, 8000)
+    await clock_cycles(dut.gmii_clk, 8000)
     await tb.drain(0, 10)
     await tb.drain(1, 10)
     after = await tb.counters()
@@ -220,15 +221,15 @@ async def watchdog_restart_and_id_conflict(dut):
     res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
     assert res["state"] == NodeState.OP
     # the watchdog runs from the last SoC or ISEND_REQ, at most 400 cycles before its answer
-    await ClockCycles(dut.gmii_clk, 2500)
+    await clock_cycles(dut.gmii_clk, 2500)
     assert tb.state == NodeState.OP, "the watchdog fired before three periods"
-    await ClockCycles(dut.gmii_clk, 600)
+    await clock_cycles(dut.gmii_clk, 600)
     assert tb.state == NodeState.REINIT
     res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
     assert res["state"] == NodeState.OP
     assert (await tb.counters())["missed_cycles"] == 1
     await tb.send(tb.reinit_all())
-    await ClockCycles(dut.gmii_clk, 200)
+    await clock_cycles(dut.gmii_clk, 200)
     assert tb.state == NodeState.INIT and int(dut.local_ip.value) == 0
     await tb.init(2)
     res = await tb.isend(2, dict(set_point=1, measurement=0, **GAINS))
@@ -237,7 +238,7 @@ async def watchdog_restart_and_id_conflict(dut):
     await tb.send(tb.request(MsgType.ADDR_REQ, NODE_ALL, body_of(
         MsgType.ADDR_REQ, other_mac, bytes([198, 18, 0, 40]), bytes(4), 2),
         dst_mac=BROADCAST_MAC, dst_ip=BROADCAST_IP))
-    await ClockCycles(dut.gmii_clk, 300)
+    await clock_cycles(dut.gmii_clk, 300)
     assert tb.state == NodeState.INIT and int(dut.node_id.value) == NODE_ALL
     assert (await tb.counters())["id_conflict"] == 1
 

@@ -25,6 +25,7 @@ from scapy.utils import checksum
 
 from hdl.net.frames import DEFAULT_RBCP_PORT, DROP_REASONS, TCP_ACK, TCP_FIN, TCP_RST, TCP_SYN
 from host.ros1.rbcp import rbcp_request
+from host.simulator import clock_cycles
 from tb.harness import run_bench
 from tb.models.tcp_peer import TcpPeerModel, fix_ip_checksum, fix_tcp_checksum, tcp_frame
 from tb.net_tb import NET_CONFIGS, PEER_IP, PEER_MAC, NetTB, SessionPort, checksums_ok, rbcp
@@ -179,7 +180,7 @@ async def run_fuzz_live_session(dut):
     for _ in range(200):
         if peer.established:
             break
-        await ClockCycles(dut.aclk, 100)
+        await clock_cycles(dut.aclk, 100)
     assert peer.established, "no connection"
     up = rng.randbytes(64 * 1024)
     down = rng.randbytes(64 * 1024)
@@ -194,11 +195,11 @@ async def run_fuzz_live_session(dut):
             await ClockCycles(dut.aclk, 32)
         await tb.put(frame, fcs=good_fcs, error=not good_fcs and rng.random() < 0.5)
         if i % 50 == 49:
-            await ClockCycles(dut.aclk, rng.randrange(200, 2000))
+            await clock_cycles(dut.aclk, rng.randrange(200, 2000))
     for _ in range(4000):
         if len(s.received) >= len(up) and len(peer.received) >= len(down):
             break
-        await ClockCycles(dut.aclk, 500)
+        await clock_cycles(dut.aclk, 500)
     dut._log.info("end: state %d, engine %s, stack %s, peer snd_una %d snd_nxt %d window %d "
                   "retransmissions %d rst %d", s.get("state"), await tb.session_counters(0),
                   await tb.counters(), peer.snd_una, peer.snd_nxt, peer.peer_window,
@@ -207,7 +208,7 @@ async def run_fuzz_live_session(dut):
     assert bytes(peer.received) == down, "peer received: " + difference(bytes(peer.received),
                                                                         down)
     peer_task.cancel()
-    await ClockCycles(dut.aclk, 3000)
+    await clock_cycles(dut.aclk, 3000)
     # still answering
     await tb.send(Ether(src=PEER_MAC, dst=tb.mac) / IP(src=PEER_IP, dst=tb.ip) /
                   ICMP(type=8, id=1, seq=2) / Raw(b"alive"))
@@ -219,7 +220,7 @@ async def run_fuzz_live_session(dut):
     answer = await rbcp(tb, rbcp_request(0xC0, 3, 0x10, 4))
     tb.frames_sent += 1
     assert answer is not None and answer[1] == 0xC8
-    await ClockCycles(dut.aclk, 200)
+    await clock_cycles(dut.aclk, 200)
     counts = await tb.counters()
     accounted = counts["delivered"] + sum(counts[r] for r in DROP_REASONS)
     dut._log.info("counters %s, session %s", counts, await tb.session_counters(0))

@@ -5,6 +5,7 @@ a page table the MMU walks). Spec: docs/reconos.md."""
 import cocotb
 
 from host.reconos import Resource
+from host.simulator import clock_cycles
 
 from .harness import amount, cocotb_bench
 from .reconos_pingpong_tb import PingPongTB, run_round_trips
@@ -51,14 +52,13 @@ async def bad_calls_get_a_defined_outcome(dut):
     """An unknown command word is ignored (no reply) and recorded; a handle of the wrong
     resource type is refused (no reply, an error recorded, where ReconOS panics); the stuck
     thread is suspended through HWT_Signal and the other slots keep working."""
-    from cocotb.triggers import ClockCycles
     tb = PingPongTB(dut)
     rt = await tb.setup()
     slot = tb.BAD
     for kinds in (("sem", "sem"), ("sem", "mutex")):
         res = [Resource("mbox", 8), Resource(kinds[0], 0), Resource(kinds[1], 0)]
         await rt.create_thread(slot, res)
-        await ClockCycles(dut.aclk, 3000)
+        await clock_cycles(dut.aclk, 3000)
         if kinds[1] == "sem":
             assert res[1].state.value == 1 and res[2].state.value == 1
             assert rt.ignored[slot][-1] == 0x123

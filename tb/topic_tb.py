@@ -7,10 +7,10 @@ import random
 
 import cocotb
 import pytest
-from cocotb.triggers import ClockCycles, RisingEdge, gather, with_timeout
+from cocotb.triggers import RisingEdge, gather, with_timeout
 from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
 
-from host.simulator import start_clock
+from host.simulator import clock_cycles, start_clock
 from tb.harness import bench_params
 from tb.models.topic import TopicScoreboard, random_lengths, tagged_message
 from tb.streams import reset_aresetn
@@ -135,7 +135,7 @@ class TopicTB:
             watch.clear()
 
     async def cycles(self, n):
-        await ClockCycles(self.dut.aclk, n)
+        await clock_cycles(self.dut.aclk, n)
 
     def frame(self, message):
         return AxiStreamFrame(message)
