@@ -15,7 +15,7 @@ from gen.msg.model import MessageDefinitionError
 from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
-from .compiled import DEFAULT_MEMORY_MB
+from .compiled import DEFAULT_MEMORY_MB, MEMORY_OPTION
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -253,7 +253,7 @@ def _add_project_commands(commands):
     p.add_argument("--stall-ms", type=float, default=10.0,
                    help="end the run when nothing happens (no OS call, memory access or "
                         "message) for this long in simulated time (default 10 ms)")
-    p.add_argument("--memory-mb", type=_memory_mb, default=DEFAULT_MEMORY_MB,
+    p.add_argument(MEMORY_OPTION, type=_memory_mb, default=DEFAULT_MEMORY_MB,
                    help="physical memory behind the system's AXI4 port, in MiB (default "
                         f"{DEFAULT_MEMORY_MB})")
     p.add_argument("-o", "--output", type=Path, default=None,

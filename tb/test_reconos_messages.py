@@ -15,52 +15,17 @@ import pytest
 
 from gen.msg import MessageLibrary
 from gen.msg.layout import CLayout
-from gen.msg.model import Array, Named, Primitive, Sequence
-from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT
+from gen.msg.model import Named, Primitive, Sequence
+from gen.msg.wire import STRUCT_FORMAT
 from host.reconos.memory import ProcessMemory
 from host.reconos.messages import MessageMemory
+
+from .models.messages import ByteRam, random_field_value
 
 TYPES = ["sensor_msgs/msg/JointState", "geometry_msgs/msg/PoseArray",
          "diagnostic_msgs/msg/DiagnosticArray", "tf2_msgs/msg/TFMessage",
          "sensor_msgs/msg/Image", "visualization_msgs/msg/InteractiveMarkerInit",
          "std_msgs/msg/Empty"]
-
-
-class Ram:
-    def __init__(self, size):
-        self.data = bytearray(size)
-
-    def read(self, addr, n):
-        return bytes(self.data[addr:addr + n])
-
-    def write(self, addr, data):
-        self.data[addr:addr + len(data)] = data
-
-
-def random_value(library, type_, rng, depth=0):
-    """A random value of field type ``type_`` (sequences of 0..3 elements)."""
-    if isinstance(type_, Named):
-        return {f.name: random_value(library, f.type, rng, depth + 1)
-                for f in library[type_.typename].fields}
-    if isinstance(type_, Primitive):
-        if type_.is_string:
-            n = rng.randrange(0, (type_.bound or 12) + 1)
-            return "".join(rng.choice("abcxyz_/0") for _ in range(n))
-        if type_.name == "bool":
-            return rng.random() < 0.5
-        if type_.name.startswith("float"):
-            return struct.unpack("<" + STRUCT_FORMAT[type_.name], struct.pack(
-                "<" + STRUCT_FORMAT[type_.name], rng.uniform(-1e3, 1e3)))[0]
-        size = struct.calcsize(STRUCT_FORMAT[type_.name])
-        if type_.name.startswith("int"):
-            return rng.randrange(-(1 << (8 * size - 1)), 1 << (8 * size - 1))
-        return rng.randrange(1 << (8 * size))
-    n = type_.length if isinstance(type_, Array) else \
-        rng.randrange(0, min(type_.bound or 3, 3) + 1) if depth < 4 else 0
-    items = [random_value(library, type_.element, rng, depth + 1) for _ in range(n)]
-    if isinstance(type_.element, Primitive) and type_.element.name in BYTE_ELEMENTS:
-        return bytes(items)
-    return items
 
 
 def check_raw(mem, layout, va, type_name, value):
@@ -100,11 +65,11 @@ def check_raw(mem, layout, va, type_name, value):
 def test_every_field_shape_round_trips(arch, type_name):
     rng = random.Random()
     library = MessageLibrary([], store="ros2_humble")
-    mem = ProcessMemory(arch, Ram(1 << 24), 1 << 24)
+    mem = ProcessMemory(arch, ByteRam(1 << 24), 1 << 24)
     messages = MessageMemory(mem, library)
     layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
     for _ in range(5):
-        value = random_value(library, Named(type_name), rng)
+        value = random_field_value(library, Named(type_name), rng)
         va = messages.create(type_name)
         messages.write(va, type_name, value)
         assert messages.read(va, type_name) == value
@@ -113,6 +78,6 @@ def test_every_field_shape_round_trips(arch, type_name):
 
 def test_wstring_is_refused():
     library = MessageLibrary([], store="ros2_humble")
-    messages = MessageMemory(ProcessMemory("r64", Ram(1 << 20), 1 << 20), library)
+    messages = MessageMemory(ProcessMemory("r64", ByteRam(1 << 20), 1 << 20), library)
     with pytest.raises(TypeError, match="wstring"):
         messages._write_value(messages.create("std_msgs/msg/Empty"), Primitive("wstring"), "x")

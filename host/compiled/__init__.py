@@ -16,12 +16,14 @@ import ctypes
 import re
 from pathlib import Path
 
-__all__ = ["DEFAULT_MEMORY_MB", "SOURCES", "LINK_ARGS", "CompiledAxiRam", "attach_memory", "cosim_wrapper",
-           "memory_harness", "verilog_ports"]
+__all__ = ["DEFAULT_MEMORY_MB", "MEMORY_OPTION", "SOURCES", "LINK_ARGS", "CompiledAxiRam",
+           "attach_memory", "cosim_wrapper", "memory_harness", "verilog_ports"]
 
 #: MiB of physical memory behind a system's AXI4 port in ``rosgate sim`` unless
-#: ``--memory-mb`` says otherwise (only what is written is backed by the host's memory)
+#: :data:`MEMORY_OPTION` says otherwise (only what is written is backed by the host's memory)
 DEFAULT_MEMORY_MB = 256
+#: the ``rosgate sim`` option that sets it
+MEMORY_OPTION = "--memory-mb"
 
 HERE = Path(__file__).resolve().parent
 #: the files a Verilator build with the compiled memory adds to the exported Verilog

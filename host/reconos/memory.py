@@ -11,12 +11,11 @@ them), so a run that frees what it no longer needs runs in bounded memory.
 """
 
 from hdl.reconos.protocol import arch as get_arch
+from host.compiled import MEMORY_OPTION
 
-__all__ = ["ProcessMemory", "PAGE", "MEMORY_OPTION"]
+__all__ = ["ProcessMemory", "PAGE"]
 
 PAGE = 4096
-#: how a user of ``rosgate sim`` sets the physical memory (named when it runs out)
-MEMORY_OPTION = "--memory-mb"
 
 class ProcessMemory:
     """Virtual memory of one process in ``ram`` (an object with ``read(addr, n)`` and
@@ -57,11 +56,11 @@ class ProcessMemory:
     def _frame(self, *, align=PAGE, size=PAGE):
         base = -(-self._next_frame // align) * align
         if base + size > self.ram_size:
+            used = self.usage()
             raise MemoryError(
-                f"the co-simulation's physical memory is exhausted: {self.ram_size} bytes, "
-                f"{self.in_use} of them in {len(self.blocks)} live heap blocks (most "
-                f"{self.peak}), {sum(n for _, n in self._free)} freed for reuse; more with "
-                f"{MEMORY_OPTION}")
+                f"the co-simulation's physical memory is exhausted: {used['size']} bytes, "
+                f"{used['in_use']} of them in {used['blocks']} live heap blocks (most "
+                f"{used['peak']}), {used['free']} freed for reuse; more with {MEMORY_OPTION}")
         self._next_frame = base + size
         self.ram.write(base, bytes(size))
         return base

@@ -90,16 +90,13 @@ class MessageMemory:
             for m in self.layout.struct(t.typename).members:
                 self._fini_value(at + m.offset, m.type)
         elif isinstance(t, Primitive) and t.is_string:
-            self._release(self._ptr(at))
-            for k in range(3):
-                self._ptr(at + k * self.p, 0)
-        elif isinstance(t, Primitive):
+            self._drop_sequence(at)
+        elif isinstance(t, Primitive) or \
+                isinstance(t, Array) and isinstance(t.element, Primitive) and \
+                not t.element.is_string:
             return
         elif isinstance(t.element, Primitive) and not t.element.is_string:
-            if not isinstance(t, Array):
-                self._release(self._ptr(at))
-                for k in range(3):
-                    self._ptr(at + k * self.p, 0)
+            self._drop_sequence(at)
         else:
             size, _ = self.layout.size_align(t.element)
             base, n = (at, t.length) if isinstance(t, Array) else \
@@ -108,9 +105,14 @@ class MessageMemory:
                 for i in range(n):
                     self._fini_value(base + i * size, t.element)
             if not isinstance(t, Array):
-                self._release(base)
-                for k in range(3):
-                    self._ptr(at + k * self.p, 0)
+                self._drop_sequence(at)
+
+    def _drop_sequence(self, at):
+        """Free the buffer of the string or sequence ``{data, size, capacity}`` at ``at``
+        and zero it."""
+        self._release(self._ptr(at))
+        for k in range(3):
+            self._ptr(at + k * self.p, 0)
 
     def write(self, va, type_name, value):
         """Store ``value`` in the struct at ``va``: what the struct held is freed

@@ -11,9 +11,10 @@ import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from gen.msg.model import Array, Named, Primitive, Sequence
-from gen.msg.wire import BYTE_ELEMENTS
+from gen.msg.wire import BYTE_ELEMENTS, STRUCT_FORMAT
 
-__all__ = ["golden_store", "random_value", "random_primitive", "to_rosbags"]
+__all__ = ["golden_store", "random_value", "random_primitive", "to_rosbags", "ByteRam",
+           "random_field_value"]
 
 # rosbags reads `byte` as int8 (ROS 1's meaning); rosidl (ROS 2) makes it an unsigned octet.
 # The byte on the wire is the same, so only the Python representation is converted.
@@ -115,3 +116,44 @@ def to_rosbags(ts, library, typename, value):
     if not definition.fields:
         return cls()
     return cls(**{f.name: convert(f.type, value[f.name]) for f in definition.fields})
+
+
+class ByteRam:
+    """Bytes in a ``bytearray`` with the ``read``/``write`` of a simulated memory: the
+    physical memory of a process memory model outside a simulator."""
+
+    def __init__(self, size):
+        self.data = bytearray(size)
+
+    def read(self, addr, n):
+        return bytes(self.data[addr:addr + n])
+
+    def write(self, addr, data):
+        self.data[addr:addr + len(data)] = data
+
+
+def random_field_value(library, type_, rng, depth=0):
+    """A random value of field type ``type_`` that a rosidl struct holds exactly (floats
+    rounded to their width, sequences of 0..3 elements, nesting cut at depth 4)."""
+    if isinstance(type_, Named):
+        return {f.name: random_field_value(library, f.type, rng, depth + 1)
+                for f in library[type_.typename].fields}
+    if isinstance(type_, Primitive):
+        if type_.is_string:
+            n = rng.randrange(0, (type_.bound or 12) + 1)
+            return "".join(rng.choice("abcxyz_/0") for _ in range(n))
+        if type_.name == "bool":
+            return rng.random() < 0.5
+        if type_.name.startswith("float"):
+            return struct.unpack("<" + STRUCT_FORMAT[type_.name], struct.pack(
+                "<" + STRUCT_FORMAT[type_.name], rng.uniform(-1e3, 1e3)))[0]
+        size = struct.calcsize(STRUCT_FORMAT[type_.name])
+        if type_.name.startswith("int"):
+            return rng.randrange(-(1 << (8 * size - 1)), 1 << (8 * size - 1))
+        return rng.randrange(1 << (8 * size))
+    n = type_.length if isinstance(type_, Array) else \
+        rng.randrange(0, min(type_.bound or 3, 3) + 1) if depth < 4 else 0
+    items = [random_field_value(library, type_.element, rng, depth + 1) for _ in range(n)]
+    if isinstance(type_.element, Primitive) and type_.element.name in BYTE_ELEMENTS:
+        return bytes(items)
+    return items
