@@ -253,10 +253,7 @@ def reconros_thread(ctx, name):
     example's build.cfg. The thread's ``Parameters`` ``scale`` and ``pixels_per_beat`` choose
     the :func:`scaled_config`."""
     from hdl.reconos.image_node import ImageNodeThread, LaneControlThread
-    try:
-        scale = float(ctx.params.get("scale", 1))
-    except ValueError:
-        raise ValueError(f"scale={ctx.params['scale']!r} is not a number") from None
+    scale = ctx.param("scale", 1.0, float)
     if not 0 < scale <= 1:
         raise ValueError(f"scale={scale!r} is not in (0, 1]")
     ppc = ctx.params.get("pixels_per_beat", "4")

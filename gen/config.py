@@ -290,6 +290,12 @@ class Thread:
     gateway: dict = None
     #: ``Parameters`` (a rosgate extension): name -> value, strings, for ``build(ctx)``
     params: dict = field(default_factory=dict)
+    #: the command-line setting each parameter set by ``--param`` came from: name -> text
+    param_options: dict = field(default_factory=dict)
+    #: the section's ``Parameters`` line (``None`` when it has none)
+    params_at: Location = None
+    #: the parameters its ``build(ctx)`` read (filled when the thread is built)
+    params_read: set = field(default_factory=set)
 
     @property
     def core_name(self):
@@ -348,11 +354,11 @@ class Project:
 # --- parsing -------------------------------------------------------------------------------
 
 def _kind(section_name):
-    for prefix in ("General", "Clock", "HwSlot", "ResourceGroup", "ReconosThread",
-                   "ROSGateway"):
-        if section_name.startswith(prefix):
-            return prefix
-    return None
+    """The kind of a section (the name before ``@``; ``None`` for an unknown one: a prefix
+    match would take ``HwSlott@X`` for a slot)."""
+    kind = section_name.split("@", 1)[0].strip()
+    return kind if kind in ("General", "Clock", "HwSlot", "ResourceGroup", "ReconosThread",
+                            "ROSGateway") else None
 
 
 def _parameters(sec, file):
@@ -381,11 +387,13 @@ def apply_parameters(project, settings, option="--param"):
         if thread == "*":
             for t in project.threads:
                 t.params[name] = value
+                t.param_options[name] = f"{option} {setting}"
             continue
         if thread not in names:
             raise ValueError(f"{option} {setting!r}: no thread {thread!r} in {project.path} "
                              f"(threads: {', '.join(names) or 'none'})")
         names[thread].params[name] = value
+        names[thread].param_options[name] = f"{option} {setting}"
     return project
 
 
@@ -580,7 +588,9 @@ def parse_project(text, path="build.cfg", *, msg_dirs=None):
         sw = sec.values.get("SwSource", "").split(",")[0].strip() or None
         thread = Thread(name, len(threads), tslots, hw, sw, gnames, [], [],
                         _bool(sec, "UseMem", file, True), sec.where(file),
-                        params=_parameters(sec, file))
+                        params=_parameters(sec, file),
+                        params_at=sec.where(file, "Parameters") if "Parameters" in sec.values
+                        else None)
         _thread_resources(thread, resources)
         threads.append(thread)
     for sec in kinds.get("ROSGateway", []):
@@ -871,6 +881,11 @@ def load_project(path, *, msg_dirs=None, check=True):
         text = path.read_text()
     except OSError as exc:
         raise ConfigError(Location(str(path), 0, "-"), f"cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        line = path.read_bytes()[:exc.start].count(b"\n") + 1
+        raise ConfigError(Location(str(path), line, "-"),
+                          f"not a text file (byte {exc.start} is not UTF-8); a build.cfg is an "
+                          f"INI text file") from None
     project = parse_project(text, path, msg_dirs=msg_dirs)
     if check:
         check_messages(project, project_library(project))

@@ -100,4 +100,8 @@ def load_io_description(path):
         text = path.read_text()
     except OSError as exc:
         raise IoDescriptionError(f"{path}: cannot read it: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        line = path.read_bytes()[:exc.start].count(b"\n") + 1
+        raise IoDescriptionError(f"{path}:{line}: not a text file (byte {exc.start} is not "
+                                 f"UTF-8); an IO description is TOML text") from None
     return parse_io_description(text, path)

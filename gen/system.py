@@ -65,8 +65,21 @@ class ThreadContext:
         self.arch = project.arch
         self.endpoints = thread.endpoints
         self.stream = HW_TOPIC_STREAM
-        self.params = dict(thread.params)
+        self.params = _ReadParameters(thread.params)
         self._library = library
+
+    def param(self, name, default, kind=str):
+        """The parameter ``name`` read as ``kind`` (``str``, ``int``, ``float``), ``default``
+        when not set; a value that does not read as ``kind`` raises :class:`ValueError`
+        naming it."""
+        if name not in self.params:
+            return default
+        text = self.params[name]
+        try:
+            return kind(text)
+        except ValueError:
+            what = {int: "a whole number", float: "a number"}.get(kind, kind.__name__)
+            raise ValueError(f"{name}={text!r} is not {what}") from None
 
     def handle(self, name):
         """The thread-local handle of resource ``name`` (``"sub"`` or ``"resourcedip_sub"``)."""
@@ -175,8 +188,81 @@ def message_memory_layout(library, typename, arch):
                         {v.path: offset(v.path) for v in plan.variables})
 
 
+class _ReadParameters(dict):
+    """A thread's parameters that remember which names ``build(ctx)`` looked at, so a
+    parameter no thread reads (a typo) is refused rather than ignored."""
+
+    def __init__(self, params):
+        super().__init__(params)
+        self.read = set()
+
+    def __getitem__(self, name):
+        self.read.add(name)
+        return super().__getitem__(name)
+
+    def get(self, name, default=None):
+        self.read.add(name)
+        return super().get(name, default)
+
+    def __contains__(self, name):
+        self.read.add(name)
+        return super().__contains__(name)
+
+    def __iter__(self):
+        self.read.update(super().keys())
+        return super().__iter__()
+
+    def keys(self):
+        self.read.update(super().keys())
+        return super().keys()
+
+    def items(self):
+        self.read.update(super().keys())
+        return super().items()
+
+    def pop(self, name, *default):
+        self.read.add(name)
+        return super().pop(name, *default)
+
+
+def _wildcard(thread, name):
+    """Whether ``name`` was set for every thread (``--param *.NAME=VALUE``): a thread need
+    not read it, as long as one does."""
+    return thread.param_options.get(name, "").split(" ", 1)[-1].startswith("*.")
+
+
+def _params_location(thread):
+    """The build.cfg line of ``thread``'s ``Parameters`` (its section's header without one)."""
+    return thread.params_at or thread.where
+
+
+def _describe_params(thread):
+    """``{name: value}`` of ``thread``, saying which came from the command line."""
+    parts = [f"{name}={value!r}" + (f" (from {thread.param_options[name]})"
+                                    if name in thread.param_options else "")
+             for name, value in thread.params.items()]
+    return "{" + ", ".join(parts) + "}"
+
+
 def thread_module_path(project, thread):
-    return project.dir / "src" / thread.core_name / "amaranth" / "thread.py"
+    """``<project>/src/rt_<name in lower case>/amaranth/thread.py``; a thread whose folder is
+    spelt otherwise, or whose ``HwSource`` says ``amaranth`` without that file, is refused
+    rather than left to become an external core."""
+    path = project.dir / "src" / thread.core_name / "amaranth" / "thread.py"
+    if path.is_file():
+        return path
+    src = project.dir / "src"
+    near = [d for d in (src.iterdir() if src.is_dir() else ())
+            if d.name.lower() == thread.core_name and (d / "amaranth" / "thread.py").is_file()]
+    if near:
+        raise ConfigError(thread.where, f"thread {thread.name}: its Amaranth source is in "
+                                        f"src/{near[0].name}/amaranth/thread.py, but thread "
+                                        f"folders are lower-case: rename the folder to "
+                                        f"src/{thread.core_name}")
+    if (thread.hwsource or "").lower() == "amaranth":
+        raise ConfigError(thread.where, f"thread {thread.name}: HwSource = amaranth, but "
+                                        f"there is no src/{thread.core_name}/amaranth/thread.py")
+    return path
 
 
 #: one thread module loaded at a time: a module is in ``sys.modules`` while it executes, and a
@@ -217,10 +303,18 @@ def build_thread(project, thread, slot, library=None):
         component = _load(path, thread).build(ctx)
     except ValueError as exc:
         # a parameter the thread refuses (hdl.params.ParameterError is a ValueError)
-        raise ConfigError(Location(thread.where.file, thread.where.line, thread.where.section,
-                                   "Parameters"),
+        raise ConfigError(_params_location(thread),
                           f"{path}: build() of thread {thread.name} refused its parameters "
-                          f"{thread.params}: {exc}") from None
+                          f"{_describe_params(thread)}: {exc}") from None
+    thread.params_read |= ctx.params.read
+    unread = [name for name in thread.params if name not in ctx.params.read
+              and not _wildcard(thread, name)]
+    if unread:
+        name = unread[0]
+        source = thread.param_options.get(name, f"{name}={thread.params[name]}")
+        raise ConfigError(_params_location(thread),
+                          f"{source}: thread {thread.name} has no parameter {name!r} (its "
+                          f"build() reads: {', '.join(sorted(ctx.params.read)) or 'none'})")
     expected = ctx.thread_signature().members
     got = getattr(component, "signature", None)
     members = got.members if got is not None else {}
@@ -260,6 +354,14 @@ class SystemTop(wiring.Component):
             self.threads.append(build_thread(project, thread, slot, library) if thread else None)
             if slot.clock is not project.system_clock:
                 self.async_slots.append(slot.id)
+        built = [s.thread for s in slots if self.threads[s.id] is not None]
+        for thread in built:
+            for name in thread.params:
+                if _wildcard(thread, name) and not any(name in t.params_read for t in built):
+                    raise ConfigError(_params_location(thread),
+                                      f"{thread.param_options[name]}: no thread has a parameter "
+                                      f"{name!r} (their build() functions read: "
+                                      f"{', '.join(sorted(set().union(*(t.params_read for t in built)))) or 'none'})")
         for slot in slots:
             if slot.id in self.async_slots and self.threads[slot.id] is None:
                 raise ConfigError(slot.where, f"slot {slot.name} runs on clock "

@@ -142,6 +142,10 @@ def _add_msg(commands):
 def _definition(args, store="ros2_humble"):
     """The message library of ``--msg-dir`` and the definition of ``args.type`` in it."""
     from gen.msg import MessageLibrary
+    for folder in args.msg_dir:
+        if not folder.is_dir():
+            args.parser.error(f"--msg-dir {folder}: "
+                              f"{'a file, not a folder' if folder.exists() else 'no such folder'}")
     library = MessageLibrary(args.msg_dir, store=store)
     if args.type not in library:
         args.parser.error(f"unknown message type {args.type!r} (standard interfaces and "
@@ -248,9 +252,11 @@ def _add_project_commands(commands):
     p.add_argument("--waves", action="store_true", help="record FST waveforms")
     p.add_argument("--arg", action="append", default=[], metavar="KEY=VALUE",
                    help="passed to the software nodes as ctx.args (repeatable)")
-    p.add_argument("--limit-ms", type=float, default=1000.0,
+    p.add_argument("--help-args", action="store_true",
+                   help="list the --arg keys the project's sim.py takes, and exit")
+    p.add_argument("--limit-ms", type=_positive_ms, default=1000.0,
                    help="simulated-time limit in ms (default 1000)")
-    p.add_argument("--stall-ms", type=float, default=10.0,
+    p.add_argument("--stall-ms", type=_positive_ms, default=10.0,
                    help="end the run when nothing happens (no OS call, memory access or "
                         "message) for this long in simulated time (default 10 ms)")
     p.add_argument(MEMORY_OPTION, type=_memory_mb, default=DEFAULT_MEMORY_MB,
@@ -360,6 +366,17 @@ def _memory_mb(text):
     return value
 
 
+def _positive_ms(text):
+    """``--limit-ms``, ``--stall-ms``: a number of milliseconds above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number of milliseconds above 0")
+    return value
+
+
 def _key_values(items, option):
     out = {}
     for item in items:
@@ -380,6 +397,16 @@ def _run_sim(args):
     from host.simulator import SimulationFailed
     console = Console(f"{PROG} sim")
     p = _project(args)
+    if args.help_args:
+        from host.sim_args import describe_args
+        try:
+            module = load_sim_module(p)
+        except ProjectError as exc:
+            console.error(exc)
+            return 2
+        for line in describe_args(module, p.name):
+            print(line)
+        return 0
     out = args.output or _default_out(p, "sim")
     started = time.time()
     ros2 = None

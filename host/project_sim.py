@@ -14,6 +14,9 @@ Software nodes live in ``<project>/sim.py``:
 ``setup(ctx)`` (optional)
     Called after the threads are created and before the nodes start, as a ReconROS
     application's ``main()`` prepares messages after ``reconos_app_init``.
+``ARGS`` (optional)
+    The ``--arg`` keys the nodes read, as :class:`host.sim_args.SimArg` (help, default, kind):
+    ``rosgate sim`` refuses any other key and a value that does not read as its kind.
 ``check(ctx)`` (optional)
     Called in the ``rosgate`` process before the simulator is built (the system's Verilog is
     written first, in seconds), with a :class:`CheckContext`:
@@ -46,6 +49,7 @@ from .compiled import DEFAULT_MEMORY_MB, memory_harness
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
+from .sim_args import ArgumentError, check_args
 from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
                         source_digest, top_params)
 from .toolchain import cache_dir
@@ -443,8 +447,14 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     build_cfg = Path(build_cfg).resolve()
     project = apply_parameters(load_project(build_cfg), thread_params)
     out = Path(out).resolve()
-    args = dict(args or {})
     module = load_sim_module(project)
+    try:
+        args = check_args(module, dict(args or {}), project.name)
+    except ArgumentError as exc:
+        raise ProjectError(str(exc)) from None
+    _check_output("--record", record, folder=True)
+    _check_output("--trace", trace, folder=False)
+    _check_output("-o", out, folder=False)
     system = build_system(project)
     build_dir = Path(build_dir) if build_dir else \
         project_build_dir(project, thread_params, sim, cxx_opt)
@@ -467,8 +477,6 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
               "limit_ms": float(limit_ms), "memory_mb": int(memory_mb),
               "stall_ms": float(stall_ms)}
     if record is not None:
-        if Path(record).exists():
-            raise ProjectError(f"--record {record}: the folder exists; rosbag2 writes a new one")
         params["record"] = str(Path(record).resolve())
     if trace is not None:
         params["trace"] = str(Path(trace).resolve())
@@ -508,6 +516,28 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         if follower is not None:
             follower.join()
     return json.loads((out / RESULTS).read_text())
+
+
+def _check_output(option, path, *, folder):
+    """Refuse, before anything is built, an output ``path`` that cannot be written: its
+    parent folder is created (as the run would) or the error names the option. ``folder``:
+    the path is a new folder the run creates (rosbag2 refuses an existing one)."""
+    if path is None:
+        return
+    path = Path(path)
+    if folder and path.exists():
+        raise ProjectError(f"{option} {path}: the folder exists; rosbag2 writes a new one")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ProjectError(f"{option} {path}: cannot create {path.parent}: "
+                           f"{exc.strerror}") from None
+    if not os.access(path.parent, os.W_OK):
+        raise ProjectError(f"{option} {path}: cannot write into {path.parent}")
+    if not folder and path.is_dir() != (option == "-o"):
+        kind = "a file, not a folder" if option == "-o" else "a folder, not a file"
+        if path.exists():
+            raise ProjectError(f"{option} {path}: {kind}")
 
 
 def project_build_dir(project, thread_params, sim, cxx_opt=PROJECT_CXX_OPT):

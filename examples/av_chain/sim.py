@@ -25,6 +25,7 @@ from gen.av_chain import scaled_config
 from hdl.kernels.lane import DRIVE_COMMAND, LANE_RESULT
 from host.autorace import SoftwareChain
 from host.reconos.messages import image_message as image_msg
+from host.sim_args import SimArg
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import scene  # noqa: E402  (the example's scene generator, next to this file)
@@ -161,5 +162,15 @@ async def camera(ctx):
             f"OpenCV: {'yes' if exact else 'NO'}; events as the reference: "
             f"{'yes' if ctx.results['events_equal'] else 'NO'}")
 
+
+ARGS = {
+    "frames": SimArg("camera frames of the scene", 100, kind=int),
+    "seed": SimArg("seed of the random scene", 1, kind=int),
+    "red_from": SimArg("frame from which the traffic light is red (default: the scene's own)",
+                       kind=int),
+    "green_from": SimArg("frame from which the traffic light is green again", kind=int),
+    "bad_frames": SimArg("1: first send each stage a frame it must drop", "0",
+                         choices=("0", "1")),
+}
 
 NODES = [camera]

@@ -15,6 +15,7 @@ import math
 from hdl.kernels.ball_control import ROLLING_MM_S2, TOUCH_COUNT_MM
 from hdl.kernels.inverse_kinematics import PLATFORM
 from hdl.kernels.servo_pwm import SERVO_FULL_SCALE_DEG, SERVO_MAX_US, SERVO_MIN_US
+from host.sim_args import SimArg
 
 PERIOD_S = 0.02
 COUNT_MM = float(TOUCH_COUNT_MM)
@@ -145,6 +146,12 @@ async def chain_timing(ctx):
             await ctx.legs.get()
         ctx.results["latencies"].append(ctx.now() - ctx.touch_cycle)
 
+
+ARGS = {
+    "x": SimArg("the ball's start position x on the plate, mm", 90, kind=float),
+    "y": SimArg("the ball's start position y on the plate, mm", -60, kind=float),
+    "periods": SimArg("control periods to simulate", 300, kind=int),
+}
 
 NODES = [plant, chain_timing]
 

@@ -17,6 +17,7 @@ from cocotb.triggers import Combine, Timer
 from hdl.dds.action import CancelStatus, GoalStatus
 from hdl.dds.fibonacci_server import MAX_ORDER
 from hdl.reconos.service_threads import CallStatus
+from host.sim_args import SimArg
 
 OK, REFUSED = CallStatus.OK, CallStatus.REFUSED
 SUCCEEDED, CANCELED = GoalStatus.SUCCEEDED, GoalStatus.CANCELED
@@ -105,6 +106,16 @@ async def fibonacci_clients(ctx):
     await Combine(*(cocotb.start_soon(_fibonacci_client(ctx, t, g)) for t, g in plans.items()))
     ctx.results["all_goals_correct"] = all(g["correct"] for g in ctx.results["fibonacci_goals"])
 
+
+ARGS = {
+    "seed": SimArg("seed of the random requests", 1, kind=int),
+    "calls": SimArg("calls per client", 3, kind=int),
+    "size": SimArg("numbers per sort request", 256, kind=int),
+    "sort_sizes": SimArg("instead: the sort requests' sizes, one call each", kind=int,
+                         many=True),
+    "fib_orders": SimArg("instead: the Fibonacci goals' orders, one goal each", kind=int,
+                         many=True),
+}
 
 NODES = [sort_clients, fibonacci_clients]
 

@@ -11,6 +11,7 @@ on /topic/gateway go through the gateway onto the hardware topic and out of Thre
 import random
 
 from cocotb.queue import Queue
+from host.sim_args import SimArg
 
 ENCODINGS = ("bgr8", "rgb8", "mono8", "mono16")
 CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "mono16": 2}
@@ -77,5 +78,11 @@ def summary(results, clock_mhz):
                  f"images unchanged; {results['extra_outputs']} messages more than sent")
     return lines
 
+
+ARGS = {
+    "seed": SimArg("seed of the random images", 7, kind=int),
+    "images": SimArg("images the camera sends", 3, kind=int),
+    "max_side": SimArg("largest width and height of an image, pixels", 24, kind=int),
+}
 
 NODES = [camera]

@@ -4,6 +4,8 @@
 Words for leg 6 (every seventh) name no leg: the node drops them and answers nothing.
 ``--arg requests=N`` (default 50)."""
 
+from host.sim_args import SimArg
+
 
 def setup(ctx):
     ctx.answers = ctx.broker.subscribe("/legangle")
@@ -31,6 +33,10 @@ async def client(ctx):
     ctx.log(f"client: {len(answered)} answers, {ctx.results['mean_cycles']:.0f} cycles each "
             "on average")
 
+
+ARGS = {
+    "requests": SimArg("platform poses to solve", 50, kind=int),
+}
 
 NODES = [client]
 

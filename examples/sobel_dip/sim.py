@@ -22,6 +22,7 @@ import numpy as np
 from cocotb.queue import Queue
 
 from host.reconos.messages import image_message as image_msg
+from host.sim_args import SimArg
 
 HERE = Path(__file__).resolve().parent
 IMAGES = HERE.parent / "images"
@@ -227,5 +228,10 @@ def summary(results, clock_mhz):
                  f"byte (speedups scale the paper's 640x480 times by the image's pixels)")
     return lines
 
+
+ARGS = {
+    "images": SimArg("photographs to filter, comma-separated (the current folder, this "
+                     "example's folder or examples/images)", "coffee_80x60.png", files=True),
+}
 
 NODES = [camera, viewer]

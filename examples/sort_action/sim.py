@@ -4,6 +4,7 @@ action server "sort", collects its feedback and checks each result. ``--arg goal
 rejected)."""
 
 import random
+from host.sim_args import SimArg
 
 
 async def client(ctx):
@@ -27,6 +28,12 @@ async def client(ctx):
         ctx.log(f"client: goal {k} of {size} values: {record}")
         ctx.results["goals"].append(record)
 
+
+ARGS = {
+    "seed": SimArg("seed of the random numbers", 1, kind=int),
+    "size": SimArg("numbers per goal", 200, kind=int),
+    "goals": SimArg("goals sent one after another", 2, kind=int),
+}
 
 NODES = [client]
 

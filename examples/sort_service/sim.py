@@ -7,6 +7,7 @@ import random
 
 from cocotb.triggers import Combine
 import cocotb
+from host.sim_args import SimArg
 
 
 async def _client(ctx, k, n, size):
@@ -28,5 +29,11 @@ async def clients(ctx):
                     for k in range(int(ctx.args.get("clients", 2)))))
     ctx.results["all_sorted"] = all(c["sorted"] for c in ctx.results["calls"])
 
+
+ARGS = {
+    "requests": SimArg("requests per client", 3, kind=int),
+    "size": SimArg("numbers per request", 2048, kind=int),
+    "clients": SimArg("clients calling at the same time", 2, kind=int),
+}
 
 NODES = [clients]

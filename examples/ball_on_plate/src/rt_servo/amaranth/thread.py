@@ -7,6 +7,6 @@ from hdl.reconos.threads import ServoNode
 
 
 def build(ctx):
-    pwm = ServoPwm(clock_hz=int(ctx.params.get("pwm_clock_hz", 100_000_000)))
+    pwm = ServoPwm(clock_hz=ctx.param("pwm_clock_hz", 100_000_000, int))
     return ServoNode(ctx.arch, pwm, h_sub=ctx.handle("sub"), h_msg=ctx.handle("leg_msg"),
                      h_mbox=ctx.handle("servo_mbox"))

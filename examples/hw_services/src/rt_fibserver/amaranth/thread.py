@@ -7,6 +7,6 @@ from hdl.reconos.service_threads import TopicNodeThread
 
 def build(ctx):
     call = ctx.hw_call("server")
-    node = FibonacciServer(**call.plans, step_cycles=int(ctx.params.get("step_cycles", 1000)))
+    node = FibonacciServer(**call.plans, step_cycles=ctx.param("step_cycles", 1000, int))
     return TopicNodeThread(ctx.arch, node, {call.request_port: "request_in",
                                             call.reply_port: "reply_out"})

@@ -7,7 +7,7 @@ from hdl.reconos.threads import WordKernelNode
 
 
 def build(ctx):
-    lanes = int(ctx.params.get("lanes", 16))
+    lanes = ctx.param("lanes", 16, int)
     return WordKernelNode(ctx.arch, InverseKinematics(lanes=lanes), h_sub=ctx.handle("sub"),
                           h_pub=ctx.handle("pub"), h_msg_in=ctx.handle("angle_msg"),
                           h_msg_out=ctx.handle("leg_msg"), dropped="err_leg")

@@ -18,6 +18,6 @@ def build(ctx):
         ctx.arch, h_srvs=ctx.handle("filter_server"),
         h_req=ctx.handle("filter_service_msg_req"), h_res=ctx.handle("filter_service_msg_res"),
         image_offsets=ctx.offsets("sensor_msgs/msg/Image"),
-        mode=ctx.params.get("mode", "opencv"),
-        max_width=int(ctx.params.get("max_width", 640)),
-        max_height=int(ctx.params.get("max_height", 480)))
+        mode=ctx.param("mode", "opencv"),
+        max_width=ctx.param("max_width", 640, int),
+        max_height=ctx.param("max_height", 480, int))

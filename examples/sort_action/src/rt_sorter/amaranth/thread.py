@@ -11,4 +11,4 @@ def build(ctx):
         goal_offset=ctx.offsets("sorter_msgs/action/Sort_SendGoal_Request")["goal"],
         res_offset=ctx.offsets("sorter_msgs/action/Sort_GetResult_Response")["result"],
         fb_offset=ctx.offsets("sorter_msgs/action/Sort_FeedbackMessage")["feedback"],
-        block_size=int(ctx.params.get("block_size", 2048)))
+        block_size=ctx.param("block_size", 2048, int))

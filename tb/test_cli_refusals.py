@@ -1,0 +1,122 @@
+"""A first day's typos: each is refused with exit status 2 and a message naming the bad word
+and what would have been accepted, before anything is built; paths a user types are read
+against the folder the command was started in."""
+
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from .harness import ROOT
+from .models.image import IMAGES
+
+SOBEL_DIP = ROOT / "examples" / "sobel_dip" / "build.cfg"
+AV_CHAIN = ROOT / "examples" / "av_chain" / "build.cfg"
+INVERSE = ROOT / "examples" / "inverse_kinematics"
+
+
+def run_rosgate(*args, cwd=ROOT):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-m", "host.cli", *map(str, args)], cwd=cwd,
+                          env=env, capture_output=True, text=True, timeout=300)
+
+
+def assert_refused(result, *words):
+    assert result.returncode == 2, (result.returncode, result.stdout, result.stderr)
+    assert "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in result.stderr, (word, result.stderr)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--arg", "image=my_photo.png"], ["--arg image", "takes: images", "--help-args"]),
+    (["--arg", "images"], ["--arg", "KEY=VALUE"]),
+    (["--stall-ms", "-5"], ["--stall-ms", "'-5'"]),
+    (["--limit-ms", "-1"], ["--limit-ms", "'-1'"]),
+    (["--limit-ms", "nan"], ["--limit-ms", "'nan'"]),
+    (["--param", "Sobel.nosuch=1"], ["Sobel.nosuch=1", "no parameter 'nosuch'", "max_width"]),
+    (["--param", "*.nosuch=1"], ["*.nosuch=1", "no thread has a parameter 'nosuch'"]),
+    (["--param", "DIP.mode=reconros"], ["DIP.mode=reconros", "no parameter 'mode'"]),
+    (["--param", "Sobel.max_width=abc"], ["max_width='abc' is not a whole number",
+                                           "--param Sobel.max_width=abc", "build.cfg:"]),
+    (["--record", "/proc/rosgate/bag"], ["--record /proc/rosgate/bag", "cannot create"]),
+    (["-o", ROOT / "README.md"], ["-o", "a file, not a folder"]),
+])
+def test_sim_refuses_before_building(args, words, tmp_path):
+    result = run_rosgate("sim", SOBEL_DIP, "--sim", "icarus", *args, cwd=tmp_path)
+    assert_refused(result, *words)
+
+
+def test_sim_refuses_a_value_its_argument_cannot_read(tmp_path):
+    assert_refused(run_rosgate("sim", AV_CHAIN, "--arg", "frames=ten", cwd=tmp_path),
+                   "--arg frames=ten", "'ten' is not a whole number")
+    assert_refused(run_rosgate("sim", AV_CHAIN, "--arg", "bad_frames=yes", cwd=tmp_path),
+                   "'yes' is not one of 0, 1")
+
+
+def test_help_args_lists_what_sim_py_declares():
+    result = run_rosgate("sim", AV_CHAIN, "--help-args")
+    assert result.returncode == 0, result.stderr
+    for name in ("frames", "seed", "red_from", "green_from", "bad_frames"):
+        assert f"  {name} " in result.stdout, result.stdout
+    assert "default 100" in result.stdout
+
+
+def test_parameter_without_parameters_line_blames_the_section_and_the_option(tmp_path):
+    """inverse_kinematics' build.cfg has no Parameters: the error names the thread's section
+    line and the --param it came from, not a Parameters line that does not exist."""
+    result = run_rosgate("export-hw", INVERSE / "build.cfg", "-o", tmp_path / "out",
+                         "--param", "Inverse.lanes=many")
+    assert_refused(result, "[ReconosThread@Inverse]:", "--param Inverse.lanes=many",
+                   "lanes='many' is not a whole number")
+    assert "] Parameters:" not in result.stderr
+
+
+def test_misspelt_section_kind_is_refused(tmp_path):
+    shutil.copytree(INVERSE, tmp_path / "p")
+    cfg = tmp_path / "p" / "build.cfg"
+    cfg.write_text(cfg.read_text().replace("[HwSlot@", "[HwSlott@"))
+    line = next(n for n, text in enumerate(cfg.read_text().splitlines(), 1)
+                if text.startswith("[HwSlott@"))
+    assert_refused(run_rosgate("info", cfg), f"build.cfg:{line}: [HwSlott@",
+                   "unknown section")
+
+
+def test_thread_folder_in_another_case_is_refused(tmp_path):
+    shutil.copytree(INVERSE, tmp_path / "p")
+    (tmp_path / "p" / "src" / "rt_inverse").rename(tmp_path / "p" / "src" / "rt_Inverse")
+    result = run_rosgate("export-hw", tmp_path / "p" / "build.cfg", "-o", tmp_path / "out")
+    assert_refused(result, "src/rt_Inverse/amaranth/thread.py", "rename the folder to "
+                   "src/rt_inverse")
+    assert not (tmp_path / "out" / "manifest.json").exists()
+
+
+def test_binary_files_are_refused(tmp_path):
+    binary = tmp_path / "binary"
+    binary.write_bytes(bytes(range(256)) * 4)
+    assert_refused(run_rosgate("info", binary), "not a text file", "build.cfg is an INI")
+    assert_refused(run_rosgate("export", "finemb", "--io", binary, "-o", tmp_path / "out"),
+                   "not a text file", "IO description is TOML")
+
+
+@pytest.mark.parametrize("folder, word", [("/nonexistent/rosgate", "no such folder"),
+                                          (ROOT / "README.md", "a file, not a folder")])
+def test_msg_dir_must_be_a_folder(folder, word):
+    assert_refused(run_rosgate("msg", "show", "std_msgs/String", "--msg-dir", folder),
+                   f"--msg-dir {folder}", word)
+
+
+def test_paths_are_read_against_the_callers_folder(tmp_path):
+    """``cd ~/photos && rosgate sim <repo>/examples/sobel_dip/build.cfg --arg images=mine.png
+    -o out --trace trace.txt``: every path is the caller's."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    shutil.copy(IMAGES / "chelsea_96x72.png", photos / "mine.png")
+    result = run_rosgate("sim", SOBEL_DIP, "--sim", "icarus", "--arg", "images=mine.png",
+                         "-o", "out", "--trace", "trace.txt", cwd=photos)
+    assert result.returncode == 0, result.stderr
+    assert (photos / "out" / "mine_filtered.png").is_file()
+    assert (photos / "trace.txt").stat().st_size > 0
+    assert "1 of 1 images equal to OpenCV" in result.stdout
