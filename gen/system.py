@@ -19,12 +19,16 @@ file (an HLS or VHDL thread, or a ROS gateway) leaves its slot empty: the slot's
 and its topic ports become ports of the system top, for a core made elsewhere.
 """
 
+import contextlib
 import importlib.util
+import re
 import sys
 import threading
+import traceback
 from dataclasses import dataclass
+from pathlib import Path
 
-from amaranth.hdl import Module
+from amaranth.hdl import Module, Shape
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -34,7 +38,8 @@ from hdl.stream import StreamFIFO
 
 from .config import ConfigError, Location, project_library
 
-__all__ = ["HW_TOPIC_STREAM", "ThreadContext", "HwCall", "SystemTop", "thread_module_path",
+__all__ = ["HW_TOPIC_STREAM", "ThreadContext", "HwCall", "SystemTop", "ThreadCodeError",
+           "thread_code", "thread_module_path",
            "build_thread", "build_system", "thread_sources", "message_memory_layout"]
 
 
@@ -244,6 +249,55 @@ def _describe_params(thread):
     return "{" + ", ".join(parts) + "}"
 
 
+class ThreadCodeError(ConfigError):
+    """An error in a project's own thread code (``src/rt_*/amaranth/*.py``): a syntax error, an
+    exception in ``build()`` or in its components' ``elaborate()``, a combinational cycle.
+    ``str()`` is ``file:line: Type: message`` of the place in the user's file."""
+
+    def __init__(self, file, line, message):
+        self.location = Location(str(file), line, "-")
+        self.message = message
+        ValueError.__init__(self, f"{file}:{line}: {message}")
+
+
+@contextlib.contextmanager
+def thread_code(project, keep=()):
+    """Turn an exception raised in (or, for a combinational cycle, pointing into) the
+    project's thread sources into a :class:`ThreadCodeError` at the user's file and line;
+    other exceptions, and those of the types ``keep``, pass unchanged."""
+    try:
+        yield
+    except ConfigError:
+        raise
+    except Exception as exc:
+        if isinstance(exc, keep) and not isinstance(exc, SyntaxError):
+            raise
+        where = _in_project_sources(exc, project.dir / "src")
+        if where is None:
+            raise
+        raise ThreadCodeError(*where, f"{type(exc).__name__}: {str(exc).strip()}") from None
+
+
+def _in_project_sources(exc, src):
+    """(file, line) in ``src`` that ``exc`` came from, else ``None``."""
+    src = src.resolve()
+
+    def inside(file):
+        try:
+            return Path(file).resolve().is_relative_to(src)
+        except (OSError, ValueError):
+            return False
+    if isinstance(exc, SyntaxError) and exc.filename and inside(exc.filename):
+        return exc.filename, exc.lineno
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if inside(f.filename)]
+    if frames:
+        return frames[-1].filename, frames[-1].lineno
+    for mo in re.finditer(r"(/[^\s:()]+\.py):(\d+)", str(exc)):
+        if inside(mo.group(1)):
+            return mo.group(1), int(mo.group(2))
+    return None
+
+
 def thread_module_path(project, thread):
     """``<project>/src/rt_<name in lower case>/amaranth/thread.py``; a thread whose folder is
     spelt otherwise, or whose ``HwSource`` says ``amaranth`` without that file, is refused
@@ -285,7 +339,8 @@ def _load(path, thread):
                 del sys.modules[name]
                 raise
     if not callable(getattr(module, "build", None)):
-        raise ConfigError(thread.where, f"{path} defines no build(ctx) function")
+        raise ThreadCodeError(path, 1, f"defines no build(ctx) function (thread {thread.name} "
+                                       f"is built by calling it)")
     return module
 
 
@@ -300,7 +355,10 @@ def build_thread(project, thread, slot, library=None):
     if not path.is_file():
         return None
     try:
-        component = _load(path, thread).build(ctx)
+        with thread_code(project, keep=ValueError):
+            component = _load(path, thread).build(ctx)
+    except ConfigError:
+        raise
     except ValueError as exc:
         # a parameter the thread refuses (hdl.params.ParameterError is a ValueError)
         raise ConfigError(_params_location(thread),
@@ -320,10 +378,30 @@ def build_thread(project, thread, slot, library=None):
     members = got.members if got is not None else {}
     for name, member in expected.items():
         if name not in members or members[name] != member:
-            raise ConfigError(thread.where, f"{path}: build() returned a "
-                                            f"{type(component).__name__} without the port "
-                                            f"{name!r} ({member}) of thread {thread.name}")
+            found = "it has none" if name not in members else \
+                f"it has {_describe_member(members[name])}"
+            raise ThreadCodeError(path, _build_line(path), f"build() of thread {thread.name} "
+                                  f"returned a {type(component).__name__} without the port "
+                                  f"{name!r} the thread needs: {_describe_member(member)}; "
+                                  f"{found}")
     return component
+
+
+def _describe_member(member):
+    """A port in words: ``In(32 bits)`` or ``Out(FifoReadSignature: data, empty, re)``."""
+    flow = "In" if member.flow == In else "Out"
+    if member.is_port:
+        return f"{flow}({Shape.cast(member.shape).width} bits)"
+    signature = member.signature
+    return f"{flow}({type(signature).__name__}: {', '.join(signature.members)})"
+
+
+def _build_line(path):
+    """The line of ``def build`` in ``path`` (1 if not found)."""
+    for number, text in enumerate(Path(path).read_text().splitlines(), 1):
+        if text.startswith("def build"):
+            return number
+    return 1
 
 
 class SystemTop(wiring.Component):
@@ -424,7 +502,8 @@ class SystemTop(wiring.Component):
 
 def build_system(project, *, library=None):
     """The :class:`SystemTop` of ``project``."""
-    return SystemTop(project, library=library)
+    with thread_code(project):
+        return SystemTop(project, library=library)
 
 
 def thread_sources(project):

@@ -177,6 +177,7 @@ def _run_msg_layout(args):
 
 
 def _run_msg_export_c(args):
+    from gen.export.verilog import write_atomically
     from gen.msg.cheader import c_header
     library, definition = _definition(args)
     text = c_header(library, definition.name)
@@ -184,8 +185,7 @@ def _run_msg_export_c(args):
         sys.stdout.write(text)
         return 0
     try:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
-        args.output.write_text(text)
+        write_atomically(args.output, text)
     except OSError as exc:
         return _cannot_write("msg export-c", args.output, exc)
     print(f"wrote {args.output} (rosidl structs of {definition.name} and its members, offsets "
@@ -235,8 +235,12 @@ def _add_project_commands(commands):
                          "manifest", _run_export_hw,
             "Write the system top and every Amaranth thread as Verilog (hdl/), FuseSoC cores "
             "(hdl/*.core), Vivado IP packaging (ip/), the block design (bd/design_1.tcl), "
-            "build.tcl and manifest.json.")
+            "build.tcl and manifest.json (which lists every file written, relative to the "
+            "folder). Files are written whole (a temporary file and a rename); re-exporting "
+            "into an earlier export's folder removes what the new export no longer writes.")
     p.add_argument("-o", "--output", type=Path, required=True, help="output folder (created)")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty folder that is not an earlier export")
     p = add("export-msg", "write C offset headers for the project's messages",
             _run_export_msg,
             "Write one C header per message type the project uses (rosidl structs and "
@@ -323,11 +327,15 @@ def _run_info(args):
 
 
 def _run_export_hw(args):
-    from gen.export.hw import export_hw
+    from gen.export.hw import ExportFolderError, export_hw
     p = _project(args)
     start = time.monotonic()
     try:
-        manifest = export_hw(p, args.output, log=lambda s: print(f"-- {s}", flush=True))
+        manifest = export_hw(p, args.output, log=lambda s: print(f"-- {s}", flush=True),
+                             force=args.force)
+    except ExportFolderError as exc:
+        print(f"{PROG} export-hw: error: {exc}", file=sys.stderr)
+        return 2
     except OSError as exc:
         return _cannot_write("export-hw", args.output, exc)
     print(f"wrote {args.output}: {len(manifest['cores'])} cores "
@@ -338,6 +346,7 @@ def _run_export_hw(args):
 
 def _run_export_msg(args):
     from gen.config import project_library
+    from gen.export.verilog import write_atomically
     from gen.msg.cheader import c_header
     p = _project(args)
     library = project_library(p)
@@ -346,7 +355,7 @@ def _run_export_msg(args):
         args.output.mkdir(parents=True, exist_ok=True)
         for t in types:
             name = t.replace("/", "__").lower() + ".h"
-            (args.output / name).write_text(c_header(library, t))
+            write_atomically(args.output / name, c_header(library, t))
             print(f"wrote {args.output / name}")
     except OSError as exc:
         return _cannot_write("export-msg", args.output, exc)
@@ -469,7 +478,7 @@ def _run_report(args):
 
     from gen.export.resources import YOSYS_COMMAND, estimate_resources
     from gen.export.verilog import export_verilog, write_if_changed
-    from gen.system import build_system
+    from gen.system import build_system, thread_code
     p = _project(args)
     system = build_system(p)
     rows = [("rosgate_system", "system", system)]
@@ -484,7 +493,8 @@ def _run_report(args):
           "|---|---|---|---|---|---|---|")
     vfiles = []
     for name, what, component in rows:
-        text, _ = export_verilog(component, name)
+        with thread_code(p):
+            text, _ = export_verilog(component, name)
         vfile = folder / f"{name}.v"
         write_if_changed(vfile, text)
         vfiles.append(vfile)
@@ -554,6 +564,25 @@ def build_parser():
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
+    status = 1
+    try:
+        status = _dispatch(args)
+        return status
+    finally:
+        if status != 0:
+            _quiet_unused_elaboratables()
+
+
+def _quiet_unused_elaboratables():
+    """A run that failed half-way leaves Amaranth components never elaborated, and Amaranth
+    warns about each when it is collected: noise after the error that matters."""
+    import warnings
+
+    from amaranth.hdl import UnusedElaboratable
+    warnings.filterwarnings("ignore", category=UnusedElaboratable)
+
+
+def _dispatch(args):
     try:
         return args.func(args)
     except ParameterError as exc:

@@ -161,7 +161,7 @@ class SimContext:
     @property
     def threads(self):
         if self._threads is None:
-            from gen.system import build_system
+            from gen.system import build_system, thread_code
             self._threads = thread_components(self.project, build_system(self.project))
         return self._threads
 
@@ -442,7 +442,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         The simulation failed for another reason (see the log).
     """
     from gen.config import apply_parameters, load_project
-    from gen.system import build_system
+    from gen.system import build_system, thread_code
 
     build_cfg = Path(build_cfg).resolve()
     project = apply_parameters(load_project(build_cfg), thread_params)
@@ -460,8 +460,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         project_build_dir(project, thread_params, sim, cxx_opt)
     # the Verilog first (seconds): the threads' parameters are final, and check() may read
     # them before minutes go into the simulator build
-    vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
-                       key=_system_key(project, thread_params))
+    with thread_code(project):
+        vfile = export_top(system, TOP, build_dir, icarus=sim == "icarus",
+                           key=_system_key(project, thread_params))
     if module is not None and hasattr(module, "check"):
         try:
             module.check(CheckContext(project, args, thread_components(project, system)))

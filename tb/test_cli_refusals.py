@@ -120,3 +120,72 @@ def test_paths_are_read_against_the_callers_folder(tmp_path):
     assert (photos / "out" / "mine_filtered.png").is_file()
     assert (photos / "trace.txt").stat().st_size > 0
     assert "1 of 1 images equal to OpenCV" in result.stdout
+
+
+BAD_THREADS = {
+    "syntax": ("def build(ctx) return 1\n", 1, "SyntaxError: expected ':'"),
+    "no_build": ("x = 1\n", 1, "defines no build(ctx) function"),
+    "undefined_state": ('''from amaranth import Module
+from amaranth.lib import wiring
+
+
+class Bad(wiring.Component):
+    def elaborate(self, platform):
+        m = Module()
+        with m.FSM():
+            with m.State("A"):
+                m.next = "NOPE"
+        return m
+
+
+def build(ctx):
+    return Bad(ctx.thread_signature())
+''', 8, "FSM state 'NOPE' is referenced but not defined"),
+    "comb_loop": ('''from amaranth import Module, Signal
+from amaranth.lib import wiring
+
+
+class Bad(wiring.Component):
+    def elaborate(self, platform):
+        m = Module()
+        a, b = Signal(), Signal()
+        m.d.comb += a.eq(~b)
+        m.d.comb += b.eq(a)
+        m.d.comb += self.osif_hw2sw.data.eq(a)
+        return m
+
+
+def build(ctx):
+    return Bad(ctx.thread_signature())
+''', 9, "CombinationalCycle"),
+    "missing_port": ('''from amaranth.lib import wiring
+
+
+class Bad(wiring.Component):
+    def elaborate(self, platform):
+        pass
+
+
+def build(ctx):
+    members = dict(ctx.thread_signature().members)
+    del members["osif_sw2hw"]
+    return Bad(wiring.Signature(members))
+''', 9, "without the port 'osif_sw2hw' the thread needs: Out(FifoReadSignature: data, "
+        "empty, re); it has none"),
+    "undefined_name": ("def build(ctx):\n    return undefined_name\n", 2,
+                       "NameError: name 'undefined_name' is not defined"),
+}
+
+
+@pytest.mark.parametrize("kind", BAD_THREADS)
+@pytest.mark.parametrize("command", ["export-hw", "sim"])
+def test_errors_in_thread_code_name_file_and_line(kind, command, tmp_path):
+    source, line, words = BAD_THREADS[kind]
+    shutil.copytree(INVERSE, tmp_path / "p")
+    thread = tmp_path / "p" / "src" / "rt_inverse" / "amaranth" / "thread.py"
+    thread.write_text(source)
+    extra = ["-o", tmp_path / "out"] if command == "export-hw" else ["--sim", "icarus"]
+    result = run_rosgate(command, tmp_path / "p" / "build.cfg", *extra, cwd=tmp_path)
+    assert_refused(result, f"{thread}:{line}: ", words)
+    assert "UnusedElaboratable" not in result.stderr and "0x" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) <= 4, result.stderr

@@ -234,3 +234,91 @@ def test_export_msg_headers(tmp_path):
                      "application_msgs__srv__sobelsrv_response.h", "sensor_msgs__msg__image.h"]
     text = (tmp_path / "sensor_msgs__msg__image.h").read_text()
     assert "#define ROSGATE_OFFSET__sensor_msgs__msg__Image__data__data 72\n" in text
+
+
+def _copy_inverse(tmp_path):
+    import shutil
+    folder = tmp_path / "project"
+    shutil.copytree(ROOT / "examples" / "inverse_kinematics", folder)
+    return folder
+
+
+def test_manifest_lists_its_files_relative_to_the_folder(tmp_path):
+    project = _copy_inverse(tmp_path)
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(tmp_path / "out")]) == 0
+    manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert (tmp_path / "out" / manifest["build_cfg"]).resolve() == \
+        (project / "build.cfg").resolve()
+    on_disk = sorted(str(p.relative_to(tmp_path / "out")) for p in
+                     (tmp_path / "out").rglob("*") if p.is_file())
+    assert manifest["files"] == on_disk
+    assert str(tmp_path) not in (tmp_path / "out" / "manifest.json").read_text()
+
+
+def test_reexport_removes_what_it_no_longer_writes(tmp_path, capsys):
+    project = _copy_inverse(tmp_path)
+    out = tmp_path / "out"
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(out)]) == 0
+    assert (out / "hdl" / "rt_inverse.v").is_file()
+    # the thread becomes an external core (its Amaranth source gone): its files must go
+    import shutil
+    shutil.rmtree(project / "src" / "rt_inverse" / "amaranth")
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(out)]) == 0
+    assert not (out / "hdl" / "rt_inverse.v").exists()
+    assert not (out / "ip" / "package_rt_inverse.tcl").exists()
+    assert "removed hdl/rt_inverse.v" in capsys.readouterr().out
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert "hdl/rt_inverse.v" not in manifest["files"]
+
+
+def test_export_refuses_a_foreign_folder_without_force(tmp_path, capsys):
+    project = _copy_inverse(tmp_path)
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(out), "--force"]) == 0
+    assert (out / "notes.txt").read_text() == "mine" and (out / "manifest.json").is_file()
+
+
+def test_failed_write_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    """A full disk in the middle of a write: the old Verilog stays, no temporary file."""
+    import errno
+
+    from gen.export import verilog
+    path = tmp_path / "core.v"
+    verilog.write_if_changed(path, "module old; endmodule\n")
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    monkeypatch.setattr(verilog.os, "fsync", full)
+    with pytest.raises(OSError):
+        verilog.write_if_changed(path, "module new; endmodule\n" * 1000)
+    assert path.read_text() == "module old; endmodule\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["core.v"]
+
+
+def test_export_killed_half_way_leaves_no_truncated_verilog(tmp_path, monkeypatch):
+    """An export that dies after its first core: what it wrote is whole, nothing else is
+    there, and no temporary files remain."""
+    from gen.export import hw
+    project = load_project(_copy_inverse(tmp_path) / "build.cfg")
+    calls = []
+    real = hw.export_verilog
+
+    def dies_on_the_second(component, name):
+        calls.append(name)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(component, name)
+    monkeypatch.setattr(hw, "export_verilog", dies_on_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        hw.export_hw(project, tmp_path / "out")
+    files = sorted(p.relative_to(tmp_path / "out").as_posix()
+                   for p in (tmp_path / "out").rglob("*") if p.is_file())
+    assert not any(".tmp" in f for f in files)
+    assert "manifest.json" not in files
+    text = (tmp_path / "out" / "hdl" / "rosgate_system.v").read_text()
+    assert text.rstrip().endswith("endmodule")

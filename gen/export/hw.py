@@ -13,6 +13,7 @@ Layout of the output folder::
 """
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -62,25 +63,57 @@ def fusesoc_core(project, core, description):
     ])
 
 
-def export_hw(project, out, *, log=None):
-    """Write the hardware of ``project`` into ``out``; return the manifest (a dict)."""
-    from gen.system import build_system, thread_sources
+class ExportFolderError(ValueError):
+    """The output folder of an export holds files that are not an earlier export's."""
+
+
+def _previous_files(out, force):
+    """The files an earlier export wrote into ``out`` (from its manifest.json); an existing
+    folder with other files and no manifest is refused unless ``force``."""
+    manifest = out / "manifest.json"
+    if manifest.is_file():
+        try:
+            return set(json.loads(manifest.read_text()).get("files", []))
+        except (ValueError, AttributeError):
+            pass
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise ExportFolderError(f"-o {out}: the folder holds files that are not a rosgate "
+                                f"export (no manifest.json listing them); choose a new folder "
+                                f"or pass --force to write into it")
+    return set()
+
+
+def export_hw(project, out, *, log=None, force=False):
+    """Write the hardware of ``project`` into ``out``; return the manifest (a dict).
+
+    Every file is written through a temporary file and a rename, ``manifest.json`` last
+    (it lists the files, relative to ``out``); what an earlier export into ``out`` wrote and
+    this one does not is removed. A non-empty ``out`` that is not an earlier export is
+    refused (:class:`ExportFolderError`) unless ``force``."""
+    from gen.system import build_system, thread_code, thread_sources
 
     log = log or (lambda s: None)
     out = Path(out)
+    previous = _previous_files(out, force)
     start = time.monotonic()
     log(f"building the system of {project.name} ({len(project.slots)} slots, "
         f"{len(project.topics)} hardware topics)")
     system = build_system(project)
     cores = {}
+    written = set()
+
+    def write(relative, text):
+        write_if_changed(out / relative, text)
+        written.add(relative)
 
     def emit(name, component, description):
-        text, vtop = export_verilog(component, name)
-        write_if_changed(out / "hdl" / f"{name}.v", text)
+        with thread_code(project):
+            text, vtop = export_verilog(component, name)
+        write(f"hdl/{name}.v", text)
         interfaces = bus_interfaces(component)
-        write_if_changed(out / "hdl" / f"{name}.core", fusesoc_core(project, name, description))
-        write_if_changed(out / "ip" / f"package_{name}.tcl",
-                         package_tcl(name, project.part, interfaces, description=description))
+        write(f"hdl/{name}.core", fusesoc_core(project, name, description))
+        write(f"ip/package_{name}.tcl",
+              package_tcl(name, project.part, interfaces, description=description))
         cores[name] = {"verilog": f"hdl/{name}.v", "fusesoc": f"hdl/{name}.core",
                        "fusesoc_name": core_vlnv(project, name),
                        "package_tcl": f"ip/package_{name}.tcl",
@@ -105,12 +138,14 @@ def export_hw(project, out, *, log=None):
              f"ReconOS hardware thread {slot.thread.name} of {project.name}")
     for kind in ("M", "S"):
         for name, text in busdef_xml(kind, 64 if project.arch == "r64" else 32).items():
-            write_if_changed(out / "ip" / "busdefs" / name, text)
-    write_if_changed(out / "bd" / "design_1.tcl", block_design_tcl(project, system, sys_ifs))
-    write_if_changed(out / "build.tcl", build_tcl(project, list(cores)))
+            write(f"ip/busdefs/{name}", text)
+    write("bd/design_1.tcl", block_design_tcl(project, system, sys_ifs))
+    write("build.tcl", build_tcl(project, list(cores)))
     sources = thread_sources(project)
     manifest = {
-        "project": project.name, "build_cfg": str(project.path), "board": project.board,
+        "project": project.name, "build_cfg": os.path.relpath(Path(project.path).resolve(),
+                                                              out.resolve()),
+        "board": project.board,
         "part": project.part, "arch": project.arch, "top": SYSTEM_CORE,
         "clocks": [{"name": c.name, "id": c.id, "freq_hz": c.freq, "source": c.source,
                     "system": c is project.system_clock} for c in project.clocks],
@@ -138,7 +173,13 @@ def export_hw(project, out, *, log=None):
                    for name, t in project.topics.items()},
         "cores": cores,
         "warnings": project.warnings,
+        "files": sorted(written | {"manifest.json"}),
     }
     write_if_changed(out / "manifest.json", json.dumps(manifest, indent=2) + "\n")
+    for stale in sorted(previous - written - {"manifest.json"}):
+        path = out / stale
+        if ".." not in Path(stale).parts and path.is_file():
+            path.unlink()
+            log(f"removed {stale} (an earlier export's, not written now)")
     log(f"wrote {out} in {time.monotonic() - start:.1f} s")
     return manifest

@@ -9,6 +9,7 @@ combinational logic at t=0 (pitfall 3).
 """
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -194,11 +195,28 @@ def write_if_changed(path, text):
     Keeping the timestamp of an unchanged file lets incremental Verilator builds skip work.
     """
     path = Path(path)
-    if path.exists() and path.read_text() == text:
+    if path.is_file() and path.read_text() == text:
         return False
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    write_atomically(path, text)
     return True
+
+
+def write_atomically(path, text):
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename: a
+    write that fails (a full disk, a killed process) leaves the old file or none, never a
+    truncated one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(temporary, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        temporary.unlink(missing_ok=True)
+        raise
 
 
 def manifest_data(*, module, component, top, extra=None):
