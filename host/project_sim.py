@@ -35,6 +35,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 import signal
 import sys
 import threading
@@ -231,7 +232,11 @@ def _stall_report(cosim, running):
     slots = ", ".join(f"slot {s} in {m.upper()}{tuple(a)}" for s, (m, a) in
                       sorted(cosim.runtime.pending.items())) or "no slot in an OS call"
     nodes = ", ".join(getattr(n, "__name__", str(n)) for n in running) or "none"
-    return f"{slots}; nodes still running: {nodes}"
+    errors = cosim.runtime.errors
+    recorded = (f"; ReconOS protocol errors before: {'; '.join(errors[:5])}"
+                f"{f' (and {len(errors) - 5} more)' if len(errors) > 5 else ''}"
+                if errors else "")
+    return f"{slots}; nodes still running: {nodes}{recorded}"
 
 
 async def _watch_progress(cosim, ctx, stall_cycles, running, failures, ended, period=20_000):
@@ -506,7 +511,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     except SimulationFailed as exc:
         if (out / ERROR).is_file():
             raise ProjectError(json.loads((out / ERROR).read_text())["error"]) from None
-        raise SimulationFailed(f"{exc}; simulator log: {out / LOG}" if quiet else str(exc),
+        reason = _logged_exception(out / LOG, project.dir) if quiet else None
+        raise SimulationFailed(f"{reason or exc}; simulator log: {out / LOG}" if quiet
+                               else str(exc),
                                failed=exc.failed, total=exc.total,
                                results=exc.results) from None
     finally:
@@ -517,6 +524,43 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         if follower is not None:
             follower.join()
     return json.loads((out / RESULTS).read_text())
+
+
+_LOG_EVENT = re.compile(r"^\s*[\d.]+[munpf]?s\s+[A-Z]+\s|^\s*\*\*")
+_FRAME = re.compile(r'^File "(?P<file>[^"]+)", line (?P<line>\d+)')
+
+
+def _logged_exception(log, project_dir):
+    """``file:line: Type: message`` of the last Python exception in the simulator's ``log``
+    (the deepest frame in ``project_dir`` if any, else the last), ``None`` without one: a
+    failure outside the nodes' own code (a task a node started, the simulator) still names
+    its reason on the terminal."""
+    try:
+        lines = Path(log).read_text(errors="replace").splitlines()
+    except OSError:
+        return None
+    starts = [n for n, line in enumerate(lines) if line.strip() ==
+              "Traceback (most recent call last):"]
+    if not starts:
+        return None
+    frames, message, code_line = [], None, False
+    for line in lines[starts[-1] + 1:]:
+        if _LOG_EVENT.match(line):
+            break
+        text = line.strip()
+        mo = _FRAME.match(text)
+        if mo:
+            frames.append((mo["file"], int(mo["line"])))
+            code_line = True        # the frame's source line follows
+        elif code_line:
+            code_line = False
+        elif text and set(text) - set("^~ "):
+            message = text
+    if message is None:
+        return None
+    mine = [f for f in frames if Path(f[0]).resolve().is_relative_to(Path(project_dir).resolve())]
+    file, line = (mine or frames)[-1]
+    return f"{file}:{line}: {message}"
 
 
 def _check_output(option, path, *, folder):

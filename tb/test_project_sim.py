@@ -203,6 +203,40 @@ def test_stalled_run_ends_with_what_waits(tmp_path, capsys):
     assert "slot 1 in ROS_TAKE" in err and "nodes still running: broken" in err, err
 
 
+def test_failed_task_of_a_node_names_its_exception(tmp_path, capsys):
+    """A task a node started (not the node itself) fails: the terminal shows its exception
+    with file and line, not only the log's path."""
+    cfg, line = broken_project(tmp_path, '''async def _helper(ctx):
+    await ctx.cycles(10)
+    raise RuntimeError("the helper task broke")  # <-
+
+
+async def broken(ctx):
+    cocotb.start_soon(_helper(ctx))
+    await ctx.cycles(1000)''')
+    text = cfg.parent.joinpath("sim.py").read_text()
+    cfg.parent.joinpath("sim.py").write_text("import cocotb\n" + text)
+    assert rosgate(["sim", str(cfg), "--sim", "icarus", "--arg", f"images={PHOTO}",
+                    "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err
+    assert f"sim.py:{line + 1}: RuntimeError: the helper task broke" in err, err
+
+
+def test_stall_names_the_recorded_protocol_error(tmp_path, capsys):
+    """A thread that publishes on its rosnode handle: the stall message carries the protocol
+    error the ReconOS model recorded."""
+    project = tmp_path / "project"
+    shutil.copytree(ROOT / "examples" / "inverse_kinematics", project)
+    thread = project / "src" / "rt_inverse" / "amaranth" / "thread.py"
+    thread.write_text(thread.read_text().replace('h_pub=ctx.handle("pub")',
+                                                 'h_pub=ctx.handle("node")'))
+    assert rosgate(["sim", str(project / "build.cfg"), "--sim", "icarus", "--stall-ms", "0.5",
+                    "--arg", "requests=2", "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "no progress" in err and "ReconOS protocol errors before: slot 0: handle 0 is " \
+        "rosnode, expected rospub" in err, err
+
+
 #: in test-full (make test: the sort service node runs in tb/test_reconos_apps.py, clock-crossing
 #: slots in the reconos system benches)
 SORT_SIMS = [pytest.param(s, marks=pytest.mark.full) for s in ("icarus", "verilator")]
