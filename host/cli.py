@@ -106,6 +106,53 @@ def _run_export_topic(args):
     return 0
 
 
+# export av_chain --------------------------------------------------------------------------
+
+def _add_export_av_chain(sub):
+    p = sub.add_parser(
+        "av_chain", help="the lane-following chain joined by hardware topics (fpgaDDS)",
+        description="Export the lane-following chain of examples/av_chain as one Verilog "
+                    "module `av_chain`: seven kernels joined by hardware topics, the camera "
+                    "stream in, the drive command out, taps of topics A-F (docs/av_chain.md), "
+                    "plus a JSON manifest.")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="image scale in (0, 1]: 1 is the 640x480 camera and the 1000x600 "
+                        "bird's-eye view (default 1)")
+    p.add_argument("--pixels-per-beat", type=int, default=4, choices=(1, 2, 4, 8),
+                   help="pixels per stream beat (default 4)")
+    p.add_argument("-o", "--output", required=True, type=Path,
+                   help="output folder (created); writes av_chain.v and av_chain.json")
+    p.set_defaults(func=_run_export_av_chain, options={}, parser=p)
+
+
+def _run_export_av_chain(args):
+    from gen.av_chain import scaled_params
+    from gen.export.verilog import export_verilog, write_if_changed, write_manifest
+    from gen.tops import build_top
+
+    if not 0 < args.scale <= 1:
+        args.parser.error(f"--scale must be in (0, 1], not {args.scale!r}")
+    params = scaled_params(args.scale, args.pixels_per_beat)
+    start = time.monotonic()
+    component = build_top("av_chain", **params)
+    text, top = export_verilog(component, "av_chain")
+    out = args.output
+    try:
+        write_if_changed(out / "av_chain.v", text)
+        write_manifest(out / "av_chain.json", module="av_chain", component=component, top=top,
+                       extra={"scale": args.scale, "pixels_per_beat": args.pixels_per_beat,
+                              "camera": list(component.config.camera),
+                              "bev": list(component.config.bev)})
+    except OSError as exc:
+        return _cannot_write("export av_chain", out, exc)
+    c = component.config
+    print(f"wrote {out / 'av_chain.v'} (module av_chain, {len(top.ports) + 2} ports; camera "
+          f"{c.camera[0]}x{c.camera[1]}, bird's-eye view {c.bev[0]}x{c.bev[1]}, "
+          f"{c.pixels_per_beat} px/beat) and {out / 'av_chain.json'} in "
+          f"{time.monotonic() - start:.1f} s")
+    return 0
+
+
 # msg -------------------------------------------------------------------------------------
 
 def _add_msg(commands):
@@ -555,6 +602,7 @@ def build_parser():
     cores = export.add_subparsers(dest="core", metavar="CORE", required=True)
     _add_export_topic(cores)
     add_export_finemb(cores)
+    _add_export_av_chain(cores)
     _add_msg(commands)
     _add_project_commands(commands)
     add_tap_commands(commands)

@@ -1,7 +1,9 @@
 """``rosgate tap``: a simulated design on a TAP device in a network namespace the command
 creates and removes (docs/simulation.md "On a TAP device"), and ``rosgate export finemb``."""
 
+import shlex
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -114,7 +116,7 @@ def _run_tap_engine(args):
                 f"the engine is up at {args.ip}; the kernel is {args.kernel_ip}/24 on {TAP_NAME} "
                 f"in namespace {sim.namespace}",
                 f"  ping       {ns} ping {args.ip}",
-                f"  RBCP       {ns} python3 -c \"import sitcpy.rbcp as r; "
+                f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp as r; "
                 f"print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\"  "
                 f"({args.registers} registers at 0)",
                 f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}",

@@ -213,3 +213,25 @@ def test_export_finemb_names_a_bad_io_file(tmp_path, capsys):
     assert main(["export", "finemb", "--io", str(bad), "-o", str(tmp_path / "o")]) == 2
     assert f"{bad}:5: port 1" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_export_av_chain_writes_lint_clean_verilog_and_manifest(tmp_path, capsys):
+    """``rosgate export av_chain`` (docs/av_chain.md): the fpgaDDS chain as one module whose
+    ports are the manifest's, camera and bird's-eye sizes as asked."""
+    assert main(["export", "av_chain", "--scale", "0.2", "--pixels-per-beat", "2",
+                 "-o", str(tmp_path)]) == 0
+    assert "camera 128x96, bird's-eye view 200x120, 2 px/beat" in capsys.readouterr().out
+    text = (tmp_path / "av_chain.v").read_text()
+    manifest = json.loads((tmp_path / "av_chain.json").read_text())
+    ports = verilog_ports(text, "av_chain")
+    assert ports == {p["name"]: (p["direction"], p["width"]) for p in manifest["ports"]}
+    assert manifest["camera"] == [128, 96] and manifest["bev"] == [200, 120]
+    # 2 px/beat of bgr8: 48-bit camera beats in, the 64-bit drive command out
+    assert ports["camera_tdata"] == ("input", 48) and ports["command_tdata"] == ("output", 64)
+    assert lint_verilog(tmp_path / "av_chain.v", "av_chain") == ""
+
+
+def test_export_av_chain_refuses_a_bad_scale(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["export", "av_chain", "--scale", "1.5", "-o", str(tmp_path)])
+    assert exc.value.code == 2 and "--scale must be in (0, 1], not 1.5" in capsys.readouterr().err

@@ -64,6 +64,19 @@ def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
         probe = in_namespace(ns, sys.executable, "-c", script, timeout=300)
         assert probe.returncode == 0 and "rbcp and echo ok" in probe.stdout, \
             probe.stdout + probe.stderr
+        # the printed hints, run as printed (a user pastes them into a shell)
+        hints = {m["what"]: m["command"] for m in re.finditer(
+            r"^  (?P<what>RBCP|TCP echo)\s+(?P<command>ip netns exec .*?)(?:  \(.*)?$", text,
+            re.MULTILINE)}
+        rbcp = subprocess.run(hints["RBCP"], shell=True, capture_output=True, text=True,
+                              timeout=120)
+        # the hint reads 16 bytes at 0, which nothing wrote (the registers start cleared)
+        assert rbcp.returncode == 0 and rbcp.stdout.strip() == repr(bytearray(16)), \
+            rbcp.stdout + rbcp.stderr
+        echo = subprocess.run(f"(printf 'hello rosgate\\n'; sleep 3) | timeout 20 "
+                              f"{hints['TCP echo']}", shell=True, capture_output=True, text=True,
+                              timeout=60)
+        assert "hello rosgate" in echo.stdout, (echo.returncode, echo.stdout, echo.stderr)
     finally:
         proc.send_signal(signal.SIGINT)
         rest, _ = proc.communicate(timeout=180)
