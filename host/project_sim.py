@@ -453,6 +453,17 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     project = apply_parameters(load_project(build_cfg), thread_params)
     out = Path(out).resolve()
     module = load_sim_module(project)
+    from gen.system import thread_module_path
+    if not any(thread_module_path(project, t).is_file() or t.gateway is not None
+               for t in project.threads):
+        raise ProjectError(f"{project.name} has no Amaranth thread: every slot is an external "
+                           f"core (an HLS or VHDL thread; its ports are ports of the system "
+                           f"top), so there is no hardware to simulate; `rosgate export-hw` "
+                           f"writes the system for Vivado")
+    if module is None and ros2 is None:
+        raise ProjectError(f"{project.name} has no sim.py ({project.dir / 'sim.py'}): nothing "
+                           f"would drive its system, and the run would end at once; write "
+                           f"one (docs/simulation.md) or join a ROS 2 graph with --ros2")
     try:
         args = check_args(module, dict(args or {}), project.name)
     except ArgumentError as exc:

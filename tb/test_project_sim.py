@@ -253,6 +253,41 @@ def test_sort_service_two_slots(sim, tmp_path):
     assert len(results["calls"]) == 6 and results["all_sorted"], results
 
 
+def test_sort_service_slots_serve_in_parallel(tmp_path):
+    """Two clients call at once: each slot takes one call, so both answers come after about
+    one call's time (served one after another, the second would take twice the first)."""
+    results = run_project_sim(ROOT / "examples/sort_service/build.cfg", "icarus",
+                              out=tmp_path / "out", args={"requests": "1", "size": "300"},
+                              limit_ms=20)
+    cycles = sorted(c["cycles"] for c in results["calls"])
+    assert len(cycles) == 2 and results["all_sorted"], results
+    assert cycles[1] < 1.5 * cycles[0], cycles
+
+
+def test_image_echo_runs_its_own_camera(tmp_path):
+    """examples/image_echo without --ros2: its sim.py's camera sends photographs and random
+    images; each comes back unchanged, none more than sent."""
+    results = run_project_sim(ROOT / "examples/image_echo/build.cfg", "icarus",
+                              out=tmp_path / "out", args={"images": "5", "seed": "3"},
+                              limit_ms=20)
+    assert len(results["images"]) == 5 and results["all_equal"], results
+    assert results["extra_echoes"] == 0 and all(i["cycles"] > 0 for i in results["images"])
+
+
+def test_project_without_hardware_or_nodes_is_refused(tmp_path, capsys):
+    """examples/sobel_topic has only an HLS thread: nothing to simulate, said so (exit 2),
+    instead of 0 cycles and exit 0."""
+    assert rosgate(["sim", str(ROOT / "examples/sobel_topic/build.cfg"), "--sim", "icarus",
+                    "-o", str(tmp_path / "out")]) == 2
+    assert "Sobel has no Amaranth thread" in capsys.readouterr().err
+    project = tmp_path / "no_nodes"
+    shutil.copytree(ROOT / "examples/inverse_kinematics", project)
+    (project / "sim.py").unlink()
+    assert rosgate(["sim", str(project / "build.cfg"), "--sim", "icarus",
+                    "-o", str(tmp_path / "out")]) == 2
+    assert "InverseKinematics has no sim.py" in capsys.readouterr().err
+
+
 def test_sort_action_example(tmp_path):
     """examples/sort_action on Icarus: goals of the block size are accepted, sorted, with
     feedback rising to 100 %; a larger goal is rejected."""

@@ -47,8 +47,12 @@ class Broker:
         self._services[service] = server
 
     def server_queue(self, service):
-        q = Queue()
-        self._services[service] = q
+        """The request queue of a hardware server of ``service``: every slot serving it takes
+        from the same queue (as ReconROS' threads share one rcl service), so two slots serve
+        two calls at once; each keeps the reply queue of the request it took."""
+        q = self._services.get(service)
+        if not isinstance(q, Queue):
+            q = self._services[service] = Queue()
         return q
 
     async def call(self, service, request):
@@ -62,9 +66,11 @@ class Broker:
         return await reply.get()
 
     def action_server_queue(self, action):
-        """Register an action server: a :class:`Queue` of :class:`ActionGoal`."""
-        q = Queue()
-        self._actions[action] = q
+        """Register an action server: a :class:`Queue` of :class:`ActionGoal`, shared by every
+        slot that serves ``action``."""
+        q = self._actions.get(action)
+        if not isinstance(q, Queue):
+            q = self._actions[action] = Queue()
         return q
 
     def send_goal(self, action, goal, goal_id=None):
