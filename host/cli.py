@@ -6,6 +6,7 @@ message names the option and the allowed values).
 
 import argparse
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -485,7 +486,7 @@ def _run_sim(args):
                 p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
                 thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
                 memory_mb=args.memory_mb, waves=args.waves, progress=console.progress, ros2=ros2,
-                record=args.record, trace=args.trace,
+                record=args.record, trace=args.trace, status=_SimStatus(console),
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:
         console.error(exc)
@@ -510,6 +511,49 @@ def _run_sim(args):
     console.done(f"{len(written)} files to {out}/ ({', '.join(written[:6])}"
                  f"{', ...' if len(written) > 6 else ''})")
     return 0
+
+
+class _SimStatus:
+    """The running simulation's status: on a terminal the step's status line, off it one
+    line every :attr:`LOG_SECONDS` (a log shows a long run is alive and how far it is)."""
+
+    LOG_SECONDS = 10.0
+
+    def __init__(self, console):
+        self.console = console
+        self.printed = None
+
+    @staticmethod
+    def describe(s):
+        parts = [f"{s['cycle']:,} cycles ({s['ms']:g} ms simulated)"]
+        if "done" in s:
+            parts.append(f"{s['done']} of {s['total']} {s['unit']}")
+            if s["done"] > 0 and s["total"] > s["done"]:
+                left = s["seconds"] * (s["total"] - s["done"]) / s["done"]
+                parts.append(f"about {_duration(left)} left")
+        parts.append(f"{s['messages']:,} messages")
+        parts.append(f"memory {s['memory_in_use'] / 2**20:.1f} of "
+                     f"{s['memory_size'] / 2**20:.0f} MiB in use")
+        parts.append(f"{_duration(s['seconds'])} running")
+        return ", ".join(parts)
+
+    def __call__(self, status):
+        text = self.describe(status)
+        if self.console.out.is_terminal:
+            self.console.progress("simulation", text)
+        elif status["seconds"] >= self.LOG_SECONDS and (
+                self.printed is None or time.monotonic() - self.printed >= self.LOG_SECONDS):
+            self.printed = time.monotonic()
+            self.console.print(f"   [status] {text}")
+
+
+def _duration(seconds):
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    if seconds < 3600:
+        return f"{seconds // 60} min {seconds % 60:02d} s"
+    return f"{seconds // 3600} h {seconds // 60 % 60:02d} min"
 
 
 def _print_bridge(console, summary):
@@ -545,7 +589,8 @@ def _run_report(args):
         vfile = folder / f"{name}.v"
         write_if_changed(vfile, text)
         vfiles.append(vfile)
-        r = estimate_resources(vfile, name)
+        with _PassProgress(f"yosys {YOSYS_COMMAND.split()[0]} on {name}") as progress:
+            r = estimate_resources(vfile, name, progress=progress)
         print(f"| {name} | {what} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
               f"{r['BRAM18_equiv']} | {r['DSP']} |", flush=True)
     if args.timing:
@@ -558,6 +603,45 @@ def _run_report(args):
         print(f"no simulation results at {path} (run `rosgate sim {args.build_cfg}`)")
     print(f"wrote the Verilog of {len(rows)} cores to {folder} (what yosys read)")
     return 0
+
+
+class _PassProgress:
+    """Progress of a long tool run on standard error (the report's table stays on standard
+    output): on a terminal one line, rewritten each second, with the tool's current pass and
+    the time; off it one such line every :attr:`LOG_SECONDS`."""
+
+    LOG_SECONDS = 30.0
+
+    def __init__(self, what):
+        self.what = what
+        self.tty = sys.stderr.isatty()
+        self.step = "starting"
+        self.stop = threading.Event()
+
+    def __enter__(self):
+        self.start = time.monotonic()
+        self.ticker = threading.Thread(target=self._tick, daemon=True)
+        self.ticker.start()
+        return self
+
+    def __call__(self, step):
+        self.step = step
+
+    def _tick(self):
+        while not self.stop.wait(1.0 if self.tty else self.LOG_SECONDS):
+            line = f"  {self.what}: {self.step} ({time.monotonic() - self.start:.0f} s)"
+            if self.tty:
+                sys.stderr.write("\r\033[K" + line[:150])
+                sys.stderr.flush()
+            else:
+                print(line, file=sys.stderr, flush=True)
+
+    def __exit__(self, *exc):
+        self.stop.set()
+        self.ticker.join()
+        if self.tty:
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
 
 
 def _report_timing(project, rows, vfiles, folder):

@@ -64,6 +64,10 @@ RESULTS, ERROR, PROGRESS, LOG, STOP = "sim_results.json", "sim_error.json", \
     "sim_progress.jsonl", "sim.log", "sim.stop"
 
 
+#: wall seconds between two status events of a running simulation
+STATUS_SECONDS = 2.0
+
+
 class ProjectError(Exception):
     """The project's ``sim.py`` refused the run or failed in it; the message names the file
     and line the error came from."""
@@ -158,6 +162,7 @@ class SimContext:
         self._sleeping = 0
         self._progress = None
         self._threads = None
+        self._work = None
 
     @property
     def threads(self):
@@ -188,9 +193,28 @@ class SimContext:
     def log(self, text):
         """Log a line; ``rosgate sim`` shows it while the simulation runs."""
         self.cosim.dut._log.info(text)
+        self._event({"cycle": self.now(), "text": str(text)})
+
+    def progress(self, done, total, unit):
+        """Say how far the run is: ``done`` of ``total`` ``unit`` (``"frames"``); ``rosgate
+        sim``'s status line shows it with an estimate of the time left."""
+        self._work = (int(done), int(total), str(unit))
+
+    def _event(self, event):
         if self._progress is not None:
-            self._progress.write(json.dumps({"cycle": self.now(), "text": str(text)}) + "\n")
+            self._progress.write(json.dumps(event) + "\n")
             self._progress.flush()
+
+    def _status(self, seconds):
+        """A status event: wall seconds since the nodes started, cycles, simulated ms,
+        messages, memory in use, the nodes' work."""
+        usage = self.cosim.memory.usage()
+        status = {"seconds": round(seconds, 1), "cycle": self.now(), "ms": round(self.now() / (self.clock_mhz * 1000), 3),
+                  "messages": self.cosim.broker.events, "memory_in_use": usage["in_use"],
+                  "memory_size": usage["size"]}
+        if self._work is not None:
+            status["done"], status["total"], status["unit"] = self._work
+        return {"status": status}
 
 
 def load_sim_module(project):
@@ -239,14 +263,19 @@ def _stall_report(cosim, running):
     return f"{slots}; nodes still running: {nodes}{recorded}"
 
 
-async def _watch_progress(cosim, ctx, stall_cycles, running, failures, ended, period=20_000):
+async def _watch_progress(cosim, ctx, stall_cycles, running, failures, ended, period=20_000,
+                          status_seconds=STATUS_SECONDS):
     """End the run when nothing happens for ``stall_cycles`` while no node sleeps on
     purpose."""
     def activity():
         return (cosim.runtime.commands, cosim.memory_accesses, cosim.broker.events)
     last, quiet = activity(), 0
+    started = shown = time.monotonic()
     while True:
         await clock_cycles(cosim.dut.aclk, period)
+        if time.monotonic() - shown >= status_seconds:
+            shown = time.monotonic()
+            ctx._event(ctx._status(shown - started))
         now = activity()
         if now != last or ctx._sleeping:
             last, quiet = now, 0
@@ -341,8 +370,9 @@ async def run_project(dut):
                 ended.set()
             limit_cycles = round(float(p["limit_ms"]) * 1000 * ctx.clock_mhz)
             stall_cycles = round(float(p["stall_ms"]) * 1000 * ctx.clock_mhz)
-            watch = cocotb.start_soon(_watch_progress(cosim, ctx, stall_cycles, running,
-                                                      failures, ended))
+            watch = cocotb.start_soon(_watch_progress(
+                cosim, ctx, stall_cycles, running, failures, ended,
+                status_seconds=float(p.get("status_seconds", STATUS_SECONDS))))
             await First(ended.wait(), cosim.runtime.failed.wait(),
                         clock_cycles(dut.aclk, limit_cycles))
             watch.cancel()
@@ -401,7 +431,8 @@ def _follow(path, show, stop):
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, memory_mb=DEFAULT_MEMORY_MB, seed=None,
                     build_dir=None, quiet=True, waves=False, progress=None, log=None, ros2=None,
-                    record=None, trace=None, cxx_opt=PROJECT_CXX_OPT):
+                    record=None, trace=None, cxx_opt=PROJECT_CXX_OPT, status=None,
+                    status_seconds=STATUS_SECONDS):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
     Parameters
@@ -428,6 +459,13 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         ``progress(stage, text)`` for the build's progress.
     log : callable or None
         ``log(cycle, text)`` for each line the nodes log while the simulation runs.
+    status : callable or None
+        ``status(dict)`` every :data:`STATUS_SECONDS` of wall time while the simulation runs:
+        ``seconds`` (wall, since the nodes started), ``cycle``, ``ms`` (simulated), ``messages``, ``memory_in_use``, ``memory_size`` (bytes)
+        and, when a node reports it (:meth:`SimContext.progress`), ``done``, ``total``,
+        ``unit``.
+    status_seconds : float
+        Wall seconds between two ``status`` calls.
     ros2 : dict or None
         Join a DDS domain instead of running to the nodes' end (``rosgate sim --ros2``):
         ``domain`` (int) and ``nodes`` (bool: run ``sim.py``'s nodes too). The run has no
@@ -492,7 +530,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
               "slot_clock_ns": {str(s.id): _period_ns(s.clock.freq) for s in project.slots},
               "args": args, "thread_params": list(thread_params), "out": str(out),
               "limit_ms": float(limit_ms), "memory_mb": int(memory_mb),
-              "stall_ms": float(stall_ms)}
+              "stall_ms": float(stall_ms), "status_seconds": float(status_seconds)}
     if record is not None:
         params["record"] = str(Path(record).resolve())
     if trace is not None:
@@ -508,10 +546,15 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
             (out / name).unlink()
     stop = threading.Event()
     follower = None
-    if log is not None:
+    if log is not None or status is not None:
+        def show(event):
+            if "status" in event:
+                if status is not None:
+                    status(event["status"])
+            elif log is not None:
+                log(event["cycle"], event["text"])
         follower = threading.Thread(target=_follow, daemon=True,
-                                    args=(out / PROGRESS, lambda e: log(e["cycle"], e["text"]),
-                                          stop))
+                                    args=(out / PROGRESS, show, stop))
         follower.start()
     handlers = _forward_stop(out / STOP) if ros2 is not None else {}
     try:

@@ -288,6 +288,25 @@ def test_project_without_hardware_or_nodes_is_refused(tmp_path, capsys):
     assert "InverseKinematics has no sim.py" in capsys.readouterr().err
 
 
+def test_status_reports_cycles_work_and_memory(tmp_path):
+    """While a run goes on, the status (rosgate sim's progress line) says how many cycles
+    ran, how many of the nodes' images are done and how much memory is in use."""
+    seen = []
+    results = run_project_sim(SOBEL_DIP, "icarus", out=tmp_path / "out",
+                              args={"images": ",".join([str(PHOTO)] * 4)}, status=seen.append,
+                              status_seconds=0.0, log=lambda cycle, text: None)
+    assert len(results["images"]) == 4 and len(seen) >= 2, seen
+    cycles = [s["cycle"] for s in seen]
+    assert cycles == sorted(cycles) and cycles[-1] <= results["cycles"]
+    assert {s["unit"] for s in seen} == {"images"} and {s["total"] for s in seen} == {4}
+    assert [s["done"] for s in seen] == sorted(s["done"] for s in seen)
+    assert all(0 < s["memory_in_use"] <= results["memory"]["peak"] for s in seen), seen
+    assert all(s["memory_size"] == 256 << 20 for s in seen)
+    from host.cli import _SimStatus
+    line = _SimStatus.describe({**seen[-1], "done": 1, "total": 4, "seconds": 30.0})
+    assert "1 of 4 images, about 1 min 30 s left" in line and "MiB in use" in line, line
+
+
 def test_sort_action_example(tmp_path):
     """examples/sort_action on Icarus: goals of the block size are accepted, sorted, with
     feedback rising to 100 %; a larger goal is rejected."""

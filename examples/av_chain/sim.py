@@ -141,6 +141,7 @@ async def camera(ctx):
             if fired:
                 want.append(k)
         ctx.results["frames"].append(entry)
+        ctx.progress(len(ctx.results["frames"]), count, "frames")
         ctx.log(f"camera: frame {k}: {cycles} cycles, centre {entry['centre']} (truth "
                 f"{frame.centre:.1f}), speed {entry['speed']} turn {entry['turn']}")
     frames = ctx.results["frames"]
@@ -161,6 +162,25 @@ async def camera(ctx):
             f"{ctx.clock_mhz:g} MHz (sd {ctx.results['sd_cycles']:,.0f}); every stage as "
             f"OpenCV: {'yes' if exact else 'NO'}; events as the reference: "
             f"{'yes' if ctx.results['events_equal'] else 'NO'}")
+
+
+def summary(results, clock_mhz):
+    frames = results["frames"]
+    if not frames:
+        return ["no frames ran"]
+    memory = results["memory"]
+    w, h = (round(640 * results["scale"]), round(480 * results["scale"]))
+    return [
+        f"{len(frames)} frames of {w}x{h} through the chain as ReconOS threads "
+        f"({results['ppc']} px/clk, {clock_mhz:g} MHz)",
+        f"chain alpha (camera publish to /cmd): {results['mean_cycles']:,.0f} cycles = "
+        f"{results['mean_cycles'] / (clock_mhz * 1000):.3f} ms (sd {results['sd_cycles']:,.0f})",
+        f"every stage as OpenCV: {'yes' if results['stages_bit_exact'] else 'NO'}; stop/start "
+        f"events as the reference: {'yes' if results['events_equal'] else 'NO'}; lane centre "
+        f"within {results['lane_centre_max_error_px']:.1f} px of the scene's",
+        f"{results['cycles']:,} cycles in {results['cpu_seconds']:.0f} CPU-s; memory "
+        f"{memory['peak'] / 2**20:.1f} MiB at most in use of {memory['size'] / 2**20:.0f} MiB",
+    ]
 
 
 ARGS = {

@@ -121,7 +121,9 @@ async def plant(ctx):
     ctx.touch_cycle = ctx.now()
     ctx.results["touches"].append(ball.touch_word())
     await touch.put_wait(ball.touch_word())
-    for n in range(int(ctx.args.get("periods", 300))):
+    periods = int(ctx.args.get("periods", 300))
+    for n in range(periods):
+        ctx.progress(n, periods, "control periods")
         report = [await servo.get() for _ in range(6)]
         widths = [w & 0xFFFFFF for w in sorted(report, key=lambda w: w >> 24)]
         if all(widths):

@@ -143,7 +143,9 @@ def setup(ctx):
 
 async def camera(ctx):
     """Publish each photograph; wait until the viewer has it."""
-    for seq, path in enumerate(_paths(ctx.args)):
+    paths = _paths(ctx.args)
+    for seq, path in enumerate(paths):
+        ctx.progress(seq, len(paths), "images")
         pixels = _read(path)
         ctx.log(f"camera: {path.name} ({pixels.shape[1]}x{pixels.shape[0]}) published")
         start = ctx.now()

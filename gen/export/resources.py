@@ -15,7 +15,29 @@ __all__ = ["estimate_resources", "YOSYS_COMMAND"]
 YOSYS_COMMAND = "synth_xilinx -flatten -family xc7"
 
 
-def estimate_resources(verilog, top, *, blackbox=None):
+def _run_yosys(yosys, script, verilog, progress):
+    """Yosys' log of ``script``; ``progress(pass_name)`` for each pass it starts."""
+    import tempfile
+    with tempfile.TemporaryFile("w+") as errors:
+        proc = subprocess.Popen([yosys, "-q", "-p", script, "-l", "/dev/stdout"],
+                                stdout=subprocess.PIPE, stderr=errors, text=True)
+        lines = []
+        for line in proc.stdout:
+            lines.append(line)
+            mo = _PASS.match(line)
+            if mo and progress is not None and "frontend" not in mo.group(1):
+                progress(mo.group(1))
+        if proc.wait():
+            errors.seek(0)
+            raise RuntimeError(f"yosys failed on {verilog}:\n{errors.read()[-2000:]}")
+    return "".join(lines)
+
+
+#: a line of yosys' log that starts a pass: ``2.3. Executing ABC pass (technology mapping).``
+_PASS = re.compile(r"^\d+(?:\.\d+)*\. Executing (.+?)(?: \(.*\))?\.?$")
+
+
+def estimate_resources(verilog, top, *, blackbox=None, progress=None):
     """Return ``{"LUT", "INV", "FF", "LUTRAM", "BRAM36", "BRAM18", "DSP", "CARRY4", "cells"}``
     for ``top``.
 
@@ -31,6 +53,7 @@ def estimate_resources(verilog, top, *, blackbox=None):
     all reset pins from one inverter, so adding them would count the reset once per
     flip-flop. FF counts every FD* flip-flop, LUTRAM the RAM*/SRL* cells, BRAM18 and BRAM36
     the block RAM primitives (an RAMB36 counts as two BRAM18 in ``BRAM18_equiv``).
+    ``progress(pass_name)`` is called as Yosys starts each pass.
     """
     yosys = shutil.which("yosys")
     if yosys is None:
@@ -55,11 +78,7 @@ def estimate_resources(verilog, top, *, blackbox=None):
         saved = json.loads(cached.read_text())
         if saved.get("key") == key:
             return saved["estimate"]
-    result = subprocess.run([yosys, "-q", "-p", script, "-l", "/dev/stdout"],
-                            capture_output=True, text=True)
-    if result.returncode:
-        raise RuntimeError(f"yosys failed on {verilog}:\n{result.stderr[-2000:]}")
-    text = result.stdout
+    text = _run_yosys(yosys, script, verilog, progress)
     stat = text[text.rindex("Printing statistics"):] if "Printing statistics" in text else text
     cells = {name: int(n) for name, n in re.findall(r"^\s+(\S+)\s+(\d+)\s*$", stat, re.M)}
     total = lambda pred: sum(n for name, n in cells.items() if pred(name))  # noqa: E731
