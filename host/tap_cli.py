@@ -93,6 +93,10 @@ def add_tap_commands(commands):
                    help="stop after this many cycles (default: run until Ctrl-C)")
     p.add_argument("--period-ms", type=float, default=0.0,
                    help="the shortest cycle period (default 0: as fast as the simulation)")
+    p.add_argument("--no-master", action="store_true",
+                   help="bring the line up and wait for your own master (FINROC's, or one "
+                        "you wrote): prints the namespace, the kernel's address and the "
+                        "nodes' MACs, then shows the nodes' states until Ctrl-C")
     _add_common(p)
     p.set_defaults(func=_run_tap_finemb, parser=p, options={"nodes": "--nodes"})
 
@@ -150,11 +154,12 @@ def _node_table(master, rate, terminal):
             for k, n in sorted(master.nodes.items()))
     from rich.table import Table
     table = Table(title=f"FinEmbP cycle {master.cycle_no}: {rate:.1f} cycles/s")
-    for col in ("node", "MAC", "IP", "state", "answered", "late", "reinits", "inputs"):
+    for col in ("node", "MAC", "IP", "state", "answered", "late", "REINIT seen", "reinits",
+                "inputs"):
         table.add_column(col, no_wrap=True)
     for k, n in sorted(master.nodes.items()):
         table.add_row(str(k), n.mac_text, n.ip, n.state.name, str(n.answered), str(n.late),
-                      str(n.reinits), inputs[k])
+                      str(n.reinit_answers), str(n.reinits), inputs[k])
     return table
 
 
@@ -166,6 +171,8 @@ def _run_tap_finemb(args):
     from .finemb.run import PlantModel, line_simulation
     con = Console(f"{PROG} tap finemb")
     check_int("nodes", args.nodes, 1, 32)
+    if args.no_master and (args.cycles or args.period_ms):
+        args.parser.error("--cycles and --period-ms set rosgate's master; --no-master runs none")
     io_path = args.io or Path(__file__).resolve().parents[1] / "examples" / "finemb" / \
         "pid_node.toml"
     descriptor = load_io_description(io_path)
@@ -175,6 +182,8 @@ def _run_tap_finemb(args):
     with con.step(f"building a line of {args.nodes} FinEmbP nodes for Verilator"):
         sim = line_simulation(descriptor, args.nodes, _build_dir(args, f"finemb-{args.nodes}"),
                               kernel_ip=args.kernel_ip, progress=con.progress).__enter__()
+    if args.no_master:
+        return _serve_line(con, args, sim, stop, start)
     plant = PlantModel()
     try:
         con.print(f"the line is up on {TAP_NAME} in namespace {sim.namespace}; the master runs "
@@ -208,6 +217,44 @@ def _run_tap_finemb(args):
         sim.stop()
     con.print(f"{PROG} tap finemb: {summary}; namespace {sim.namespace} removed "
               f"({time.monotonic() - start:.0f} s)")
+    return 0
+
+
+def _serve_line(con, args, sim, stop, start):
+    """``rosgate tap finemb --no-master``: the line waits for a master the user runs in the
+    namespace; the nodes' states are shown as they change."""
+    from hdl.finemb.line import line_mac
+    from hdl.finemb.protocol import FINEMB_PORT, NodeState
+    ns = f"ip netns exec {sim.namespace}"
+    try:
+        for line in (
+                f"the line of {args.nodes} nodes is up on {TAP_NAME} in namespace "
+                f"{sim.namespace}; the kernel is {args.kernel_ip}/24 there. Run your FinEmbP "
+                f"master in the namespace (UDP port {FINEMB_PORT}, broadcasts and the SoC out "
+                f"of {TAP_NAME}):",
+                f"  master     {ns} <your master>",
+                f"  capture    {ns} tcpdump -i {TAP_NAME} -w finemb.pcap",
+                "nodes, from the TAP side along the line (none has an address yet):",
+                *(f"  node {k}: MAC {line_mac(k)}, serial {k + 1}" for k in range(args.nodes)),
+                "Ctrl-C stops the simulation and removes the namespace."):
+            con.print(line)
+        shown = None
+        while not stop.wait(0.5):
+            status = sim.status
+            if status is not None:
+                states = [NodeState(int(status["signals"][f"state{k}"])).name
+                          for k in range(args.nodes)]
+                if states != shown:
+                    shown = states
+                    con.print(f"   [{_sim_line(status)}] nodes: "
+                              + ", ".join(f"{k} {s}" for k, s in enumerate(states)))
+            if args.duration and time.monotonic() - start >= args.duration:
+                break
+        status = sim.status
+    finally:
+        sim.stop()
+    con.print(f"{PROG} tap finemb: stopped after {_sim_line(status) if status else 'no status'}"
+              f"; namespace {sim.namespace} removed ({time.monotonic() - start:.0f} s)")
     return 0
 
 

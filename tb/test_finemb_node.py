@@ -16,7 +16,7 @@ from scapy.packet import Raw
 
 from hdl.finemb import IoDescriptor
 from hdl.finemb.protocol import (
-    BROADCAST_IP, BROADCAST_MAC, NODE_ALL, Direction, Flag, MsgType, NodeState,
+    BROADCAST_IP, BROADCAST_MAC, NODE_ALL, Direction, Flag, MsgType, NodeState, ReinitReason,
 )
 from host.simulator import clock_cycles
 from tb.harness import cocotb_bench
@@ -212,8 +212,8 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
 
 @cocotb.test()
 async def watchdog_restart_and_id_conflict(dut):
-    """Three cycle periods without SoC or ISEND_REQ: REINIT (shown in the next response); the next
-    ISEND_REQ returns the node to OP. A master that restarts (REINIT to all): INIT, and the
+    """Three cycle periods without SoC or ISEND_REQ, or a REINIT with reason 1: REINIT, which
+    the next ISEND_RES reports while the node returns to OP (the one after reports OP). A master that restarts (REINIT to all): INIT, and the
     node is initialised again without a reset. An ADDR_REQ giving the node's id to another
     MAC: the node gives up its address."""
     tb, _ = await started(dut)
@@ -225,9 +225,22 @@ async def watchdog_restart_and_id_conflict(dut):
     assert tb.state == NodeState.OP, "the watchdog fired before three periods"
     await clock_cycles(dut.gmii_clk, 600)
     assert tb.state == NodeState.REINIT
+    # the first answer after the watchdog fired reports REINIT, the node is in OP again and
+    # the next answer says so
+    res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
+    assert res["state"] == NodeState.REINIT and tb.state == NodeState.OP
     res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
     assert res["state"] == NodeState.OP
     assert (await tb.counters())["missed_cycles"] == 1
+    # the same after a REINIT with reason 1 (application request) to this node
+    await tb.send(tb.request(MsgType.REINIT, 1, body_of(MsgType.REINIT,
+                                                        ReinitReason.APPLICATION)))
+    await clock_cycles(dut.gmii_clk, 200)
+    assert tb.state == NodeState.REINIT
+    res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
+    assert res["state"] == NodeState.REINIT and tb.state == NodeState.OP
+    res = await tb.isend(1, dict(set_point=1, measurement=0, **GAINS))
+    assert res["state"] == NodeState.OP
     await tb.send(tb.reinit_all())
     await clock_cycles(dut.gmii_clk, 200)
     assert tb.state == NodeState.INIT and int(dut.local_ip.value) == 0

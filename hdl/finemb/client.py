@@ -51,7 +51,7 @@ class FinembClient(wiring.Component):
       input page or ``app_deadline`` cycles after the flip, whichever comes first. Three
       cycle periods (from the SoC) without an SoC -> REINIT (counted as ``missed_cycles``).
     * **REINIT**: the address is kept; ADDR_REQ and IODESC_REQ are answered again; the next
-      ISEND_REQ -> OP. REINIT for this node enters it; REINIT for every node with reason
+      ISEND_REQ -> OP, its answer still reporting REINIT (the one after it reports OP). REINIT for this node enters it; REINIT for every node with reason
       MASTER_RESTART returns every node to INIT (a master that starts again re-initialises
       the network without a power cycle).
 
@@ -318,18 +318,22 @@ class FinembClient(wiring.Component):
                             m.d.comb += ev.other_node.eq(1)
                     with m.Case(MsgType.ISEND_REQ):
                         with m.If(for_me):
-                            # the master cycles: (back) to OP, the watchdog re-armed
+                            # the master cycles: (back) to OP, the watchdog re-armed; the
+                            # answer still reports a REINIT the node was in, so a master that
+                            # only runs cycles learns that its watchdog fired or a REINIT came
+                            reported = Mux(state == NodeState.REINIT, NodeState.REINIT,
+                                           NodeState.OP)
                             m.d.comb += restart_watchdog.eq(1)
                             m.d.sync += [state.eq(NodeState.OP), since_soc.eq(0)]
                             with m.If(~page_size_ok):
                                 m.d.comb += ev.bad_page.eq(1)
                                 reply(MsgType.ISEND_RES, pi, 0, node=node_id,
-                                      new_state=NodeState.OP, flags=Flag.ERROR)
+                                      new_state=reported, flags=Flag.ERROR)
                             with m.Else():
                                 with m.If(page_ok):
                                     m.d.comb += self.page_out_commit.eq(1)
                                 reply(MsgType.ISEND_RES, pi, 0, node=node_id,
-                                      new_state=NodeState.OP)
+                                      new_state=reported)
                         with m.Else():
                             m.d.comb += ev.other_node.eq(1)
                     with m.Case(MsgType.REINIT):

@@ -71,13 +71,16 @@ class MsgType(enum.IntEnum):
 
 class Flag(enum.IntFlag):
     """Bits of the header's ``flags``; bits 8-9 carry the sender's :class:`NodeState` in a
-    node's responses (a rosgate choice: the master sees every node's state each cycle)."""
+    node's responses (a rosgate choice: the master sees every node's state each cycle).
+
+    rosgate's nodes set only ERROR and the state, and ignore the other bits in requests. The
+    protocol's FORWARDED bit (bit 4, a forwarding node marking a frame) is not used: a node
+    forwards frames cut-through, unchanged, so their checksums and FCS stay the sender's."""
 
     PAGE_PARITY = 1 << 0
     ERROR = 1 << 1
     MORE_FRAGMENTS = 1 << 2
     ACK_REQUIRED = 1 << 3
-    FORWARDED = 1 << 4
 
 
 STATE_SHIFT = 8

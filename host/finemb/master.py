@@ -44,6 +44,7 @@ class NodeRecord:
     state: NodeState = NodeState.INIT     # as the node reported it last
     answered: int = 0                     # ISEND_RES in time
     late: int = 0                         # cycles without one
+    reinit_answers: int = 0               # answers reporting REINIT (watchdog or REINIT)
     missed_in_row: int = 0
     reinits: int = 0
     inputs: dict = None                   # the last input page, decoded
@@ -195,6 +196,7 @@ class FinembMaster:
         old = self.nodes.get(node_id)
         if old is not None:
             node.reinits, node.answered, node.late = old.reinits + 1, old.answered, old.late
+            node.reinit_answers = old.reinit_answers
         self.nodes[node_id] = node
         return node
 
@@ -266,6 +268,8 @@ class FinembMaster:
             if type_ != MsgType.ISEND_RES or node is None or cycle != self.cycle_no:
                 continue
             node.state = NodeState(flags >> STATE_SHIFT & 3)
+            if node.state == NodeState.REINIT:
+                node.reinit_answers += 1
             if flags & Flag.ERROR or len(body) != node.descriptor.page_in_bytes:
                 continue
             node.inputs = got[node_id] = node.descriptor.unpack(Direction.IN, body)
