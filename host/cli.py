@@ -301,7 +301,9 @@ def _add_project_commands(commands):
             "results (also in <output>/sim_results.json).")
     p.add_argument("--sim", default="verilator", choices=["icarus", "verilator"],
                    help="simulator (default verilator)")
-    p.add_argument("--waves", action="store_true", help="record FST waveforms")
+    p.add_argument("--waves", action="store_true",
+                   help="record every signal of the system as an FST waveform into the output "
+                        "folder (rosgate_system.fst)")
     p.add_argument("--arg", action="append", default=[], metavar="KEY=VALUE",
                    help="passed to the software nodes as ctx.args (repeatable)")
     p.add_argument("--help-args", action="store_true",
@@ -490,9 +492,11 @@ def _run_sim(args):
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:
         console.error(exc)
+        _failed_waves(console, args, out)
         return 2
     except SimulationFailed as exc:
         console.error(f"simulation failed: {exc}")
+        _failed_waves(console, args, out)
         return 1
     module = load_sim_module(p)
     if ros2 is not None:
@@ -503,6 +507,10 @@ def _run_sim(args):
     else:
         import json
         console.print(json.dumps(results, indent=2))
+    if args.waves:
+        from host.project_sim import WAVES
+        console.print(f"waveform (every signal of the system, FST): {Path(out) / WAVES}; open "
+                      f"it with gtkwave or surfer")
     for path, counts in results.get("recorded", {}).items():
         console.print(f"recorded {sum(counts.values())} messages on {len(counts)} topics to "
                       f"{path}")
@@ -511,6 +519,12 @@ def _run_sim(args):
     console.done(f"{len(written)} files to {out}/ ({', '.join(written[:6])}"
                  f"{', ...' if len(written) > 6 else ''})")
     return 0
+
+
+def _failed_waves(console, args, out):
+    from host.project_sim import WAVES
+    if args.waves and (Path(out) / WAVES).is_file():
+        console.error(f"the waveform up to the failure: {Path(out) / WAVES}")
 
 
 class _SimStatus:
@@ -700,9 +714,23 @@ def main(argv=None):
     try:
         status = _dispatch(args)
         return status
+    except BrokenPipeError:
+        # the reader went away (`rosgate ... | head`): end quietly, as a SIGPIPE would
+        _discard_stdout()
+        status = 141
+        return status
     finally:
         if status != 0:
             _quiet_unused_elaboratables()
+
+
+def _discard_stdout():
+    """Point standard output at /dev/null, so the interpreter's last flush at exit does not
+    fail on the closed pipe again."""
+    import os
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def _quiet_unused_elaboratables():

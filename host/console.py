@@ -11,6 +11,19 @@ from rich.console import Console as RichConsole
 __all__ = ["Console"]
 
 
+class _QuietOnBrokenPipe(RichConsole):
+    """A console whose reader went away (``rosgate ... | head``) ends the command quietly
+    with the status of a SIGPIPE, as the plain ``print`` paths of the command line do."""
+
+    def on_broken_pipe(self):
+        import os
+        import sys
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+        raise SystemExit(141)
+
+
 class Console:
     """Output of one ``rosgate`` command.
 
@@ -22,7 +35,7 @@ class Console:
 
     def __init__(self, prog):
         self.prog = prog
-        self.out = RichConsole(highlight=False, soft_wrap=True)
+        self.out = _QuietOnBrokenPipe(highlight=False, soft_wrap=True)
         self.err = RichConsole(stderr=True, highlight=False, soft_wrap=True)
         self._status = None
         self._start = time.monotonic()

@@ -62,6 +62,8 @@ TOP = "rosgate_system"
 #: files the simulation writes into the output folder, besides the nodes' own
 RESULTS, ERROR, PROGRESS, LOG, STOP = "sim_results.json", "sim_error.json", \
     "sim_progress.jsonl", "sim.log", "sim.stop"
+#: the waveform of a run with ``waves``, in the output folder
+WAVES = f"{TOP}.fst"
 
 
 #: wall seconds between two status events of a running simulation
@@ -541,7 +543,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     inputs = [name for name, flow in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     out.mkdir(parents=True, exist_ok=True)
-    for name in (RESULTS, ERROR, PROGRESS, STOP):
+    for name in (RESULTS, ERROR, PROGRESS, STOP, WAVES):
         if (out / name).exists():
             (out / name).unlink()
     stop = threading.Event()
@@ -571,6 +573,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
                                failed=exc.failed, total=exc.total,
                                results=exc.results) from None
     finally:
+        if waves and (build_dir / f"{TOP}.fst").is_file():
+            # the waveform goes with the run's other files, out of the build cache
+            os.replace(build_dir / f"{TOP}.fst", out / WAVES)
         for signum, handler in handlers.items():
             signal.signal(signum, handler)
         (out / STOP).unlink(missing_ok=True)

@@ -235,3 +235,22 @@ def test_export_av_chain_refuses_a_bad_scale(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["export", "av_chain", "--scale", "1.5", "-o", str(tmp_path)])
     assert exc.value.code == 2 and "--scale must be in (0, 1], not 1.5" in capsys.readouterr().err
+
+
+def test_output_into_a_closed_pipe_ends_quietly():
+    """``rosgate ... | head``: no traceback, the status of a SIGPIPE."""
+    result = subprocess.run(
+        f"set -o pipefail; {sys.executable} -m host.cli info examples/av_chain/build.cfg | "
+        f"head -1", shell=True, executable="/bin/bash", capture_output=True, text=True)
+    assert result.returncode == 141 and result.stderr == "", result.stderr
+    assert result.stdout.startswith("project AvChain")
+
+
+def test_waves_are_written_into_the_output_folder(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["sim", "examples/inverse_kinematics/build.cfg", "--sim", "icarus", "--waves",
+                 "--arg", "requests=2", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    fst = out / "rosgate_system.fst"
+    assert f"waveform (every signal of the system, FST): {fst}" in printed
+    assert fst.stat().st_size > 10_000
