@@ -12,8 +12,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench import (av_chain, ball_on_plate, cosim, finemb, hmt, kernels, msg,  # noqa: E402
-                   net, reconos, reconos_apps, ros2, services, timing)
+from bench import (av_chain, ball_on_plate, cosim, examples, finemb, hmt,  # noqa: E402
+                   kernels, msg, net, reconos, reconos_apps, ros2, services, timing)
 from bench.plots import write_plots  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -36,6 +36,7 @@ BENCHES = [
     ("services and actions over hardware topics against ReconROS' memory-based services",
      services),
     ("co-simulation pace: rosgate sim against the bare Verilator model", cosim),
+    ("the examples as rosgate sim runs them: the figures the documentation quotes", examples),
     ("timing: every core placed and routed on ECP5 (LFE5UM5G-85F-8), 3 seeds", timing),
 ]
 

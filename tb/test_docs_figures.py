@@ -1,0 +1,42 @@
+"""The cycle figures the documentation quotes for the examples are the measured ones of
+``bench/results/`` (``make bench`` writes them; ``bench/examples.py`` runs the examples as a
+user does), not numbers typed by hand."""
+
+import json
+import re
+
+from .harness import ROOT
+
+RESULTS = ROOT / "bench" / "results"
+DOCS = ROOT / "docs"
+
+
+def examples():
+    return json.loads((RESULTS / "examples.json").read_text())["examples"]
+
+
+def test_sobel_dip_figures_of_the_simulation_page():
+    text = (DOCS / "simulation.md").read_text()
+    cycles = examples()["sobel_dip"]["cycles"]
+    quoted = 0
+    for image, n in cycles.items():
+        for mo in re.finditer(rf"viewer: {re.escape(image)} \(\d+x\d+\) filtered in (\d+) "
+                              rf"cycles = ([0-9.]+) ms", text):
+            assert int(mo.group(1)) == n and float(mo.group(2)) == round(n / 1e5, 3), mo[0]
+            quoted += 1
+        for mo in re.finditer(rf"^{re.escape(image)}\s+\d+x\d+\s+(\d+)\s+([0-9.]+)\s", text,
+                              re.MULTILINE):
+            assert int(mo.group(1)) == n and float(mo.group(2)) == round(n / 1e5, 3), mo[0]
+            quoted += 1
+    assert quoted >= 2, "docs/simulation.md no longer quotes the Sobel/DIP example"
+
+
+def test_inverse_kinematics_figures_of_the_howto():
+    text = (DOCS / "howto.md").read_text()
+    mo = re.search(r"\((\d+) cycles from publish to answer on average, (\d+) of them the "
+                   r"kernel's search", text)
+    assert mo, "docs/howto.md no longer quotes the inverse kinematics example"
+    assert int(mo.group(1)) == examples()["inverse_kinematics"]["cycles"]["mean"]
+    kernels = json.loads((RESULTS / "kernels.json").read_text())["rows"]
+    ik = next(r for r in kernels if r["label"] == "inverse kinematics (per solution)")
+    assert int(mo.group(2)) == round(ik["cycles"])
