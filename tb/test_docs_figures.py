@@ -40,3 +40,11 @@ def test_inverse_kinematics_figures_of_the_howto():
     kernels = json.loads((RESULTS / "kernels.json").read_text())["rows"]
     ik = next(r for r in kernels if r["label"] == "inverse kinematics (per solution)")
     assert int(mo.group(2)) == round(ik["cycles"])
+
+
+def test_howto_shows_the_example_thread_as_it_is():
+    """docs/howto.md's complete FSM thread is examples/image_invert's, character for
+    character (the example runs in tb/test_project_sim.py)."""
+    text = (DOCS / "howto.md").read_text()
+    code = (ROOT / "examples/image_invert/src/rt_invert/amaranth/thread.py").read_text()
+    assert f"```python\n{code}```" in text

@@ -274,6 +274,20 @@ def test_image_echo_runs_its_own_camera(tmp_path):
     assert results["extra_echoes"] == 0 and all(i["cycles"] > 0 for i in results["images"])
 
 
+@pytest.mark.parametrize("sim", ["icarus", "verilator"])
+def test_image_invert_thread_inverts_every_tail(sim, tmp_path):
+    """examples/image_invert (docs/howto.md's FSM thread): random images of 0..7 pixels a
+    side, so every length of the last 8-byte word and empty images occur; each comes back
+    inverted, the other fields unchanged (checked by its sim.py against 255 - byte)."""
+    seed = random.Random().randrange(1 << 30)
+    results = run_project_sim(ROOT / "examples/image_invert/build.cfg", sim,
+                              out=tmp_path / "out", args={"images": "40", "max_side": "7",
+                                                          "seed": str(seed)}, limit_ms=20)
+    assert results["all_equal"] and len(results["images"]) == 40, (seed, results)
+    tails = {i["bytes"] % 8 for i in results["images"]}
+    assert len(tails) >= 5 and any(i["bytes"] == 0 for i in results["images"]), (seed, tails)
+
+
 def test_project_without_hardware_or_nodes_is_refused(tmp_path, capsys):
     """examples/sobel_topic has only an HLS thread: nothing to simulate, said so (exit 2),
     instead of 0 cycles and exit 0."""
