@@ -1,6 +1,7 @@
 """``rosgate tap``: a simulated design on a TAP device in a network namespace the command
 creates and removes (docs/simulation.md "On a TAP device"), and ``rosgate export finemb``."""
 
+import os
 import shlex
 import signal
 import sys
@@ -328,7 +329,9 @@ def _run_export_finemb(args):
                   "type": p.type.name.lower(), "offset": p.offset, "size": p.size}
                  for p in descriptor.ports]
         write_manifest(out / f"{name}.json", module=name, component=node, top=top, extra={
-            "io_description": str(args.io), "application": args.app, "mac": args.mac,
+            # relative to the manifest's folder, as every path of an export's manifest
+            "io_description": os.path.relpath(args.io.resolve(), out.resolve()),
+            "application": args.app, "mac": args.mac,
             "serial": args.serial, "page_out_bytes": descriptor.page_out_bytes,
             "page_in_bytes": descriptor.page_in_bytes, "io_ports": ports,
             "io_descriptor_hex": descriptor.encode().hex(),

@@ -239,11 +239,12 @@ def test_export_av_chain_refuses_a_bad_scale(tmp_path, capsys):
 
 def test_output_into_a_closed_pipe_ends_quietly():
     """``rosgate ... | head``: no traceback, the status of a SIGPIPE."""
+    # the reader is gone before rosgate writes (Python starts in a tenth of a second, `true`
+    # ends at once), so the first write meets the closed pipe
     result = subprocess.run(
         f"set -o pipefail; {sys.executable} -m host.cli info examples/av_chain/build.cfg | "
-        f"head -1", shell=True, executable="/bin/bash", capture_output=True, text=True)
+        f"true", shell=True, executable="/bin/bash", capture_output=True, text=True)
     assert result.returncode == 141 and result.stderr == "", result.stderr
-    assert result.stdout.startswith("project AvChain")
 
 
 def test_waves_are_written_into_the_output_folder(tmp_path, capsys):

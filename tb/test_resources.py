@@ -78,14 +78,21 @@ def test_estimate_reused_while_unchanged(tmp_path, monkeypatch):
     first = estimate_resources(path, "adder")
     import gen.export.resources as resources
     calls = []
-    real_run = resources.subprocess.run
+    real_run, real_popen = resources.subprocess.run, resources.subprocess.Popen
 
     def run(args, **kwargs):
         calls.append(args)
         return real_run(args, **kwargs)
+
+    def popen(args, **kwargs):
+        calls.append(args)
+        return real_popen(args, **kwargs)
     monkeypatch.setattr(resources.subprocess, "run", run)
+    monkeypatch.setattr(resources.subprocess, "Popen", popen)
     assert estimate_resources(path, "adder") == first
     assert all("-V" in a for a in calls), calls       # only the version was asked
     path.write_text(path.read_text().replace("adder", "adder2"))
-    estimate_resources(path, "adder2")
+    passes = []
+    estimate_resources(path, "adder2", progress=passes.append)
     assert any("-p" in a for a in calls)
+    assert passes[0] == "SYNTH_XILINX pass" and "ABC" in passes, passes
