@@ -48,3 +48,14 @@ def test_howto_shows_the_example_thread_as_it_is():
     text = (DOCS / "howto.md").read_text()
     code = (ROOT / "examples/image_invert/src/rt_invert/amaranth/thread.py").read_text()
     assert f"```python\n{code}```" in text
+
+
+def test_service_figures_of_the_services_page():
+    text = (DOCS / "services.md").read_text()
+    rows = json.loads((RESULTS / "services.json").read_text())["sort"]
+    for row in rows:
+        label = "0 (transport only)" if row["values"] == 0 else str(row["values"])
+        unit = " cycles" if row["values"] == 0 else ""
+        line = (f"| {label} | {row['hw_topics_cycles']:,}{unit} | "
+                f"{row['memory_cycles']:,}{unit} |")
+        assert line in text, line

@@ -274,7 +274,7 @@ def test_image_echo_runs_its_own_camera(tmp_path):
     assert results["extra_echoes"] == 0 and all(i["cycles"] > 0 for i in results["images"])
 
 
-@pytest.mark.parametrize("sim", ["icarus", "verilator"])
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
 def test_image_invert_thread_inverts_every_tail(sim, tmp_path):
     """examples/image_invert (docs/howto.md's FSM thread): random images of 0..7 pixels a
     side, so every length of the last 8-byte word and empty images occur; each comes back
