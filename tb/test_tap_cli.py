@@ -27,20 +27,29 @@ def in_namespace(ns, *cmd, timeout=120):
                           timeout=timeout)
 
 
-def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
-    proc = subprocess.Popen([*ROSGATE, "tap", "engine", "--sessions", "1", "--build-dir",
-                             str(SIM_BUILD / "tap-engine")], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True,
+def start_tap(*args, timeout=900):
+    """``rosgate tap <args>`` started; its output up to the "Ctrl-C" line (the design is up)."""
+    proc = subprocess.Popen([*ROSGATE, "tap", *map(str, args)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
     lines = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            proc.kill()
+            raise AssertionError(f"rosgate tap {args[0]} ended early:\n" + "".join(lines))
+        lines.append(line)
+        if line.startswith("Ctrl-C"):
+            return proc, lines
+    proc.kill()
+    raise AssertionError(f"rosgate tap {args[0]} not up in {timeout} s:\n" + "".join(lines))
+
+
+def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
+    proc, lines = start_tap("engine", "--sessions", "1", "--build-dir",
+                            SIM_BUILD / "tap-engine")
     try:
-        deadline = time.monotonic() + 600
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            assert line, "rosgate tap engine ended early:\n" + "".join(lines)
-            lines.append(line)
-            if line.startswith("Ctrl-C"):
-                break
         text = "".join(lines)
         ns = re.search(r"in namespace (rg[0-9a-f]+)", text).group(1)
         assert f"ip netns exec {ns} ping 198.18.0.16" in text
@@ -181,19 +190,9 @@ print("socket master ok")
 def test_tap_finemb_no_master_serves_a_socket_master():
     """``rosgate tap finemb --no-master``: the line comes up and waits; a master written in
     the test from docs/finemb.md runs it from the namespace, including the REINIT answers."""
-    proc = subprocess.Popen([*ROSGATE, "tap", "finemb", "--nodes", "2", "--no-master",
-                             "--build-dir", str(SIM_BUILD / "tap-finemb-n2")], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
-    lines = []
+    proc, lines = start_tap("finemb", "--nodes", "2", "--no-master", "--build-dir",
+                            SIM_BUILD / "tap-finemb-n2")
     try:
-        deadline = time.monotonic() + 900
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            assert line, "rosgate tap finemb ended early:\n" + "".join(lines)
-            lines.append(line)
-            if line.startswith("Ctrl-C"):
-                break
         text = "".join(lines)
         mo = re.search(r"up on (\S+) in namespace (rg[0-9a-f]+); the kernel is ([0-9.]+)/24",
                        text)

@@ -38,8 +38,7 @@ from gen.config import project_library
 from tb.models.msgstream import reconros_beats
 from tb.streams import random_pauses
 
-ORIGINAL = __import__("importlib").import_module("demo_sim")
-image = ORIGINAL.image
+from host.reconos.messages import random_image_message
 
 
 def frame(beats):
@@ -65,7 +64,7 @@ async def injector(ctx):
         # the message after a bad one is small, and so is a bad one half of the time: the
         # good one is then read to its fields while the receivers still complete the bad one
         small = follows_bad or (kind != "good" and rng.randrange(2))
-        value = image(rng, 2 if small else 12, k)
+        value = random_image_message(rng, 2 if small else 12)
         beats = reconros_beats(library, "sensor_msgs/msg/Image", value, 77)
         if kind == "too_many":
             # the data array's count (the last array: the 8-bit arrays are encoding, data,
@@ -110,7 +109,6 @@ def external_threadb_project(folder):
     port of the system top) and with the injector as its sim.py."""
     shutil.copytree(GATEWAY_DEMO, folder)
     shutil.rmtree(folder / "src" / "rt_threadb")
-    (folder / "demo_sim.py").write_text((GATEWAY_DEMO / "sim.py").read_text())
     (folder / "sim.py").write_text(INJECTOR)
     return folder / "build.cfg"
 

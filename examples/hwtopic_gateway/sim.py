@@ -11,24 +11,8 @@ on /topic/gateway go through the gateway onto the hardware topic and out of Thre
 import random
 
 from cocotb.queue import Queue
+from host.reconos.messages import random_image_message
 from host.sim_args import SimArg
-
-ENCODINGS = ("bgr8", "rgb8", "mono8", "mono16")
-CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "mono16": 2}
-
-
-def image(rng, max_side, k):
-    width, height = rng.randrange(1, max_side + 1), rng.randrange(1, max_side + 1)
-    encoding = rng.choice(ENCODINGS)
-    step = width * CHANNELS[encoding]
-    return {"header": {"stamp": {"sec": rng.randrange(-(1 << 31), 1 << 31),
-                                 "nanosec": rng.randrange(1 << 32)},
-                       "frame_id": "".join(rng.choice("abcdefghij_/") for _ in
-                                           range(rng.randrange(0, 20)))},
-            "height": height, "width": width, "encoding": encoding,
-            "is_bigendian": rng.randrange(2), "step": step,
-            "data": rng.randbytes(step * height)}
-
 
 def setup(ctx):
     ctx.outputs = ctx.broker.subscribe("/outputtopic")
@@ -41,7 +25,7 @@ async def camera(ctx):
     rng = random.Random(int(ctx.args.get("seed", 7)))
     n, side = int(ctx.args.get("images", 3)), int(ctx.args.get("max_side", 24))
     for k in range(n):
-        value = image(rng, side, k)
+        value = random_image_message(rng, side)
         start = ctx.now()
         ctx.broker.publish("/inputtopic", value)
         got = await ctx.outputs.get()
@@ -54,7 +38,7 @@ async def camera(ctx):
                 f"{'came back equal' if got == value and via_gateway == value else 'DIFFERS'}"
                 f" after {ctx.now() - start} cycles")
     for k in range(n):
-        value = image(rng, side, k)
+        value = random_image_message(rng, side)
         start = ctx.now()
         ctx.broker.publish("/topic/gateway", value)
         got = await ctx.outputs.get()

@@ -14,26 +14,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from host.reconos.messages import image_message
+from host.reconos.messages import image_message, random_image_message
 from host.sim_args import SimArg
 
 IMAGES = Path(__file__).resolve().parent.parent / "images"
-CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "mono16": 2}
-
-
-def random_image(rng, max_side):
-    width, height = rng.randrange(1, max_side + 1), rng.randrange(1, max_side + 1)
-    encoding = rng.choice(sorted(CHANNELS))
-    step = width * CHANNELS[encoding]
-    return {"header": {"stamp": {"sec": rng.randrange(-(1 << 31), 1 << 31),
-                                 "nanosec": rng.randrange(1 << 32)},
-                       "frame_id": "".join(rng.choice("abcdefghij_/") for _ in
-                                           range(rng.randrange(0, 20)))},
-            "height": height, "width": width, "encoding": encoding,
-            "is_bigendian": rng.randrange(2), "step": step,
-            "data": rng.randbytes(step * height)}
-
-
 def images(args):
     """(name, message) of the run: small photographs first, then random images."""
     rng = random.Random(int(args.get("seed", 1)))
@@ -45,7 +29,7 @@ def images(args):
         if pixels is not None and pixels.nbytes <= limit and len(out) < count:
             out.append((path.name, image_message(pixels, k, frame_id=path.stem)))
     while len(out) < count:
-        out.append((f"random {len(out)}", random_image(rng, side)))
+        out.append((f"random {len(out)}", random_image_message(rng, side)))
     return out
 
 

@@ -1,25 +1,13 @@
 """Software side of the image inverter for ``rosgate sim``: a camera publishes images on
 /image_in, one at a time, and checks each that comes back on /image_inverted: every data
 byte 255 minus the one sent, every other field unchanged. ``--arg images=N`` (default 6)
-random ``mono8``/``bgr8``/``mono16`` images of 0 to ``--arg max_side`` (default 40) pixels a
-side, so every length of the last memory word occurs."""
+random images (``bgr8``, ``rgb8``, ``mono8``, ``mono16``) of 0 to ``--arg max_side`` (default
+40) pixels a side, so every length of the last memory word occurs."""
 
 import random
 
+from host.reconos.messages import random_image_message
 from host.sim_args import SimArg
-
-CHANNELS = {"mono8": 1, "bgr8": 3, "mono16": 2}
-
-
-def image(rng, max_side, k):
-    width, height = rng.randrange(0, max_side + 1), rng.randrange(0, max_side + 1)
-    encoding = rng.choice(sorted(CHANNELS))
-    step = width * CHANNELS[encoding]
-    return {"header": {"stamp": {"sec": k, "nanosec": rng.randrange(1 << 32)},
-                       "frame_id": f"camera_{k}"},
-            "height": height, "width": width, "encoding": encoding, "is_bigendian": 0,
-            "step": step, "data": rng.randbytes(step * height)}
-
 
 def setup(ctx):
     ctx.inverted = ctx.broker.subscribe("/image_inverted")
@@ -30,7 +18,7 @@ async def camera(ctx):
     rng = random.Random(int(ctx.args.get("seed", 1)))
     count, side = int(ctx.args.get("images", 6)), int(ctx.args.get("max_side", 40))
     for k in range(count):
-        value = image(rng, side, k)
+        value = random_image_message(rng, side, min_side=0)
         start = ctx.now()
         ctx.broker.publish("/image_in", value)
         got = await ctx.inverted.get()

@@ -202,6 +202,27 @@ class MessageMemory:
         return [self._read_value(ptr + i * size, t.element) for i in range(n)]
 
 
+#: bytes per pixel of the encodings :func:`random_image_message` chooses from
+IMAGE_CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "mono16": 2}
+
+
+def random_image_message(rng, max_side, *, min_side=1):
+    """A random ``sensor_msgs/Image`` value from ``rng`` (a :class:`random.Random`):
+    ``min_side`` to ``max_side`` pixels a side, one of the :data:`IMAGE_CHANNELS` encodings,
+    a random stamp, frame id and ``is_bigendian`` flag, random bytes."""
+    width = rng.randrange(min_side, max_side + 1)
+    height = rng.randrange(min_side, max_side + 1)
+    encoding = rng.choice(tuple(IMAGE_CHANNELS))
+    step = width * IMAGE_CHANNELS[encoding]
+    return {"header": {"stamp": {"sec": rng.randrange(-(1 << 31), 1 << 31),
+                                 "nanosec": rng.randrange(1 << 32)},
+                       "frame_id": "".join(rng.choice("abcdefghij_/") for _ in
+                                           range(rng.randrange(0, 20)))},
+            "height": height, "width": width, "encoding": encoding,
+            "is_bigendian": rng.randrange(2), "step": step,
+            "data": rng.randbytes(step * height)}
+
+
 def image_message(pixels, seq=0, *, encoding="bgr8", step=None, data=None, frame_id="camera"):
     """The ``sensor_msgs/Image`` value of the ``height x width x 3`` array ``pixels``, stamped
     ``seq`` seconds; ``encoding``, ``step`` and ``data`` override what the pixels give (for
