@@ -17,6 +17,7 @@ from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
 from .compiled import DEFAULT_MEMORY_MB, MEMORY_OPTION
+from .ros2.bridge import SERVICE_QUEUE
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -323,6 +324,10 @@ def _add_project_commands(commands):
                         "services appear on it; runs until SIGINT/SIGTERM (docs/ros2.md)")
     p.add_argument("--domain", type=int, default=None,
                    help="DDS domain id with --ros2 (default: ROS_DOMAIN_ID, else 0)")
+    p.add_argument("--service-queue", type=_positive_int, default=None, metavar="N",
+                   help="with --ros2, calls of one hardware service the bridge holds while the "
+                        "hardware serves earlier ones; a call beyond them is refused with the "
+                        f"empty response, counted and logged (default {SERVICE_QUEUE})")
     p.add_argument("--with-nodes", action="store_true",
                    help="with --ros2, also run sim.py's nodes (by default the ROS 2 graph "
                         "stands in for them)")
@@ -425,6 +430,16 @@ def _memory_mb(text):
     return value
 
 
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number above 0")
+    return value
+
+
 def _positive_ms(text):
     """``--limit-ms``, ``--stall-ms``: a number of milliseconds above 0."""
     try:
@@ -475,9 +490,10 @@ def _run_sim(args):
         if domain not in DOMAIN_IDS:
             console.error(f"--domain {domain}: expected a DDS domain id 0..{DOMAIN_IDS[-1]}")
             return 2
-        ros2 = {"domain": domain, "nodes": args.with_nodes}
-    elif args.domain is not None or args.with_nodes:
-        console.error("--domain and --with-nodes need --ros2")
+        ros2 = {"domain": domain, "nodes": args.with_nodes,
+                "service_queue": args.service_queue or SERVICE_QUEUE}
+    elif args.domain is not None or args.with_nodes or args.service_queue is not None:
+        console.error("--domain, --with-nodes and --service-queue need --ros2")
         return 2
     try:
         with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "

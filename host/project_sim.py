@@ -48,7 +48,7 @@ from cocotb.triggers import Event, First
 
 from .compiled import DEFAULT_MEMORY_MB, memory_harness
 from .reconos import ReconosCosim, Resource
-from .ros2.bridge import BridgeQos
+from .ros2.bridge import SERVICE_QUEUE, BridgeQos
 from .ros2.cosim import serve_ros2, start_bridge, start_recorders
 from .sim_args import ArgumentError, check_args
 from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
@@ -470,7 +470,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         Wall seconds between two ``status`` calls.
     ros2 : dict or None
         Join a DDS domain instead of running to the nodes' end (``rosgate sim --ros2``):
-        ``domain`` (int) and ``nodes`` (bool: run ``sim.py``'s nodes too). The run has no
+        ``domain`` (int), ``nodes`` (bool: run ``sim.py``'s nodes too) and ``service_queue``
+        (int: calls of one service the bridge holds for the hardware; more are refused). The run has no
         simulated-time limit; SIGINT or SIGTERM to this process ends it cleanly.
     record, trace : path or None
         Write every message on the project's topics to a rosbag2 (MCAP) at ``record`` (a new
@@ -539,7 +540,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         params["trace"] = str(Path(trace).resolve())
     if ros2 is not None:
         params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
-                          "stop_file": str(out / STOP)}
+                          "stop_file": str(out / STOP),
+                          "service_queue": int(ros2.get("service_queue", SERVICE_QUEUE))}
     inputs = [name for name, flow in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     out.mkdir(parents=True, exist_ok=True)

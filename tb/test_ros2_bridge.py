@@ -13,6 +13,7 @@ request header) on loopback, each test on its own domain id.
 """
 
 import random
+import re
 import shutil
 import time
 
@@ -325,8 +326,10 @@ def test_hardware_client_calls_a_dds_service(tmp_path, photo):
 
 def test_ros2_options_need_ros2(capsys):
     from host.cli import main as rosgate
-    assert rosgate(["sim", str(SOBEL_DIP), "--domain", "3"]) == 2
-    assert "--domain and --with-nodes need --ros2" in capsys.readouterr().err
+    for option in (["--domain", "3"], ["--with-nodes"], ["--service-queue", "5"]):
+        assert rosgate(["sim", str(SOBEL_DIP), *option]) == 2
+        assert "--domain, --with-nodes and --service-queue need --ros2" in \
+            capsys.readouterr().err
     assert rosgate(["sim", str(SOBEL_DIP), "--ros2", "--domain", "300"]) == 2
     assert "--domain 300" in capsys.readouterr().err
 
@@ -458,6 +461,80 @@ def test_sort_service_from_dds(tmp_path):
             assert reply.guid == guid
             got[reply.seq] = list(reply.sorted)
     assert got == {seq: sorted(values) for seq, values in calls.items()}
+
+
+def test_sort_service_burst_is_answered_call_for_call(tmp_path):
+    """Two DDS clients write 50 calls each back to back, 3 of them larger than the sort thread
+    takes: every call is answered to its own client and sequence number, 97 sorted, the 3
+    with the empty response, which the bridge counts and logs as rejected (received =
+    delivered + rejected). The thread's block is 64 values here, so a call takes ~800
+    cycles instead of 22,500."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    block = 64
+    with peer.ros2_sim(SORT_SERVICE, "icarus", out, domain, "--param",
+                       f"SortDemo.block_size={block}"):
+        p = peer.Peer(domain)
+        writers = [p.writer("rq/srvRequest", peer.SortRequest) for _ in range(2)]
+        replies = p.reader("rr/srvReply", peer.SortResponse)
+        p.wait_matched(*writers, replies)
+        guids = [rng.randrange(1, 1 << 63) for _ in writers]
+        calls = {}
+        too_large = set(rng.sample(range(100), 3))
+        for k in range(100):
+            client, seq = k % 2, k // 2 + 1
+            n = rng.choice([block + 1, 1000]) if k in too_large else rng.randrange(1, block + 1)
+            values = [rng.randrange(1 << 32) for _ in range(n)]
+            calls[(guids[client], seq)] = values
+            writers[client].write(peer.SortRequest(guids[client], seq, values))
+        got = {}
+        for _ in calls:
+            reply = peer.SortResponse.deserialize(p.take_raw(replies))
+            assert (reply.guid, reply.seq) not in got, "answered twice"
+            got[(reply.guid, reply.seq)] = list(reply.sorted)
+    assert set(got) == set(calls)
+    for key, values in calls.items():
+        assert got[key] == ([] if len(values) > block else sorted(values)), key
+    counts = peer.results(out)["ros2"]["counts"]["/srv"]
+    assert counts == {"received": 100, "delivered": 97, "rejected": 3, "sent": 100}, counts
+    console = (tmp_path / "out.console").read_text()
+    refused = re.findall(r"/srv: rejected a my_reconros_services/srv/Sort_Request from DDS: "
+                         r"(\d+) values; the sort thread takes 1 to 64", console)
+    assert sorted(map(int, refused)) == sorted(len(calls[k]) for k in calls
+                                               if len(calls[k]) > block), console
+
+
+def test_service_calls_beyond_the_queue_are_refused_not_lost(tmp_path):
+    """--service-queue 3: ten calls written at once; those beyond the three the bridge holds
+    for the hardware are answered with the empty response at once, counted and logged; none
+    is lost."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    with peer.ros2_sim(SORT_SERVICE, "icarus", out, domain, "--service-queue", "3",
+                       "--param", "SortDemo.block_size=64"):
+        p = peer.Peer(domain)
+        requests = p.writer("rq/srvRequest", peer.SortRequest)
+        replies = p.reader("rr/srvReply", peer.SortResponse)
+        p.wait_matched(requests, replies)
+        calls = {seq: [rng.randrange(1 << 32) for _ in range(rng.randrange(1, 65))]
+                 for seq in range(1, 11)}
+        for seq, values in calls.items():
+            requests.write(peer.SortRequest(7, seq, values))
+        got = {}
+        for _ in calls:
+            reply = peer.SortResponse.deserialize(p.take_raw(replies))
+            got[reply.seq] = list(reply.sorted)
+    assert set(got) == set(calls)
+    refused = [seq for seq in calls if got[seq] == []]
+    assert all(got[seq] == sorted(calls[seq]) for seq in calls if seq not in refused)
+    counts = peer.results(out)["ros2"]["counts"]["/srv"]
+    assert counts["received"] == 10 and counts["rejected"] == len(refused) >= 1, counts
+    assert counts["delivered"] == 10 - len(refused) >= 3, counts
+    assert (tmp_path / "out.console").read_text().count(
+        "calls wait for the hardware already (the bridge's service queue, --service-queue "
+        "3)") == len(refused)
 
 
 ACTION_CLIENT_CFG = """[General]

@@ -30,6 +30,19 @@ async def clients(ctx):
     ctx.results["all_sorted"] = all(c["sorted"] for c in ctx.results["calls"])
 
 
+def accepts(ctx, name, value):
+    """With ``--ros2``: why a call from DDS cannot go to the hardware, or ``None``. The sort
+    thread takes 1 to ``block_size`` (2048) values; the bridge answers any other call with
+    the empty response, logs it and counts it as rejected."""
+    if name != "/srv":
+        return None
+    block = getattr(ctx.threads.get("SortDemo"), "block_size", 2048)
+    n = len(value["unsorted"])
+    if not 1 <= n <= block:
+        return f"{n} values; the sort thread takes 1 to {block}"
+    return None
+
+
 ARGS = {
     "requests": SimArg("requests per client", 3, kind=int),
     "size": SimArg("numbers per request", 2048, kind=int),

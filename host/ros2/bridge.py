@@ -66,14 +66,22 @@ STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
 CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
 
 
+#: calls of one service the bridge holds for the hardware by default (``--service-queue``)
+SERVICE_QUEUE = 1000
+
+
 class BridgeQos:
     """ROS 2's default QoS profile for topics and services (rmw_qos_profile_default):
     reliable, keep last ``depth``, volatile."""
 
-    def __init__(self, depth=10):
+    def __init__(self, depth=10, service_queue=SERVICE_QUEUE):
         if not isinstance(depth, int) or depth < 1:
             raise ValueError(f"QoS history depth {depth!r}: expected an integer >= 1")
+        if not isinstance(service_queue, int) or service_queue < 1:
+            raise ValueError(f"service queue {service_queue!r}: expected an integer >= 1")
         self.depth = depth
+        #: calls of one service the bridge holds for the hardware; more are refused
+        self.service_queue = service_queue
 
     def dds(self, status=False, keep_all=False):
         """The profile; ``status``: an action's status topic (transient local, keep last 1,
@@ -196,8 +204,11 @@ class Ros2Bridge:
             req_type = self.types.service_part(service.request_type)
             res_type = self.types.service_part(service.response_type)
             if service.servers:
+                # every request is kept until the bridge takes it (history KEEP_ALL, reliable:
+                # a burst makes the clients wait, it does not overwrite requests)
                 ep = self._reader(request, req_type, service.name, service.request_type,
-                                  service.key)
+                                  service.key, keep_all=True)
+                ep.queued = 0
                 ep.reply = self._writer(reply, res_type, service.name, service.response_type,
                                         service.key)
                 self._inbound.append((ep, self._service_request))
@@ -420,19 +431,41 @@ class Ros2Bridge:
         return guid, seq, data[:4] + data[20:]
 
     def _service_request(self, ep, data):
-        request = self._request(ep, data)
-        if request is None:
-            return
-        guid, seq, value = request
+        split = self._split(ep, data)
+        if split is None:
+            return                       # no request header: nobody to answer
+        guid, seq, body = split
+        try:
+            value = decode_cdr(self.library, ep.typename, body, padded=True)
+        except WireError as exc:
+            return self._refuse_call(ep, guid, seq, str(exc))
+        reason = self.accepts(ep.name, value) if self.accepts is not None else None
+        if reason:
+            return self._refuse_call(ep, guid, seq, reason)
+        if ep.queued >= self.qos.service_queue:
+            return self._refuse_call(ep, guid, seq, f"{ep.queued} calls wait for the hardware "
+                                                    f"already (the bridge's service queue, "
+                                                    f"--service-queue {self.qos.service_queue})")
         self.counts[ep.name]["delivered"] += 1
         self._calls += 1
+        ep.queued += 1
 
         async def call():
+            # the hardware takes the calls in the order they came (the broker's queue)
             try:
                 self._reply(ep, guid, seq, await self.broker.call(ep.key, value))
             finally:
                 self._calls -= 1
+                ep.queued -= 1
         self.spawn(call())
+
+    def _refuse_call(self, ep, guid, seq, reason):
+        """A request the hardware cannot take: counted and logged as rejected, and answered
+        with the response type's default value (empty sequences, zeros), so that the
+        client does not wait for ever."""
+        self._reject(ep, reason)
+        response = ep.reply.typename
+        self._reply(ep, guid, seq, default_value(self.library, response))
 
     def _service_reply(self, ep, data):
         got = self._client_reply(ep, data, ep.pending)

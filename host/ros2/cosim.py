@@ -35,18 +35,22 @@ def _on_signal(signum, frame):
 def start_bridge(ctx, module, options):
     """Create and start the bridge for ``ctx.project``; log what it shows on DDS.
 
-    ``options``: ``domain`` (int), ``stop_file`` (path or None). ``module`` is the project's
+    ``options``: ``domain`` (int), ``stop_file`` (path or None), ``service_queue`` (int: calls
+    of one service held for the hardware). ``module`` is the project's
     ``sim.py``: its ``accepts(ctx, name, value)``, if any, states the hardware's limits for
     messages arriving from DDS."""
     import cocotb
 
     from gen.config import project_library
+
+    from .bridge import SERVICE_QUEUE, BridgeQos
     accepts = getattr(module, "accepts", None) if module is not None else None
     bridge = Ros2Bridge(
         ros_interfaces(ctx.project), project_library(ctx.project), ctx.broker,
         domain=int(options["domain"]), log=ctx.log, spawn=cocotb.start_soon,
         now_ns=lambda: cocotb.utils.get_sim_time("ns"),
-        accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None)
+        accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None,
+        qos=BridgeQos(service_queue=int(options.get("service_queue", SERVICE_QUEUE))))
     shown = bridge.start()
     ctx.log(f"ros2 bridge: joined DDS domain {bridge.domain} with "
             f"{len(shown)} interfaces: {'; '.join(shown) or 'none'}")
