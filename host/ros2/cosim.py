@@ -3,8 +3,9 @@
 The run has no simulated-time limit. Every ``POLL_CYCLES`` the bridge moves what waits in
 either direction. Once every hardware thread waits in an OS call and nothing has happened (no
 OS call, register access, memory access or message) for ``IDLE_POLLS`` polls, the system
-cannot move by itself: the simulator blocks on DDS for up to ``IDLE_WAIT_S`` of wall time, so
-an idle system costs no processor time. A thread that computes without OS calls keeps the
+cannot move by itself: the simulator blocks on DDS, first for ``IDLE_WAIT_S`` of wall time and,
+while the quiet lasts, for twice as long each time up to ``IDLE_WAIT_MAX_S``, so an idle system
+costs almost no processor time (a wake-up a second). A thread that computes without OS calls keeps the
 simulation running. SIGINT or SIGTERM (or the stop file the ``rosgate`` process writes when
 it gets them) ends the run cleanly: the participant is deleted, the results and files are
 written, the simulator exits.
@@ -19,11 +20,12 @@ from .bridge import Ros2Bridge
 from .graph import ros_interfaces
 
 __all__ = ["start_bridge", "serve_ros2", "start_recorders", "POLL_CYCLES", "IDLE_POLLS",
-           "IDLE_WAIT_S"]
+           "IDLE_WAIT_S", "IDLE_WAIT_MAX_S"]
 
 POLL_CYCLES = 200
 IDLE_POLLS = 1
 IDLE_WAIT_S = 0.05
+IDLE_WAIT_MAX_S = 1.0
 
 _stop = {"signal": None}
 
@@ -109,6 +111,7 @@ async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
         return (cosim.runtime.commands, cosim.runtime.bus_accesses, cosim.memory_accesses,
                 cosim.broker.events)
     last, quiet = activity(), 0
+    idle_wait = IDLE_WAIT_S
     # one timer, not ClockCycles: cocotb would run Python at every one of the clock edges
     poll = Timer(round(POLL_CYCLES * 1000 / ctx.clock_mhz), "ns")
     while not failures and (why := _stop_requested(options)) is None:
@@ -116,11 +119,14 @@ async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
         await poll
         now = activity()
         if moved or now != last or ctx._sleeping:
-            last, quiet = now, 0
+            last, quiet, idle_wait = now, 0, IDLE_WAIT_S
             continue
         quiet += 1
         if quiet >= IDLE_POLLS and all(s in cosim.runtime.pending for s in slots):
-            bridge.wait(IDLE_WAIT_S)
+            # DDS data ends the wait at once; the longer the quiet, the longer the wait, so a
+            # system left idle wakes about once a second (and sees a stop request then)
+            bridge.wait(idle_wait)
+            idle_wait = min(2 * idle_wait, IDLE_WAIT_MAX_S)
     if not failures:
         waiting = ", ".join(f"slot {s} in {m.upper()}" for s, (m, _) in
                             sorted(cosim.runtime.pending.items())) or "no slot in an OS call"
