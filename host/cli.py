@@ -724,9 +724,13 @@ def build_parser():
 
 
 def main(argv=None):
+    from host.console import stop_on_signals
     parser = build_parser()
     args = parser.parse_args(argv)
     status = 1
+    if argv is None:
+        # the command line's own process: Ctrl-C and SIGTERM stop it cleanly at any moment
+        stop_on_signals()
     try:
         status = _dispatch(args)
         return status
@@ -774,8 +778,12 @@ def _dispatch(args):
         # a tool failed (a simulator build, yosys): its own message says which and where
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        from host.console import Interrupted
+        if isinstance(exc, Interrupted):
+            print(f"{PROG} {args.command}: stopped by {exc.name}", file=sys.stderr)
+            return 128 + exc.signum
+        print(f"{PROG} {args.command}: interrupted", file=sys.stderr)
         return 130
 
 

@@ -8,7 +8,33 @@ import time
 
 from rich.console import Console as RichConsole
 
-__all__ = ["Console"]
+__all__ = ["Console", "Interrupted", "stop_on_signals"]
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM asked the command to stop (``signum``); the command ends with a
+    line saying so and exit status ``128 + signum``."""
+
+    def __init__(self, signum):
+        super().__init__(signum)
+        self.signum = signum
+
+    @property
+    def name(self):
+        import signal
+        return signal.Signals(self.signum).name
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
+def stop_on_signals():
+    """SIGINT and SIGTERM raise :class:`Interrupted` from here on, also in a process that was
+    started with SIGINT ignored (a shell's background job)."""
+    import signal
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _raise_interrupted)
 
 
 class _QuietOnBrokenPipe(RichConsole):

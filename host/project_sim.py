@@ -47,9 +47,10 @@ import cocotb
 from cocotb.triggers import Event, First
 
 from .compiled import DEFAULT_MEMORY_MB, memory_harness
+from .console import Interrupted
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import SERVICE_QUEUE, BridgeQos
-from .ros2.cosim import serve_ros2, start_bridge, start_recorders
+from .ros2.cosim import catch_stop_signals, serve_ros2, start_bridge, start_recorders
 from .sim_args import ArgumentError, check_args
 from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
                         source_digest, top_params)
@@ -304,6 +305,8 @@ async def run_project(dut):
     from gen.system import thread_module_path
 
     p = top_params()
+    if p.get("ros2"):
+        catch_stop_signals()
     out = Path(p["out"])
     project = apply_parameters(load_project(p["build_cfg"]), p.get("thread_params", []))
     sim_py = project.dir / "sim.py"
@@ -550,17 +553,21 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
             (out / name).unlink()
     stop = threading.Event()
     follower = None
-    if log is not None or status is not None:
+    joined = threading.Event()       # the bridge is on DDS: a stop request ends it cleanly
+    if log is not None or status is not None or ros2 is not None:
         def show(event):
             if "status" in event:
                 if status is not None:
                     status(event["status"])
-            elif log is not None:
+                return
+            if event["text"].startswith("ros2 bridge: joined DDS domain"):
+                joined.set()
+            if log is not None:
                 log(event["cycle"], event["text"])
         follower = threading.Thread(target=_follow, daemon=True,
                                     args=(out / PROGRESS, show, stop))
         follower.start()
-    handlers = _forward_stop(out / STOP) if ros2 is not None else {}
+    handlers = _forward_stop(out / STOP, joined) if ros2 is not None else {}
     try:
         run_top(__name__, TOP, system, sim, build_dir, params=params, seed=seed,
                 extra_env={"ROSGATE_EXTERNAL_INPUTS": " ".join(inputs)},
@@ -666,11 +673,15 @@ def _system_key(project, thread_params):
                          root=package)[:32]
 
 
-def _forward_stop(stop_file):
-    """While the simulator runs: SIGINT and SIGTERM to this process write ``stop_file``,
-    which the simulation reads to end cleanly (the simulator, in the same process group,
-    also gets a terminal's SIGINT itself). Returns the handlers to restore."""
+def _forward_stop(stop_file, joined):
+    """While a ``--ros2`` run is on DDS (``joined`` set): SIGINT and SIGTERM to this process
+    write ``stop_file``, which the simulation reads to end cleanly (the simulator, in the same
+    process group, also gets a terminal's SIGINT itself). Before that (building, starting), or
+    at a second signal, they raise :class:`~host.console.Interrupted`: the build or the
+    simulator is stopped and the command ends at once. Returns the handlers to restore."""
     def request_stop(signum, frame):
+        if not joined.is_set() or Path(stop_file).exists():
+            raise Interrupted(signum)
         Path(stop_file).write_text(signal.Signals(signum).name)
     return {signum: signal.signal(signum, request_stop)
             for signum in (signal.SIGINT, signal.SIGTERM)}

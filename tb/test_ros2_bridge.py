@@ -16,6 +16,9 @@ import os
 import random
 import re
 import shutil
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -712,3 +715,34 @@ def test_image_echo_from_dds(tmp_path):
             sample = peer.image(rng.integers(0, 256, (2, 3, 3), np.uint8), k)
             writer.write(sample)
             assert peer.Image.deserialize(p.take_raw(reader, timeout=60)) == sample, k
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", "sigint-ignored-at-start", "sigterm"])
+def test_stop_while_building_ends_cleanly(how, tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it), SIGINT to a process that
+    was started with SIGINT ignored (a script's background job), or SIGTERM, while the
+    simulator is being built: rosgate sim ends at once with one line, status 128 + signal,
+    no traceback, and leaves no build running."""
+    env = dict(peer.loopback_environment(), ROSGATE_CACHE=str(tmp_path / "cache"))
+    ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) \
+        if how == "sigint-ignored-at-start" else None
+    process = subprocess.Popen(
+        [sys.executable, "-m", "host.cli", "sim", str(IMAGE_ECHO), "--ros2", "--domain",
+         str(peer.unique_domain()), "-o", str(tmp_path / "out")], cwd=ROOT, env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=ignore)
+    line = process.stdout.readline()
+    assert "exporting and building ImageEcho" in line, line
+    time.sleep(4)                                    # Verilator is compiling the model
+    if how == "ctrl-c":
+        os.killpg(process.pid, signal.SIGINT)
+    else:
+        process.send_signal(signal.SIGTERM if how == "sigterm" else signal.SIGINT)
+    out, err = process.communicate(timeout=120)
+    name = "SIGTERM" if how == "sigterm" else "SIGINT"
+    assert process.returncode == 128 + getattr(signal, name), (process.returncode, err)
+    assert err.strip() == f"rosgate sim: stopped by {name}", err
+    time.sleep(1)
+    leftovers = subprocess.run(["pgrep", "-f", str(tmp_path / "cache")], capture_output=True,
+                               text=True).stdout
+    assert leftovers == "", leftovers

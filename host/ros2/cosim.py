@@ -19,7 +19,7 @@ from cocotb.triggers import Timer
 from .bridge import Ros2Bridge
 from .graph import ros_interfaces
 
-__all__ = ["start_bridge", "serve_ros2", "start_recorders", "POLL_CYCLES", "IDLE_POLLS",
+__all__ = ["start_bridge", "serve_ros2", "start_recorders", "catch_stop_signals", "POLL_CYCLES", "IDLE_POLLS",
            "IDLE_WAIT_S", "IDLE_WAIT_MAX_S"]
 
 POLL_CYCLES = 200
@@ -56,9 +56,14 @@ def start_bridge(ctx, module, options):
     shown = bridge.start()
     ctx.log(f"ros2 bridge: joined DDS domain {bridge.domain} with "
             f"{len(shown)} interfaces: {'; '.join(shown) or 'none'}")
+    return bridge
+
+
+def catch_stop_signals():
+    """From the simulation's start: SIGINT and SIGTERM (a terminal's Ctrl-C reaches the
+    simulator too) are a stop request, served once the bridge runs, never a traceback."""
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _on_signal)
-    return bridge
 
 
 def start_recorders(ctx, record, trace):
