@@ -328,6 +328,10 @@ def _add_project_commands(commands):
                    help="with --ros2, calls of one hardware service the bridge holds while the "
                         "hardware serves earlier ones; a call beyond them is refused with the "
                         f"empty response, counted and logged (default {SERVICE_QUEUE})")
+    p.add_argument("--clock", choices=("zero", "wall", "none"), default=None,
+                   help="with --ros2, /clock (rosgraph_msgs/msg/Clock, for nodes with "
+                        "use_sim_time) and the stamps of goals and recordings: simulated time "
+                        "from zero (default), from the wall time at the start, or no /clock")
     p.add_argument("--with-nodes", action="store_true",
                    help="with --ros2, also run sim.py's nodes (by default the ROS 2 graph "
                         "stands in for them)")
@@ -491,9 +495,11 @@ def _run_sim(args):
             console.error(f"--domain {domain}: expected a DDS domain id 0..{DOMAIN_IDS[-1]}")
             return 2
         ros2 = {"domain": domain, "nodes": args.with_nodes,
-                "service_queue": args.service_queue or SERVICE_QUEUE}
-    elif args.domain is not None or args.with_nodes or args.service_queue is not None:
-        console.error("--domain, --with-nodes and --service-queue need --ros2")
+                "service_queue": args.service_queue or SERVICE_QUEUE,
+                "clock": args.clock or "zero"}
+    elif args.domain is not None or args.with_nodes or args.service_queue is not None or \
+            args.clock is not None:
+        console.error("--domain, --with-nodes, --service-queue and --clock need --ros2")
         return 2
     try:
         with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "

@@ -50,7 +50,8 @@ from .compiled import DEFAULT_MEMORY_MB, memory_harness
 from .console import Interrupted
 from .reconos import ReconosCosim, Resource
 from .ros2.bridge import SERVICE_QUEUE, BridgeQos
-from .ros2.cosim import catch_stop_signals, serve_ros2, start_bridge, start_recorders
+from .ros2.cosim import (JOINED, catch_stop_signals, clock_offset_ns, serve_ros2,
+                         start_bridge, start_recorders)
 from .sim_args import ArgumentError, check_args
 from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
                         source_digest, top_params)
@@ -360,7 +361,8 @@ async def run_project(dut):
     try:
         if module is not None and hasattr(module, "setup"):
             module.setup(ctx)
-        recorders = start_recorders(ctx, p.get("record"), p.get("trace"))
+        recorders = start_recorders(ctx, p.get("record"), p.get("trace"),
+                                    clock_offset_ns(ros2) if ros2 else 0)
         if ros2:
             bridge = start_bridge(ctx, module, ros2)
         ctx._start = cocotb.utils.get_sim_time("ns")
@@ -473,8 +475,10 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         Wall seconds between two ``status`` calls.
     ros2 : dict or None
         Join a DDS domain instead of running to the nodes' end (``rosgate sim --ros2``):
-        ``domain`` (int), ``nodes`` (bool: run ``sim.py``'s nodes too) and ``service_queue``
-        (int: calls of one service the bridge holds for the hardware; more are refused). The run has no
+        ``domain`` (int), ``nodes`` (bool: run ``sim.py``'s nodes too), ``service_queue``
+        (int: calls of one service the bridge holds for the hardware; more are refused) and
+        ``clock`` (``"zero"``: ``/clock`` and stamps are simulated time from zero, ``"wall"``:
+        from the wall time at the start, ``"none"``: no ``/clock``). The run has no
         simulated-time limit; SIGINT or SIGTERM to this process ends it cleanly.
     record, trace : path or None
         Write every message on the project's topics to a rosbag2 (MCAP) at ``record`` (a new
@@ -544,7 +548,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     if ros2 is not None:
         params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
                           "stop_file": str(out / STOP),
-                          "service_queue": int(ros2.get("service_queue", SERVICE_QUEUE))}
+                          "service_queue": int(ros2.get("service_queue", SERVICE_QUEUE)),
+                          "clock": ros2.get("clock", "zero"), "clock_start_ns": time.time_ns()}
     inputs = [name for name, flow in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     out.mkdir(parents=True, exist_ok=True)
@@ -560,7 +565,7 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
                 if status is not None:
                     status(event["status"])
                 return
-            if event["text"].startswith("ros2 bridge: joined DDS domain"):
+            if event["text"].startswith(JOINED):
                 joined.set()
             if log is not None:
                 log(event["cycle"], event["text"])
@@ -673,6 +678,13 @@ def _system_key(project, thread_params):
                          root=package)[:32]
 
 
+def _has_joined(progress):
+    try:
+        return JOINED in progress.read_text()
+    except OSError:
+        return False
+
+
 def _forward_stop(stop_file, joined):
     """While a ``--ros2`` run is on DDS (``joined`` set): SIGINT and SIGTERM to this process
     write ``stop_file``, which the simulation reads to end cleanly (the simulator, in the same
@@ -680,6 +692,8 @@ def _forward_stop(stop_file, joined):
     at a second signal, they raise :class:`~host.console.Interrupted`: the build or the
     simulator is stopped and the command ends at once. Returns the handlers to restore."""
     def request_stop(signum, frame):
+        if not joined.is_set() and _has_joined(Path(stop_file).with_name(PROGRESS)):
+            joined.set()            # the follower had not read it yet
         if not joined.is_set() or Path(stop_file).exists():
             raise Interrupted(signum)
         Path(stop_file).write_text(signal.Signals(signum).name)

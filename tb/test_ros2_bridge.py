@@ -331,9 +331,10 @@ def test_hardware_client_calls_a_dds_service(tmp_path, photo):
 
 def test_ros2_options_need_ros2(capsys):
     from host.cli import main as rosgate
-    for option in (["--domain", "3"], ["--with-nodes"], ["--service-queue", "5"]):
+    for option in (["--domain", "3"], ["--with-nodes"], ["--service-queue", "5"],
+                   ["--clock", "wall"]):
         assert rosgate(["sim", str(SOBEL_DIP), *option]) == 2
-        assert "--domain, --with-nodes and --service-queue need --ros2" in \
+        assert "--domain, --with-nodes, --service-queue and --clock need --ros2" in \
             capsys.readouterr().err
     assert rosgate(["sim", str(SOBEL_DIP), "--ros2", "--domain", "300"]) == 2
     assert "--domain 300" in capsys.readouterr().err
@@ -746,3 +747,41 @@ def test_stop_while_building_ends_cleanly(how, tmp_path):
     leftovers = subprocess.run(["pgrep", "-f", str(tmp_path / "cache")], capture_output=True,
                                text=True).stdout
     assert leftovers == "", leftovers
+
+
+@pytest.mark.parametrize("clock", ["zero", "wall"])
+def test_clock_is_simulated_time(clock, tmp_path):
+    """/clock (rosgraph_msgs/msg/Clock, read with rclcpp's clock QoS: best effort, keep last
+    1) carries simulated time: it only grows, an image echoed between two samples moves it
+    by the cycles the hardware took, and a recording's stamps are on the same clock. With
+    --clock wall it starts from the wall time at the start."""
+    from cyclonedds.core import Policy, Qos
+    domain = peer.unique_domain()
+    out, bag = tmp_path / "out", tmp_path / "bag"
+    started_ns = time.time_ns()
+    with peer.ros2_sim(IMAGE_ECHO, "icarus", out, domain, "--clock", clock,
+                       "--record", str(bag)):
+        p = peer.Peer(domain)
+        clocks = p.reader("rt/clock", peer.Clock,
+                          qos=Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1)))
+        writer = p.writer("rt/image_in", peer.Image)
+        reader = p.reader("rt/image_out", peer.Image)
+        p.wait_matched(writer, reader, clocks)
+
+        def sample():
+            c = peer.Clock.deserialize(p.take_raw(clocks, timeout=30)).clock
+            return c.sec * 1_000_000_000 + c.nanosec
+        before = sample()
+        writer.write(peer.image(np.zeros((4, 4, 3), np.uint8), sec=1))
+        peer.Image.deserialize(p.take_raw(reader))
+        after = sample()
+    assert after > before, (before, after)
+    if clock == "wall":
+        assert started_ns <= before <= time.time_ns()
+    else:
+        assert before < 10**9, "simulated time from zero: well under a second here"
+    from rosbags.highlevel import AnyReader
+    with AnyReader([bag]) as recording:
+        stamps = [t for _, t, _ in recording.messages()]
+    assert stamps and all(before - 10**9 <= s <= after + 10**9 for s in stamps), \
+        (before, after, stamps)

@@ -66,6 +66,8 @@ STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
 CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
 
 
+#: the simulated clock's topic and type (ROS 2's ``use_sim_time``)
+CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: calls of one service the bridge holds for the hardware by default (``--service-queue``)
 SERVICE_QUEUE = 1000
 
@@ -82,6 +84,14 @@ class BridgeQos:
         self.depth = depth
         #: calls of one service the bridge holds for the hardware; more are refused
         self.service_queue = service_queue
+
+    def clock(self):
+        """``/clock``'s profile: reliable, keep last 1, volatile (rclcpp's clock subscription,
+        best effort keep last 1, matches it)."""
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
+                   Policy.History.KeepLast(1), Policy.Durability.Volatile)
 
     def dds(self, status=False, keep_all=False):
         """The profile; ``status``: an action's status topic (transient local, keep last 1,
@@ -137,11 +147,13 @@ class Ros2Bridge:
         Starts a coroutine beside the simulation (``cocotb.start_soon``), for service calls
         into the graph.
     now_ns : callable
-        Simulated time in ns, for the stamps of action goals.
+        The bridge's clock in ns (simulated time), for the stamps of action goals.
+    publish_clock : bool
+        Write ``/clock`` (:meth:`write_clock`).
     """
 
     def __init__(self, interfaces, library, broker, *, domain, log, spawn, accepts=None,
-                 qos=None, now_ns=time.monotonic_ns):
+                 qos=None, now_ns=time.monotonic_ns, publish_clock=False):
         if not isinstance(domain, int) or domain not in DOMAIN_IDS:
             raise ValueError(f"DDS domain {domain!r}: expected an integer 0..{DOMAIN_IDS[-1]}")
         self.interfaces = interfaces
@@ -152,6 +164,8 @@ class Ros2Bridge:
         self.spawn = spawn
         self.accepts = accepts
         self.now_ns = now_ns
+        self.publish_clock = publish_clock
+        self._clock = None
         self.qos = qos or BridgeQos()
         self.types = DdsTypes(library)
         #: per ROS 2 name: samples taken from DDS, delivered, rejected, and written to DDS
@@ -222,6 +236,10 @@ class Ros2Bridge:
                 self._inbound.append((ep, self._service_reply))
                 self._clients.append((self.broker.server_queue(service.key), ep))
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
+        if self.publish_clock:
+            self._clock = self._writer(dds_topic_name(CLOCK_TOPIC), self.types.message(CLOCK_TYPE),
+                                       CLOCK_TOPIC, CLOCK_TYPE, None, status=False, clock=True)
+            shown.append(f"{CLOCK_TOPIC} [{CLOCK_TYPE}] (simulated time)")
         for action in self.interfaces.actions.values():
             if action.servers:
                 self._serve_action(action)
@@ -293,9 +311,9 @@ class Ros2Bridge:
         if key in self._published_keys:
             self._published[id(value)] = (value, time.monotonic_ns())
 
-    def _topic(self, name, idl, status=False, keep_all=False):
+    def _topic(self, name, idl, status=False, keep_all=False, qos=None):
         from cyclonedds.topic import Topic
-        return Topic(self.participant, name, idl, qos=self.qos.dds(status, keep_all))
+        return Topic(self.participant, name, idl, qos=qos or self.qos.dds(status, keep_all))
 
     def _reader(self, dds_name, idl, name, typename, key, keep_all=False):
         from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
@@ -308,10 +326,12 @@ class Ros2Bridge:
         self.waitset.attach(condition)
         return _Endpoint(name, typename, reader, key)
 
-    def _writer(self, dds_name, idl, name, typename, key, status=False, keep_all=False):
+    def _writer(self, dds_name, idl, name, typename, key, status=False, keep_all=False,
+                clock=False):
         from cyclonedds.pub import DataWriter
-        writer = DataWriter(self.participant, self._topic(dds_name, idl, status, keep_all),
-                            qos=self.qos.dds(status, keep_all))
+        qos = self.qos.clock() if clock else self.qos.dds(status, keep_all)
+        topic = self._topic(dds_name, idl, status, keep_all, qos=qos if clock else None)
+        writer = DataWriter(self.participant, topic, qos=qos)
         self.counts.setdefault(name, self.counts.default_factory())
         return _Endpoint(name, typename, writer, key)
 
@@ -332,6 +352,14 @@ class Ros2Bridge:
                 "rejections": list(self.rejections), "timeline": list(self.timeline)}
 
     # --- running -------------------------------------------------------------------------
+    def write_clock(self, ns):
+        """Publish ``ns`` (the bridge's clock: simulated time, from zero or from the wall
+        time at the start) on ``/clock`` as a ``rosgraph_msgs/msg/Clock``."""
+        if self._clock is None:
+            return
+        value = {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
+        self._write(self._clock, encode_cdr(self.library, CLOCK_TYPE, value))
+
     @property
     def busy(self):
         """A service call this bridge started into the graph is still running."""

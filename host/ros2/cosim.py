@@ -14,18 +14,24 @@ written, the simulator exits.
 import signal
 from pathlib import Path
 
+import cocotb
 from cocotb.triggers import Timer
 
 from .bridge import Ros2Bridge
 from .graph import ros_interfaces
 
-__all__ = ["start_bridge", "serve_ros2", "start_recorders", "catch_stop_signals", "POLL_CYCLES", "IDLE_POLLS",
+__all__ = ["start_bridge", "serve_ros2", "start_recorders", "catch_stop_signals",
+           "clock_offset_ns", "CLOCK_PERIOD_NS", "JOINED", "POLL_CYCLES", "IDLE_POLLS",
            "IDLE_WAIT_S", "IDLE_WAIT_MAX_S"]
 
 POLL_CYCLES = 200
 IDLE_POLLS = 1
 IDLE_WAIT_S = 0.05
 IDLE_WAIT_MAX_S = 1.0
+#: how the line the simulation logs once the bridge is on DDS starts
+JOINED = "ros2 bridge: joined DDS domain"
+#: simulated time between two samples of ``/clock`` (10 kHz of simulated time)
+CLOCK_PERIOD_NS = 100_000
 
 _stop = {"signal": None}
 
@@ -38,7 +44,9 @@ def start_bridge(ctx, module, options):
     """Create and start the bridge for ``ctx.project``; log what it shows on DDS.
 
     ``options``: ``domain`` (int), ``stop_file`` (path or None), ``service_queue`` (int: calls
-    of one service held for the hardware). ``module`` is the project's
+    of one service held for the hardware), ``clock`` (``"zero"``, ``"wall"`` or ``"none"``:
+    ``/clock`` from simulated time, from simulated time plus ``clock_start_ns``, or no
+    ``/clock``). ``module`` is the project's
     ``sim.py``: its ``accepts(ctx, name, value)``, if any, states the hardware's limits for
     messages arriving from DDS."""
     import cocotb
@@ -47,16 +55,24 @@ def start_bridge(ctx, module, options):
 
     from .bridge import SERVICE_QUEUE, BridgeQos
     accepts = getattr(module, "accepts", None) if module is not None else None
+    offset = clock_offset_ns(options)
     bridge = Ros2Bridge(
         ros_interfaces(ctx.project), project_library(ctx.project), ctx.broker,
         domain=int(options["domain"]), log=ctx.log, spawn=cocotb.start_soon,
-        now_ns=lambda: cocotb.utils.get_sim_time("ns"),
+        now_ns=lambda: round(cocotb.utils.get_sim_time("ns")) + offset,
+        publish_clock=options.get("clock", "zero") != "none",
         accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None,
         qos=BridgeQos(service_queue=int(options.get("service_queue", SERVICE_QUEUE))))
     shown = bridge.start()
-    ctx.log(f"ros2 bridge: joined DDS domain {bridge.domain} with "
+    ctx.log(f"{JOINED} {bridge.domain} with "
             f"{len(shown)} interfaces: {'; '.join(shown) or 'none'}")
     return bridge
+
+
+def clock_offset_ns(options):
+    """What the bridge's clock adds to simulated time: 0 (``--clock zero``, or none), or the
+    wall time at the start (``--clock wall``: stamps and ``/clock`` read as today's date)."""
+    return int(options.get("clock_start_ns", 0)) if options.get("clock") == "wall" else 0
 
 
 def catch_stop_signals():
@@ -66,12 +82,12 @@ def catch_stop_signals():
         signal.signal(signum, _on_signal)
 
 
-def start_recorders(ctx, record, trace):
+def start_recorders(ctx, record, trace, offset_ns=0):
     """A :class:`BagRecorder` at ``record`` and a :class:`TraceWriter` at ``trace`` (either
-    may be ``None``), fed by every publication on the project's topics."""
-    import cocotb
-
+    may be ``None``), fed by every publication on the project's topics, stamped with
+    simulated time plus ``offset_ns`` (the bridge's clock)."""
     from gen.config import project_library
+
     from .recorder import BagRecorder, TraceWriter
     if record is None and trace is None:
         return []
@@ -92,7 +108,7 @@ def start_recorders(ctx, record, trace):
                 unknown.add(key)
                 ctx.log(f"recorder: {key!r} is not a topic of the build.cfg; not recorded")
             return
-        now = cocotb.utils.get_sim_time("ns")
+        now = round(cocotb.utils.get_sim_time("ns")) + offset_ns
         for recorder in recorders:
             recorder.write(topic.name, value, now)
     ctx.broker.observers.append(observe)
@@ -117,10 +133,16 @@ async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
                 cosim.broker.events)
     last, quiet = activity(), 0
     idle_wait = IDLE_WAIT_S
+    offset = clock_offset_ns(options)
+    clock_due = 0
     # one timer, not ClockCycles: cocotb would run Python at every one of the clock edges
     poll = Timer(round(POLL_CYCLES * 1000 / ctx.clock_mhz), "ns")
     while not failures and (why := _stop_requested(options)) is None:
         moved = bridge.poll()
+        now_ns = round(cocotb.utils.get_sim_time("ns"))
+        if now_ns >= clock_due:
+            bridge.write_clock(now_ns + offset)
+            clock_due = now_ns + CLOCK_PERIOD_NS
         await poll
         now = activity()
         if moved or now != last or ctx._sleeping:
@@ -130,6 +152,7 @@ async def serve_ros2(cosim, ctx, bridge, options, failures, slots):
         if quiet >= IDLE_POLLS and all(s in cosim.runtime.pending for s in slots):
             # DDS data ends the wait at once; the longer the quiet, the longer the wait, so a
             # system left idle wakes about once a second (and sees a stop request then)
+            bridge.write_clock(round(cocotb.utils.get_sim_time("ns")) + offset)
             bridge.wait(idle_wait)
             idle_wait = min(2 * idle_wait, IDLE_WAIT_MAX_S)
     if not failures:

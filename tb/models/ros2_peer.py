@@ -44,6 +44,12 @@ class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
 
 @dataclass
 @final
+class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
+    clock: Time
+
+
+@dataclass
+@final
 class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
     stamp: Time
     frame_id: str
