@@ -341,6 +341,8 @@ class Project:
     topics: dict
     msg_dirs: list
     warnings: list = field(default_factory=list)
+    #: where ``TargetPart`` was written (for errors about the part)
+    part_at: Location = None
 
     @property
     def dir(self):
@@ -614,7 +616,7 @@ def parse_project(text, path="build.cfg", *, msg_dirs=None):
                       clocks=list(clocks.values()), slots=slots, resources=resources,
                       threads=threads, topics=topics,
                       msg_dirs=list(msg_dirs) if msg_dirs is not None else
-                      [path.parent / "msg"])
+                      [path.parent / "msg"], part_at=gen.where(file, "TargetPart"))
     project.warnings = [r.warning for r in resources if getattr(r, "warning", None)]
     for topic in topics.values():
         for ep in topic.pubs + topic.subs:

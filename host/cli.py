@@ -603,10 +603,15 @@ def _print_bridge(console, summary):
 def _run_report(args):
     import json
 
-    from gen.export.resources import YOSYS_COMMAND, estimate_resources
+    from gen.export.resources import (FAMILY_NAMES, estimate_resources, xilinx_family,
+                                      yosys_command)
     from gen.export.verilog import export_verilog, write_if_changed
     from gen.system import build_system, thread_code
     p = _project(args)
+    try:
+        family = xilinx_family(p.part)
+    except ValueError as exc:
+        raise ConfigError(p.part_at, str(exc)) from None
     system = build_system(p)
     rows = [("rosgate_system", "system", system)]
     seen = set()
@@ -615,9 +620,11 @@ def _run_report(args):
             seen.add(s.thread.core_name)
             rows.append((s.thread.core_name, f"thread {s.thread.name}", c))
     folder = _default_out(p, "report")
-    print(f"{p.name}: resources per core from yosys `{YOSYS_COMMAND}` (estimates)", flush=True)
-    print("| core | what | LUT | FF | LUTRAM | BRAM18 equiv. | DSP |\n"
-          "|---|---|---|---|---|---|---|")
+    command = yosys_command(family)
+    print(f"{p.name}: resources per core for {p.part} ({FAMILY_NAMES[family]}, from the "
+          f"build.cfg's TargetPart) from yosys `{command}` (estimates)", flush=True)
+    print("| core | what | LUT | FF | LUTRAM | BRAM36 | BRAM18 | URAM | DSP |\n"
+          "|---|---|---|---|---|---|---|---|---|")
     vfiles = []
     for name, what, component in rows:
         with thread_code(p):
@@ -625,10 +632,10 @@ def _run_report(args):
         vfile = folder / f"{name}.v"
         write_if_changed(vfile, text)
         vfiles.append(vfile)
-        with _PassProgress(f"yosys {YOSYS_COMMAND.split()[0]} on {name}") as progress:
-            r = estimate_resources(vfile, name, progress=progress)
-        print(f"| {name} | {what} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | "
-              f"{r['BRAM18_equiv']} | {r['DSP']} |", flush=True)
+        with _PassProgress(f"yosys synth_xilinx ({family}) on {name}") as progress:
+            r = estimate_resources(vfile, name, progress=progress, family=family)
+        print(f"| {name} | {what} | {r['LUT']} | {r['FF']} | {r['LUTRAM']} | {r['BRAM36']} | "
+              f"{r['BRAM18']} | {r.get('URAM', 0)} | {r['DSP']} |", flush=True)
     if args.timing:
         _report_timing(p, rows, vfiles, folder)
     path = args.sim_results or _default_out(p, "sim") / "sim_results.json"

@@ -96,3 +96,47 @@ def test_estimate_reused_while_unchanged(tmp_path, monkeypatch):
     estimate_resources(path, "adder2", progress=passes.append)
     assert any("-p" in a for a in calls)
     assert passes[0] == "SYNTH_XILINX pass" and "ABC" in passes, passes
+
+
+class LargeStore(wiring.Component):
+    """A 32K x 64 synchronous store (2 Mibit): block RAM on 7-series, UltraRAM on
+    UltraScale+."""
+
+    waddr: In(15)
+    wdata: In(64)
+    we: In(1)
+    raddr: In(15)
+    rdata: Out(64)
+
+    def elaborate(self, platform):
+        from amaranth.lib.memory import Memory
+        m = Module()
+        m.submodules.store = store = Memory(shape=64, depth=1 << 15, init=[])
+        w, r = store.write_port(), store.read_port()
+        m.d.comb += [w.addr.eq(self.waddr), w.data.eq(self.wdata), w.en.eq(self.we),
+                     r.addr.eq(self.raddr), self.rdata.eq(r.data)]
+        return m
+
+
+@pytest.mark.parametrize("part, family", [
+    ("xczu7ev-ffvc1156-2-e", "xcup"), ("xczu3eg-sbva484-1-e", "xcup"),
+    ("xc7z020clg484-1", "xc7"), ("xc7z100ffg900-2", "xc7"), ("xc7a35ticsg324-1L", "xc7"),
+    ("xcku040-ffva1156-2-e", "xcu"), ("xcvu9p-flga2104-2L-e", "xcup")])
+def test_family_follows_the_part(part, family):
+    from gen.export.resources import xilinx_family
+    assert xilinx_family(part) == family
+
+
+def test_unknown_part_is_refused():
+    from gen.export.resources import xilinx_family
+    with pytest.raises(ValueError, match="part 'xc6slx9': not a Xilinx 7-series"):
+        xilinx_family("xc6slx9")
+
+
+def test_ultrascale_plus_maps_a_large_store_to_ultraram(tmp_path):
+    path = _write(tmp_path, LargeStore(), "large_store")
+    xcup = estimate_resources(path, "large_store", family="xcup")
+    xc7 = estimate_resources(path, "large_store", family="xc7")
+    # 2 Mibit: 8 URAM288 (288 Kibit each) on UltraScale+, 64 RAMB36 (36 Kibit) on 7-series
+    assert xcup["URAM"] == 8 and xcup["BRAM36"] == 0, xcup
+    assert xc7["URAM"] == 0 and xc7["BRAM18_equiv"] >= 114, xc7

@@ -1,6 +1,8 @@
-"""FPGA resource estimates with Debian's Yosys: ``synth_xilinx -flatten -family xc7``.
+"""FPGA resource estimates with Debian's Yosys: ``synth_xilinx -flatten -family <family>``.
 
 Estimates for trends and comparisons, not Vivado's numbers (docs/testing.md, Vivado-free checks).
+The family follows the part (:func:`xilinx_family`): 7-series for the benches' fixed
+comparisons, UltraScale+ (with UltraRAM) for a project on a Zynq UltraScale+ board.
 """
 
 import hashlib
@@ -10,9 +12,38 @@ import shutil
 import subprocess
 from pathlib import Path
 
-__all__ = ["estimate_resources", "YOSYS_COMMAND"]
+__all__ = ["estimate_resources", "yosys_command", "xilinx_family", "FAMILY_NAMES",
+           "YOSYS_COMMAND"]
 
-YOSYS_COMMAND = "synth_xilinx -flatten -family xc7"
+#: Yosys' Xilinx families: name
+FAMILY_NAMES = {"xc7": "7-series", "xcu": "UltraScale", "xcup": "UltraScale+"}
+
+
+def xilinx_family(part):
+    """The ``synth_xilinx`` family of a Xilinx part name: ``xcup`` for Zynq UltraScale+
+    (``xczu...``) and the ``...p`` Kintex/Virtex UltraScale+ parts, ``xcu`` for the other
+    Kintex/Virtex UltraScale parts, ``xc7`` for 7-series (``xc7...``, Zynq-7000)."""
+    name = str(part).strip().lower()
+    if name.startswith("xczu"):
+        return "xcup"
+    mo = re.match(r"xc(ku|vu)(\d+)(p?)", name)
+    if mo:
+        return "xcup" if mo.group(3) else "xcu"
+    if name.startswith("xc7"):
+        return "xc7"
+    raise ValueError(f"part {part!r}: not a Xilinx 7-series or UltraScale(+) part yosys "
+                     f"maps (xc7..., xczu..., xcku..., xcvu...)")
+
+
+def yosys_command(family="xc7"):
+    """The synthesis command for ``family`` (UltraRAM inferred where the family has it)."""
+    if family not in FAMILY_NAMES:
+        raise ValueError(f"family {family!r}: expected one of {', '.join(FAMILY_NAMES)}")
+    return f"synth_xilinx -flatten -family {family}" + (" -uram" if family == "xcup" else "")
+
+
+#: the benches' fixed comparison (the papers' and LiteEth's figures are 7-series)
+YOSYS_COMMAND = yosys_command("xc7")
 
 
 def _run_yosys(yosys, script, verilog, progress):
@@ -37,7 +68,7 @@ def _run_yosys(yosys, script, verilog, progress):
 _PASS = re.compile(r"^\d+(?:\.\d+)*\. Executing (.+?)(?: \(.*\))?\.?$")
 
 
-def estimate_resources(verilog, top, *, blackbox=None, progress=None):
+def estimate_resources(verilog, top, *, blackbox=None, progress=None, family="xc7"):
     """Return ``{"LUT", "INV", "FF", "LUTRAM", "BRAM36", "BRAM18", "DSP", "CARRY4", "cells"}``
     for ``top``.
 
@@ -53,7 +84,8 @@ def estimate_resources(verilog, top, *, blackbox=None, progress=None):
     all reset pins from one inverter, so adding them would count the reset once per
     flip-flop. FF counts every FD* flip-flop, LUTRAM the RAM*/SRL* cells, BRAM18 and BRAM36
     the block RAM primitives (an RAMB36 counts as two BRAM18 in ``BRAM18_equiv``).
-    ``progress(pass_name)`` is called as Yosys starts each pass.
+    ``progress(pass_name)`` is called as Yosys starts each pass. ``family`` is the
+    ``synth_xilinx`` family (:func:`xilinx_family`); URAM counts UltraRAM (URAM288) blocks.
     """
     yosys = shutil.which("yosys")
     if yosys is None:
@@ -70,7 +102,7 @@ def estimate_resources(verilog, top, *, blackbox=None, progress=None):
             raise ValueError(f"blackbox {blackbox!r} matches no module of {verilog}")
     box = f"hierarchy -top {top}; blackbox {' '.join(_escaped(n) for n in boxed)}; " \
         if boxed else ""
-    script = f"read_verilog -sv {source}; {box}{YOSYS_COMMAND} -top {top}; stat"
+    script = f"read_verilog -sv {source}; {box}{yosys_command(family)} -top {top}; stat"
     version = subprocess.run([yosys, "-V"], capture_output=True, text=True).stdout
     key = hashlib.sha1(f"{version}\n{script}\n{text}".encode()).hexdigest()
     cached = source.with_suffix(".resources.json")
@@ -90,6 +122,7 @@ def estimate_resources(verilog, top, *, blackbox=None, progress=None):
                         or c.startswith("SRL")),
         "BRAM36": total(lambda c: c.startswith("RAMB36")),
         "BRAM18": total(lambda c: c.startswith("RAMB18")),
+        "URAM": total(lambda c: c.startswith("URAM")),
         "DSP": total(lambda c: c.startswith("DSP")),
         "CARRY4": total(lambda c: c.startswith("CARRY")),
         "cells": cells,
