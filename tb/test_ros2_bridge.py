@@ -785,3 +785,45 @@ def test_clock_is_simulated_time(clock, tmp_path):
         stamps = [t for _, t, _ in recording.messages()]
     assert stamps and all(before - 10**9 <= s <= after + 10**9 for s in stamps), \
         (before, after, stamps)
+
+
+def test_hardware_nodes_are_on_the_ros_graph(tmp_path):
+    """ros_discovery_info (rmw_dds_common/msg/ParticipantEntitiesInfo, decoded with types
+    written from its definition): the bridge's participant gid, the hardware node "/echo"
+    with one reader and one writer, and the bridge's own node with the /clock writer; every
+    gid is the GUID (and 8 zero bytes) of the endpoint DDS matches on the right topic, read
+    with a transient-local reader that joins after the bridge."""
+    from cyclonedds.core import Policy, Qos
+    domain = peer.unique_domain()
+    with peer.ros2_sim(IMAGE_ECHO, "icarus", tmp_path / "out", domain):
+        p = peer.Peer(domain)
+        info_reader = p.reader("ros_discovery_info", peer.ParticipantEntitiesInfo,
+                               qos=Qos(Policy.Reliability.Reliable(10**9),
+                                       Policy.History.KeepLast(1),
+                                       Policy.Durability.TransientLocal))
+        info = peer.ParticipantEntitiesInfo.deserialize(p.take_raw(info_reader, timeout=30))
+        # the GUIDs of the bridge's endpoints, as DDS matching reports them to our own
+        image_in = p.writer("rt/image_in", peer.Image)
+        image_out = p.reader("rt/image_out", peer.Image)
+        clock = p.reader("rt/clock", peer.Clock)
+        p.wait_matched(image_in, image_out, clock)
+        guids = {
+            "rt/image_in": [image_in.get_matched_subscription_data(h).key.bytes
+                            for h in image_in.get_matched_subscriptions()],
+            "rt/image_out": [image_out.get_matched_publication_data(h).key.bytes
+                             for h in image_out.get_matched_publications()],
+            "rt/clock": [clock.get_matched_publication_data(h).key.bytes
+                         for h in clock.get_matched_publications()]}
+    nodes = {(n.node_namespace, n.node_name): n for n in info.node_entities_info_seq}
+    assert set(nodes) == {("/", "echo"), ("/", "rosgate_sim")}, nodes
+    for gid in [info.gid] + [g for n in nodes.values()
+                             for g in n.reader_gid_seq + n.writer_gid_seq]:
+        assert bytes(gid.data[16:]) == bytes(8), gid
+    echo, sim = nodes[("/", "echo")], nodes[("/", "rosgate_sim")]
+    assert [bytes(g.data[:16]) for g in echo.reader_gid_seq] == guids["rt/image_in"]
+    assert [bytes(g.data[:16]) for g in echo.writer_gid_seq] == guids["rt/image_out"]
+    assert [bytes(g.data[:16]) for g in sim.writer_gid_seq] == guids["rt/clock"]
+    assert not sim.reader_gid_seq
+    # the participant's gid: the GUID prefix of each of its endpoints
+    assert all(bytes(g.data[:12]) == bytes(info.gid.data[:12])
+               for n in nodes.values() for g in n.reader_gid_seq + n.writer_gid_seq)

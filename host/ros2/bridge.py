@@ -66,6 +66,11 @@ STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
 CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
 
 
+#: the ROS graph's topic and type (rmw_dds_common), the size of a gid, the bridge's own node
+DISCOVERY_TOPIC = "ros_discovery_info"
+DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+GID_SIZE = 24
+BRIDGE_NODE = "/rosgate_sim"
 #: the simulated clock's topic and type (ROS 2's ``use_sim_time``)
 CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: calls of one service the bridge holds for the hardware by default (``--service-queue``)
@@ -84,6 +89,14 @@ class BridgeQos:
         self.depth = depth
         #: calls of one service the bridge holds for the hardware; more are refused
         self.service_queue = service_queue
+
+    def discovery(self):
+        """``ros_discovery_info``'s profile (rmw_cyclonedds_cpp): reliable, keep last 1,
+        transient local, so a participant that joins later still gets the graph."""
+        from cyclonedds.core import Policy, Qos
+        from cyclonedds.util import duration
+        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
+                   Policy.History.KeepLast(1), Policy.Durability.TransientLocal)
 
     def clock(self):
         """``/clock``'s profile: reliable, keep last 1, volatile (rclcpp's clock subscription,
@@ -166,6 +179,9 @@ class Ros2Bridge:
         self.now_ns = now_ns
         self.publish_clock = publish_clock
         self._clock = None
+        #: node name -> (the bridge's readers, writers) that stand for its endpoints on DDS
+        self._graph = {}
+        self.graph = {}
         self.qos = qos or BridgeQos()
         self.types = DdsTypes(library)
         #: per ROS 2 name: samples taken from DDS, delivered, rejected, and written to DDS
@@ -205,9 +221,11 @@ class Ros2Bridge:
                 ep = self._reader(dds_topic_name(topic.name), self.types.message(topic.msgtype),
                                   topic.name, topic.msgtype, topic.key, keep_all=keep_all)
                 self._inbound.append((ep, self._topic_sample))
+                self._own(("topic", topic.name, "subscribers"), ep)
             if topic.publishers:
                 ep = self._writer(dds_topic_name(topic.name), self.types.message(topic.msgtype),
                                   topic.name, topic.msgtype, topic.key, keep_all=keep_all)
+                self._own(("topic", topic.name, "publishers"), ep)
                 # what the bridge itself publishes does not come back to it (the broker's
                 # origin rule): DDS samples are not echoed onto DDS
                 self._outbound.append((self.broker.subscribe(topic.key, ORIGIN), ep))
@@ -226,6 +244,7 @@ class Ros2Bridge:
                 ep.reply = self._writer(reply, res_type, service.name, service.response_type,
                                         service.key)
                 self._inbound.append((ep, self._service_request))
+                self._own(("service", service.name, "servers"), ep, ep.reply)
                 shown.append(f"{service.name} [{service.srvtype}] (served in hardware)")
             elif service.key not in self.broker._services:
                 ep = self._reader(reply, res_type, service.name, service.response_type,
@@ -233,12 +252,14 @@ class Ros2Bridge:
                 ep.reply = self._writer(request, req_type, service.name,
                                         service.request_type, service.key)
                 ep.pending = {}
+                self._own(("service", service.name, "clients"), ep, ep.reply)
                 self._inbound.append((ep, self._service_reply))
                 self._clients.append((self.broker.server_queue(service.key), ep))
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
         if self.publish_clock:
             self._clock = self._writer(dds_topic_name(CLOCK_TOPIC), self.types.message(CLOCK_TYPE),
                                        CLOCK_TOPIC, CLOCK_TYPE, None, status=False, clock=True)
+            self._graph.setdefault(BRIDGE_NODE, ([], []))[1].append(self._clock)
             shown.append(f"{CLOCK_TOPIC} [{CLOCK_TYPE}] (simulated time)")
         for action in self.interfaces.actions.values():
             if action.servers:
@@ -247,7 +268,40 @@ class Ros2Bridge:
             elif action.key not in self.broker._actions:
                 self._call_action(action)
                 shown.append(f"{action.name} [{action.actiontype}] (action used from hardware)")
+        self._write_discovery_info()
         return shown
+
+    def _own(self, role, *endpoints):
+        """Count ``endpoints`` (the bridge's readers and writers) as those of the hardware
+        nodes in ``role`` (``(kind, name, role)`` of :attr:`RosInterfaces.nodes`)."""
+        for node in self.interfaces.nodes.get(role, ()):
+            readers, writers = self._graph.setdefault(node, ([], []))
+            for ep in endpoints:
+                (writers if hasattr(ep.entity, "write") else readers).append(ep)
+
+    def _write_discovery_info(self):
+        """``ros_discovery_info`` as rmw_cyclonedds_cpp writes it: this participant's gid and,
+        per hardware node, the gids of its readers and writers (a DDS GUID and 8 zero bytes),
+        so ``ros2 node list`` and ``ros2 topic info -v`` name the hardware nodes."""
+        from cyclonedds.pub import DataWriter
+
+        def gid(entity):
+            return {"data": entity.guid.bytes + bytes(GID_SIZE - 16)}
+        nodes = []
+        for name, (readers, writers) in sorted(self._graph.items()):
+            namespace, _, node = name.rpartition("/")
+            nodes.append({"node_namespace": namespace or "/", "node_name": node,
+                          "reader_gid_seq": [gid(ep.entity) for ep in readers],
+                          "writer_gid_seq": [gid(ep.entity) for ep in writers]})
+        value = {"gid": gid(self.participant), "node_entities_info_seq": nodes}
+        writer = DataWriter(self.participant,
+                            self._topic(DISCOVERY_TOPIC, self.types.message(DISCOVERY_TYPE),
+                                        qos=self.qos.discovery()), qos=self.qos.discovery())
+        self._discovery = _Endpoint(DISCOVERY_TOPIC, DISCOVERY_TYPE, writer, None)
+        self._write(self._discovery, encode_cdr(self.library, DISCOVERY_TYPE, value))
+        self.counts.pop(DISCOVERY_TOPIC, None)
+        self.graph = {name: {"readers": [ep.name for ep in r], "writers": [ep.name for ep in w]}
+                      for name, (r, w) in self._graph.items()}
 
     def _action_endpoints(self, action, client):
         """The action's three services (request and reply sides swapped for a client) and
@@ -289,6 +343,8 @@ class Ros2Bridge:
                           (services["get_result"], self._result_reply)]
         feedback.state = state
         self._action_clients.append(state)
+        self._own(("action", action.name, "clients"), feedback,
+                  *(e for ep in services.values() for e in (ep, ep.reply)))
 
     def _serve_action(self, action):
         """An action served in hardware, as rcl_action shows it: the services send_goal,
@@ -306,6 +362,8 @@ class Ros2Bridge:
             ep = services[name]
             ep.goals, ep.feedback, ep.status = goals, feedback, status
             self._inbound.append((ep, handler))
+        self._own(("action", action.name, "servers"), feedback, status,
+                  *(e for ep in services.values() for e in (ep, ep.reply)))
 
     def _observe(self, key, value):
         if key in self._published_keys:

@@ -96,6 +96,9 @@ class RosInterfaces:
     topics: dict
     services: dict
     actions: dict
+    #: (kind, ROS 2 name, role) -> the names of the ROS nodes (``rosnode`` resources) of the
+    #: threads in that role, e.g. ``("topic", "/image_in", "subscribers") -> ["/echo"]``
+    nodes: dict = field(default_factory=dict)
 
 
 def _interface_type(thread, resource, suffix):
@@ -118,9 +121,9 @@ def _interface_type(thread, resource, suffix):
 def ros_interfaces(project):
     """The :class:`RosInterfaces` of ``project`` (a :class:`gen.config.Project`)."""
     from gen.config import ConfigError, unquote
-    topics, services, actions = {}, {}, {}
+    topics, services, actions, nodes = {}, {}, {}, {}
 
-    def add(table, raw, kind, typename, thread, role, where, make):
+    def add(table, raw, kind, typename, thread, role, where, make, node_resource):
         name = absolute_name(raw, str(where))
         entry = table.setdefault(name, make(name, typename, where=where, key=raw))
         if entry.key != raw:
@@ -131,6 +134,10 @@ def ros_interfaces(project):
             raise ConfigError(where, f"{kind} {name!r} carries {getattr(entry, type_attr)} "
                                      f"elsewhere in the build.cfg, not {typename}")
         getattr(entry, role).append(thread.name)
+        node = _node_name(thread, node_resource)
+        names = nodes.setdefault((kind, name, role), [])
+        if node not in names:
+            names.append(node)
         return name
 
     for thread in project.threads:
@@ -139,18 +146,33 @@ def ros_interfaces(project):
             if r.type in ("rossub", "rospub"):
                 name = add(topics, unquote(r.args[2]), "topic", _interface_type(thread, r, ""),
                            thread, "subscribers" if r.type == "rossub" else "publishers",
-                           r.where, TopicInterface)
+                           r.where, TopicInterface, r.args[0])
                 if gateway is not None:
                     topics[name].hardware_topic = gateway["hw_topic"]
             elif r.type in ("rossrvs", "rossrvc"):
                 raw = unquote(r.args[2]) if len(r.args) > 2 else r.name
                 srvtype = _interface_type(thread, r, "_req").removesuffix("_Request")
                 add(services, raw, "service", srvtype, thread,
-                    "servers" if r.type == "rossrvs" else "clients", r.where, ServiceInterface)
+                    "servers" if r.type == "rossrvs" else "clients", r.where, ServiceInterface,
+                    r.args[0])
             elif r.type in ("rosactions", "rosactionc"):
                 goal = _interface_type(thread, r, "_goal_req")
                 add(actions, unquote(r.args[2]), "action",
                     goal.removesuffix("_SendGoal_Request"), thread,
                     "servers" if r.type == "rosactions" else "clients", r.where,
-                    ActionInterface)
-    return RosInterfaces(topics, services, actions)
+                    ActionInterface, r.args[0])
+    return RosInterfaces(topics, services, actions, nodes)
+
+
+def _node_name(thread, resource_name):
+    """The absolute name of the ROS node a thread's endpoint belongs to: the ``rosnode``
+    resource its first argument names (``node_1 = rosnode, "filternode"`` -> ``/filternode``);
+    the thread's name when the argument names no rosnode."""
+    from gen.config import unquote
+    try:
+        node = thread.resource(resource_name.strip())
+    except KeyError:
+        node = None
+    if node is None or node.type != "rosnode" or not node.args:
+        return absolute_name(thread.name.lower())
+    return absolute_name(unquote(node.args[0]))

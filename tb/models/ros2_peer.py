@@ -50,6 +50,29 @@ class Clock(IdlStruct, typename="rosgraph_msgs::msg::dds_::Clock_"):
 
 @dataclass
 @final
+class Gid(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    data: t.array[t.uint8, 24]
+
+
+@dataclass
+@final
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: t.bounded_str[256]
+    node_name: t.bounded_str[256]
+    reader_gid_seq: t.sequence[Gid]
+    writer_gid_seq: t.sequence[Gid]
+
+
+@dataclass
+@final
+class ParticipantEntitiesInfo(IdlStruct,
+                              typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+    gid: Gid
+    node_entities_info_seq: t.sequence[NodeEntitiesInfo]
+
+
+@dataclass
+@final
 class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
     stamp: Time
     frame_id: str
