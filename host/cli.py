@@ -17,7 +17,7 @@ from hdl.dds import MAX_ENDPOINTS, QOS_POLICIES
 from hdl.params import ParameterError
 
 from .compiled import DEFAULT_MEMORY_MB, MEMORY_OPTION
-from .ros2.bridge import SERVICE_QUEUE
+from .ros2.bridge import GOAL_POLICIES, SERVICE_QUEUE
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -332,6 +332,9 @@ def _add_project_commands(commands):
                    help="with --ros2, /clock (rosgraph_msgs/msg/Clock, for nodes with "
                         "use_sim_time) and the stamps of goals and recordings: simulated time "
                         "from zero (default), from the wall time at the start, or no /clock")
+    p.add_argument("--goal-policy", choices=GOAL_POLICIES, default=None,
+                   help="with --ros2, an action goal that arrives while the hardware serves "
+                        "others: accepted at once and queued (default), or refused at once")
     p.add_argument("--with-nodes", action="store_true",
                    help="with --ros2, also run sim.py's nodes (by default the ROS 2 graph "
                         "stands in for them)")
@@ -496,10 +499,11 @@ def _run_sim(args):
             return 2
         ros2 = {"domain": domain, "nodes": args.with_nodes,
                 "service_queue": args.service_queue or SERVICE_QUEUE,
-                "clock": args.clock or "zero"}
+                "clock": args.clock or "zero", "goal_policy": args.goal_policy or "queue"}
     elif args.domain is not None or args.with_nodes or args.service_queue is not None or \
-            args.clock is not None:
-        console.error("--domain, --with-nodes, --service-queue and --clock need --ros2")
+            args.clock is not None or args.goal_policy is not None:
+        console.error("--domain, --with-nodes, --service-queue, --clock and --goal-policy "
+                      "need --ros2")
         return 2
     try:
         with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "

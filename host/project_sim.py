@@ -549,7 +549,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
                           "stop_file": str(out / STOP),
                           "service_queue": int(ros2.get("service_queue", SERVICE_QUEUE)),
-                          "clock": ros2.get("clock", "zero"), "clock_start_ns": time.time_ns()}
+                          "clock": ros2.get("clock", "zero"), "clock_start_ns": time.time_ns(),
+                          "goal_policy": ros2.get("goal_policy", "queue")}
     inputs = [name for name, flow in top_ports(system).items()
               if name.startswith("slot") and flow == "in" and not name.endswith("_clk")]
     out.mkdir(parents=True, exist_ok=True)

@@ -332,10 +332,10 @@ def test_hardware_client_calls_a_dds_service(tmp_path, photo):
 def test_ros2_options_need_ros2(capsys):
     from host.cli import main as rosgate
     for option in (["--domain", "3"], ["--with-nodes"], ["--service-queue", "5"],
-                   ["--clock", "wall"]):
+                   ["--clock", "wall"], ["--goal-policy", "reject"]):
         assert rosgate(["sim", str(SOBEL_DIP), *option]) == 2
-        assert "--domain, --with-nodes, --service-queue and --clock need --ros2" in \
-            capsys.readouterr().err
+        assert "--domain, --with-nodes, --service-queue, --clock and --goal-policy need " \
+            "--ros2" in capsys.readouterr().err
     assert rosgate(["sim", str(SOBEL_DIP), "--ros2", "--domain", "300"]) == 2
     assert "--domain 300" in capsys.readouterr().err
 
@@ -827,3 +827,75 @@ def test_hardware_nodes_are_on_the_ros_graph(tmp_path):
     # the participant's gid: the GUID prefix of each of its endpoints
     assert all(bytes(g.data[:12]) == bytes(info.gid.data[:12])
                for n in nodes.values() for g in n.reader_gid_seq + n.writer_gid_seq)
+
+
+def _action_endpoints(p):
+    base = "sort/_action/"
+    eps = {"send": p.writer(f"rq/{base}send_goalRequest", peer.SortSendGoalRequest),
+           "sent": p.reader(f"rr/{base}send_goalReply", peer.SortSendGoalResponse),
+           "ask": p.writer(f"rq/{base}get_resultRequest", peer.SortGetResultRequest),
+           "results": p.reader(f"rr/{base}get_resultReply", peer.SortGetResultResponse),
+           "cancel": p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest),
+           "cancelled": p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse),
+           "feedback": p.reader(f"rt/{base}feedback", peer.SortFeedbackMessage)}
+    p.wait_matched(*eps.values())
+    return eps
+
+
+def test_goals_are_answered_at_once_and_execute_on_acceptance(tmp_path):
+    """As rclcpp_action: three goals written back to back are all answered at once (the
+    second and third accepted into the queue while the hardware sorts the first); the first
+    executes without a get_result (its feedback comes first); a queued goal is canceled
+    (CANCELED, its result empty); a reused goal id is refused; the counters add up."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    with peer.ros2_sim(SORT_ACTION, "icarus", out, domain):
+        p = peer.Peer(domain)
+        e = _action_endpoints(p)
+        guid = rng.randrange(1, 1 << 63)
+        ids = [peer.UUID(list(rng.randbytes(16))) for _ in range(3)]
+        values = [[rng.randrange(1 << 32) for _ in range(200)] for _ in ids]
+        for k, (uuid, v) in enumerate(zip(ids, values)):
+            e["send"].write(peer.SortSendGoalRequest(guid, k + 1, uuid, peer.SortGoal(v)))
+        replies = [peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"]))
+                   for _ in ids]
+        assert sorted((r.seq, r.accepted) for r in replies) == [(1, True), (2, True),
+                                                              (3, True)]
+        # executing without anybody asking for the result: feedback of the first goal
+        first = peer.SortFeedbackMessage.deserialize(p.take_raw(e["feedback"]))
+        assert list(first.goal_id.uuid) == list(ids[0].uuid)
+        e["cancel"].write(peer.CancelGoalRequest(guid, 10, peer.GoalInfo(ids[2],
+                                                                        peer.Time(0, 0))))
+        answer = peer.CancelGoalResponse.deserialize(p.take_raw(e["cancelled"]))
+        assert answer.return_code == 0 and \
+            [list(g.goal_id.uuid) for g in answer.goals_canceling] == [list(ids[2].uuid)]
+        e["send"].write(peer.SortSendGoalRequest(guid, 11, ids[0], peer.SortGoal([1])))
+        refused = peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"]))
+        assert (refused.seq, refused.accepted) == (11, False)
+        got = {}
+        for k, uuid in enumerate(ids):
+            e["ask"].write(peer.SortGetResultRequest(guid, 20 + k, uuid))
+        for _ in ids:
+            r = peer.SortGetResultResponse.deserialize(p.take_raw(e["results"]))
+            got[r.seq] = (r.status, list(r.result.sorted))
+    assert got == {20: (4, sorted(values[0])), 21: (4, sorted(values[1])), 22: (5, [])}
+    counts = peer.results(out)["ros2"]["counts"]["/sort/_action/send_goal"]
+    assert counts["received"] == 4 and counts["delivered"] == 3 and counts["rejected"] == 1, \
+        counts
+
+
+def test_goal_policy_reject_refuses_goals_while_busy(tmp_path):
+    domain = peer.unique_domain()
+    rng = random.Random()
+    with peer.ros2_sim(SORT_ACTION, "icarus", tmp_path / "out", domain,
+                       "--goal-policy", "reject"):
+        p = peer.Peer(domain)
+        e = _action_endpoints(p)
+        for k in range(2):
+            e["send"].write(peer.SortSendGoalRequest(
+                7, k + 1, peer.UUID(list(rng.randbytes(16))),
+                peer.SortGoal([rng.randrange(1 << 32) for _ in range(200)])))
+        replies = sorted((r.seq, r.accepted) for r in (
+            peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"])) for _ in range(2)))
+    assert replies == [(1, True), (2, False)]

@@ -84,6 +84,15 @@ class Broker:
         self._actions[action].put(g)
         return g
 
+    def withdraw_goal(self, action, goal):
+        """Take ``goal`` back out of ``action``'s queue before a server took it; whether it
+        was still there."""
+        queue = self._actions.get(action)
+        if queue is None or goal not in queue.items:
+            return False
+        queue.items.remove(goal)
+        return True
+
 
 class ActionGoal:
     """One goal of an action, as both ends see it (rclc's goal handle).

@@ -62,7 +62,13 @@ CANCEL_GOAL = "action_msgs/srv/CancelGoal"
 #: the bridge's origin in the in-process graph (host.reconos.Broker)
 ORIGIN = "ros2 bridge"
 #: action_msgs/msg/GoalStatus
-STATUS_UNKNOWN, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 2, 4
+STATUS_UNKNOWN, STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 1, 2, 4
+STATUS_CANCELED, STATUS_ABORTED = 5, 6
+#: rcl_action's default result timeout: a finished goal leaves the status list after it
+RESULT_TIMEOUT_S = 900.0
+#: what the bridge does with a goal while the hardware serves others (``--goal-policy``)
+GOAL_POLICIES = ("queue", "reject")
+CANCEL_NONE = 0
 CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
 
 
@@ -132,13 +138,18 @@ class _Endpoint:
 class _GoalRecord:
     """A goal a DDS client sent to a hardware action server."""
 
-    def __init__(self, goal, stamp):
+    def __init__(self, goal, stamp, status=STATUS_EXECUTING):
         from cocotb.triggers import Event
         self.goal = goal
         self.stamp = stamp
-        self.status = STATUS_EXECUTING
+        self.status = status
         self.result = None
         self.done = Event()
+        self.finished_s = None       # wall time the result came (for the result timeout)
+
+    @property
+    def active(self):
+        return self.status in (STATUS_ACCEPTED, STATUS_EXECUTING)
 
 
 class Ros2Bridge:
@@ -163,10 +174,18 @@ class Ros2Bridge:
         The bridge's clock in ns (simulated time), for the stamps of action goals.
     publish_clock : bool
         Write ``/clock`` (:meth:`write_clock`).
+    goal_policy : str
+        A goal that arrives while the hardware serves as many goals as it has servers:
+        ``"queue"`` accepts it at once and hands it to the hardware when a server is free,
+        ``"reject"`` refuses it at once.
+    result_timeout_s : float
+        Wall seconds a finished goal stays in the status list and its result can be asked
+        for (rcl_action's default: 900).
     """
 
     def __init__(self, interfaces, library, broker, *, domain, log, spawn, accepts=None,
-                 qos=None, now_ns=time.monotonic_ns, publish_clock=False):
+                 qos=None, now_ns=time.monotonic_ns, publish_clock=False, goal_policy="queue",
+                 result_timeout_s=RESULT_TIMEOUT_S):
         if not isinstance(domain, int) or domain not in DOMAIN_IDS:
             raise ValueError(f"DDS domain {domain!r}: expected an integer 0..{DOMAIN_IDS[-1]}")
         self.interfaces = interfaces
@@ -178,9 +197,15 @@ class Ros2Bridge:
         self.accepts = accepts
         self.now_ns = now_ns
         self.publish_clock = publish_clock
+        if goal_policy not in GOAL_POLICIES:
+            raise ValueError(f"goal policy {goal_policy!r}: expected one of "
+                             f"{', '.join(GOAL_POLICIES)}")
+        self.goal_policy = goal_policy
+        self.result_timeout_s = float(result_timeout_s)
         self._clock = None
         #: node name -> (the bridge's readers, writers) that stand for its endpoints on DDS
         self._graph = {}
+        self._served_goals = []      # (goals by uuid, status writer) of each served action
         self.graph = {}
         self.qos = qos or BridgeQos()
         self.types = DdsTypes(library)
@@ -356,11 +381,13 @@ class Ros2Bridge:
                               f"{action.name}/_action/status",
                               "action_msgs/msg/GoalStatusArray", action.key, status=True)
         goals = {}
+        self._served_goals.append((goals, status))
         for name, handler in (("send_goal", self._send_goal),
                               ("get_result", self._get_result),
                               ("cancel_goal", self._cancel_goal)):
             ep = services[name]
             ep.goals, ep.feedback, ep.status = goals, feedback, status
+            ep.servers = max(1, len(action.servers))
             self._inbound.append((ep, handler))
         self._own(("action", action.name, "servers"), feedback, status,
                   *(e for ep in services.values() for e in (ep, ep.reply)))
@@ -450,6 +477,7 @@ class Ros2Bridge:
                 moved += 1
         for state in self._action_clients:
             moved += self._poll_action_client(state)
+        self._expire_goals()
         for queue, ep in self._clients:
             # a request waits until a server is there (rclcpp's wait_for_service): a volatile
             # request written before the match would be lost
@@ -607,38 +635,88 @@ class Ros2Bridge:
         return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
 
     def _publish_status(self, ep):
+        self._write_status(ep.goals, ep.status)
+
+    def _write_status(self, goals, writer):
         status_list = [{"goal_info": {"goal_id": {"uuid": uuid}, "stamp": r.stamp},
-                        "status": r.status} for uuid, r in ep.goals.items()]
-        self._write(ep.status, encode_cdr(self.library, ep.status.typename,
-                                          {"status_list": status_list}))
+                        "status": r.status} for uuid, r in goals.items()]
+        self._write(writer, encode_cdr(self.library, writer.typename,
+                                       {"status_list": status_list}))
 
     def _send_goal(self, ep, data):
-        request = self._request(ep, data)
-        if request is None:
+        """A goal from DDS, answered at once as rclcpp_action answers: the hardware decides
+        when it has a free server (its GOAL_DECIDE comes within cycles); otherwise the goal
+        policy accepts it into the queue or refuses it. An accepted goal executes at once:
+        the bridge asks the hardware for its result on acceptance (ReconROS' servers wait in
+        ACTIONS_RESULT_TAKE), and keeps it for the client's get_result."""
+        split = self._split(ep, data)
+        if split is None:
             return
-        guid, seq, value = request
+        guid, seq, body = split
+        try:
+            value = decode_cdr(self.library, ep.typename, body, padded=True)
+        except WireError as exc:
+            return self._refuse_goal(ep, guid, seq, str(exc))
+        reason = self.accepts(ep.name, value) if self.accepts is not None else None
+        if reason:
+            return self._refuse_goal(ep, guid, seq, reason)
         uuid = bytes(value["goal_id"]["uuid"])
-        self.counts[ep.name]["delivered"] += 1
         if uuid in ep.goals:
-            self._reject(ep, f"goal id {uuid.hex()} is already in use; refused")
-            self._reply(ep, guid, seq, {"accepted": False, "stamp": self._stamp()})
-            return
+            return self._refuse_goal(ep, guid, seq, f"goal id {uuid.hex()} is already in use")
+        busy = sum(r.active for r in ep.goals.values()) >= ep.servers
+        if busy and self.goal_policy == "reject":
+            return self._refuse_goal(ep, guid, seq, f"the hardware serves {ep.servers} goal(s) "
+                                                    f"already (--goal-policy reject)")
+        self.counts[ep.name]["delivered"] += 1
         goal = self.broker.send_goal(ep.key, value["goal"], uuid)
+        record = ep.goals[uuid] = _GoalRecord(goal, self._stamp(), STATUS_ACCEPTED)
+        record.result_type = ep.reply.typename.replace("_SendGoal_Response",
+                                                       "_GetResult_Response")
         self._calls += 1
+        if busy:
+            self._reply(ep, guid, seq, {"accepted": True, "stamp": record.stamp})
+            self._publish_status(ep)
 
         async def decide():
             try:
                 accepted = await goal.accepted.get()
-                stamp = self._stamp()
-                if accepted:
-                    record = ep.goals[uuid] = _GoalRecord(goal, stamp)
-                    self.spawn(self._goal_feedback(ep, goal))
-                    self.spawn(self._goal_result(ep, record))
-                    self._publish_status(ep)
-                self._reply(ep, guid, seq, {"accepted": accepted, "stamp": stamp})
+                if not accepted and not busy:
+                    # refused by the hardware while the client still waits: a refusal
+                    del ep.goals[uuid]
+                    self.counts[ep.name]["delivered"] -= 1
+                    self._reject(ep, "the hardware server refused the goal")
+                    self._reply(ep, guid, seq, {"accepted": False, "stamp": self._stamp()})
+                    return
+                if not accepted:
+                    # accepted into the queue, refused when its turn came
+                    self._finish(ep, record, STATUS_ABORTED)
+                    self.log(f"ros2 bridge: {ep.name}: goal {uuid.hex()} aborted: the "
+                             f"hardware server refused it when its turn came")
+                    return
+                if record.status == STATUS_ACCEPTED:
+                    record.status = STATUS_EXECUTING
+                goal.request_result()
+                self.spawn(self._goal_feedback(ep, goal))
+                self.spawn(self._goal_result(ep, record))
+                if not busy:
+                    self._reply(ep, guid, seq, {"accepted": True, "stamp": record.stamp})
+                self._publish_status(ep)
             finally:
                 self._calls -= 1
         self.spawn(decide())
+
+    def _refuse_goal(self, ep, guid, seq, reason):
+        self._reject(ep, reason)
+        self._reply(ep, guid, seq, {"accepted": False, "stamp": self._stamp()})
+
+    def _finish(self, ep, record, status):
+        """End ``record`` without a hardware result: ``status`` and the empty result."""
+        result = default_value(self.library, record.result_type)
+        record.result = {**result, "status": status}
+        record.status = status
+        record.finished_s = time.monotonic()
+        record.done.set()
+        self._publish_status(ep)
 
     async def _goal_feedback(self, ep, goal):
         while True:
@@ -650,6 +728,7 @@ class Ros2Bridge:
         # ReconROS' ACTIONS_RESULT_SEND is rclc_action_send_result with GOAL_STATE_SUCCEEDED
         record.result = {**response, "status": response.get("status") or STATUS_SUCCEEDED}
         record.status = record.result["status"]
+        record.finished_s = time.monotonic()
         record.done.set()
         self._publish_status(ep)
 
@@ -665,7 +744,6 @@ class Ros2Bridge:
             self._reply(ep, guid, seq, default_value(self.library, ep.reply.typename))
             return
         self.counts[ep.name]["delivered"] += 1
-        record.goal.request_result()
         self._calls += 1
 
         async def answer():
@@ -681,19 +759,39 @@ class Ros2Bridge:
         if request is None:
             return
         guid, seq, value = request
-        uuid = bytes(value["goal_info"]["goal_id"]["uuid"])
+        info = value["goal_info"]
+        uuid = bytes(info["goal_id"]["uuid"])
         record = ep.goals.get(uuid)
         if record is None and any(uuid):
             self._reject(ep, f"cancel of unknown goal {uuid.hex()}; answered "
                              f"ERROR_UNKNOWN_GOAL_ID")
-            code = CANCEL_UNKNOWN_GOAL_ID
-        else:
-            # rosgate's hardware action servers cannot be cancelled (ReconROS' ACTIONS_CANCEL
-            # calls are not modelled): a running goal's cancel is rejected
-            self.counts[ep.name]["delivered"] += 1
-            code = CANCEL_GOAL_TERMINATED if record is not None and record.result is not None \
-                else CANCEL_REJECTED
+            self._reply(ep, guid, seq, {"return_code": CANCEL_UNKNOWN_GOAL_ID,
+                                        "goals_canceling": []})
+            return
+        self.counts[ep.name]["delivered"] += 1
+        if record is not None and record.status == STATUS_ACCEPTED and \
+                self.broker.withdraw_goal(ep.key, record.goal):
+            # still in the queue, not taken by the hardware: canceled here
+            self._finish(ep, record, STATUS_CANCELED)
+            self._reply(ep, guid, seq, {"return_code": CANCEL_NONE, "goals_canceling": [
+                {"goal_id": {"uuid": list(uuid)}, "stamp": record.stamp}]})
+            return
+        # a goal the hardware executes cannot be stopped (ReconROS' threads have no cancel
+        # path): refused; a finished one: terminated
+        code = CANCEL_GOAL_TERMINATED if record is not None and record.result is not None \
+            else CANCEL_REJECTED
         self._reply(ep, guid, seq, {"return_code": code, "goals_canceling": []})
+
+    def _expire_goals(self):
+        """Drop finished goals older than the result timeout from their status lists."""
+        now = time.monotonic()
+        for goals, status in self._served_goals:
+            old = [u for u, r in goals.items()
+                   if r.finished_s is not None and now - r.finished_s > self.result_timeout_s]
+            for uuid in old:
+                del goals[uuid]
+            if old:
+                self._write_status(goals, status)
 
     # --- actions used from hardware ------------------------------------------------------
     def _poll_action_client(self, state):

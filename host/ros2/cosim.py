@@ -46,7 +46,8 @@ def start_bridge(ctx, module, options):
     ``options``: ``domain`` (int), ``stop_file`` (path or None), ``service_queue`` (int: calls
     of one service held for the hardware), ``clock`` (``"zero"``, ``"wall"`` or ``"none"``:
     ``/clock`` from simulated time, from simulated time plus ``clock_start_ns``, or no
-    ``/clock``). ``module`` is the project's
+    ``/clock``), ``goal_policy`` (``"queue"`` or ``"reject"``: a goal while the hardware
+    is busy). ``module`` is the project's
     ``sim.py``: its ``accepts(ctx, name, value)``, if any, states the hardware's limits for
     messages arriving from DDS."""
     import cocotb
@@ -61,6 +62,7 @@ def start_bridge(ctx, module, options):
         domain=int(options["domain"]), log=ctx.log, spawn=cocotb.start_soon,
         now_ns=lambda: round(cocotb.utils.get_sim_time("ns")) + offset,
         publish_clock=options.get("clock", "zero") != "none",
+        goal_policy=options.get("goal_policy", "queue"),
         accepts=(lambda name, value: accepts(ctx, name, value)) if accepts else None,
         qos=BridgeQos(service_queue=int(options.get("service_queue", SERVICE_QUEUE))))
     shown = bridge.start()
