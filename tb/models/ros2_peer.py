@@ -26,8 +26,15 @@ _domains = itertools.count()
 
 
 def unique_domain():
-    """A DDS domain id no other test process of this run uses (pid and a counter)."""
-    return 1 + (os.getpid() * 13 + next(_domains) * 7) % 230
+    """A DDS domain id no other test process of this run uses: pytest-xdist worker ``gwK``
+    of ``N`` takes ids from its own slice of 1..230 in turn (a pid-based id could collide
+    between two workers); outside xdist the pid picks the start."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    if worker.startswith("gw") and worker[2:].isdigit():
+        size = 230 // max(workers, 1)
+        return 1 + int(worker[2:]) % workers * size + next(_domains) % size
+    return 1 + (os.getpid() + next(_domains)) % 230
 
 
 def loopback_environment():
