@@ -433,13 +433,14 @@ class SystemTop(wiring.Component):
             if slot.clock is not project.system_clock:
                 self.async_slots.append(slot.id)
         built = [s.thread for s in slots if self.threads[s.id] is not None]
+        read = set().union(*(t.params_read for t in built))
         for thread in built:
             for name in thread.params:
-                if _wildcard(thread, name) and not any(name in t.params_read for t in built):
+                if _wildcard(thread, name) and name not in read:
                     raise ConfigError(_params_location(thread),
                                       f"{thread.param_options[name]}: no thread has a parameter "
                                       f"{name!r} (their build() functions read: "
-                                      f"{', '.join(sorted(set().union(*(t.params_read for t in built)))) or 'none'})")
+                                      f"{', '.join(sorted(read)) or 'none'})")
         for slot in slots:
             if slot.id in self.async_slots and self.threads[slot.id] is None:
                 raise ConfigError(slot.where, f"slot {slot.name} runs on clock "

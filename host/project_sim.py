@@ -213,7 +213,9 @@ class SimContext:
         """A status event: wall seconds since the nodes started, cycles, simulated ms,
         messages, memory in use, the nodes' work."""
         usage = self.cosim.memory.usage()
-        status = {"seconds": round(seconds, 1), "cycle": self.now(), "ms": round(self.now() / (self.clock_mhz * 1000), 3),
+        cycle = self.now()
+        status = {"seconds": round(seconds, 1), "cycle": cycle,
+                  "ms": round(cycle / (self.clock_mhz * 1000), 3),
                   "messages": self.cosim.broker.events, "memory_in_use": usage["in_use"],
                   "memory_size": usage["size"]}
         if self._work is not None:
@@ -468,9 +470,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         ``log(cycle, text)`` for each line the nodes log while the simulation runs.
     status : callable or None
         ``status(dict)`` every :data:`STATUS_SECONDS` of wall time while the simulation runs:
-        ``seconds`` (wall, since the nodes started), ``cycle``, ``ms`` (simulated), ``messages``, ``memory_in_use``, ``memory_size`` (bytes)
-        and, when a node reports it (:meth:`SimContext.progress`), ``done``, ``total``,
-        ``unit``.
+        ``seconds`` (wall, since the nodes started), ``cycle``, ``ms`` (simulated),
+        ``messages``, ``memory_in_use``, ``memory_size`` (bytes) and, when a node reports it
+        (:meth:`SimContext.progress`), ``done``, ``total``, ``unit``.
     status_seconds : float
         Wall seconds between two ``status`` calls.
     ros2 : dict or None

@@ -213,8 +213,9 @@ async def bad_input_is_dropped_counted_and_the_next_request_answered(dut):
 @cocotb.test()
 async def watchdog_restart_and_id_conflict(dut):
     """Three cycle periods without SoC or ISEND_REQ, or a REINIT with reason 1: REINIT, which
-    the next ISEND_RES reports while the node returns to OP (the one after reports OP). A master that restarts (REINIT to all): INIT, and the
-    node is initialised again without a reset. An ADDR_REQ giving the node's id to another
+    the next ISEND_RES reports while the node returns to OP (the one after reports OP). A
+    master that restarts (REINIT to all): INIT, and the node is initialised again without a
+    reset. An ADDR_REQ giving the node's id to another
     MAC: the node gives up its address."""
     tb, _ = await started(dut)
     await tb.send(tb.soc(period_ns=8_000))            # 1000 cycles

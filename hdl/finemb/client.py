@@ -51,9 +51,10 @@ class FinembClient(wiring.Component):
       input page or ``app_deadline`` cycles after the flip, whichever comes first. Three
       cycle periods (from the SoC) without an SoC -> REINIT (counted as ``missed_cycles``).
     * **REINIT**: the address is kept; ADDR_REQ and IODESC_REQ are answered again; the next
-      ISEND_REQ -> OP, its answer still reporting REINIT (the one after it reports OP). REINIT for this node enters it; REINIT for every node with reason
-      MASTER_RESTART returns every node to INIT (a master that starts again re-initialises
-      the network without a power cycle).
+      ISEND_REQ -> OP, its answer still reporting REINIT (the one after it reports OP).
+      REINIT for this node enters it; REINIT for every node with reason MASTER_RESTART
+      returns every node to INIT (a master that starts again re-initialises the network
+      without a power cycle).
 
     An ADDR_REQ that gives this node's id to another MAC makes the node give up its address
     (INIT, ``id_conflict``): two nodes never keep one id. A request with a bad magic,

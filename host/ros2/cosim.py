@@ -5,10 +5,10 @@ either direction. Once every hardware thread waits in an OS call and nothing has
 OS call, register access, memory access or message) for ``IDLE_POLLS`` polls, the system
 cannot move by itself: the simulator blocks on DDS, first for ``IDLE_WAIT_S`` of wall time and,
 while the quiet lasts, for twice as long each time up to ``IDLE_WAIT_MAX_S``, so an idle system
-costs almost no processor time (a wake-up a second). A thread that computes without OS calls keeps the
-simulation running. SIGINT or SIGTERM (or the stop file the ``rosgate`` process writes when
-it gets them) ends the run cleanly: the participant is deleted, the results and files are
-written, the simulator exits.
+costs almost no processor time (a wake-up a second). A thread that computes without OS calls
+keeps the simulation running. SIGINT or SIGTERM (or the stop file the ``rosgate`` process
+writes when it gets them) ends the run cleanly: the participant is deleted, the results and
+files are written, the simulator exits.
 """
 
 import signal
