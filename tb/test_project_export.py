@@ -281,6 +281,12 @@ def test_export_refuses_a_foreign_folder_without_force(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
     assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(out), "--force"]) == 0
     assert (out / "notes.txt").read_text() == "mine" and (out / "manifest.json").is_file()
+    # a folder with only other subfolders (rosgate sim's sim/) is not foreign
+    beside = tmp_path / "with_sim"
+    (beside / "sim").mkdir(parents=True)
+    (beside / "sim" / "sim_results.json").write_text("{}")
+    assert rosgate(["export-hw", str(project / "build.cfg"), "-o", str(beside)]) == 0
+    assert (beside / "sim" / "sim_results.json").read_text() == "{}"
 
 
 def test_failed_write_leaves_the_old_file_whole(tmp_path, monkeypatch):

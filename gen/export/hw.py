@@ -63,6 +63,10 @@ def fusesoc_core(project, core, description):
     ])
 
 
+#: the folders an export writes into
+EXPORT_FOLDERS = ("hdl", "ip", "bd")
+
+
 class ExportFolderError(ValueError):
     """The output folder of an export holds files that are not an earlier export's."""
 
@@ -76,11 +80,22 @@ def _previous_files(out, force):
             return set(json.loads(manifest.read_text()).get("files", []))
         except (ValueError, AttributeError):
             pass
-    if out.is_dir() and any(out.iterdir()) and not force:
+    if out.is_dir() and not force and _foreign_files(out):
         raise ExportFolderError(f"-o {out}: the folder holds files that are not a rosgate "
-                                f"export (no manifest.json listing them); choose a new folder "
-                                f"or pass --force to write into it")
+                                f"export (no manifest.json listing them, e.g. "
+                                f"{_foreign_files(out)[0]}); choose a new folder or pass "
+                                f"--force to write into it")
     return set()
+
+
+def _foreign_files(out):
+    """Files in ``out`` an export could overwrite or leave stale: at its top and in the
+    folders it writes (other folders, such as ``rosgate sim``'s ``sim/``, are left alone)."""
+    found = [f.name for f in out.iterdir() if f.is_file()]
+    for sub in EXPORT_FOLDERS:
+        if (out / sub).is_dir():
+            found += [str(f.relative_to(out)) for f in (out / sub).rglob("*") if f.is_file()]
+    return sorted(found)
 
 
 def export_hw(project, out, *, log=None, force=False):
