@@ -19,6 +19,9 @@ CONFIG ?=
 WAVES ?= 0
 SEED ?=
 RUNS ?= 10
+# make sim / make soak: the tests of one simulator, and those that run none (a layout, a model,
+# a parser), of one configuration if CONFIG is given
+SELECT = ($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)
 
 .PHONY: help setup debs demo test test-full sim soak lint bench bench-resources timing train-mnist clean
 
@@ -72,12 +75,11 @@ test-full: setup
 sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \
 	  $$(ls tb/test_*.py | sed 's,tb/test_,,; s,\.py,,'); exit 2; }
-	@# tests of one simulator, and those that run no simulator (a layout, a model, a parser)
-	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)" -p no:xdist -rA
+	WAVES=$(WAVES) SEED=$(SEED) $(PY) -m pytest tb/test_$(TOP).py -k "$(SELECT)" -p no:xdist -rA
 
 soak: setup
 	@test -f tb/test_$(TOP).py || { echo "make soak: no bench tb/test_$(TOP).py for TOP=$(TOP)"; exit 2; }
-	$(PY) -m tb.soak tb/test_$(TOP).py -k "($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)" --runs $(RUNS) --jobs $(JOBS)
+	$(PY) -m tb.soak tb/test_$(TOP).py -k "$(SELECT)" --runs $(RUNS) --jobs $(JOBS)
 
 lint: setup
 	$(PY) -m tb.lint_tops

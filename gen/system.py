@@ -33,6 +33,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from hdl.dds import HW_TOPIC_STREAM, Topic
+from hdl.params import read_as
 from hdl.reconos import ReconosSystem, ThreadSignature
 from hdl.stream import StreamFIFO
 
@@ -79,12 +80,10 @@ class ThreadContext:
         naming it."""
         if name not in self.params:
             return default
-        text = self.params[name]
         try:
-            return kind(text)
-        except ValueError:
-            what = {int: "a whole number", float: "a number"}.get(kind, kind.__name__)
-            raise ValueError(f"{name}={text!r} is not {what}") from None
+            return read_as(kind, self.params[name])
+        except ValueError as exc:
+            raise ValueError(f"{name}={exc}") from None
 
     def handle(self, name):
         """The thread-local handle of resource ``name`` (``"sub"`` or ``"resourcedip_sub"``)."""

@@ -6,7 +6,19 @@ Front ends (the command line, config readers) map :attr:`ParameterError.name` to
 spelling of the parameter instead of checking the range a second time.
 """
 
-__all__ = ["ParameterError", "check_int", "check_choice", "check_power_of_two"]
+__all__ = ["ParameterError", "check_int", "check_choice", "check_power_of_two", "read_as"]
+
+#: how a value that does not read as a kind is described
+_KIND_WORDS = {int: "a whole number", float: "a number", str: "text"}
+
+
+def read_as(kind, text):
+    """``text`` read as ``kind`` (``str``, ``int`` or ``float``); a :class:`ValueError`
+    saying what it is not (``'abc' is not a whole number``) otherwise."""
+    try:
+        return kind(text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not {_KIND_WORDS.get(kind, kind.__name__)}") from None
 
 
 class ParameterError(ValueError):

@@ -425,37 +425,27 @@ def _run_export_msg(args):
     return 0
 
 
-def _memory_mb(text):
-    """``--memory-mb``: a whole number of MiB from 1 to 4095 (the r32 bus addresses 4 GiB)."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if not 1 <= value <= 4095:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of MiB from 1 "
-                                         f"to 4095")
-    return value
+def _number_option(kind, expected, ok):
+    """An argparse ``type``: the text read as ``kind`` and accepted by ``ok``, else an error
+    naming the text and what was ``expected``."""
+    def read(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not ok(value):
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
+        return value
+    return read
 
 
-def _positive_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number above 0")
-    return value
-
-
-def _positive_ms(text):
-    """``--limit-ms``, ``--stall-ms``: a number of milliseconds above 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number of milliseconds above 0")
-    return value
+#: ``--memory-mb``: the r32 bus addresses 4 GiB
+_memory_mb = _number_option(int, "a whole number of MiB from 1 to 4095",
+                            lambda v: 1 <= v <= 4095)
+_positive_int = _number_option(int, "a whole number above 0", lambda v: v >= 1)
+#: ``--limit-ms``, ``--stall-ms`` (NaN and infinity refused)
+_positive_ms = _number_option(float, "a number of milliseconds above 0",
+                              lambda v: 0 < v < float("inf"))
 
 
 def _key_values(items, option):
@@ -741,7 +731,7 @@ def build_parser():
 
 
 def main(argv=None):
-    from host.console import stop_on_signals
+    from host.console import discard_stdout, stop_on_signals
     parser = build_parser()
     args = parser.parse_args(argv)
     status = 1
@@ -753,21 +743,12 @@ def main(argv=None):
         return status
     except BrokenPipeError:
         # the reader went away (`rosgate ... | head`): end quietly, as a SIGPIPE would
-        _discard_stdout()
+        discard_stdout()
         status = 141
         return status
     finally:
         if status != 0:
             _quiet_unused_elaboratables()
-
-
-def _discard_stdout():
-    """Point standard output at /dev/null, so the interpreter's last flush at exit does not
-    fail on the closed pipe again."""
-    import os
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, sys.stdout.fileno())
-    os.close(devnull)
 
 
 def _quiet_unused_elaboratables():

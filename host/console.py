@@ -8,7 +8,7 @@ import time
 
 from rich.console import Console as RichConsole
 
-__all__ = ["Console", "Interrupted", "stop_on_signals"]
+__all__ = ["Console", "Interrupted", "stop_on_signals", "discard_stdout"]
 
 
 class Interrupted(KeyboardInterrupt):
@@ -42,12 +42,18 @@ class _QuietOnBrokenPipe(RichConsole):
     with the status of a SIGPIPE, as the plain ``print`` paths of the command line do."""
 
     def on_broken_pipe(self):
-        import os
-        import sys
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
+        discard_stdout()
         raise SystemExit(141)
+
+
+def discard_stdout():
+    """Point standard output at /dev/null once its reader went away, so the interpreter's
+    last flush at exit does not fail on the closed pipe again."""
+    import os
+    import sys
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 class Console:

@@ -518,9 +518,9 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         args = check_args(module, dict(args or {}), project.name)
     except ArgumentError as exc:
         raise ProjectError(str(exc)) from None
-    _check_output("--record", record, folder=True)
-    _check_output("--trace", trace, folder=False)
-    _check_output("-o", out, folder=False)
+    _check_output("--record", record, "new folder")
+    _check_output("--trace", trace, "file")
+    _check_output("-o", out, "folder")
     system = build_system(project)
     build_dir = Path(build_dir) if build_dir else \
         project_build_dir(project, thread_params, sim, cxx_opt)
@@ -639,14 +639,14 @@ def _logged_exception(log, project_dir):
     return f"{file}:{line}: {message}"
 
 
-def _check_output(option, path, *, folder):
+def _check_output(option, path, kind):
     """Refuse, before anything is built, an output ``path`` that cannot be written: its
-    parent folder is created (as the run would) or the error names the option. ``folder``:
-    the path is a new folder the run creates (rosbag2 refuses an existing one)."""
+    parent folder is created (as the run would) or the error names the option. ``kind``:
+    ``"file"``, ``"folder"``, or ``"new folder"`` (rosbag2 refuses an existing one)."""
     if path is None:
         return
     path = Path(path)
-    if folder and path.exists():
+    if kind == "new folder" and path.exists():
         raise ProjectError(f"{option} {path}: the folder exists; rosbag2 writes a new one")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -655,10 +655,9 @@ def _check_output(option, path, *, folder):
                            f"{exc.strerror}") from None
     if not os.access(path.parent, os.W_OK):
         raise ProjectError(f"{option} {path}: cannot write into {path.parent}")
-    if not folder and path.is_dir() != (option == "-o"):
-        kind = "a file, not a folder" if option == "-o" else "a folder, not a file"
-        if path.exists():
-            raise ProjectError(f"{option} {path}: {kind}")
+    if path.exists() and path.is_dir() != (kind != "file"):
+        found = "a folder, not a file" if kind == "file" else "a file, not a folder"
+        raise ProjectError(f"{option} {path}: {found}")
 
 
 def project_build_dir(project, thread_params, sim, cxx_opt=PROJECT_CXX_OPT):

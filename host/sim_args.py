@@ -17,6 +17,8 @@ another folder). A ``sim.py`` without ``ARGS`` receives every key unchecked.
 
 from pathlib import Path
 
+from hdl.params import read_as
+
 __all__ = ["SimArg", "ArgumentError", "check_args", "describe_args"]
 
 
@@ -63,13 +65,10 @@ class SimArg:
             if self.choices is not None and item not in self.choices:
                 raise ArgumentError(f"--arg {name}={text}: {item!r} is not one of "
                                     f"{', '.join(self.choices)}")
-            if self.kind is not str:
-                try:
-                    self.kind(item)
-                except ValueError:
-                    raise ArgumentError(
-                        f"--arg {name}={text}: {item!r} is not "
-                        f"{'a whole number' if self.kind is int else 'a number'}") from None
+            try:
+                read_as(self.kind, item)
+            except ValueError as exc:
+                raise ArgumentError(f"--arg {name}={text}: {exc}") from None
         if self.files:
             items = [str((Path.cwd() / Path(i).expanduser()).resolve())
                      if i and (Path.cwd() / Path(i).expanduser()).exists() else i

@@ -42,7 +42,7 @@ from host.simulator import (
 )
 
 __all__ = ["SIMULATORS", "ROOT", "SIM_BUILD", "amount", "cocotb_bench", "run_bench",
-           "bench_params", "bench_manifest", "export_bench_top", "environment_seed",
+           "run_rosgate", "bench_params", "bench_manifest", "export_bench_top", "environment_seed",
            "failed_seeds", "verilog_key"]
 
 #: the repository, and its simulator output folder
@@ -53,6 +53,16 @@ SIM_BUILD = ROOT / "sim_build"
 #: matrix's amounts of them (messages, photographs at full size, servo periods); ``make test``
 #: and a bare pytest run the same cases with fewer draws
 _FULL = os.environ.get("ROSGATE_FULL", "0") not in ("", "0")
+
+
+def run_rosgate(*args, cwd=None, env=None, timeout=600):
+    """``rosgate <args>`` as a user runs it: its own process (``python -m host.cli``), in
+    ``cwd`` (default: the repository); the completed process, output captured as text."""
+    import subprocess
+    env = dict(os.environ if env is None else env, PYTHONPATH=str(ROOT))
+    return subprocess.run([sys.executable, "-m", "host.cli", *map(str, args)],
+                          cwd=cwd or ROOT, env=env, capture_output=True, text=True,
+                          timeout=timeout)
 
 
 def amount(quick, full):

@@ -13,6 +13,8 @@ from hdl.params import ParameterError
 from host.cli import main
 from host.lint import lint_verilog
 
+from .harness import run_rosgate
+
 
 def verilog_ports(text, module):
     """(direction, width, name) of every port declared in ``module``."""
@@ -82,8 +84,7 @@ def test_export_is_deterministic(tmp_path):
     (["--pubs", "x", "--subs", "1", "--width", "8"], "argument --pubs: invalid int value: 'x'"),
 ])
 def test_export_topic_rejects_bad_parameters(tmp_path, args, message):
-    result = subprocess.run([sys.executable, "-m", "host.cli", "export", "topic", *args,
-                             "-o", str(tmp_path / "out")], capture_output=True, text=True)
+    result = run_rosgate("export", "topic", *args, "-o", tmp_path / "out")
     assert result.returncode == 2
     assert message in result.stderr, result.stderr
     assert not (tmp_path / "out").exists(), "nothing may be written on a bad parameter"
@@ -98,28 +99,22 @@ def test_topic_parameter_errors_name_the_parameter():
 
 
 def test_help_documents_every_option():
-    result = subprocess.run([sys.executable, "-m", "host.cli", "export", "topic", "--help"],
-                            capture_output=True, text=True)
+    result = run_rosgate("export", "topic", "--help")
     assert result.returncode == 0
     for option in ("--pubs", "--subs", "--width", "--fifo-depth", "--qos", "--history",
                    "--no-monitor", "-o"):
         assert option in result.stdout
 
 
-def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "host.cli", *args], capture_output=True,
-                          text=True)
-
-
 def test_msg_layout_prints_spec_offsets():
-    result = run_cli("msg", "layout", "sensor_msgs/Image", "--arch", "arm32")
+    result = run_rosgate("msg", "layout", "sensor_msgs/Image", "--arch", "arm32")
     assert result.returncode == 0, result.stderr
     assert "sizeof 60" in result.stdout
     assert re.search(r"^\s+48\s+4\s+pointer\s+data\.data$", result.stdout, re.MULTILINE)
 
 
 def test_msg_show_project_action_type():
-    result = run_cli("msg", "show", "sorter_msgs/action/Sort_GetResult_Response",
+    result = run_rosgate("msg", "show", "sorter_msgs/action/Sort_GetResult_Response",
                      "--msg-dir", "examples/messages")
     assert result.returncode == 0, result.stderr
     assert "int8 status" in result.stdout and "sorter_msgs/action/Sort_Result result" in \
@@ -128,7 +123,7 @@ def test_msg_show_project_action_type():
 
 def test_msg_export_c_writes_header(tmp_path):
     out = tmp_path / "image.h"
-    result = run_cli("msg", "export-c", "sensor_msgs/Image", "-o", str(out))
+    result = run_rosgate("msg", "export-c", "sensor_msgs/Image", "-o", str(out))
     assert result.returncode == 0, result.stderr
     text = out.read_text()
     assert "typedef struct sensor_msgs__msg__Image {" in text
@@ -136,41 +131,41 @@ def test_msg_export_c_writes_header(tmp_path):
 
 
 def test_msg_errors_exit_2_with_location(tmp_path):
-    result = run_cli("msg", "show", "nope/Type")
+    result = run_rosgate("msg", "show", "nope/Type")
     assert result.returncode == 2 and "unknown message type 'nope/Type'" in result.stderr
     bad = tmp_path / "bad_msgs" / "msg"
     bad.mkdir(parents=True)
     (bad / "Bad.msg").write_text("uint8 ok\nuint8[0] broken\n")
-    result = run_cli("msg", "show", "bad_msgs/Bad", "--msg-dir", str(tmp_path))
+    result = run_rosgate("msg", "show", "bad_msgs/Bad", "--msg-dir", str(tmp_path))
     assert result.returncode == 2
     assert "Bad.msg:2: bad array bound: fixed arrays need N >= 1 ('uint8[0]')" in result.stderr
 
 
 def test_msg_plan_per_framing():
-    result = run_cli("msg", "plan", "sensor_msgs/Image")
+    result = run_rosgate("msg", "plan", "sensor_msgs/Image")
     assert result.returncode == 0, result.stderr
     assert "framing cdr: 10 steps" in result.stdout
     assert "run 16 B: const 00 01 00 00 | field header.stamp.sec int32 4 B" in result.stdout
-    result = run_cli("msg", "plan", "sensor_msgs/Image", "--framing", "ros1")
+    result = run_rosgate("msg", "plan", "sensor_msgs/Image", "--framing", "ros1")
     assert result.returncode == 0, result.stderr
     assert "field header.seq uint32 4 B" in result.stdout
     assert "md5sum 060021388200f6f0f447d0fcd9c64743" in result.stdout
     assert "MSG: std_msgs/Header" in result.stdout
-    result = run_cli("msg", "plan", "sensor_msgs/Image", "--framing", "reconros")
+    result = run_rosgate("msg", "plan", "sensor_msgs/Image", "--framing", "reconros")
     assert result.returncode == 0, result.stderr
     assert "publisher 8 B beat 0 | publisher 8 B beat 1 | extend height uint32 8 B" in \
         result.stdout
 
 
 def test_msg_plan_streams_sequences_of_messages_packed():
-    result = run_cli("msg", "plan", "sensor_msgs/PointCloud2")
+    result = run_rosgate("msg", "plan", "sensor_msgs/PointCloud2")
     assert result.returncode == 0, result.stderr
     assert "stream fields: sequence<sensor_msgs/msg/PointField> packed" in result.stdout
     assert "loop over the elements of fields" in result.stdout
 
 
 def test_msg_plan_rejects_unstreamable_type():
-    result = run_cli("msg", "plan", "sensor_msgs/PointCloud2", "--framing", "reconros")
+    result = run_rosgate("msg", "plan", "sensor_msgs/PointCloud2", "--framing", "reconros")
     assert result.returncode == 2
     assert "no encoding for fields, sensor_msgs/msg/PointField[]" in result.stderr
 

@@ -2,25 +2,16 @@
 and what would have been accepted, before anything is built; paths a user types are read
 against the folder the command was started in."""
 
-import os
 import shutil
-import subprocess
-import sys
 
 import pytest
 
-from .harness import ROOT
+from .harness import ROOT, run_rosgate
 from .models.image import IMAGES
 
 SOBEL_DIP = ROOT / "examples" / "sobel_dip" / "build.cfg"
 AV_CHAIN = ROOT / "examples" / "av_chain" / "build.cfg"
 INVERSE = ROOT / "examples" / "inverse_kinematics"
-
-
-def run_rosgate(*args, cwd=ROOT):
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "host.cli", *map(str, args)], cwd=cwd,
-                          env=env, capture_output=True, text=True, timeout=300)
 
 
 def assert_refused(result, *words):

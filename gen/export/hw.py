@@ -80,11 +80,11 @@ def _previous_files(out, force):
             return set(json.loads(manifest.read_text()).get("files", []))
         except (ValueError, AttributeError):
             pass
-    if out.is_dir() and not force and _foreign_files(out):
+    foreign = _foreign_files(out) if out.is_dir() and not force else []
+    if foreign:
         raise ExportFolderError(f"-o {out}: the folder holds files that are not a rosgate "
-                                f"export (no manifest.json listing them, e.g. "
-                                f"{_foreign_files(out)[0]}); choose a new folder or pass "
-                                f"--force to write into it")
+                                f"export (no manifest.json listing them, e.g. {foreign[0]}); "
+                                f"choose a new folder or pass --force to write into it")
     return set()
 
 

@@ -83,6 +83,11 @@ CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 SERVICE_QUEUE = 1000
 
 
+def ros_time(ns):
+    """``builtin_interfaces/msg/Time`` of ``ns`` nanoseconds."""
+    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
 class BridgeQos:
     """ROS 2's default QoS profile for topics and services (rmw_qos_profile_default):
     reliable, keep last ``depth``, volatile."""
@@ -99,18 +104,13 @@ class BridgeQos:
     def discovery(self):
         """``ros_discovery_info``'s profile (rmw_cyclonedds_cpp): reliable, keep last 1,
         transient local, so a participant that joins later still gets the graph."""
-        from cyclonedds.core import Policy, Qos
-        from cyclonedds.util import duration
-        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
-                   Policy.History.KeepLast(1), Policy.Durability.TransientLocal)
+        return self.dds(status=True)
 
     def clock(self):
         """``/clock``'s profile: reliable, keep last 1, volatile (rclcpp's clock subscription,
         best effort keep last 1, matches it)."""
         from cyclonedds.core import Policy, Qos
-        from cyclonedds.util import duration
-        return Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
-                   Policy.History.KeepLast(1), Policy.Durability.Volatile)
+        return Qos(Policy.Durability.Volatile, base=self.dds(status=True))
 
     def dds(self, status=False, keep_all=False):
         """The profile; ``status``: an action's status topic (transient local, keep last 1,
@@ -138,10 +138,11 @@ class _Endpoint:
 class _GoalRecord:
     """A goal a DDS client sent to a hardware action server."""
 
-    def __init__(self, goal, stamp, status=STATUS_EXECUTING):
+    def __init__(self, goal, stamp, result_type, status=STATUS_EXECUTING):
         from cocotb.triggers import Event
         self.goal = goal
         self.stamp = stamp
+        self.result_type = result_type       # <Action>_GetResult_Response
         self.status = status
         self.result = None
         self.done = Event()
@@ -206,7 +207,6 @@ class Ros2Bridge:
         #: node name -> (the bridge's readers, writers) that stand for its endpoints on DDS
         self._graph = {}
         self._served_goals = []      # (goals by uuid, status writer) of each served action
-        self.graph = {}
         self.qos = qos or BridgeQos()
         self.types = DdsTypes(library)
         #: per ROS 2 name: samples taken from DDS, delivered, rejected, and written to DDS
@@ -283,7 +283,7 @@ class Ros2Bridge:
                 shown.append(f"{service.name} [{service.srvtype}] (called from hardware)")
         if self.publish_clock:
             self._clock = self._writer(dds_topic_name(CLOCK_TOPIC), self.types.message(CLOCK_TYPE),
-                                       CLOCK_TOPIC, CLOCK_TYPE, None, status=False, clock=True)
+                                       CLOCK_TOPIC, CLOCK_TYPE, None, qos=self.qos.clock())
             self._graph.setdefault(BRIDGE_NODE, ([], []))[1].append(self._clock)
             shown.append(f"{CLOCK_TOPIC} [{CLOCK_TYPE}] (simulated time)")
         for action in self.interfaces.actions.values():
@@ -308,8 +308,6 @@ class Ros2Bridge:
         """``ros_discovery_info`` as rmw_cyclonedds_cpp writes it: this participant's gid and,
         per hardware node, the gids of its readers and writers (a DDS GUID and 8 zero bytes),
         so ``ros2 node list`` and ``ros2 topic info -v`` name the hardware nodes."""
-        from cyclonedds.pub import DataWriter
-
         def gid(entity):
             return {"data": entity.guid.bytes + bytes(GID_SIZE - 16)}
         nodes = []
@@ -319,14 +317,11 @@ class Ros2Bridge:
                           "reader_gid_seq": [gid(ep.entity) for ep in readers],
                           "writer_gid_seq": [gid(ep.entity) for ep in writers]})
         value = {"gid": gid(self.participant), "node_entities_info_seq": nodes}
-        writer = DataWriter(self.participant,
-                            self._topic(DISCOVERY_TOPIC, self.types.message(DISCOVERY_TYPE),
-                                        qos=self.qos.discovery()), qos=self.qos.discovery())
-        self._discovery = _Endpoint(DISCOVERY_TOPIC, DISCOVERY_TYPE, writer, None)
+        # kept: the writer holds the transient-local sample for participants joining later
+        self._discovery = self._writer(DISCOVERY_TOPIC, self.types.message(DISCOVERY_TYPE),
+                                       DISCOVERY_TOPIC, DISCOVERY_TYPE, None,
+                                       qos=self.qos.discovery(), counted=False)
         self._write(self._discovery, encode_cdr(self.library, DISCOVERY_TYPE, value))
-        self.counts.pop(DISCOVERY_TOPIC, None)
-        self.graph = {name: {"readers": [ep.name for ep in r], "writers": [ep.name for ep in w]}
-                      for name, (r, w) in self._graph.items()}
 
     def _action_endpoints(self, action, client):
         """The action's three services (request and reply sides swapped for a client) and
@@ -396,9 +391,9 @@ class Ros2Bridge:
         if key in self._published_keys:
             self._published[id(value)] = (value, time.monotonic_ns())
 
-    def _topic(self, name, idl, status=False, keep_all=False, qos=None):
+    def _topic(self, name, idl, keep_all=False, qos=None):
         from cyclonedds.topic import Topic
-        return Topic(self.participant, name, idl, qos=qos or self.qos.dds(status, keep_all))
+        return Topic(self.participant, name, idl, qos=qos or self.qos.dds(keep_all=keep_all))
 
     def _reader(self, dds_name, idl, name, typename, key, keep_all=False):
         from cyclonedds.core import ReadCondition, SampleState, ViewState, InstanceState
@@ -412,12 +407,14 @@ class Ros2Bridge:
         return _Endpoint(name, typename, reader, key)
 
     def _writer(self, dds_name, idl, name, typename, key, status=False, keep_all=False,
-                clock=False):
+                qos=None, counted=True):
+        """A writer with the default profile (``status``, ``keep_all`` as
+        :meth:`BridgeQos.dds`) or ``qos``; ``counted``: listed in :meth:`summary`."""
         from cyclonedds.pub import DataWriter
-        qos = self.qos.clock() if clock else self.qos.dds(status, keep_all)
-        topic = self._topic(dds_name, idl, status, keep_all, qos=qos if clock else None)
-        writer = DataWriter(self.participant, topic, qos=qos)
-        self.counts.setdefault(name, self.counts.default_factory())
+        qos = qos or self.qos.dds(status, keep_all)
+        writer = DataWriter(self.participant, self._topic(dds_name, idl, qos=qos), qos=qos)
+        if counted:
+            self.counts.setdefault(name, self.counts.default_factory())
         return _Endpoint(name, typename, writer, key)
 
     def close(self):
@@ -442,7 +439,7 @@ class Ros2Bridge:
         time at the start) on ``/clock`` as a ``rosgraph_msgs/msg/Clock``."""
         if self._clock is None:
             return
-        value = {"clock": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}}
+        value = {"clock": ros_time(ns)}
         self._write(self._clock, encode_cdr(self.library, CLOCK_TYPE, value))
 
     @property
@@ -506,7 +503,8 @@ class Ros2Bridge:
         result = ddspy_write(ep.entity._ref, data)
         if result < 0:
             raise RuntimeError(f"DDS write on {ep.name} failed with code {result}")
-        self.counts[ep.name]["sent"] += 1
+        if ep.name in self.counts:
+            self.counts[ep.name]["sent"] += 1
 
     def _reject(self, ep, reason):
         self.counts[ep.name]["rejected"] += 1
@@ -515,16 +513,21 @@ class Ros2Bridge:
 
     def _decode(self, ep, data):
         """The sample's value, or ``None`` after rejecting it."""
-        try:
-            value = decode_cdr(self.library, ep.typename, data, padded=True)
-        except WireError as exc:
-            self._reject(ep, str(exc))
-            return None
-        reason = self.accepts(ep.name, value) if self.accepts is not None else None
+        value, reason = self._check(ep, data)
         if reason:
             self._reject(ep, reason)
             return None
         return value
+
+    def _check(self, ep, data):
+        """(value, ``None``), or (``None``, why the hardware cannot take the sample): its
+        bytes are not the type's CDR, or ``sim.py``'s ``accepts`` refuses it."""
+        try:
+            value = decode_cdr(self.library, ep.typename, data, padded=True)
+        except WireError as exc:
+            return None, str(exc)
+        reason = self.accepts(ep.name, value) if self.accepts is not None else None
+        return (None, reason) if reason else (value, None)
 
     def _topic_sample(self, ep, data):
         value = self._decode(ep, data)
@@ -545,17 +548,10 @@ class Ros2Bridge:
         return guid, seq, data[:4] + data[20:]
 
     def _service_request(self, ep, data):
-        split = self._split(ep, data)
-        if split is None:
-            return                       # no request header: nobody to answer
-        guid, seq, body = split
-        try:
-            value = decode_cdr(self.library, ep.typename, body, padded=True)
-        except WireError as exc:
-            return self._refuse_call(ep, guid, seq, str(exc))
-        reason = self.accepts(ep.name, value) if self.accepts is not None else None
-        if reason:
-            return self._refuse_call(ep, guid, seq, reason)
+        request = self._request(ep, data, refuse=lambda *call: self._refuse_call(ep, *call))
+        if request is None:
+            return
+        guid, seq, value = request
         if ep.queued >= self.qos.service_queue:
             return self._refuse_call(ep, guid, seq, f"{ep.queued} calls wait for the hardware "
                                                     f"already (the bridge's service queue, "
@@ -602,14 +598,21 @@ class Ros2Bridge:
         self._send(ep.reply, self._guid, self._seq, value)
         return self._seq
 
-    def _request(self, ep, data):
-        """(guid, seq, value) of a request, or ``None`` after rejecting it."""
+    def _request(self, ep, data, refuse=None):
+        """(guid, seq, value) of a request, or ``None`` after rejecting it; ``refuse(guid,
+        seq, reason)``, if given, rejects and answers a request the hardware cannot take."""
         split = self._split(ep, data)
         if split is None:
-            return None
+            return None                  # no request header: nobody to answer
         guid, seq, body = split
-        value = self._decode(ep, body)
-        return None if value is None else (guid, seq, value)
+        value, reason = self._check(ep, body)
+        if reason:
+            if refuse is None:
+                self._reject(ep, reason)
+            else:
+                refuse(guid, seq, reason)
+            return None
+        return guid, seq, value
 
     def _client_reply(self, ep, data, table):
         """(the waiting item, value) of a reply to one of this bridge's calls, or None."""
@@ -631,8 +634,7 @@ class Ros2Bridge:
 
     # --- actions served in hardware ------------------------------------------------------
     def _stamp(self):
-        ns = int(self.now_ns())
-        return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+        return ros_time(int(self.now_ns()))
 
     def _publish_status(self, ep):
         self._write_status(ep.goals, ep.status)
@@ -649,17 +651,10 @@ class Ros2Bridge:
         policy accepts it into the queue or refuses it. An accepted goal executes at once:
         the bridge asks the hardware for its result on acceptance (ReconROS' servers wait in
         ACTIONS_RESULT_TAKE), and keeps it for the client's get_result."""
-        split = self._split(ep, data)
-        if split is None:
+        request = self._request(ep, data, refuse=lambda *call: self._refuse_goal(ep, *call))
+        if request is None:
             return
-        guid, seq, body = split
-        try:
-            value = decode_cdr(self.library, ep.typename, body, padded=True)
-        except WireError as exc:
-            return self._refuse_goal(ep, guid, seq, str(exc))
-        reason = self.accepts(ep.name, value) if self.accepts is not None else None
-        if reason:
-            return self._refuse_goal(ep, guid, seq, reason)
+        guid, seq, value = request
         uuid = bytes(value["goal_id"]["uuid"])
         if uuid in ep.goals:
             return self._refuse_goal(ep, guid, seq, f"goal id {uuid.hex()} is already in use")
@@ -667,23 +662,24 @@ class Ros2Bridge:
         if busy and self.goal_policy == "reject":
             return self._refuse_goal(ep, guid, seq, f"the hardware serves {ep.servers} goal(s) "
                                                     f"already (--goal-policy reject)")
-        self.counts[ep.name]["delivered"] += 1
         goal = self.broker.send_goal(ep.key, value["goal"], uuid)
-        record = ep.goals[uuid] = _GoalRecord(goal, self._stamp(), STATUS_ACCEPTED)
-        record.result_type = ep.reply.typename.replace("_SendGoal_Response",
-                                                       "_GetResult_Response")
+        result_type = ep.reply.typename.replace("_SendGoal_Response", "_GetResult_Response")
+        record = ep.goals[uuid] = _GoalRecord(goal, self._stamp(), result_type,
+                                              STATUS_ACCEPTED)
         self._calls += 1
         if busy:
+            self.counts[ep.name]["delivered"] += 1
             self._reply(ep, guid, seq, {"accepted": True, "stamp": record.stamp})
             self._publish_status(ep)
 
         async def decide():
             try:
                 accepted = await goal.accepted.get()
+                if record.status == STATUS_CANCELED:
+                    return               # taken out of the queue before the hardware saw it
                 if not accepted and not busy:
                     # refused by the hardware while the client still waits: a refusal
                     del ep.goals[uuid]
-                    self.counts[ep.name]["delivered"] -= 1
                     self._reject(ep, "the hardware server refused the goal")
                     self._reply(ep, guid, seq, {"accepted": False, "stamp": self._stamp()})
                     return
@@ -699,6 +695,7 @@ class Ros2Bridge:
                 self.spawn(self._goal_feedback(ep, goal))
                 self.spawn(self._goal_result(ep, record))
                 if not busy:
+                    self.counts[ep.name]["delivered"] += 1
                     self._reply(ep, guid, seq, {"accepted": True, "stamp": record.stamp})
                 self._publish_status(ep)
             finally:
@@ -771,8 +768,10 @@ class Ros2Bridge:
         self.counts[ep.name]["delivered"] += 1
         if record is not None and record.status == STATUS_ACCEPTED and \
                 self.broker.withdraw_goal(ep.key, record.goal):
-            # still in the queue, not taken by the hardware: canceled here
+            # still in the queue, not taken by the hardware: canceled here (and the goal's
+            # decision ends, so no call is left running)
             self._finish(ep, record, STATUS_CANCELED)
+            record.goal.accepted.put(False)
             self._reply(ep, guid, seq, {"return_code": CANCEL_NONE, "goals_canceling": [
                 {"goal_id": {"uuid": list(uuid)}, "stamp": record.stamp}]})
             return
