@@ -27,6 +27,10 @@ def assert_refused(result, *words):
     (["--stall-ms", "-5"], ["--stall-ms", "'-5'"]),
     (["--limit-ms", "-1"], ["--limit-ms", "'-1'"]),
     (["--limit-ms", "nan"], ["--limit-ms", "'nan'"]),
+    (["--ros2", "--service-queue", "0"], ["--service-queue", "'0': expected a whole number "
+                                                             "above 0"]),
+    (["--ros2", "--goal-policy", "later"], ["--goal-policy", "'later'"]),
+    (["--ros2", "--clock", "gps"], ["--clock", "'gps'"]),
     (["--param", "Sobel.nosuch=1"], ["Sobel.nosuch=1", "no parameter 'nosuch'", "max_width"]),
     (["--param", "*.nosuch=1"], ["*.nosuch=1", "no thread has a parameter 'nosuch'"]),
     (["--param", "DIP.mode=reconros"], ["DIP.mode=reconros", "no parameter 'mode'"]),
