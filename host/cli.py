@@ -18,6 +18,7 @@ from hdl.params import ParameterError
 
 from .compiled import DEFAULT_MEMORY_MB, MEMORY_OPTION
 from .ros2.bridge import GOAL_POLICIES, SERVICE_QUEUE
+from .ros2.player import PACES as PLAY_PACES
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -343,6 +344,26 @@ def _add_project_commands(commands):
                         "the new folder DIR, stamped with simulated time")
     p.add_argument("--trace", type=Path, default=None, metavar="FILE",
                    help="write one readable line per message (time, topic, fields) to FILE")
+    p.add_argument("--play", type=Path, default=None, metavar="BAG",
+                   help="play a rosbag2 (MCAP or sqlite3: a bag folder or a .mcap/.db3 file) "
+                        "into the system's topics; without --ros2 the run ends when the bag "
+                        "is played and the system is idle (docs/simulation.md)")
+    p.add_argument("--play-topic", action="append", default=[], metavar="TOPIC",
+                   help="with --play, play this bag topic (repeatable; default: every bag "
+                        "topic that a thread of the system subscribes)")
+    p.add_argument("--remap", action="append", default=[], metavar="FROM:=TO",
+                   help="with --play, play bag topic FROM into the system's topic TO "
+                        "(repeatable)")
+    p.add_argument("--play-pace", choices=PLAY_PACES, default=None,
+                   help="with --play: each message at its time in the bag, mapped to "
+                        "simulated time from the start (bag, the default), or each as soon "
+                        "as every subscriber took the one before (fast)")
+    p.add_argument("--play-delay", type=_seconds, default=None, metavar="S",
+                   help="with --play, wait S seconds of wall time before the first message "
+                        "(with --ros2: time for DDS peers to discover the bridge)")
+    p.add_argument("--play-rate", type=_positive_rate, default=None, metavar="R",
+                   help="with --play and pace bag, play R times as fast as recorded "
+                        "(default 1)")
     p = add("report", "resources per core (yosys synth_xilinx) and the last simulation's "
                       "numbers", _run_report)
     p.add_argument("--sim-results", type=Path, default=None,
@@ -443,6 +464,8 @@ def _number_option(kind, expected, ok):
 _memory_mb = _number_option(int, "a whole number of MiB from 1 to 4095",
                             lambda v: 1 <= v <= 4095)
 _positive_int = _number_option(int, "a whole number above 0", lambda v: v >= 1)
+_positive_rate = _number_option(float, "a number above 0", lambda v: 0 < v < float("inf"))
+_seconds = _number_option(float, "seconds, 0 or more", lambda v: 0 <= v < float("inf"))
 #: ``--limit-ms``, ``--stall-ms`` (NaN and infinity refused)
 _positive_ms = _number_option(float, "a number of milliseconds above 0",
                               lambda v: 0 < v < float("inf"))
@@ -495,6 +518,20 @@ def _run_sim(args):
         console.error("--domain, --with-nodes, --service-queue, --clock and --goal-policy "
                       "need --ros2")
         return 2
+    play = None
+    if args.play is not None:
+        play = {"path": str(args.play.resolve()), "topics": args.play_topic,
+                "remaps": args.remap, "pace": args.play_pace or "bag",
+                "rate": args.play_rate or 1.0, "delay": args.play_delay or 0.0}
+        if play["pace"] == "fast" and args.play_rate is not None:
+            console.error("--play-rate applies to --play-pace bag; fast plays each message "
+                          "as soon as the one before was taken")
+            return 2
+    elif args.play_topic or args.remap or args.play_pace or args.play_rate is not None or \
+            args.play_delay is not None:
+        console.error("--play-topic, --remap, --play-pace, --play-rate and --play-delay need "
+                      "--play")
+        return 2
     try:
         with console.step(f"exporting and building {p.name} ({len(p.threads)} threads) for "
                           f"{args.sim}, then simulating"
@@ -504,7 +541,8 @@ def _run_sim(args):
                 p.path, args.sim, out=out, args=_key_values(args.arg, "--arg"),
                 thread_params=args.param, limit_ms=args.limit_ms, stall_ms=args.stall_ms,
                 memory_mb=args.memory_mb, waves=args.waves, progress=console.progress, ros2=ros2,
-                record=args.record, trace=args.trace, status=_SimStatus(console),
+                record=args.record, trace=args.trace, play=play,
+                status=_SimStatus(console),
                 log=lambda cycle, text: console.print(f"   [{cycle:>10} cycles] {text}"))
     except ProjectError as exc:
         console.error(exc)
@@ -515,8 +553,12 @@ def _run_sim(args):
         _failed_waves(console, args, out)
         return 1
     module = load_sim_module(p)
+    if "play" in results:
+        _print_play(console, results["play"])
     if ros2 is not None:
         _print_bridge(console, results["ros2"])
+    elif play is not None and not hasattr(module, "PLAY_NODES"):
+        pass                    # sim.py's nodes did not run: its summary has nothing to say
     elif module is not None and hasattr(module, "summary"):
         for line in module.summary(results, p.clock_mhz):
             console.print(line)
@@ -592,6 +634,23 @@ def _print_bridge(console, summary):
     for name, c in sorted(summary["counts"].items()):
         console.print(f"  {name:<32} {c['received']:>6} {c['delivered']:>6} {c['rejected']:>6} "
                       f"{c['sent']:>6}")
+
+
+def _print_play(console, play):
+    played = sum(play["played"].values())
+    pace = f"bag time x{play['rate']:g}" if play["pace"] == "bag" else "as fast as taken"
+    into = ", ".join(f"{source} -> {target} {play['played'][target]}"
+                     for source, target in sorted(play["mapping"].items()))
+    console.print(f"played {played} of {play['messages']} messages from {play['bag']} "
+                  f"({pace}): {into}" + ("" if play["finished"] else "; the run ended first"))
+    for skip in play["skipped"][:5]:
+        console.print(f"  skipped message {skip['index']} of {skip['topic']}: {skip['reason']}")
+    if len(play["skipped"]) > 5:
+        console.print(f"  ... {len(play['skipped'])} skipped in all (sim_results.json)")
+    for topic, why in sorted(play["ignored"].items()):
+        console.print(f"  not played: {topic} ({why})")
+    answered = ", ".join(f"{t} {n}" for t, n in play["published_by_system"].items())
+    console.print(f"the system published meanwhile: {answered or 'nothing'}")
 
 
 def _run_report(args):

@@ -148,6 +148,10 @@ class SimContext:
         The system clock.
     threads : dict
         As :class:`CheckContext`'s (built on first use).
+    playback : host.ros2.player.BagPlayer or None
+        With ``rosgate sim --play``: the bag's player; ``await ctx.playback.next(topic)`` is
+        the next message it published on ``topic`` (``None`` at the end). Such a run runs
+        ``sim.py``'s ``PLAY_NODES`` instead of its ``NODES``.
     """
 
     def __init__(self, cosim, project, args, out):
@@ -167,6 +171,8 @@ class SimContext:
         self._progress = None
         self._threads = None
         self._work = None
+        #: the :class:`~host.ros2.player.BagPlayer` of ``--play`` (``None`` without)
+        self.playback = None
 
     @property
     def threads(self):
@@ -344,9 +350,20 @@ async def run_project(dut):
             ctx._resources[slot.id] = res
             await cosim.runtime.create_thread(slot.id, res)
             created.append(slot.id)
-    nodes = list(getattr(module, "NODES", [])) if module is not None else []
+    play = p.get("play")
+    nodes = list(getattr(module, "PLAY_NODES" if play else "NODES", [])) \
+        if module is not None else []
     if ros2 and not ros2.get("nodes"):
         nodes = []
+    if play:
+        from .ros2.player import BagPlayer, PlayPlan
+        ctx.playback = BagPlayer(PlayPlan.from_json(play), ctx,
+                                 accepts=getattr(module, "accepts", None),
+                                 settle=not nodes and not ros2)
+
+        async def play_bag(ctx):
+            await ctx.playback.run()
+        nodes.append(play_bag)
     ended, failures, running = Event(), [], {}
 
     async def guarded(node):
@@ -400,6 +417,8 @@ async def run_project(dut):
         _write_error(out, _located(exc, sim_py))
         raise
     finally:
+        if ctx.playback is not None:
+            ctx.results["play"] = ctx.playback.summary()
         if bridge is not None:
             ctx.results["ros2"] = bridge.summary()
             bridge.close()
@@ -440,7 +459,7 @@ def _follow(path, show, stop):
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, memory_mb=DEFAULT_MEMORY_MB, seed=None,
                     build_dir=None, quiet=True, waves=False, progress=None, log=None, ros2=None,
-                    record=None, trace=None, cxx_opt=PROJECT_CXX_OPT, status=None,
+                    record=None, trace=None, play=None, cxx_opt=PROJECT_CXX_OPT, status=None,
                     status_seconds=STATUS_SECONDS):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
@@ -485,6 +504,14 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     record, trace : path or None
         Write every message on the project's topics to a rosbag2 (MCAP) at ``record`` (a new
         folder), and one line per message to the text file ``trace``.
+    play : dict or None
+        Play a rosbag2 into the system's topics (``rosgate sim --play``): ``path``, ``topics``
+        (bag topics to play; default every one the system subscribes), ``remaps``
+        (``FROM:=TO``), ``pace`` (``"bag"`` or ``"fast"``), ``rate`` (bag pace), ``delay``
+        (wall seconds before the first message). The bag is
+        read and checked before the build (:func:`host.ros2.player.plan_playback`). Without
+        ``--ros2`` the run ends once the bag is played and the system is idle, or when
+        ``sim.py``'s ``PLAY_NODES`` end.
     cxx_opt : str or None
         The C++ optimisation of a Verilator model (:func:`host.simulator.run_top`); a build
         folder is built with one.
@@ -510,14 +537,28 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
                            f"core (an HLS or VHDL thread; its ports are ports of the system "
                            f"top), so there is no hardware to simulate; `rosgate export-hw` "
                            f"writes the system for Vivado")
-    if module is None and ros2 is None:
+    if module is None and ros2 is None and play is None:
         raise ProjectError(f"{project.name} has no sim.py ({project.dir / 'sim.py'}): nothing "
                            f"would drive its system, and the run would end at once; write "
-                           f"one (docs/simulation.md) or join a ROS 2 graph with --ros2")
+                           f"one (docs/simulation.md), join a ROS 2 graph with --ros2 or "
+                           f"play a bag with --play")
     try:
         args = check_args(module, dict(args or {}), project.name)
     except ArgumentError as exc:
         raise ProjectError(str(exc)) from None
+    plan = None
+    if play is not None:
+        from gen.config import project_library
+
+        from .ros2.graph import ros_interfaces
+        from .ros2.player import PlaybackError, plan_playback
+        try:
+            plan = plan_playback(play["path"], ros_interfaces(project),
+                                 project_library(project), topics=play.get("topics", ()),
+                                 remaps=play.get("remaps", ()), pace=play.get("pace", "bag"),
+                                 rate=play.get("rate", 1.0), delay=play.get("delay", 0.0))
+        except PlaybackError as exc:
+            raise ProjectError(str(exc)) from None
     _check_output("--record", record, "new folder")
     _check_output("--trace", trace, "file")
     _check_output("-o", out, "folder")
@@ -547,6 +588,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         params["record"] = str(Path(record).resolve())
     if trace is not None:
         params["trace"] = str(Path(trace).resolve())
+    if plan is not None:
+        params["play"] = plan.to_json()
     if ros2 is not None:
         params["ros2"] = {"domain": int(ros2["domain"]), "nodes": bool(ros2.get("nodes")),
                           "stop_file": str(out / STOP),

@@ -65,13 +65,19 @@ def setup(ctx):
     scale, ppc = chain_settings(ctx.project)
     ctx.config = scaled_config(scale, ppc)
     ctx.subs = {k: ctx.broker.subscribe(t) for k, t in TOPICS.items()}
+    ctx.commands = []
+    if ctx.playback is not None:
+        # a frame's events and command are compared with the software chain's for that frame
+        # alone: the next frame goes once the command for the last has come
+        ctx.playback.hold()
     ctx.results.update(variant="reconros", scale=scale, ppc=ppc, clock_mhz=ctx.clock_mhz,
                        frames=[], bad_frames=[])
 
 
-def _compare(ctx, k, frame, sub, command):
-    """Frame ``k``'s messages on every topic against the software chain; returns the
-    frame's report and the reference's step."""
+def _compare(ctx, k, image_bgr, stamp, sub, command):
+    """Frame ``k``'s messages on every topic (their ``header.stamp`` that of the camera frame,
+    ``stamp``) against the software chain run on ``image_bgr``; returns the frame's report
+    and the reference's step."""
     (cw, ch), (bw, bh) = ctx.config.camera, ctx.config.bev
 
     def image(name, w, h):
@@ -82,14 +88,14 @@ def _compare(ctx, k, frame, sub, command):
         if geometry != (w, h, "bgr8", 3 * w) or len(msg["data"]) != 3 * w * h:
             raise AssertionError(f"frame {k}: {TOPICS[name]} is {geometry} with "
                                  f"{len(msg['data'])} bytes; expected {w}x{h} bgr8")
-        if msg["header"]["stamp"]["sec"] != k:
-            raise AssertionError(f"frame {k}: {TOPICS[name]} has the stamp of frame "
-                                 f"{msg['header']['stamp']['sec']}")
+        if msg["header"]["stamp"] != stamp:
+            raise AssertionError(f"frame {k}: {TOPICS[name]} has the stamp "
+                                 f"{msg['header']['stamp']}, the camera frame {stamp}")
         return np.frombuffer(msg["data"], np.uint8).reshape(h, w, 3)
     a, b = image("compensated", cw, ch), image("blurred", cw, ch)
     c = image("projected", bw, bh)
     # lane following and control follow the hardware's bird's-eye view (within 1 of OpenCV)
-    step = ctx.reference.step(frame.image, bev=c)
+    step = ctx.reference.step(image_bgr, bev=c)
     diff = np.abs(c.astype(int) - step.projected.astype(int))
     lane = LANE_RESULT.from_bits(sub["lane"].get_nowait()["data"])
     got_lane = (lane.centre if lane.has_centre else None, lane.left if lane.has_left else None,
@@ -118,39 +124,133 @@ async def camera(ctx):
         for sub in ctx.subs.values():       # the bad frame sent to /image/projected
             while sub.get_nowait() is not None:
                 pass
-    count = int(args.get("frames", 100))
-    geometry = scene.Geometry(ctx.config.camera[0] / scene.CAMERA_SIZE[0])
     ctx.reference = SoftwareChain(ctx.config)
-    stops, starts, expected_stops, expected_starts = [], [], [], []
-    red_from = int(args["red_from"]) if "red_from" in args else None
-    green_from = int(args["green_from"]) if "green_from" in args else None
-    for frame in scene.frames(count, seed=int(args.get("seed", 1)), red_from=red_from,
-                              green_from=green_from, geometry=geometry):
-        k = frame.index
-        start = ctx.now()
-        ctx.broker.publish("/camera/image", image_msg(frame.image, k))
-        command = await ctx.subs["command"].get()
-        cycles = ctx.now() - start
-        report, step = _compare(ctx, k, frame, ctx.subs, command)
-        entry = {"frame": k, "cycles": cycles, "truth": frame.centre, "light": frame.light,
-                 **report}
-        for name, got, want, fired in (("stop", stops, expected_stops, step.stop),
-                                       ("start", starts, expected_starts, step.start)):
-            while (msg := ctx.subs[name].get_nowait()) is not None:
-                got.append(msg["data"])
-            if fired:
-                want.append(k)
-        ctx.results["frames"].append(entry)
-        ctx.progress(len(ctx.results["frames"]), count, "frames")
-        ctx.log(f"camera: frame {k}: {cycles} cycles, centre {entry['centre']} (truth "
-                f"{frame.centre:.1f}), speed {entry['speed']} turn {entry['turn']}")
+    events = ([], [], [], [])
+    if args.get("images"):
+        paths = args["images"].split(",")
+        for k, path in enumerate(paths):
+            msg = image_msg(_read_frame(ctx.config, path), k)
+            start = ctx.now()
+            ctx.broker.publish("/camera/image", msg)
+            await _command(ctx)
+            _check_frame(ctx, k, msg, start, None, None, events, len(paths))
+    else:
+        count = int(args.get("frames", 100))
+        geometry = scene.Geometry(ctx.config.camera[0] / scene.CAMERA_SIZE[0])
+        red_from = int(args["red_from"]) if "red_from" in args else None
+        green_from = int(args["green_from"]) if "green_from" in args else None
+        for frame in scene.frames(count, seed=int(args.get("seed", 1)), red_from=red_from,
+                                  green_from=green_from, geometry=geometry):
+            msg = image_msg(frame.image, frame.index)
+            start = ctx.now()
+            ctx.broker.publish("/camera/image", msg)
+            await _command(ctx)
+            _check_frame(ctx, frame.index, msg, start, frame.centre, frame.light, events,
+                         count)
+    _finish(ctx, events)
+
+
+async def played_camera(ctx):
+    """With ``--play``: every camera frame the bag gave the chain (a recording's
+    ``/camera/image``, or a topic remapped onto it) compared like the scene's, without
+    ground truth."""
+    ctx.reference = SoftwareChain(ctx.config)
+    events = ([], [], [], [])
+    k = 0
+    while (played := await ctx.playback.next("/camera/image")) is not None:
+        await _command(ctx)
+        _check_frame(ctx, k, played.value, played.cycle, None, None, events,
+                     ctx.playback.plan.total)
+        ctx.playback.release()
+        k += 1
+    if k == 0:
+        raise ValueError("--play: the bag gave the chain no camera frame it could take")
+    _finish(ctx, events)
+
+
+async def _command(ctx):
+    """Wait for the chain's next command; keep it with the cycle it came."""
+    command = await ctx.subs["command"].get()
+    ctx.commands.append((ctx.now(), command))
+
+
+def _check_frame(ctx, k, msg, start, truth, light, events, total):
+    """Compare frame ``k`` (the camera message ``msg``, published at cycle ``start``) on
+    every topic, with the chain's next command; ``truth`` and ``light`` from the scene
+    (``None`` for frames from files or a bag)."""
+    arrived, command = ctx.commands.pop(0)
+    cycles = arrived - start
+    image = np.frombuffer(msg["data"], np.uint8).reshape(msg["height"], msg["width"], 3)
+    report, step = _compare(ctx, k, image, msg["header"]["stamp"], ctx.subs, command)
+    entry = {"frame": k, "cycles": cycles, "truth": truth, "light": light, **report}
+    stops, starts, expected_stops, expected_starts = events
+    for name, got, want, fired in (("stop", stops, expected_stops, step.stop),
+                                   ("start", starts, expected_starts, step.start)):
+        while (event := ctx.subs[name].get_nowait()) is not None:
+            got.append(event["data"])
+        if fired:
+            want.append(k)
+    ctx.results["frames"].append(entry)
+    ctx.progress(len(ctx.results["frames"]), total, "frames")
+    ctx.log(f"camera: frame {k}: {cycles} cycles, centre {entry['centre']}"
+            + (f" (truth {truth:.1f})" if truth is not None else "")
+            + f", speed {entry['speed']} turn {entry['turn']}")
+
+
+def _read_frame(config, path):
+    """A camera frame from an image file: bgr8 at the chain's camera size, else an error
+    naming the file."""
+    import cv2
+    pixels = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_COLOR)
+    if pixels is None:
+        raise ValueError(f"--arg images: {path} is not an image OpenCV can read")
+    reason = _frame_problem(config, image_msg(pixels, 0))
+    if reason:
+        raise ValueError(f"--arg images: {path}: {reason}")
+    return pixels
+
+
+def _frame_problem(config, msg):
+    """Why the chain cannot take camera message ``msg``, or ``None``."""
+    cw, ch = config.camera
+    if msg["encoding"] != "bgr8":
+        return f"encoding {msg['encoding']!r}; the chain takes bgr8"
+    if (msg["width"], msg["height"]) != (cw, ch):
+        return (f"{msg['width']}x{msg['height']}; the chain's camera is {cw}x{ch} (set the "
+                f"threads' scale with --param '*.scale=...')")
+    if msg["step"] != 3 * cw or len(msg["data"]) != 3 * cw * ch:
+        return (f"step {msg['step']} and {len(msg['data'])} data bytes; bgr8 at {cw}x{ch} "
+                f"needs step {3 * cw} and {3 * cw * ch} bytes")
+    return None
+
+
+def accepts(ctx, name, value):
+    """A camera frame from DDS or a bag that the chain cannot take (its nodes would drop it
+    and count it): the reason, or ``None``."""
+    if name != "/camera/image":
+        return None
+    return _frame_problem(ctx.config, value)
+
+
+def check(ctx):
+    """Refuse, before anything is built, an image file the chain cannot take."""
+    if ctx.args.get("images"):
+        config = scaled_config(*chain_settings(ctx.project))
+        for path in ctx.args["images"].split(","):
+            _read_frame(config, path)
+
+
+def _finish(ctx, events):
+    stops, starts, expected_stops, expected_starts = events
     frames = ctx.results["frames"]
     cycles = [f["cycles"] for f in frames]
     mean = sum(cycles) / len(cycles)
-    errors = [abs(f["centre"] - f["truth"]) for f in frames if f["centre"] is not None]
+    errors = [abs(f["centre"] - f["truth"]) for f in frames
+              if f["centre"] is not None and f["truth"] is not None]
     exact = all(f["compensation_exact"] and f["blur_exact"] and f["projection_max_diff"] <= 1
                 and f["lane_equal"] and f["command_equal"] for f in frames)
     ctx.results.update(
+        ground_truth=all(f["truth"] is not None for f in frames),
         stops=stops, starts=starts, expected_stops=expected_stops,
         expected_starts=expected_starts, events_equal=(stops, starts) == (expected_stops,
                                                                          expected_starts),
@@ -176,8 +276,10 @@ def summary(results, clock_mhz):
         f"chain alpha (camera publish to /cmd): {results['mean_cycles']:,.0f} cycles = "
         f"{results['mean_cycles'] / (clock_mhz * 1000):.3f} ms (sd {results['sd_cycles']:,.0f})",
         f"every stage as OpenCV: {'yes' if results['stages_bit_exact'] else 'NO'}; stop/start "
-        f"events as the reference: {'yes' if results['events_equal'] else 'NO'}; lane centre "
-        f"within {results['lane_centre_max_error_px']:.1f} px of the scene's",
+        f"events as the reference: {'yes' if results['events_equal'] else 'NO'}; "
+        + (f"lane centre within {results['lane_centre_max_error_px']:.1f} px of the scene's"
+           if results["lane_centre_max_error_px"] is not None else
+           "no ground truth (frames from files or a bag)"),
         f"{results['cycles']:,} cycles in {results['cpu_seconds']:.0f} CPU-s; memory "
         f"{memory['peak'] / 2**20:.1f} MiB at most in use of {memory['size'] / 2**20:.0f} MiB",
     ]
@@ -189,8 +291,11 @@ ARGS = {
     "red_from": SimArg("frame from which the traffic light is red (default: the scene's own)",
                        kind=int),
     "green_from": SimArg("frame from which the traffic light is green again", kind=int),
+    "images": SimArg("camera frames from image files instead of the scene (comma-separated, "
+                     "each at the chain's camera size; no ground truth)", files=True),
     "bad_frames": SimArg("1: first send each stage a frame it must drop", "0",
                          choices=("0", "1")),
 }
 
 NODES = [camera]
+PLAY_NODES = [played_camera]
