@@ -99,8 +99,15 @@ SECTION_KEYS = {
     "ReconosThread": {"required": ("Slot",),
                       "optional": ("HwSource", "SwSource", "ResourceGroup", "UseMem",
                                    "VideoOut", "Ports", "Parameters")},
-    "ROSGateway": {"required": ("Slot", "HWTopic", "SWTopic", "MsgType"), "optional": ()},
+    # a topic (ReconROS), or a service or action (rosgate): one of GATEWAY_KINDS' key sets
+    "ROSGateway": {"required": ("Slot",),
+                   "optional": ("HWTopic", "SWTopic", "MsgType", "HWService", "SWService",
+                                "SrvType", "HWAction", "SWAction", "ActionType")},
 }
+#: what a [ROSGateway@N] connects: its kind -> (hardware name, software name, type) keys
+GATEWAY_KINDS = {"topic": ("HWTopic", "SWTopic", "MsgType"),
+                 "service": ("HWService", "SWService", "SrvType"),
+                 "action": ("HWAction", "SWAction", "ActionType")}
 BOARDS = {"zcu104": "r64", "zedboard": "r32", "pynqz1": "r32", "miniitx": "r32"}
 TARGET_OS = {"linux64": "r64", "linux": "r32", "linux_x86": None}
 
@@ -790,34 +797,68 @@ def _thread_resources(thread, resources):
             thread.resources.append(r)
 
 
+def _gateway_kind(sec, file):
+    """The kind of a ``[ROSGateway@N]`` (``GATEWAY_KINDS``) from the keys it has."""
+    present = [kind for kind, keys in GATEWAY_KINDS.items()
+               if any(k in sec.values for k in keys)]
+    sets = "; ".join(", ".join(keys) for keys in GATEWAY_KINDS.values())
+    if len(present) != 1:
+        raise ConfigError(sec.where(file), f"a [ROSGateway] section connects one topic, service "
+                                           f"or action: one of the key sets {sets}"
+                          + (f"; it has keys of {' and '.join(present)}" if present else ""))
+    kind = present[0]
+    for key in GATEWAY_KINDS[kind]:
+        if key not in sec.values:
+            raise ConfigError(sec.where(file), f"missing required key {key!r} (a {kind} "
+                                               f"gateway has {', '.join(GATEWAY_KINDS[kind])})")
+    return kind
+
+
 def _gateway(sec, file, tid, slots, resources, groups):
-    """A ``[ROSGateway@N]``: group ``N_ressourcegroup`` (docs/topics.md)."""
+    """A ``[ROSGateway@N]``: group ``N_ressourcegroup`` (docs/topics.md, docs/services.md)."""
     name, _ = _name_after_at(sec, file, ranged=False)
     tslots = _match_slots(sec, "Slot", slots, file)
-    msgtype = sec.values["MsgType"].strip()
-    if msgtype.count("/") != 1:
-        raise ConfigError(sec.where(file, "MsgType"), f"expected 'pkg/Type', found {msgtype!r}")
-    pkg, typ = msgtype.split("/")
-    sw = sec.values["SWTopic"].strip()
-    hwt = sec.values["HWTopic"].strip()
+    kind = _gateway_kind(sec, file)
+    hw_key, sw_key, type_key = GATEWAY_KINDS[kind]
+    typename = sec.values[type_key].strip()
+    if typename.count("/") != 1:
+        raise ConfigError(sec.where(file, type_key), f"expected 'pkg/Type', found {typename!r}")
+    pkg, typ = (part.strip() for part in typename.split("/"))
+    sw = sec.values[sw_key].strip()
+    hwt = sec.values[hw_key].strip()
     group = f"{name}_ressourcegroup"
     where = sec.where(file)
-    lines = [("node", f'rosnode, "{name}_rosnode"'), ("msg_in", f"rosmsg, {pkg}, msg, {typ}"),
-             ("msg_out", f"rosmsg, {pkg}, msg, {typ}"), ("pub", f"rospub, node, msg_out, {sw}"),
-             ("sub", f"rossub, node, msg_in, {sw}, 1000"),
-             ("hwsub", f"rossub, node, {msgtype}, {hwt}, hw"),
-             ("hwpub", f"rospub, node, {msgtype}, {hwt}, hw")]
+    node = ("node", f'rosnode, "{name}_rosnode"')
+    if kind == "service":
+        lines = [node, ("srv_msg", f"rossrvmsg, {pkg}, srv, {typ}"),
+                 ("srvs", f"rossrvs, node, srv_msg, {sw}, 10000"),
+                 ("srvc", f"rossrvc, node, srv_msg, {hwt}, hw")]
+        info = {"kind": kind, "sw_service": unquote(sw), "hw_service": unquote(hwt),
+                "srvtype": f"{pkg}/srv/{typ}"}
+    elif kind == "action":
+        raise ConfigError(sec.where(file, "HWAction"), "rosgate has no action gateway yet: "
+                                                       "a [ROSGateway] connects a topic "
+                                                       "(HWTopic) or a service (HWService)")
+    else:
+        lines = [node, ("msg_in", f"rosmsg, {pkg}, msg, {typ}"),
+                 ("msg_out", f"rosmsg, {pkg}, msg, {typ}"),
+                 ("pub", f"rospub, node, msg_out, {sw}"),
+                 ("sub", f"rossub, node, msg_in, {sw}, 1000"),
+                 ("hwsub", f"rossub, node, {typename}, {hwt}, hw"),
+                 ("hwpub", f"rospub, node, {typename}, {hwt}, hw")]
+        info = {"kind": kind, "sw_topic": unquote(sw), "hw_topic": unquote(hwt),
+                "msgtype": f"{pkg}/msg/{typ}"}
     members = []
     for key, value in lines:
         members.extend(_resource(key, value, group, where))
+    _check_references(members)
     first = 128 + len(resources)
     for i, r in enumerate(members):
         r.id = first + i
     resources.extend(members)
     groups[group] = members
     thread = Thread(name, tid, tslots, "gateway", None, [group], [], [], True, where,
-                    gateway={"sw_topic": unquote(sw), "hw_topic": unquote(hwt),
-                             "msgtype": f"{pkg}/msg/{typ}"})
+                    gateway=info)
     _thread_resources(thread, resources)
     return thread
 

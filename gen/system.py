@@ -123,6 +123,43 @@ class ThreadContext:
             out_port=ports.get("pub", "topic_out"), in_port=ports.get("sub", "topic_in"),
             **options)
 
+    def service_gateway(self, server, client, **options):
+        """A :class:`hdl.reconos.ServiceGatewayThread` that serves this thread's software
+        service ``server`` (a ``rossrvs``) by calling the service over hardware topics with
+        its ``client`` (a ``rossrvc`` ending in ``hw``) of the same type. Resource names as
+        in the build.cfg."""
+        from gen.msg.plan import stream_plan
+        from hdl.reconos.service_gateway import ServiceGatewayThread
+        call = self.hw_call(client)
+        srvs = self._service_server(server, call.interface)
+        message = srvs.args[1].strip()
+        return ServiceGatewayThread(
+            self.arch,
+            request_plan=stream_plan(self._library, f"{call.interface}_Request"),
+            reply_plan=stream_plan(self._library, f"{call.interface}_Response"),
+            request_layout=message_memory_layout(self._library, f"{call.interface}_Request",
+                                                 self.arch, "cdr"),
+            reply_layout=message_memory_layout(self._library, f"{call.interface}_Response",
+                                               self.arch, "cdr"),
+            client_id=self.thread.id + 1, h_srvs=self.handle(server),
+            h_req=self.handle(f"{message}_req"), h_res=self.handle(f"{message}_res"),
+            request_port=call.request_port, reply_port=call.reply_port, **options)
+
+    def _service_server(self, name, interface):
+        """The ``rossrvs`` resource ``name``, checked to serve ``interface``."""
+        try:
+            srvs = self.thread.resource(name)
+        except KeyError:
+            srvs = None
+        if srvs is None or srvs.type != "rossrvs":
+            raise ConfigError(self.thread.where, f"thread {self.thread.name}: {name!r} is not a "
+                                                 f"rossrvs resource of its group")
+        msg = self.thread.resource(srvs.args[1].strip() + "_req")
+        if self._library[msg.msgtype].name != self._library[f"{interface}_Request"].name:
+            raise ConfigError(srvs.where, f"{name}: serves {msg.msgtype.removesuffix('_Request')}"
+                                          f", the hardware service is {interface}")
+        return srvs
+
     def hw_call(self, name):
         """The service or action resource ``name`` of this thread over hardware topics
         (``rossrvs``/``rossrvc``/``rosactions``/``rosactionc`` ending in ``hw``): a
@@ -165,16 +202,16 @@ class HwCall:
     plans: dict
 
 
-def message_memory_layout(library, typename, arch):
+def message_memory_layout(library, typename, arch, framing="reconros"):
     """The :class:`hdl.reconos.gateway.MemoryLayout` of ``typename``: byte offset of each
-    fixed leaf and each string or sequence of its ``reconros`` stream plan in the rosidl C
+    fixed leaf and each string or sequence of its ``framing`` stream plan in the rosidl C
     struct of ``arch`` (``r32``/``r64``)."""
     from gen.msg.layout import CLayout
     from gen.msg.plan import stream_plan
     from hdl.reconos.gateway import MemoryLayout
     layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
     name = library[typename].name
-    plan = stream_plan(library, name, "reconros")
+    plan = stream_plan(library, name, framing)
 
     def offset(path):
         at, struct = 0, layout.struct(name)
@@ -349,6 +386,8 @@ def build_thread(project, thread, slot, library=None):
     path = thread_module_path(project, thread)
     ctx = ThreadContext(project, thread, slot, library or project_library(project))
     if thread.gateway is not None and not path.is_file():
+        if thread.gateway["kind"] == "service":
+            return ctx.service_gateway("srvs", "srvc")
         return ctx.topic_gateway(thread.gateway["msgtype"], to_hw=("sub", "msg_in"),
                                  from_hw=("pub", "msg_out"))
     if not path.is_file():
@@ -514,7 +553,9 @@ def thread_sources(project):
         if path.is_file():
             out[thread.name] = f"amaranth ({path.relative_to(project.dir)})"
         elif thread.gateway is not None:
-            out[thread.name] = "ROS gateway: rosgate's TopicGatewayThread"
+            out[thread.name] = ("ROS gateway: rosgate's "
+                                + {"topic": "TopicGatewayThread",
+                                   "service": "ServiceGatewayThread"}[thread.gateway["kind"]])
         else:
             out[thread.name] = (f"{thread.hwsource or 'no HwSource'}: external core (no "
                                 f"{path.relative_to(project.dir)})")

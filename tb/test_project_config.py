@@ -180,6 +180,18 @@ BAD = [
                                                        '"drive", hw\nac = rosactionc, node_1, '
                                                        'am, "drive", hw'),
      23, "ResourceGroup@Res", "am", ["nav/action/Drive", "not defined"]),
+    ("gateway with keys of two kinds", ("ResourceGroup = Res\n", "ResourceGroup = Res\n\n"
+                                        "[ROSGateway@G]\nSlot = S(1)\nHWTopic = t\n"
+                                        "SWService = /s\n"),
+     29, "ROSGateway@G", None, ["one topic, service or action", "topic and service"]),
+    ("service gateway without its type", ("ResourceGroup = Res\n", "ResourceGroup = Res\n\n"
+                                          "[ROSGateway@G]\nSlot = S(1)\nHWService = sort\n"
+                                          "SWService = /sort\n"),
+     29, "ROSGateway@G", None, ["missing required key 'SrvType'", "HWService, SWService"]),
+    ("action gateway", ("ResourceGroup = Res\n", "ResourceGroup = Res\n\n[ROSGateway@G]\n"
+                                                  "Slot = S(1)\nHWAction = a\nSWAction = /a\n"
+                                                  "ActionType = x/Y\n"),
+     31, "ROSGateway@G", "HWAction", ["no action gateway"]),
 ]
 
 
@@ -219,7 +231,13 @@ def test_hw_service_and_action_topics(tmp_path):
     assert sorted(example.topics) == ["fibonacci_reply", "fibonacci_request", "sort_reply",
                                       "sort_request"]
     assert [e.thread.name for e in example.topics["sort_request"].pubs] == \
-        ["SortClientA", "SortClientB"]
+        ["SortClientA", "SortClientB", "SortGateway"]
+    gateway = next(t for t in example.threads if t.name == "SortGateway")
+    assert gateway.gateway == {"kind": "service", "sw_service": "/sort", "hw_service": "sort",
+                               "srvtype": "my_reconros_services/srv/Sort"}
+    assert [(r.key, r.type) for r in gateway.resources] == [
+        ("node", "rosnode"), ("srv_msg", "rossrvmsgres"), ("srv_msg", "rossrvmsgreq"),
+        ("srvs", "rossrvs")]
 
 
 def test_base_config_is_good(tmp_path):

@@ -342,13 +342,19 @@ def test_services_over_hardware_topics(sim, tmp_path):
     server at once: valid goals end SUCCEEDED with F(0..order) after ``order`` feedbacks (a
     goal that found the server busy was refused and sent again), invalid orders are refused,
     a cancel after 3 feedbacks ends the goal CANCELED with the values sent so far, a cancel of
-    a goal never sent is answered ERROR_UNKNOWN_GOAL_ID."""
+    a goal never sent is answered ERROR_UNKNOWN_GOAL_ID. Software calls of /sort through the
+    generated service gateway (ServiceGatewayThread, one more client of the hardware service)
+    come back sorted; one larger than the server's block comes back empty, and the calls
+    after it are served."""
     results = run_project_sim(ROOT / "examples/hw_services/build.cfg", sim, out=tmp_path / "o",
                               args={"calls": "2", "size": "64"},
                               thread_params=["SortServer.block_size=64",
                                              "FibServer.step_cycles=40"], limit_ms=5)
     calls = results["sort_calls"]
     assert len(calls) == 4 and all(c["sorted"] for c in calls), calls
+    software = results["software_calls"]
+    assert [c["values"] > 64 for c in software] == [False, True, False, False], software
+    assert all(c["sorted"] for c in software), software
     goals = {(g["client"], g["order"], g["status"]): g for g in results["fibonacci_goals"]}
     for client, order in (("FibClientA", 10), ("FibClientB", 20), ("FibClientB", 0)):
         g = goals[(client, order, 0)]

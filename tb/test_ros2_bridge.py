@@ -899,3 +899,69 @@ def test_goal_policy_reject_refuses_goals_while_busy(tmp_path):
         replies = sorted((r.seq, r.accepted) for r in (
             peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"])) for _ in range(2)))
     assert replies == [(1, True), (2, False)]
+
+
+def test_canceling_an_executing_goal_stops_the_hardware(tmp_path):
+    """A goal the hardware sorts is canceled after its first feedback: the cancel is answered
+    ERROR_NONE with the goal listed, the thread sees it after its next merge pass
+    (ACTIONS_CANCEL_TRYTAKE), resets its sorter and ends the goal (ACTIONS_CANCEL_SEND): the
+    result is CANCELED and empty, the feedback stops before 100 %. The next goal is sorted
+    correctly by the reset sorter."""
+    domain = peer.unique_domain()
+    out = tmp_path / "out"
+    rng = random.Random()
+    with peer.ros2_sim(SORT_ACTION, "icarus", out, domain, "--param",
+                       "Sorter.block_size=2048"):
+        p = peer.Peer(domain)
+        e = _action_endpoints(p)
+        first, second = (peer.UUID(list(rng.randbytes(16))) for _ in range(2))
+        values = [rng.randrange(1 << 32) for _ in range(2048)]
+        e["send"].write(peer.SortSendGoalRequest(5, 1, first, peer.SortGoal(values)))
+        assert peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"])).accepted
+        feedback = [peer.SortFeedbackMessage.deserialize(p.take_raw(e["feedback"]))]
+        e["cancel"].write(peer.CancelGoalRequest(5, 2, peer.GoalInfo(first, peer.Time(0, 0))))
+        answer = peer.CancelGoalResponse.deserialize(p.take_raw(e["cancelled"]))
+        e["ask"].write(peer.SortGetResultRequest(5, 3, first))
+        result = peer.SortGetResultResponse.deserialize(p.take_raw(e["results"]))
+        while (raw := p.take_raw(e["feedback"], timeout=1, missing_ok=True)) is not None:
+            feedback.append(peer.SortFeedbackMessage.deserialize(raw))
+        e["send"].write(peer.SortSendGoalRequest(5, 4, second, peer.SortGoal(values[:300])))
+        assert peer.SortSendGoalResponse.deserialize(p.take_raw(e["sent"])).accepted
+        e["ask"].write(peer.SortGetResultRequest(5, 5, second))
+        after = peer.SortGetResultResponse.deserialize(p.take_raw(e["results"]))
+    assert answer.return_code == 0 and \
+        [list(g.goal_id.uuid) for g in answer.goals_canceling] == [list(first.uuid)]
+    assert (result.status, list(result.result.sorted)) == (5, [])
+    percents = [f.feedback.percent for f in feedback]
+    assert percents == sorted(percents) and percents[-1] < 100.0, percents
+    assert (after.status, list(after.result.sorted)) == (4, sorted(values[:300]))
+    log = (out / "sim.log").read_text()
+    assert "protocol" not in log.lower(), log[-2000:]
+
+
+HW_SERVICES = ROOT / "examples" / "hw_services" / "build.cfg"
+
+
+def test_hardware_service_between_threads_from_dds(tmp_path):
+    """examples/hw_services: the sort service exists between hardware threads (its server a
+    hardware node on hardware topics); its generated gateway ([ROSGateway@SortGateway],
+    ServiceGatewayThread) serves /sort on DDS. Calls of random sizes come back sorted to
+    their own sequence numbers, a call larger than the server's block (64 here) gets the
+    empty response and the next call is served."""
+    domain = peer.unique_domain()
+    rng = random.Random()
+    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain,
+                       "--param", "SortServer.block_size=64"):
+        p = peer.Peer(domain)
+        requests = p.writer("rq/sortRequest", peer.SortRequest)
+        replies = p.reader("rr/sortReply", peer.SortResponse)
+        p.wait_matched(requests, replies)
+        calls = {seq: [rng.randrange(1 << 32) for _ in range(n)]
+                 for seq, n in ((1, 64), (2, 1), (3, 65), (4, 0), (5, rng.randrange(2, 64)))}
+        for seq, values in calls.items():
+            requests.write(peer.SortRequest(99, seq, values))
+        got = {}
+        for _ in calls:
+            reply = peer.SortResponse.deserialize(p.take_raw(replies))
+            got[reply.seq] = list(reply.sorted)
+    assert got == {seq: sorted(v) if len(v) <= 64 else [] for seq, v in calls.items()}

@@ -1,12 +1,16 @@
 """Software side of the services-and-actions demo for ``rosgate sim``: through each client
 thread's mailboxes, the two sort clients call the hardware sort service at the same time and
-the two Fibonacci clients send goals to the hardware action server at the same time.
+the two Fibonacci clients send goals to the hardware action server at the same time. Then
+software calls the service /sort, which the SortGateway thread serves by calling the hardware
+service as one more client (``--arg software_calls=N``, default 3, and one call larger than the
+server takes, answered empty).
 
 ``--arg calls=N`` (default 3 per sort client), ``--arg size=N`` (default 256 values),
 ``--arg seed=N``. For measurements, ``--arg sort_sizes=1,256,2048`` makes SortClientA alone
-call once per size and ``--arg fib_orders=0,10`` makes FibClientA alone send those goals. Every reply must be its request sorted; every result F(0..order) (or, for
-a cancelled goal, the values sent before the cancel); invalid orders and goals that find the
-server busy are refused (a busy client sends its goal again).
+call once per size and ``--arg fib_orders=0,10`` makes FibClientA alone send those goals.
+Every reply must be its request sorted; every result F(0..order) (or, for a cancelled goal,
+the values sent before the cancel); invalid orders and goals that find the server busy are
+refused (a busy client sends its goal again).
 """
 
 import random
@@ -94,6 +98,33 @@ async def sort_clients(ctx):
     await Combine(*(cocotb.start_soon(_sort_client(ctx, t, random.Random(rng.random()), sizes))
                     for t, sizes in plans.items()))
     ctx.results["all_sorted"] = all(c["sorted"] for c in ctx.results["sort_calls"])
+    if "sort_sizes" not in ctx.args:
+        await _software_calls(ctx, rng, int(ctx.args.get("software_calls", 3)), size)
+
+
+async def _software_calls(ctx, rng, calls, size):
+    """Calls of the software service /sort, which the SortGateway thread serves by calling
+    the hardware service as one more client: each reply is the request sorted; a request
+    larger than the server's block comes back empty (the server's BAD_REQUEST)."""
+    if not calls:
+        return
+    ctx.results["software_calls"] = []
+    server = next(t for t in ctx.project.threads if t.name == "SortServer")
+    block = int(server.params.get("block_size", 2048))
+    sizes = [rng.choice([size, 1, 0]) for _ in range(calls)]
+    if calls:
+        sizes.insert(calls // 2, 4096)
+    for k, n in enumerate(sizes):
+        values = [rng.randrange(1 << 32) for _ in range(n)]
+        start = ctx.now()
+        reply = await ctx.broker.call("/sort", {"unsorted": values})
+        expected = sorted(values) if n <= block else []
+        ok = list(reply["sorted"]) == expected
+        ctx.results["software_calls"].append({"call": k, "values": n, "sorted": ok,
+                                              "cycles": ctx.now() - start})
+        ctx.log(f"/sort from software through the gateway: {n} values, {ctx.now() - start} "
+                f"cycles, {'as expected' if ok else 'WRONG'}")
+    ctx.results["all_sorted"] &= all(c["sorted"] for c in ctx.results["software_calls"])
 
 
 async def fibonacci_clients(ctx):
@@ -111,6 +142,8 @@ ARGS = {
     "seed": SimArg("seed of the random requests", 1, kind=int),
     "calls": SimArg("calls per client", 3, kind=int),
     "size": SimArg("numbers per sort request", 256, kind=int),
+    "software_calls": SimArg("calls of /sort from software through the sort gateway (and "
+                             "one of 4096 values it must answer empty)", 3, kind=int),
     "sort_sizes": SimArg("instead: the sort requests' sizes, one call each", kind=int,
                          many=True),
     "fib_orders": SimArg("instead: the Fibonacci goals' orders, one goal each", kind=int,
@@ -124,6 +157,9 @@ def summary(results, clock_mhz):
     lines = [f"{'sort client':<12} {'call':>4} {'values':>6} {'cycles':>8} {'us':>8}  sorted"]
     for c in results["sort_calls"]:
         lines.append(f"{c['client']:<12} {c['call']:>4} {c['values']:>6} {c['cycles']:>8} "
+                     f"{c['cycles'] / clock_mhz:>8.1f}  {'yes' if c['sorted'] else 'NO'}")
+    for c in results.get("software_calls", []):
+        lines.append(f"{'/sort (sw)':<12} {c['call']:>4} {c['values']:>6} {c['cycles']:>8} "
                      f"{c['cycles'] / clock_mhz:>8.1f}  {'yes' if c['sorted'] else 'NO'}")
     lines.append(f"{'fib client':<12} {'order':>5} {'status':>6} {'result':>6} {'cancel':>6} "
                  f"{'feedbacks':>9} {'cycles':>8}  correct")

@@ -23,7 +23,12 @@ __all__ = ["GoalStatus", "CancelStatus", "ActionServer", "ActionClient"]
 
 
 class GoalStatus(enum.IntEnum):
-    """``status`` of a RESULT frame (``action_msgs/msg/GoalStatus``)."""
+    """``action_msgs/msg/GoalStatus`` codes; a RESULT frame's ``status`` is one of the last
+    three."""
+    UNKNOWN = 0
+    ACCEPTED = 1
+    EXECUTING = 2
+    CANCELING = 3
     SUCCEEDED = 4
     CANCELED = 5
     ABORTED = 6

@@ -128,8 +128,21 @@ class TopicGatewayThread(HardwareThread):
         os, mem = self.os_and_memory(m)
         started = Signal()          # THREAD_INIT (and the message's address) done
         lock = _OsifLock(m)
-        rx = _Receiver(self, m, os, mem, lock, started) if self.from_hw else None
-        tx = _Transmitter(self, m, os, mem, lock, started) if self.to_hw else None
+        rx = tx = None
+        if self.from_hw:
+            m.submodules.deserializer = des = ReconrosDeserializer(
+                self.plan, max_count=self.max_count)
+            _EchoFilter(m, getattr(self, self.in_port), des.s_axis,
+                        des.signature.members["s_axis"].signature.flip(), self.publisher_id,
+                        self.plan.publisher_offset)
+            rx = _Receiver(self, m, os, mem, lock, started, des, self.from_hw[1])
+        if self.to_hw:
+            m.submodules.serializer = ser = ReconrosSerializer(self.plan)
+            out = getattr(self, self.out_port)
+            m.d.comb += [out.tdata.eq(ser.m_axis.tdata), out.tkeep.eq(ser.m_axis.tkeep),
+                         out.tlast.eq(ser.m_axis.tlast), out.tuser.eq(ser.m_axis.tuser),
+                         out.tvalid.eq(ser.m_axis.tvalid), ser.m_axis.tready.eq(out.tready)]
+            tx = _Transmitter(self, m, os, mem, lock, started, ser)
         with m.FSM(name="start"):
             with m.State("INIT"):
                 os.thread_init(then="ADDR" if rx else "RUN")
@@ -139,10 +152,31 @@ class TopicGatewayThread(HardwareThread):
             with m.State("RUN"):
                 m.d.comb += started.eq(1)
         if rx:
-            rx.build()
+            h_pub, h_msg = self.from_hw
+            rx.build(lambda then: os.ros_publish(h_pub, h_msg, then=then))
         if tx:
-            tx.build(both=rx is not None)
+            tx.build(self._take_states(m, os, tx, lock, both=rx is not None))
         return m
+
+    def _take_states(self, m, os, tx, lock, both):
+        """The transmitter's TX_TAKE states: a blocking take, or with messages moving both
+        ways a ROS_TRYTAKE polled every ``poll_cycles``."""
+        h_sub, h_msg = self.to_hw
+
+        def states():
+            if both:
+                lock.call(_OsifLock.TX, "TX_TAKE", lambda then: os.ros_trytake(
+                    h_sub, h_msg, ptr=tx.ptr, ret=tx.ret, then=then), "TX_TRIED")
+                with m.State("TX_TRIED"):
+                    with m.If(tx.ret == 0):
+                        m.next = "TX_READ"
+                    with m.Else():
+                        m.d.sync += tx.wait.eq(self.poll_cycles)
+                        m.next = "TX_IDLE"
+            else:
+                lock.call(_OsifLock.TX, "TX_TAKE", lambda then: os.ros_take(
+                    h_sub, h_msg, ptr=tx.ptr, then=then), "TX_READ")
+        return states
 
 
 class _OsifLock:
@@ -177,16 +211,18 @@ class _OsifLock:
 
 
 class _Transmitter:
-    """Software subscription -> struct and buffers over MEMIF (reads only) -> serializer."""
+    """A taken message's struct and buffers over MEMIF (reads only) -> ``ser``, a serializer
+    of ``thread.plan``. ``thread`` has ``plan``, ``layout``, ``order``, ``poll_cycles`` and
+    ``publisher_id`` (for a ``reconros`` plan)."""
 
-    def __init__(self, thread, m, os, mem, lock, started):
+    def __init__(self, thread, m, os, mem, lock, started, ser, early_ready=False):
         self.t, self.m, self.os, self.mem, self.lock = thread, m, os, mem, lock
         self.started = started
-        m.submodules.serializer = self.ser = ser = ReconrosSerializer(thread.plan)
-        out = getattr(thread, thread.out_port)
-        m.d.comb += [out.tdata.eq(ser.m_axis.tdata), out.tkeep.eq(ser.m_axis.tkeep),
-                     out.tlast.eq(ser.m_axis.tlast), out.tuser.eq(ser.m_axis.tuser),
-                     out.tvalid.eq(ser.m_axis.tvalid), ser.m_axis.tready.eq(out.tready)]
+        self.ser = ser
+        #: ``early_ready``: the serializer may take the fields with the last payload beat
+        #: (a CDR message that ends with its payload), before the read has ended; then the
+        #: fields are offered no more and TX_DONE only moves on
+        self.taken = Signal(name="tx_fields_taken") if early_ready else None
         self.words = [Signal(64, name=f"tx_word{i}") for i in range(thread.layout.size // WORD)]
         self.struct = Cat(*self.words)
         self.ptr = Signal(64, name="tx_ptr")
@@ -211,29 +247,31 @@ class _Transmitter:
             self.m.d.comb += payload[leaf.offset:leaf.offset + len(value)].eq(value)
         return payload
 
-    def build(self, both):
-        m, os, mem, t, ser, lock = self.m, self.os, self.mem, self.t, self.ser, self.lock
-        h_sub, h_msg = t.to_hw
+    def build(self, take_states, sent="TX_IDLE", extra_states=None):
+        """The ``tx`` FSM: TX_IDLE, the states ``take_states()`` emits (TX_TAKE, ending in
+        TX_READ with the message's address in ``ptr``, or back in TX_IDLE), the reads and
+        the stream; once the message's last byte has left, ``sent``, a state that
+        ``extra_states()`` emits unless it is TX_IDLE."""
+        m, mem, t, ser = self.m, self.mem, self.t, self.ser
         payload = self._fields()
         with m.FSM(name="tx"):
             with m.State("TX_IDLE"):
                 with m.If(self.started & (self.wait == 0)):
                     m.next = "TX_TAKE"
-            if both:
-                lock.call(_OsifLock.TX, "TX_TAKE", lambda then: os.ros_trytake(
-                    h_sub, h_msg, ptr=self.ptr, ret=self.ret, then=then), "TX_TRIED")
-                with m.State("TX_TRIED"):
-                    with m.If(self.ret == 0):
-                        m.next = "TX_READ"
-                    with m.Else():
-                        m.d.sync += self.wait.eq(t.poll_cycles)
-                        m.next = "TX_IDLE"
-            else:
-                lock.call(_OsifLock.TX, "TX_TAKE", lambda then: os.ros_take(
-                    h_sub, h_msg, ptr=self.ptr, then=then), "TX_READ")
+            take_states()
+            if extra_states is not None:
+                extra_states()
             with m.State("TX_READ"):
                 mem.read_words(self.ptr, self.words,
                                then=f"TX_VAR{t.order[0]}" if t.order else "TX_DONE")
+            taken = self.taken
+
+            def offer():
+                valid = 1 if taken is None else ~taken
+                m.d.comb += [ser.fields.valid.eq(valid), ser.fields.payload.eq(payload)]
+                if taken is not None:
+                    with m.If(ser.fields.valid & ser.fields.ready):
+                        m.d.sync += taken.eq(1)
             for k, var in enumerate(t.order):
                 v = t.plan.variables[var]
                 at = t.layout.variables[v.path]
@@ -251,7 +289,7 @@ class _Transmitter:
                 # the serializer holds the fields until the message's last byte: payloads
                 # are fed while it has them
                 with m.State(f"TX_VAR{var}"):
-                    m.d.comb += [ser.fields.valid.eq(1), ser.fields.payload.eq(payload)]
+                    offer()
                     with m.If(nbytes == 0):
                         m.d.comb += [port.tvalid.eq(1), port.tlast.eq(1), port.tkeep.eq(0)]
                         with m.If(port.tready):
@@ -259,14 +297,16 @@ class _Transmitter:
                     with m.Else():
                         m.next = f"TX_STREAM{var}"
                 with m.State(f"TX_STREAM{var}"):
-                    m.d.comb += [ser.fields.valid.eq(1), ser.fields.payload.eq(payload)]
+                    offer()
                     sink = _WordSink(port, nbytes_held)
                     m.d.comb += sink.connect()
                     mem.read_stream(data_ptr, words << 3, sink, count=words, then=after)
             with m.State("TX_DONE"):
-                m.d.comb += [ser.fields.valid.eq(1), ser.fields.payload.eq(payload)]
-                with m.If(ser.fields.ready):
-                    m.next = "TX_IDLE"
+                offer()
+                with m.If(ser.fields.ready if taken is None else taken | ser.fields.ready):
+                    if taken is not None:
+                        m.d.sync += taken.eq(0)
+                    m.next = sent
 
 
 class _WordSink:
@@ -316,17 +356,16 @@ class _EchoFilter:
 
 
 class _Receiver:
-    """Deserializer -> buffers (SET_SIZE, MEMIF writes) and struct -> ROS_PUBLISH."""
+    """``des``, a deserializer of ``thread.plan`` -> buffers of message ``h_msg``
+    (SET_SIZE, MEMIF writes) and its struct -> an OS call that sends it (ROS_PUBLISH).
+    ``thread`` has ``plan``, ``layout`` and ``order``."""
 
-    def __init__(self, thread, m, os, mem, lock, started):
+    def __init__(self, thread, m, os, mem, lock, started, des, h_msg):
         self.t, self.m, self.os, self.mem, self.lock = thread, m, os, mem, lock
         self.started = started
+        self.des = des
+        self.h_msg = h_msg
         plan = thread.plan
-        m.submodules.deserializer = self.des = des = ReconrosDeserializer(
-            plan, max_count=thread.max_count)
-        _EchoFilter(m, getattr(thread, thread.in_port), des.s_axis,
-                    des.signature.members["s_axis"].signature.flip(), thread.publisher_id,
-                    plan.publisher_offset)
         self.msg = Signal(64, name="rx_msg")
         self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
         self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
@@ -407,13 +446,18 @@ class _Receiver:
                                                       Const(0, 32), self._capacity(v)))
         return struct
 
-    def build(self):
+    def build(self, send, empty=None, failed="RX_IDLE"):
+        """The ``rx`` FSM. ``send(then)`` is the OS call that sends the written message
+        (RX_PUBLISH). ``empty``, a signal: in RX_IDLE, when no message arrives, write the
+        struct all zeros (every string and sequence empty) and send that (it is cleared
+        there). ``failed``: the state after a failed message (RX_EMPTY sends the zero struct
+        in its place)."""
         m, os, mem, t, des, lock = self.m, self.os, self.mem, self.t, self.des, self.lock
-        h_pub, h_msg = t.from_hw
+        h_msg = self.h_msg
         payload = des.fields.payload.as_value()
         struct = self._struct()
         first = f"RX_VAR{t.order[0]}" if t.order else "RX_FIELDS"
-        with m.FSM(name="rx"):
+        with m.FSM(name="rx") as fsm:
             with m.State("RX_IDLE"):
                 with m.If(self.started & self.arriving):
                     m.d.comb += self.taking.eq(1)
@@ -421,6 +465,15 @@ class _Receiver:
                                  self.good.eq(self.next_good | des.done),
                                  self.next_good.eq(0)]
                     m.next = first
+                if empty is not None:
+                    with m.Elif(self.started & empty):
+                        m.d.sync += empty.eq(0)
+                        m.next = "RX_EMPTY"
+            if empty is not None or failed == "RX_EMPTY":
+                with m.State("RX_EMPTY"):
+                    m.d.sync += [w.eq(0) for w in self.words]
+                    m.d.sync += [self.active.eq(0), self.good.eq(1), self.failed.eq(0)]
+                    m.next = "RX_WRITE"
             for k, var in enumerate(t.order):
                 v = t.plan.variables[var]
                 source, count = self.sources[var], self.counts[var]
@@ -470,14 +523,14 @@ class _Receiver:
                 # that goes on past its end) still stops it
                 with m.If(self.failed | self.good):
                     m.d.sync += self.active.eq(0)
-                    m.next = "RX_IDLE"
+                    m.next = failed
                     with m.If(self.good):
                         m.next = "RX_PUBLISH"
-            lock.call(_OsifLock.RX, "RX_PUBLISH",
-                      lambda then: os.ros_publish(h_pub, h_msg, then=then), "RX_IDLE")
+            lock.call(_OsifLock.RX, "RX_PUBLISH", send, "RX_IDLE")
             with m.State("RX_END"):
                 m.d.sync += self.active.eq(0)
-                m.next = "RX_IDLE"
+                m.next = failed
+        return fsm
 
 
 class _WordSource:

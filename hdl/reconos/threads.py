@@ -1,7 +1,7 @@
 """Example hardware threads: the ReconROS ping-pong nodes and an OS-call sequencer used by the
 compatibility tests. They are written with the thread API only (no word counting)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Mux, ResetInserter, Signal, Value
 from amaranth.lib import wiring
 
 from .hwt import HardwareThread
@@ -315,11 +315,13 @@ class _SortingThread(HardwareThread):
         self.block_size = block_size
         super().__init__(arch)
 
-    def _with_sorter(self, m, n):
-        """``(os, mem, sorter, steps)`` for a block of ``n`` elements."""
+    def _with_sorter(self, m, n, abort=None):
+        """``(os, mem, sorter, steps)`` for a block of ``n`` elements; ``abort`` (a signal)
+        resets the sorter, dropping what it holds."""
         from ..kernels import MergeSorter
         os, mem = self.os_and_memory(m)
-        m.submodules.sorter = sorter = MergeSorter(self.block_size)
+        sorter = MergeSorter(self.block_size)
+        m.submodules.sorter = sorter if abort is None else ResetInserter(abort)(sorter)
         return os, mem, sorter, SortSteps(m, mem, sorter, self.arch, n)
 
 
@@ -400,7 +402,8 @@ class SortActionThread(_SortingThread):
     result request); sort, sending ACTIONS_FEEDBACK with ``feedback.percent`` = merge passes
     done / all passes x 100 whenever the sorter has finished a pass since the last feedback
     (always ending with 100.0); ROS_MESSAGE_SET_SIZE on ``result.sorted``; write it;
-    ACTIONS_RESULT_SEND.
+    ACTIONS_RESULT_SEND. After each feedback but the last, ACTIONS_CANCEL_TRYTAKE: when a
+    cancel was asked for, the sorter is reset and the goal ended with ACTIONS_CANCEL_SEND.
 
     Parameters
     ----------
@@ -424,7 +427,8 @@ class SortActionThread(_SortingThread):
     def elaborate(self, platform):
         m = Module()
         n = Signal(range(self.block_size + 1))
-        os, mem, sorter, steps = self._with_sorter(m, n)
+        abort = Signal()
+        os, mem, sorter, steps = self._with_sorter(m, n, abort)
         h_as, h_goal, h_res, h_fb = self.handles
         goal_off, res_off, fb_off = self.offsets
         a = self.arch
@@ -432,6 +436,7 @@ class SortActionThread(_SortingThread):
         goal, src, size, dst, fb, fb_word = (
             Signal(w, name=nm) for nm in ("goal", "src", "size", "dst", "fb", "fb_word"))
         accept = Signal()
+        canceled = Signal()         # the reply's low bit: 0, a cancel was asked for
         reported = Signal(range(sorter.passes + 1))
         fb_addr = fb + (fb_off & ~(a.word_bytes - 1))
         lane = (fb_off % a.word_bytes) // 4
@@ -476,7 +481,20 @@ class SortActionThread(_SortingThread):
             with m.State("FB_WRITE"):
                 mem.write_word(fb_addr, fb_new, then="FEEDBACK")
             with m.State("FEEDBACK"):
-                os.ros_actions_feedback(h_as, h_fb, then="PROGRESS")
+                with m.If(reported == sorter.passes):
+                    os.ros_actions_feedback(h_as, h_fb, then="PROGRESS")
+                with m.Else():
+                    os.ros_actions_feedback(h_as, h_fb, then="CANCEL_CHECK")
+            with m.State("CANCEL_CHECK"):
+                os.ros_actions_cancel_trytake(h_as, ret=canceled, then="CANCEL_DECIDE")
+            with m.State("CANCEL_DECIDE"):
+                with m.If(canceled == 0):
+                    m.d.comb += abort.eq(1)
+                    m.next = "CANCEL_SEND"
+                with m.Else():
+                    m.next = "PROGRESS"
+            with m.State("CANCEL_SEND"):
+                os.ros_actions_cancel_send(h_as, then="GOAL")
             with m.State("SET_SIZE"):
                 os.ros_message_set_size(h_res, res_off, 4, n, ptr=dst, then="STORE")
             steps.store_states("STORE", dst, then="SEND")

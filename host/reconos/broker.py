@@ -99,8 +99,9 @@ class ActionGoal:
 
     ``accepted`` receives the server's decision (a bool); :meth:`request_result` is the
     client's ``get_result`` request, which the server's ACTIONS_RESULT_TAKE waits for;
-    ``feedback`` receives ``<Action>_FeedbackMessage`` values; ``result`` the
-    ``<Action>_GetResult_Response`` value.
+    :meth:`cancel` the client's cancel request, which the server's ACTIONS_CANCEL_TAKE waits
+    for and ACTIONS_CANCEL_TRYTAKE sees; ``feedback`` receives ``<Action>_FeedbackMessage``
+    values; ``result`` the ``<Action>_GetResult_Response`` value (with ``status``).
     """
 
     def __init__(self, goal, goal_id):
@@ -110,9 +111,13 @@ class ActionGoal:
         self.feedback = Queue()
         self.result = Queue()
         self.result_requested = Event()
+        self.cancel_requested = Event()
 
     def request_result(self):
         self.result_requested.set()
+
+    def cancel(self):
+        self.cancel_requested.set()
 
 
 class Queue:

@@ -28,6 +28,7 @@ from hdl.reconos.protocol import (
     osif_register_offset,
     proc_control_offset,
 )
+from hdl.dds.action import GoalStatus
 from hdl.reconos.protocol import arch as get_arch
 
 from .broker import Queue
@@ -613,6 +614,20 @@ class ReconosRuntime:
         goal = self._goal(slot, ha)
         msg = self._resource(slot, hm, "rosactionmsgresultres")
         goal.result.put(self.msgs.read(msg.ptr, msg.args[0]))
+        self._resource(slot, ha, "rosactions").state["goal"] = None
+        return [0]
+
+    async def do_ros_actions_cancel_take(self, slot, ha):
+        await self._goal(slot, ha).cancel_requested.wait()
+        return [0]
+
+    async def do_ros_actions_cancel_trytake(self, slot, ha):
+        return [0 if self._goal(slot, ha).cancel_requested.is_set() else 1]
+
+    async def do_ros_actions_cancel_send(self, slot, ha):
+        # rclc_action_send_result(goal, GOAL_STATE_CANCELED, ...): the goal ends canceled,
+        # its result the empty one; the thread's next goal take is its next goal
+        self._goal(slot, ha).result.put({"status": int(GoalStatus.CANCELED)})
         self._resource(slot, ha, "rosactions").state["goal"] = None
         return [0]
 

@@ -18,6 +18,7 @@ import os
 import time
 
 from gen.msg.parser import parse_srv
+from hdl.dds.action import CancelStatus, GoalStatus
 from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, default_value, encode_cdr
 
 from .graph import dds_topic_name, service_topic_names
@@ -62,14 +63,18 @@ CANCEL_GOAL = "action_msgs/srv/CancelGoal"
 #: the bridge's origin in the in-process graph (host.reconos.Broker)
 ORIGIN = "ros2 bridge"
 #: action_msgs/msg/GoalStatus
-STATUS_UNKNOWN, STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_SUCCEEDED = 0, 1, 2, 4
-STATUS_CANCELED, STATUS_ABORTED = 5, 6
+STATUS_UNKNOWN, STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_CANCELING = (
+    GoalStatus.UNKNOWN, GoalStatus.ACCEPTED, GoalStatus.EXECUTING, GoalStatus.CANCELING)
+STATUS_SUCCEEDED, STATUS_CANCELED, STATUS_ABORTED = (
+    GoalStatus.SUCCEEDED, GoalStatus.CANCELED, GoalStatus.ABORTED)
 #: rcl_action's default result timeout: a finished goal leaves the status list after it
 RESULT_TIMEOUT_S = 900.0
 #: what the bridge does with a goal while the hardware serves others (``--goal-policy``)
 GOAL_POLICIES = ("queue", "reject")
-CANCEL_NONE = 0
-CANCEL_REJECTED, CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = 1, 2, 3
+#: action_msgs/srv/CancelGoal return codes
+CANCEL_NONE = CancelStatus.ERROR_NONE
+CANCEL_UNKNOWN_GOAL_ID, CANCEL_GOAL_TERMINATED = (CancelStatus.ERROR_UNKNOWN_GOAL_ID,
+                                                  CancelStatus.ERROR_GOAL_TERMINATED)
 
 
 #: the ROS graph's topic and type (rmw_dds_common), the size of a gid, the bridge's own node
@@ -150,7 +155,7 @@ class _GoalRecord:
 
     @property
     def active(self):
-        return self.status in (STATUS_ACCEPTED, STATUS_EXECUTING)
+        return self.status in (STATUS_ACCEPTED, STATUS_EXECUTING, STATUS_CANCELING)
 
 
 class Ros2Bridge:
@@ -691,6 +696,8 @@ class Ros2Bridge:
                     return
                 if record.status == STATUS_ACCEPTED:
                     record.status = STATUS_EXECUTING
+                elif record.status == STATUS_CANCELING:
+                    goal.cancel()     # canceled while queued but already taken: still asked
                 goal.request_result()
                 self.spawn(self._goal_feedback(ep, goal))
                 self.spawn(self._goal_result(ep, record))
@@ -722,8 +729,10 @@ class Ros2Bridge:
 
     async def _goal_result(self, ep, record):
         response = await record.goal.result.get()
-        # ReconROS' ACTIONS_RESULT_SEND is rclc_action_send_result with GOAL_STATE_SUCCEEDED
-        record.result = {**response, "status": response.get("status") or STATUS_SUCCEEDED}
+        # ReconROS' ACTIONS_RESULT_SEND is rclc_action_send_result with GOAL_STATE_SUCCEEDED,
+        # ACTIONS_CANCEL_SEND ends the goal CANCELED with the empty result
+        record.result = {**default_value(self.library, record.result_type), **response,
+                         "status": response.get("status") or STATUS_SUCCEEDED}
         record.status = record.result["status"]
         record.finished_s = time.monotonic()
         record.done.set()
@@ -766,20 +775,31 @@ class Ros2Bridge:
                                         "goals_canceling": []})
             return
         self.counts[ep.name]["delivered"] += 1
-        if record is not None and record.status == STATUS_ACCEPTED and \
-                self.broker.withdraw_goal(ep.key, record.goal):
-            # still in the queue, not taken by the hardware: canceled here (and the goal's
-            # decision ends, so no call is left running)
-            self._finish(ep, record, STATUS_CANCELED)
-            record.goal.accepted.put(False)
-            self._reply(ep, guid, seq, {"return_code": CANCEL_NONE, "goals_canceling": [
-                {"goal_id": {"uuid": list(uuid)}, "stamp": record.stamp}]})
+        if record is not None and not record.active:
+            self._reply(ep, guid, seq, {"return_code": CANCEL_GOAL_TERMINATED,
+                                        "goals_canceling": []})
             return
-        # a goal the hardware executes cannot be stopped (ReconROS' threads have no cancel
-        # path): refused; a finished one: terminated
-        code = CANCEL_GOAL_TERMINATED if record is not None and record.result is not None \
-            else CANCEL_REJECTED
-        self._reply(ep, guid, seq, {"return_code": code, "goals_canceling": []})
+        # one goal, or every goal not finished (a zero goal id)
+        targets = [(uuid, record)] if record is not None else \
+            [(u, r) for u, r in ep.goals.items() if r.active]
+        for goal_uuid, goal_record in targets:
+            if goal_record.status == STATUS_ACCEPTED and \
+                    self.broker.withdraw_goal(ep.key, goal_record.goal):
+                # still in the queue, not taken by the hardware: canceled here (and the
+                # goal's decision ends, so no call is left running)
+                self._finish(ep, goal_record, STATUS_CANCELED)
+                goal_record.goal.accepted.put(False)
+            else:
+                # the hardware has it: its thread sees the request (ACTIONS_CANCEL_TRYTAKE or
+                # _TAKE) and ends the goal with ACTIONS_CANCEL_SEND (CANCELED); a thread
+                # without a cancel path finishes it (SUCCEEDED), as an rclcpp server may
+                goal_record.status = STATUS_CANCELING
+                goal_record.goal.cancel()
+        self._reply(ep, guid, seq, {
+            "return_code": CANCEL_NONE,
+            "goals_canceling": [{"goal_id": {"uuid": list(u)}, "stamp": r.stamp}
+                                for u, r in targets]})
+        self._publish_status(ep)
 
     def _expire_goals(self):
         """Drop finished goals older than the result timeout from their status lists."""

@@ -303,8 +303,9 @@ class Peer:
                     raise TimeoutError(f"no match on {entity.topic.name} within {timeout} s")
                 time.sleep(0.02)
 
-    def take_raw(self, reader, timeout=120):
-        """The next sample's bytes as they came from DDS (waits on a WaitSet)."""
+    def take_raw(self, reader, timeout=120, missing_ok=False):
+        """The next sample's bytes as they came from DDS (waits on a WaitSet); ``None`` after
+        ``timeout`` with ``missing_ok``."""
         from cyclonedds._clayer import ddspy_take
         from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
         from cyclonedds.util import duration
@@ -319,6 +320,8 @@ class Peer:
             if got and got[0][1].valid_data:
                 return bytes(got[0][0])
             self._waitsets[id(reader)].wait(duration(milliseconds=100))
+        if missing_ok:
+            return None
         raise TimeoutError(f"nothing on {reader.topic.name} within {timeout} s")
 
     @staticmethod
