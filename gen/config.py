@@ -836,9 +836,11 @@ def _gateway(sec, file, tid, slots, resources, groups):
         info = {"kind": kind, "sw_service": unquote(sw), "hw_service": unquote(hwt),
                 "srvtype": f"{pkg}/srv/{typ}"}
     elif kind == "action":
-        raise ConfigError(sec.where(file, "HWAction"), "rosgate has no action gateway yet: "
-                                                       "a [ROSGateway] connects a topic "
-                                                       "(HWTopic) or a service (HWService)")
+        lines = [node, ("action_msg", f"rosactionmsg, {pkg}, action, {typ}"),
+                 ("server", f"rosactions, node, action_msg, {sw}, 10000"),
+                 ("client", f"rosactionc, node, action_msg, {hwt}, hw")]
+        info = {"kind": kind, "sw_action": unquote(sw), "hw_action": unquote(hwt),
+                "actiontype": f"{pkg}/action/{typ}"}
     else:
         lines = [node, ("msg_in", f"rosmsg, {pkg}, msg, {typ}"),
                  ("msg_out", f"rosmsg, {pkg}, msg, {typ}"),

@@ -145,6 +145,49 @@ class ThreadContext:
             h_req=self.handle(f"{message}_req"), h_res=self.handle(f"{message}_res"),
             request_port=call.request_port, reply_port=call.reply_port, **options)
 
+    def action_gateway(self, server, client, **options):
+        """A :class:`hdl.reconos.ActionGatewayThread` that serves this thread's software
+        action ``server`` (a ``rosactions``) by sending its goals to the action over hardware
+        topics with its ``client`` (a ``rosactionc`` ending in ``hw``) of the same type."""
+        from gen.msg.layout import CLayout
+        from gen.msg.plan import stream_plan
+        from hdl.reconos.action_gateway import ActionGatewayThread
+        call = self.hw_call(client)
+        action = call.interface
+        try:
+            resource = self.thread.resource(server)
+        except KeyError:
+            resource = None
+        if resource is None or resource.type != "rosactions":
+            raise ConfigError(self.thread.where, f"thread {self.thread.name}: {server!r} is "
+                                                 f"not a rosactions resource of its group")
+        message = resource.args[1].strip()
+        goal_msg = self.thread.resource(f"{message}_goal_req")
+        if self._library[goal_msg.msgtype].name != \
+                self._library[f"{action}_SendGoal_Request"].name:
+            raise ConfigError(resource.where, f"{server}: serves "
+                                              f"{goal_msg.msgtype.removesuffix('_SendGoal_Request')}"
+                                              f", the hardware action is {action}")
+
+        def nested(part, outer, member):
+            return message_memory_layout(self._library, f"{action}_{part}", self.arch, "cdr",
+                                         within=(f"{action}_{outer}", member))
+        response = CLayout(self._library, "arm64" if self.arch == "r64" else "arm32").struct(
+            self._library[f"{action}_GetResult_Response"].name)
+        return ActionGatewayThread(
+            self.arch,
+            goal_plan=stream_plan(self._library, f"{action}_Goal"),
+            feedback_plan=stream_plan(self._library, f"{action}_Feedback"),
+            result_plan=stream_plan(self._library, f"{action}_Result"),
+            goal_layout=nested("Goal", "SendGoal_Request", "goal"),
+            feedback_layout=nested("Feedback", "FeedbackMessage", "feedback"),
+            result_layout=nested("Result", "GetResult_Response", "result"),
+            status_offset=next(mb.offset for mb in response.members if mb.name == "status"),
+            client_id=self.thread.id + 1, h_as=self.handle(server),
+            h_goal=self.handle(f"{message}_goal_req"),
+            h_res=self.handle(f"{message}_result_res"), h_fb=self.handle(f"{message}_feedback"),
+            request_port=call.request_port, reply_port=call.reply_port, **options)
+
     def _service_server(self, name, interface):
         """The ``rossrvs`` resource ``name``, checked to serve ``interface``."""
         try:
@@ -202,20 +245,27 @@ class HwCall:
     plans: dict
 
 
-def message_memory_layout(library, typename, arch, framing="reconros"):
+def message_memory_layout(library, typename, arch, framing="reconros", within=None):
     """The :class:`hdl.reconos.gateway.MemoryLayout` of ``typename``: byte offset of each
     fixed leaf and each string or sequence of its ``framing`` stream plan in the rosidl C
-    struct of ``arch`` (``r32``/``r64``)."""
+    struct of ``arch`` (``r32``/``r64``).
+
+    ``within=(outer, member)``: ``typename`` as member ``member`` of the struct ``outer`` (an
+    action's goal in its ``_SendGoal_Request``): offsets from the start of ``outer``, whose
+    size, rounded up to whole 8-byte words, is the layout's size (heap blocks of the ReconOS
+    runtime are word-aligned, so the rounding stays inside the block)."""
     from gen.msg.layout import CLayout
     from gen.msg.plan import stream_plan
-    from hdl.reconos.gateway import MemoryLayout
+    from hdl.reconos.gateway import WORD, MemoryLayout
     layout = CLayout(library, "arm64" if arch == "r64" else "arm32")
     name = library[typename].name
     plan = stream_plan(library, name, framing)
+    outer = library[within[0]].name if within else name
+    prefix = f"{within[1]}." if within else ""
 
     def offset(path):
-        at, struct = 0, layout.struct(name)
-        for part in path.split("."):
+        at, struct = 0, layout.struct(outer)
+        for part in (prefix + path).split("."):
             member = next((mb for mb in struct.members if mb.name == part), None)
             if member is None:
                 raise ValueError(f"{name}: no member {path!r} in its C layout")
@@ -225,7 +275,8 @@ def message_memory_layout(library, typename, arch, framing="reconros"):
         return at
     leaves = {leaf.path: offset(leaf.path) for leaf in plan.leaves
               if leaf.type not in ("count", "publisher")}
-    return MemoryLayout(layout.struct(name).size, leaves,
+    size = layout.struct(outer).size
+    return MemoryLayout(-(-size // WORD) * WORD if within else size, leaves,
                         {v.path: offset(v.path) for v in plan.variables})
 
 
@@ -388,6 +439,8 @@ def build_thread(project, thread, slot, library=None):
     if thread.gateway is not None and not path.is_file():
         if thread.gateway["kind"] == "service":
             return ctx.service_gateway("srvs", "srvc")
+        if thread.gateway["kind"] == "action":
+            return ctx.action_gateway("server", "client")
         return ctx.topic_gateway(thread.gateway["msgtype"], to_hw=("sub", "msg_in"),
                                  from_hw=("pub", "msg_out"))
     if not path.is_file():
@@ -555,7 +608,8 @@ def thread_sources(project):
         elif thread.gateway is not None:
             out[thread.name] = ("ROS gateway: rosgate's "
                                 + {"topic": "TopicGatewayThread",
-                                   "service": "ServiceGatewayThread"}[thread.gateway["kind"]])
+                                   "service": "ServiceGatewayThread",
+                                   "action": "ActionGatewayThread"}[thread.gateway["kind"]])
         else:
             out[thread.name] = (f"{thread.hwsource or 'no HwSource'}: external core (no "
                                 f"{path.relative_to(project.dir)})")

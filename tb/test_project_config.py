@@ -188,10 +188,10 @@ BAD = [
                                           "[ROSGateway@G]\nSlot = S(1)\nHWService = sort\n"
                                           "SWService = /sort\n"),
      29, "ROSGateway@G", None, ["missing required key 'SrvType'", "HWService, SWService"]),
-    ("action gateway", ("ResourceGroup = Res\n", "ResourceGroup = Res\n\n[ROSGateway@G]\n"
-                                                  "Slot = S(1)\nHWAction = a\nSWAction = /a\n"
-                                                  "ActionType = x/Y\n"),
-     31, "ROSGateway@G", "HWAction", ["no action gateway"]),
+    ("action gateway type not pkg/Type", ("ResourceGroup = Res\n", "ResourceGroup = Res\n\n"
+                                          "[ROSGateway@G]\nSlot = S(1)\nHWAction = a\n"
+                                          "SWAction = /a\nActionType = x/action/Y\n"),
+     33, "ROSGateway@G", "ActionType", ["expected 'pkg/Type'", "x/action/Y"]),
 ]
 
 
@@ -232,6 +232,8 @@ def test_hw_service_and_action_topics(tmp_path):
                                       "sort_request"]
     assert [e.thread.name for e in example.topics["sort_request"].pubs] == \
         ["SortClientA", "SortClientB", "SortGateway"]
+    assert [e.thread.name for e in example.topics["fibonacci_reply"].subs] == \
+        ["FibClientA", "FibClientB", "FibGateway"]
     gateway = next(t for t in example.threads if t.name == "SortGateway")
     assert gateway.gateway == {"kind": "service", "sw_service": "/sort", "hw_service": "sort",
                                "srvtype": "my_reconros_services/srv/Sort"}

@@ -345,7 +345,10 @@ def test_services_over_hardware_topics(sim, tmp_path):
     a goal never sent is answered ERROR_UNKNOWN_GOAL_ID. Software calls of /sort through the
     generated service gateway (ServiceGatewayThread, one more client of the hardware service)
     come back sorted; one larger than the server's block comes back empty, and the calls
-    after it are served."""
+    after it are served. Software goals of /fibonacci through the generated action gateway
+    (ActionGatewayThread): order 12 SUCCEEDED with its 12 feedbacks, order 47 rejected by the
+    hardware server, order 46 canceled after its first feedback ends CANCELED with the values
+    sent before."""
     results = run_project_sim(ROOT / "examples/hw_services/build.cfg", sim, out=tmp_path / "o",
                               args={"calls": "2", "size": "64"},
                               thread_params=["SortServer.block_size=64",
@@ -355,6 +358,12 @@ def test_services_over_hardware_topics(sim, tmp_path):
     software = results["software_calls"]
     assert [c["values"] > 64 for c in software] == [False, True, False, False], software
     assert all(c["sorted"] for c in software), software
+    goals = results["software_goals"]
+    assert [(g["order"], g["accepted"], g.get("status")) for g in goals] == \
+        [(12, True, 4), (47, False, None), (46, True, 5)], goals
+    assert goals[0]["values"] == fibonacci(12) and goals[0]["feedbacks"] == 12
+    canceled = goals[2]["values"]
+    assert 2 <= len(canceled) < 47 and canceled == fibonacci(len(canceled) - 1), canceled
     goals = {(g["client"], g["order"], g["status"]): g for g in results["fibonacci_goals"]}
     for client, order in (("FibClientA", 10), ("FibClientB", 20), ("FibClientB", 0)):
         g = goals[(client, order, 0)]

@@ -965,3 +965,55 @@ def test_hardware_service_between_threads_from_dds(tmp_path):
             reply = peer.SortResponse.deserialize(p.take_raw(replies))
             got[reply.seq] = list(reply.sorted)
     assert got == {seq: sorted(v) if len(v) <= 64 else [] for seq, v in calls.items()}
+
+
+def test_hardware_action_between_threads_from_dds(tmp_path):
+    """examples/hw_services: ROS 2's Fibonacci action between hardware threads, reached from
+    DDS through its generated gateway ([ROSGateway@FibGateway], ActionGatewayThread). A goal
+    of order 10 is accepted, its 10 feedbacks come as F(0..k) and its result is F(0..10),
+    SUCCEEDED; order 47 is rejected by the hardware server; a goal of order 46 canceled after
+    its first feedback is answered ERROR_NONE and ends CANCELED with the values sent before."""
+    domain = peer.unique_domain()
+    rng = random.Random()
+    base = "fibonacci/_action/"
+    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain):
+        p = peer.Peer(domain)
+        send = p.writer(f"rq/{base}send_goalRequest", peer.FibonacciSendGoalRequest)
+        sent = p.reader(f"rr/{base}send_goalReply", peer.FibonacciSendGoalResponse)
+        ask = p.writer(f"rq/{base}get_resultRequest", peer.FibonacciGetResultRequest)
+        results = p.reader(f"rr/{base}get_resultReply", peer.FibonacciGetResultResponse)
+        cancel = p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest)
+        cancelled = p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse)
+        feedback = p.reader(f"rt/{base}feedback", peer.FibonacciFeedbackMessage)
+        p.wait_matched(send, sent, ask, results, cancel, cancelled, feedback)
+
+        def goal(seq, order):
+            uuid = peer.UUID(list(rng.randbytes(16)))
+            send.write(peer.FibonacciSendGoalRequest(3, seq, uuid, peer.FibonacciGoal(order)))
+            return uuid, peer.FibonacciSendGoalResponse.deserialize(p.take_raw(sent)).accepted
+
+        def result(seq, uuid):
+            ask.write(peer.FibonacciGetResultRequest(3, seq, uuid))
+            r = peer.FibonacciGetResultResponse.deserialize(p.take_raw(results))
+            return r.status, list(r.result.sequence)
+
+        ten, accepted = goal(1, 10)
+        assert accepted
+        assert result(2, ten) == (4, [0, 1, 1, 2, 3, 5, 8, 13, 21, 34, 55])
+        seen = [peer.FibonacciFeedbackMessage.deserialize(p.take_raw(feedback))
+                for _ in range(10)]
+        assert [list(f.feedback.sequence) for f in seen] == \
+            [[0, 1, 1, 2, 3, 5, 8, 13, 21, 34, 55][:k + 2] for k in range(10)]
+        assert all(list(f.goal_id.uuid) == list(ten.uuid) for f in seen)
+        assert goal(3, 47)[1] is False
+        long, accepted = goal(4, 46)
+        assert accepted
+        peer.FibonacciFeedbackMessage.deserialize(p.take_raw(feedback))
+        cancel.write(peer.CancelGoalRequest(3, 5, peer.GoalInfo(long, peer.Time(0, 0))))
+        answer = peer.CancelGoalResponse.deserialize(p.take_raw(cancelled))
+        status, values = result(6, long)
+    assert answer.return_code == 0
+    fib = [0, 1]
+    while len(fib) < 47:
+        fib.append(fib[-1] + fib[-2])
+    assert status == 5 and 2 <= len(values) < 47 and values == fib[:len(values)], values

@@ -136,6 +136,52 @@ async def fibonacci_clients(ctx):
                                 if n]}
     await Combine(*(cocotb.start_soon(_fibonacci_client(ctx, t, g)) for t, g in plans.items()))
     ctx.results["all_goals_correct"] = all(g["correct"] for g in ctx.results["fibonacci_goals"])
+    if "fib_orders" not in ctx.args and int(ctx.args.get("software_calls", 3)):
+        await _software_goals(ctx)
+
+
+async def _software_goals(ctx):
+    """Goals of the software action /fibonacci, which the FibGateway thread serves by sending
+    them to the hardware server as one more client: a valid goal ends SUCCEEDED with F(0..n)
+    after n feedbacks, an invalid order is rejected, a goal canceled after its first feedback
+    ends CANCELED with the values sent before."""
+    ctx.results["software_goals"] = []
+    for order, cancel in ((12, False), (MAX_ORDER + 1, False), (MAX_ORDER, True)):
+        start = ctx.now()
+        goal = ctx.broker.send_goal("/fibonacci", {"order": order})
+        accepted = await goal.accepted.get()
+        record = {"order": order, "cancel": cancel, "accepted": accepted, "feedbacks": 0}
+        if accepted:
+            goal.request_result()
+            while (result := goal.result.get_nowait()) is None:
+                feedback = goal.feedback.get_nowait()
+                if feedback is None:
+                    await ctx.cycles(50)
+                    continue
+                record["feedbacks"] += 1
+                if cancel and record["feedbacks"] == 1:
+                    goal.cancel()
+            while goal.feedback.get_nowait() is not None:
+                record["feedbacks"] += 1
+            values = list(result["result"]["sequence"])
+            record.update(status=int(result["status"]), values=values)
+            if cancel:
+                record["correct"] = (record["status"] == CANCELED and
+                                     values == fibonacci(len(values) - 1) and
+                                     len(values) - 1 < order)
+            else:
+                record["correct"] = (record["status"] == SUCCEEDED and
+                                     values == fibonacci(order) and
+                                     record["feedbacks"] == order)
+        else:
+            record["correct"] = not 0 <= order <= MAX_ORDER
+        record["cycles"] = ctx.now() - start
+        ctx.results["software_goals"].append(record)
+        ctx.log(f"/fibonacci from software through the gateway: order {order}"
+                f"{', canceled after its first feedback' if cancel else ''}: "
+                f"{'accepted' if accepted else 'rejected'}, status {record.get('status')}, "
+                f"{record['feedbacks']} feedbacks, {record['cycles']} cycles")
+    ctx.results["all_goals_correct"] &= all(g["correct"] for g in ctx.results["software_goals"])
 
 
 ARGS = {

@@ -16,11 +16,15 @@ from .memctrl import MemoryController
 from .hwt import HardwareThread, MemCalls, MemifEngine, OsifCalls, OsifEngine, ThreadSignature
 from .system import ReconosSystem
 from .threads import CallSequenceThread, CopyThread, EchoThread
+from .gateway import TopicGatewayThread
+from .service_gateway import ServiceGatewayThread
+from .action_gateway import ActionGatewayThread
 
 __all__ = [
     "ARCHS", "CALLS", "Command", "MemifOp", "MemStatus", "ProcControlRegister", "OsifRegister",
     "FifoReadSignature", "FifoWriteSignature", "ReconosFifo", "OsifIntc", "ProcControl",
     "ReconosOsif", "MemifArbiter", "MMU", "TLB", "MemoryController", "HardwareThread",
     "MemCalls", "MemifEngine", "OsifCalls", "OsifEngine", "ThreadSignature", "ReconosSystem",
-    "CallSequenceThread", "CopyThread", "EchoThread",
+    "CallSequenceThread", "CopyThread", "EchoThread", "TopicGatewayThread",
+    "ServiceGatewayThread", "ActionGatewayThread",
 ]

@@ -3,6 +3,8 @@ message as a rosidl C struct in memory) and a hardware-mapped topic (the message
 ReconROS' framing): ReconROS' ROS gateway, and the halves of it that a node publishing or
 subscribing a hardware topic needs."""
 
+from types import SimpleNamespace
+
 from amaranth import Cat, Const, Module, Mux, ResetInserter, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -179,21 +181,54 @@ class TopicGatewayThread(HardwareThread):
         return states
 
 
+def check_gateway_side(name, plan, layout, what):
+    """Refuse a plan (of a service's or action's ``cdr`` bodies) that a gateway cannot move
+    between memory and the hardware topic: not ``cdr``, no offset for a part, or a sequence
+    of messages."""
+    if plan.framing != "cdr":
+        raise ValueError(f"{name} framing {plan.framing!r}: {what} over hardware topics carry "
+                         f"'cdr' bodies")
+    if not isinstance(layout, MemoryLayout):
+        raise TypeError(f"{name}: its layout must be a MemoryLayout, not {layout!r}")
+    missing = [leaf.path for leaf in plan.leaves
+               if leaf.type != "count" and leaf.path not in layout.leaves]
+    missing += [v.path for v in plan.variables if v.path not in layout.variables]
+    if missing:
+        raise ValueError(f"layout of {plan.typename} has no offset for {missing}")
+    packed = [v.path for v in plan.variables if v.elements]
+    if packed:
+        raise ValueError(f"{plan.typename}: the gateway moves strings and sequences of "
+                         f"primitives, not {packed[0]} (a sequence of messages)")
+
+
+def gateway_side(plan, layout):
+    """What a gateway's transmitter or receiver reads of one message type (the attributes a
+    :class:`TopicGatewayThread` has for its own)."""
+    return SimpleNamespace(plan=plan, layout=layout, poll_cycles=1, publisher_id=0,
+                           order=[s.var for s in plan.steps if s.kind == "payload"])
+
+
 class _OsifLock:
-    """The OSIF for one of the two state machines at a time (the receiver first)."""
+    """The OSIF for one of the state machines at a time: the receivers first (``RX``, then
+    ``RX2`` when ``second_receiver``), then the transmitter."""
 
-    RX, TX = 1, 2
+    RX, TX, RX2 = 1, 2, 3
 
-    def __init__(self, m):
+    def __init__(self, m, second_receiver=False):
         self.m = m
         self.owner = Signal(2, name="osif_owner")
         self.want = {self.RX: Signal(name="osif_rx_wants"),
                      self.TX: Signal(name="osif_tx_wants")}
+        order = [self.RX, self.TX]
+        if second_receiver:
+            self.want[self.RX2] = Signal(name="osif_rx2_wants")
+            order = [self.RX, self.RX2, self.TX]
         with m.If(self.owner == 0):
-            with m.If(self.want[self.RX]):
-                m.d.sync += self.owner.eq(self.RX)
-            with m.Elif(self.want[self.TX]):
-                m.d.sync += self.owner.eq(self.TX)
+            with m.If(self.want[order[0]]):
+                m.d.sync += self.owner.eq(order[0])
+            for who in order[1:]:
+                with m.Elif(self.want[who]):
+                    m.d.sync += self.owner.eq(who)
 
     def call(self, who, name, call, then):
         """States ``name`` (wait for the lock), ``name``_CALL (``call(then=...)``) and
@@ -360,16 +395,25 @@ class _Receiver:
     (SET_SIZE, MEMIF writes) and its struct -> an OS call that sends it (ROS_PUBLISH).
     ``thread`` has ``plan``, ``layout`` and ``order``."""
 
-    def __init__(self, thread, m, os, mem, lock, started, des, h_msg):
+    def __init__(self, thread, m, os, mem, lock, started, des, h_msg, *, prefix="rx",
+                 who=None, fixed=None):
         self.t, self.m, self.os, self.mem, self.lock = thread, m, os, mem, lock
         self.started = started
         self.des = des
         self.h_msg = h_msg
+        #: names of its signals, submodules and FSM; its party on the OSIF lock
+        self.prefix = prefix
+        self.who = _OsifLock.RX if who is None else who
+        #: byte offset in the struct -> a value written there with every message
+        self.fixed = dict(fixed or {})
         plan = thread.plan
-        self.msg = Signal(64, name="rx_msg")
-        self.words = [Signal(64, name=f"rx_word{i}") for i in range(thread.layout.size // WORD)]
-        self.ptrs = {v.index: Signal(64, name=f"rx_ptr{v.index}") for v in plan.variables}
-        self.counts = {v.index: Signal(32, name=f"rx_count{v.index}") for v in plan.variables}
+        self.msg = Signal(64, name=f"{prefix}_msg")
+        self.words = [Signal(64, name=f"{prefix}_word{i}")
+                      for i in range(thread.layout.size // WORD)]
+        self.ptrs = {v.index: Signal(64, name=f"{prefix}_ptr{v.index}")
+                     for v in plan.variables}
+        self.counts = {v.index: Signal(32, name=f"{prefix}_count{v.index}")
+                       for v in plan.variables}
         # each payload port through a ready-only slice: the MEMIF write's decision to take a
         # word reaches the slice's flip-flops, not the deserializer's decision to take bytes.
         # An error empties the slices: what they hold belongs to the failed message, whose
@@ -377,28 +421,28 @@ class _Receiver:
         self.sources = {}
         for v in plan.variables:
             name = payload_port(v, "m")
-            passed = m.submodules[f"rx_slice{v.index}"] = ResetInserter(des.error.valid)(
+            passed = m.submodules[f"{prefix}_slice{v.index}"] = ResetInserter(des.error.valid)(
                 RegisterSlice(des.signature.members[name].signature, ready_only=True))
             wiring.connect(m, getattr(des, name), passed.s_axis)
             self.sources[v.index] = _WordSource(passed.m_axis)
-        errors = Signal(16, name="rx_errors")
+        errors = Signal(16, name=f"{prefix}_errors")
         #: between taking a message's first part and going back to waiting
-        self.active = Signal(name="rx_active")
+        self.active = Signal(name=f"{prefix}_active")
         #: the deserializer's verdict on the message being taken (the first after it began:
         #: the next message's cannot come before it): it failed (complete its buffers,
         #: publish nothing) or it was read to its end
-        self.failed = Signal(name="rx_failed")
-        self.good = Signal(name="rx_good")
+        self.failed = Signal(name=f"{prefix}_failed")
+        self.good = Signal(name=f"{prefix}_good")
         #: a failed message left its fields offered: they are taken here, whatever state the
         #: receiver is in. They can only be the failed message's own, as the deserializer
         #: reads no further before they are taken; the receiver must not take fields at the
         #: end of a failed message itself, as those may already be the next message's.
-        self.drain = drain = Signal(name="rx_drain")
+        self.drain = drain = Signal(name=f"{prefix}_drain")
         #: the next message's good verdict, when it came while this one was being published
         #: (possible only for a type without strings or sequences)
-        self.next_good = Signal(name="rx_next_good")
+        self.next_good = Signal(name=f"{prefix}_next_good")
         #: the receiver takes a message this cycle: a verdict in this cycle is that message's
-        self.taking = Signal(name="rx_taking")
+        self.taking = Signal(name=f"{prefix}_taking")
         decided = self.good | self.failed
         with m.If(des.error.valid):
             m.d.sync += errors.eq(errors + 1)
@@ -430,9 +474,9 @@ class _Receiver:
     def _struct(self):
         """The outgoing struct's words: fixed fields, and each string or sequence as its
         buffer, size and capacity; zeros elsewhere."""
-        t, m = self.t, self.m
+        t, m, prefix = self.t, self.m, self.prefix
         payload = self.des.fields.payload.as_value()
-        struct = Signal(t.layout.size * 8, name="rx_struct")
+        struct = Signal(t.layout.size * 8, name=f"{prefix}_struct")
         for leaf in t.plan.leaves:
             if leaf.type in ("publisher", "count"):
                 continue
@@ -444,7 +488,17 @@ class _Receiver:
             m.d.comb += struct[at:at + 3 * 64].eq(Cat(self.ptrs[v.index],
                                                       self.counts[v.index].as_unsigned(),
                                                       Const(0, 32), self._capacity(v)))
+        for at, value in self.fixed.items():
+            m.d.comb += struct[at * 8:at * 8 + len(value)].eq(value)
         return struct
+
+    def _empty_struct(self):
+        """The struct of an empty message: zeros, and the fixed values."""
+        empty = Signal(self.t.layout.size * 8, name=f"{self.prefix}_empty")
+        self.m.d.comb += empty.eq(0)
+        for at, value in self.fixed.items():
+            self.m.d.comb += empty[at * 8:at * 8 + len(value)].eq(value)
+        return empty
 
     def build(self, send, empty=None, failed="RX_IDLE"):
         """The ``rx`` FSM. ``send(then)`` is the OS call that sends the written message
@@ -453,11 +507,11 @@ class _Receiver:
         there). ``failed``: the state after a failed message (RX_EMPTY sends the zero struct
         in its place)."""
         m, os, mem, t, des, lock = self.m, self.os, self.mem, self.t, self.des, self.lock
-        h_msg = self.h_msg
+        h_msg, prefix = self.h_msg, self.prefix
         payload = des.fields.payload.as_value()
         struct = self._struct()
         first = f"RX_VAR{t.order[0]}" if t.order else "RX_FIELDS"
-        with m.FSM(name="rx") as fsm:
+        with m.FSM(name=self.prefix) as fsm:
             with m.State("RX_IDLE"):
                 with m.If(self.started & self.arriving):
                     m.d.comb += self.taking.eq(1)
@@ -471,7 +525,9 @@ class _Receiver:
                         m.next = "RX_EMPTY"
             if empty is not None or failed == "RX_EMPTY":
                 with m.State("RX_EMPTY"):
-                    m.d.sync += [w.eq(0) for w in self.words]
+                    empty = self._empty_struct()
+                    m.d.sync += [w.eq(empty[64 * i:64 * i + 64])
+                                 for i, w in enumerate(self.words)]
                     m.d.sync += [self.active.eq(0), self.good.eq(1), self.failed.eq(0)]
                     m.next = "RX_WRITE"
             for k, var in enumerate(t.order):
@@ -479,7 +535,7 @@ class _Receiver:
                 source, count = self.sources[var], self.counts[var]
                 port = source.port
                 after = "RX_FIELDS" if k == len(t.order) - 1 else f"RX_VAR{t.order[k + 1]}"
-                capacity = Signal(40, name=f"rx_capacity{var}")
+                capacity = Signal(40, name=f"{prefix}_capacity{var}")
                 m.d.comb += capacity.eq(self._capacity(v))
                 with m.State(f"RX_VAR{var}"):
                     # the field's count has been read when its first byte is offered
@@ -489,7 +545,7 @@ class _Receiver:
                         m.d.sync += [count.eq(payload[v.count.offset:v.count.offset + 32]),
                                      source.ended.eq(0)]
                         m.next = f"RX_SIZE{var}"
-                lock.call(_OsifLock.RX, f"RX_SIZE{var}", lambda then, v=v, var=var, c=capacity:
+                lock.call(self.who, f"RX_SIZE{var}", lambda then, v=v, var=var, c=capacity:
                           os.ros_message_set_size(h_msg, t.layout.variables[v.path],
                                                   v.element_bytes, c, ptr=self.ptrs[var],
                                                   then=then), f"RX_WRITE{var}")
@@ -526,7 +582,7 @@ class _Receiver:
                     m.next = failed
                     with m.If(self.good):
                         m.next = "RX_PUBLISH"
-            lock.call(_OsifLock.RX, "RX_PUBLISH", send, "RX_IDLE")
+            lock.call(self.who, "RX_PUBLISH", send, "RX_IDLE")
             with m.State("RX_END"):
                 m.d.sync += self.active.eq(0)
                 m.next = failed

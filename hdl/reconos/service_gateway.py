@@ -2,8 +2,6 @@
 topics (docs/services.md): the gateway that makes a service between hardware threads reachable
 from software and, with ``rosgate sim --ros2``, from DDS."""
 
-from types import SimpleNamespace
-
 from amaranth import Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
@@ -11,7 +9,7 @@ from amaranth.lib.wiring import In, Out
 from ..dds.service import ReplyStatus, ServiceClient
 from ..dds.topic import HW_TOPIC_STREAM
 from ..msg import Deserializer, Serializer
-from .gateway import MemoryLayout, _OsifLock, _Receiver, _Transmitter
+from .gateway import _OsifLock, _Receiver, _Transmitter, check_gateway_side, gateway_side
 from .hwt import HardwareThread
 
 __all__ = ["ServiceGatewayThread"]
@@ -59,20 +57,7 @@ class ServiceGatewayThread(HardwareThread):
                  reply_port="reply_in", max_count=1 << 20):
         for name, plan, layout in (("request_plan", request_plan, request_layout),
                                    ("reply_plan", reply_plan, reply_layout)):
-            if plan.framing != "cdr":
-                raise ValueError(f"{name} framing {plan.framing!r}: services over hardware "
-                                 f"topics carry 'cdr' bodies")
-            if not isinstance(layout, MemoryLayout):
-                raise TypeError(f"{name}: its layout must be a MemoryLayout, not {layout!r}")
-            missing = [leaf.path for leaf in plan.leaves
-                       if leaf.type != "count" and leaf.path not in layout.leaves]
-            missing += [v.path for v in plan.variables if v.path not in layout.variables]
-            if missing:
-                raise ValueError(f"layout of {plan.typename} has no offset for {missing}")
-            packed = [v.path for v in plan.variables if v.elements]
-            if packed:
-                raise ValueError(f"{plan.typename}: the gateway moves strings and sequences "
-                                 f"of primitives, not {packed[0]} (a sequence of messages)")
+            check_gateway_side(name, plan, layout, "services")
         super().__init__(arch, {request_port: Out(HW_TOPIC_STREAM),
                                 reply_port: In(HW_TOPIC_STREAM)})
         if self.arch.word_bits != 64:
@@ -81,8 +66,8 @@ class ServiceGatewayThread(HardwareThread):
         self.handles = (h_srvs, h_req, h_res)
         self.request_port, self.reply_port = request_port, reply_port
         self.max_count = max_count
-        self.request = _side(request_plan, request_layout)
-        self.reply = _side(reply_plan, reply_layout)
+        self.request = gateway_side(request_plan, request_layout)
+        self.reply = gateway_side(reply_plan, reply_layout)
 
     def elaborate(self, platform):
         m = Module()
@@ -134,9 +119,3 @@ class ServiceGatewayThread(HardwareThread):
                     m.next = "TX_IDLE"
         tx.build(take_states, sent="TX_WAIT", extra_states=wait_states)
         return m
-
-
-def _side(plan, layout):
-    """What the gateway's transmitter or receiver reads of one message type."""
-    return SimpleNamespace(plan=plan, layout=layout, poll_cycles=1, publisher_id=0,
-                           order=[s.var for s in plan.steps if s.kind == "payload"])

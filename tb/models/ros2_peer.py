@@ -200,6 +200,69 @@ class SortFeedbackMessage(IdlStruct,
     feedback: SortFeedback
 
 
+FIB = "example_interfaces::action::dds_::Fibonacci_"
+
+
+@dataclass
+@final
+class FibonacciGoal(IdlStruct, typename=FIB + "Goal_"):
+    order: t.int32
+
+
+@dataclass
+@final
+class FibonacciSequence(IdlStruct, typename=FIB + "Result_"):
+    sequence: t.sequence[t.int32]
+
+
+@dataclass
+@final
+class FibonacciFeedback(IdlStruct, typename=FIB + "Feedback_"):
+    sequence: t.sequence[t.int32]
+
+
+@dataclass
+@final
+class FibonacciSendGoalRequest(IdlStruct, typename=FIB + "SendGoal_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    goal_id: UUID
+    goal: FibonacciGoal
+
+
+@dataclass
+@final
+class FibonacciSendGoalResponse(IdlStruct, typename=FIB + "SendGoal_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    accepted: bool
+    stamp: Time
+
+
+@dataclass
+@final
+class FibonacciGetResultRequest(IdlStruct, typename=FIB + "GetResult_Request_"):
+    guid: t.uint64
+    seq: t.int64
+    goal_id: UUID
+
+
+@dataclass
+@final
+class FibonacciGetResultResponse(IdlStruct, typename=FIB + "GetResult_Response_"):
+    guid: t.uint64
+    seq: t.int64
+    status: t.int8
+    result: FibonacciSequence
+
+
+@dataclass
+@final
+class FibonacciFeedbackMessage(IdlStruct, typename=FIB + "FeedbackMessage_"):
+    goal_id: UUID
+    feedback: FibonacciFeedback
+
+
 @dataclass
 @final
 class GoalInfo(IdlStruct, typename="action_msgs::msg::dds_::GoalInfo_"):
