@@ -165,9 +165,9 @@ class ThreadContext:
         goal_msg = self.thread.resource(f"{message}_goal_req")
         if self._library[goal_msg.msgtype].name != \
                 self._library[f"{action}_SendGoal_Request"].name:
-            raise ConfigError(resource.where, f"{server}: serves "
-                                              f"{goal_msg.msgtype.removesuffix('_SendGoal_Request')}"
-                                              f", the hardware action is {action}")
+            served = goal_msg.msgtype.removesuffix("_SendGoal_Request")
+            raise ConfigError(resource.where, f"{server}: serves {served}, the hardware action "
+                                              f"is {action}")
 
         def nested(part, outer, member):
             return message_memory_layout(self._library, f"{action}_{part}", self.arch, "cdr",
