@@ -19,6 +19,7 @@ from hdl.params import ParameterError
 from .compiled import DEFAULT_MEMORY_MB, MEMORY_OPTION
 from .ros2.bridge import GOAL_POLICIES, SERVICE_QUEUE
 from .ros2.player import PACES as PLAY_PACES
+from .board_cli import add_board_commands
 from .tap_cli import add_export_finemb, add_tap_commands
 
 __all__ = ["main"]
@@ -786,6 +787,7 @@ def build_parser():
     _add_msg(commands)
     _add_project_commands(commands)
     add_tap_commands(commands)
+    add_board_commands(commands)
     return parser
 
 

@@ -27,6 +27,9 @@ class EchoEngine(wiring.Component):
         As :class:`NetStack`.
     registers : int
         Bytes of register RAM, a power of two in 16..65536.
+    buffer_bytes : int
+        Each session's receive and transmit buffer (:class:`NetStack`'s ``rx_depth`` and
+        ``tx_depth``; default 65536).
 
     Members
     -------
@@ -38,10 +41,11 @@ class EchoEngine(wiring.Component):
     """
 
     def __init__(self, *, mac=DEFAULT_MAC, ip=DEFAULT_IP, rbcp_port=DEFAULT_RBCP_PORT,
-                 tcp_port=DEFAULT_TCP_PORT, sessions=2, registers=256):
+                 tcp_port=DEFAULT_TCP_PORT, sessions=2, registers=256, buffer_bytes=65536):
         self._registers = check_power_of_two("registers", registers, 16, 65536)
         self._stack = NetStack(mac=mac, ip=ip, rbcp_port=rbcp_port, tcp_port=tcp_port,
-                               sessions=sessions, user_window=registers, user_width=16)
+                               sessions=sessions, user_window=registers, user_width=16,
+                               tx_depth=buffer_bytes, rx_depth=buffer_bytes)
         self._sessions = sessions
         super().__init__({"gmii": Out(GmiiSignature(clocks=self._stack.lanes == 2)),
                           "counter_index": In(range(len(STACK_COUNTERS))),
