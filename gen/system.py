@@ -131,8 +131,7 @@ class ThreadContext:
         from gen.msg.plan import stream_plan
         from hdl.reconos.service_gateway import ServiceGatewayThread
         call = self.hw_call(client)
-        srvs = self._service_server(server, call.interface)
-        message = srvs.args[1].strip()
+        message = self._server_message(server, "rossrvs", "_req", "_Request", call.interface)
         return ServiceGatewayThread(
             self.arch,
             request_plan=stream_plan(self._library, f"{call.interface}_Request"),
@@ -154,20 +153,8 @@ class ThreadContext:
         from hdl.reconos.action_gateway import ActionGatewayThread
         call = self.hw_call(client)
         action = call.interface
-        try:
-            resource = self.thread.resource(server)
-        except KeyError:
-            resource = None
-        if resource is None or resource.type != "rosactions":
-            raise ConfigError(self.thread.where, f"thread {self.thread.name}: {server!r} is "
-                                                 f"not a rosactions resource of its group")
-        message = resource.args[1].strip()
-        goal_msg = self.thread.resource(f"{message}_goal_req")
-        if self._library[goal_msg.msgtype].name != \
-                self._library[f"{action}_SendGoal_Request"].name:
-            served = goal_msg.msgtype.removesuffix("_SendGoal_Request")
-            raise ConfigError(resource.where, f"{server}: serves {served}, the hardware action "
-                                              f"is {action}")
+        message = self._server_message(server, "rosactions", "_goal_req", "_SendGoal_Request",
+                                       action)
 
         def nested(part, outer, member):
             return message_memory_layout(self._library, f"{action}_{part}", self.arch, "cdr",
@@ -188,20 +175,23 @@ class ThreadContext:
             h_res=self.handle(f"{message}_result_res"), h_fb=self.handle(f"{message}_feedback"),
             request_port=call.request_port, reply_port=call.reply_port, **options)
 
-    def _service_server(self, name, interface):
-        """The ``rossrvs`` resource ``name``, checked to serve ``interface``."""
+    def _server_message(self, name, kind, part, type_part, interface):
+        """The message resource of this thread's ``kind`` resource ``name`` (``rossrvs`` or
+        ``rosactions``), checked to serve ``interface``: its ``<message><part>`` resource
+        carries ``<interface><type_part>``."""
         try:
-            srvs = self.thread.resource(name)
+            server = self.thread.resource(name)
         except KeyError:
-            srvs = None
-        if srvs is None or srvs.type != "rossrvs":
+            server = None
+        if server is None or server.type != kind:
             raise ConfigError(self.thread.where, f"thread {self.thread.name}: {name!r} is not a "
-                                                 f"rossrvs resource of its group")
-        msg = self.thread.resource(srvs.args[1].strip() + "_req")
-        if self._library[msg.msgtype].name != self._library[f"{interface}_Request"].name:
-            raise ConfigError(srvs.where, f"{name}: serves {msg.msgtype.removesuffix('_Request')}"
-                                          f", the hardware service is {interface}")
-        return srvs
+                                                 f"{kind} resource of its group")
+        message = server.args[1].strip()
+        msg = self.thread.resource(message + part)
+        if self._library[msg.msgtype].name != self._library[interface + type_part].name:
+            raise ConfigError(server.where, f"{name}: serves {msg.msgtype.removesuffix(type_part)}"
+                                            f", the hardware one is {interface}")
+        return message
 
     def hw_call(self, name):
         """The service or action resource ``name`` of this thread over hardware topics

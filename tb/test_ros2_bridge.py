@@ -354,16 +354,10 @@ def test_hardware_action_from_dds(tmp_path):
     rng = random.Random()
     with peer.ros2_sim(SORT_ACTION, "icarus", out, domain):
         p = peer.Peer(domain)
-        base = "sort/_action/"
-        send = p.writer(f"rq/{base}send_goalRequest", peer.SortSendGoalRequest)
-        sent = p.reader(f"rr/{base}send_goalReply", peer.SortSendGoalResponse)
-        ask = p.writer(f"rq/{base}get_resultRequest", peer.SortGetResultRequest)
-        results = p.reader(f"rr/{base}get_resultReply", peer.SortGetResultResponse)
-        cancel = p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest)
-        cancelled = p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse)
-        feedback = p.reader(f"rt/{base}feedback", peer.SortFeedbackMessage)
-        status = p.status_reader(f"rt/{base}status", peer.GoalStatusArray)
-        p.wait_matched(send, sent, ask, results, cancel, cancelled, feedback, status)
+        e = _action_endpoints(p, status=True)
+        send, sent, ask, results = e["send"], e["sent"], e["ask"], e["results"]
+        cancel, cancelled, feedback, status = (e["cancel"], e["cancelled"], e["feedback"],
+                                               e["status"])
         guid = rng.randrange(1, 1 << 63)
         uuid = peer.UUID(list(rng.randbytes(16)))
         values = [rng.randrange(1 << 32) for _ in range(rng.randrange(100, 257))]
@@ -829,15 +823,23 @@ def test_hardware_nodes_are_on_the_ros_graph(tmp_path):
                for n in nodes.values() for g in n.reader_gid_seq + n.writer_gid_seq)
 
 
-def _action_endpoints(p):
-    base = "sort/_action/"
-    eps = {"send": p.writer(f"rq/{base}send_goalRequest", peer.SortSendGoalRequest),
-           "sent": p.reader(f"rr/{base}send_goalReply", peer.SortSendGoalResponse),
-           "ask": p.writer(f"rq/{base}get_resultRequest", peer.SortGetResultRequest),
-           "results": p.reader(f"rr/{base}get_resultReply", peer.SortGetResultResponse),
+def _action_endpoints(p, action="sort", types="Sort", status=False):
+    """The DDS endpoints of an rcl_action client of ``action`` (types ``peer.<types>...``),
+    matched with the bridge's: ``send``, ``sent``, ``ask``, ``results``, ``cancel``,
+    ``cancelled``, ``feedback`` (and ``status``)."""
+    base = f"{action}/_action/"
+    kind = {name: getattr(peer, f"{types}{name}") for name in (
+        "SendGoalRequest", "SendGoalResponse", "GetResultRequest", "GetResultResponse",
+        "FeedbackMessage")}
+    eps = {"send": p.writer(f"rq/{base}send_goalRequest", kind["SendGoalRequest"]),
+           "sent": p.reader(f"rr/{base}send_goalReply", kind["SendGoalResponse"]),
+           "ask": p.writer(f"rq/{base}get_resultRequest", kind["GetResultRequest"]),
+           "results": p.reader(f"rr/{base}get_resultReply", kind["GetResultResponse"]),
            "cancel": p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest),
            "cancelled": p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse),
-           "feedback": p.reader(f"rt/{base}feedback", peer.SortFeedbackMessage)}
+           "feedback": p.reader(f"rt/{base}feedback", kind["FeedbackMessage"])}
+    if status:
+        eps["status"] = p.status_reader(f"rt/{base}status", peer.GoalStatusArray)
     p.wait_matched(*eps.values())
     return eps
 
@@ -975,17 +977,11 @@ def test_hardware_action_between_threads_from_dds(tmp_path):
     its first feedback is answered ERROR_NONE and ends CANCELED with the values sent before."""
     domain = peer.unique_domain()
     rng = random.Random()
-    base = "fibonacci/_action/"
     with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain):
         p = peer.Peer(domain)
-        send = p.writer(f"rq/{base}send_goalRequest", peer.FibonacciSendGoalRequest)
-        sent = p.reader(f"rr/{base}send_goalReply", peer.FibonacciSendGoalResponse)
-        ask = p.writer(f"rq/{base}get_resultRequest", peer.FibonacciGetResultRequest)
-        results = p.reader(f"rr/{base}get_resultReply", peer.FibonacciGetResultResponse)
-        cancel = p.writer(f"rq/{base}cancel_goalRequest", peer.CancelGoalRequest)
-        cancelled = p.reader(f"rr/{base}cancel_goalReply", peer.CancelGoalResponse)
-        feedback = p.reader(f"rt/{base}feedback", peer.FibonacciFeedbackMessage)
-        p.wait_matched(send, sent, ask, results, cancel, cancelled, feedback)
+        e = _action_endpoints(p, "fibonacci", "Fibonacci")
+        send, sent, ask, results = e["send"], e["sent"], e["ask"], e["results"]
+        cancel, cancelled, feedback = e["cancel"], e["cancelled"], e["feedback"]
 
         def goal(seq, order):
             uuid = peer.UUID(list(rng.randbytes(16)))
