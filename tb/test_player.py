@@ -154,7 +154,8 @@ def camera_frames(count, seed):
 
 def test_camera_bag_into_the_lane_following_chain(tmp_path):
     """A camera recording (rosbags, MCAP, 30 frames a second on /front_camera/image_raw) of
-    dark, red and green scenes and a frame of the wrong size, remapped onto /camera/image:
+    dark, red and green scenes and a frame of the wrong size, remapped onto /camera/image and
+    played as fast as the chain takes it (bag time would simulate 33 ms per frame):
     the wrong frame is skipped and counted before it reaches the chain, every other frame
     goes through the seven threads with every stage equal to the software chain (OpenCV; the
     projection within 1) and the stop and start events on the red and green frames, without
@@ -169,8 +170,8 @@ def test_camera_bag_into_the_lane_following_chain(tmp_path):
                      store.types["std_msgs/msg/String"]("x")))
     write_bag(tmp_path / "camera", messages)
     results = run_project_sim(
-        AV_CHAIN, "verilator", out=tmp_path / "o", thread_params=CHAIN_PARAMS, limit_ms=200,
-        play={"path": str(tmp_path / "camera"),
+        AV_CHAIN, "verilator", out=tmp_path / "o", thread_params=CHAIN_PARAMS, limit_ms=20,
+        play={"path": str(tmp_path / "camera"), "pace": "fast",
               "remaps": ["/front_camera/image_raw:=/camera/image"]})
     play = results["play"]
     assert play["played"] == {"/camera/image": 3}
