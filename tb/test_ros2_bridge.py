@@ -942,6 +942,9 @@ def test_canceling_an_executing_goal_stops_the_hardware(tmp_path):
 
 
 HW_SERVICES = ROOT / "examples" / "hw_services" / "build.cfg"
+#: the hw_services configuration of test_project_sim's run too: one build for all of them
+HW_SERVICES_PARAMS = ("--param", "SortServer.block_size=64", "--param",
+                      "FibServer.step_cycles=40")
 
 
 def test_hardware_service_between_threads_from_dds(tmp_path):
@@ -952,8 +955,7 @@ def test_hardware_service_between_threads_from_dds(tmp_path):
     empty response and the next call is served."""
     domain = peer.unique_domain()
     rng = random.Random()
-    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain,
-                       "--param", "SortServer.block_size=64"):
+    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain, *HW_SERVICES_PARAMS):
         p = peer.Peer(domain)
         requests = p.writer("rq/sortRequest", peer.SortRequest)
         replies = p.reader("rr/sortReply", peer.SortResponse)
@@ -977,7 +979,7 @@ def test_hardware_action_between_threads_from_dds(tmp_path):
     its first feedback is answered ERROR_NONE and ends CANCELED with the values sent before."""
     domain = peer.unique_domain()
     rng = random.Random()
-    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain):
+    with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain, *HW_SERVICES_PARAMS):
         p = peer.Peer(domain)
         e = _action_endpoints(p, "fibonacci", "Fibonacci")
         send, sent, ask, results = e["send"], e["sent"], e["ask"], e["results"]
