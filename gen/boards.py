@@ -221,6 +221,9 @@ class EngineBoardTop(Elaboratable):
         self.engine = EchoEngine(mac=mac, ip=ip, sessions=sessions, registers=registers,
                                  buffer_bytes=buffer_bytes or b.buffer_bytes)
         self.pin_clocks = {}
+        #: the last part of a clock net's name after synthesis -> what the clock is
+        self.clock_names = {"clk": "sync (the engine)", "gmii_rx_clk": "gmii_rx (PHY's RXC)",
+                            "gmii_tx_clk": "gmii_tx (125 MHz, TXC)"}
 
     def elaborate(self, platform):
         from hdl.net.rgmii import RgmiiPhy

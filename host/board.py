@@ -106,8 +106,11 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
         seeds_done[seed] = _report(out / f"{TOP}_seed{seed}.json")
     clocks = {}
     for seed, report in seeds_done.items():
-        for clock, (achieved, constraint) in report["fmax"].items():
-            worst = clocks.setdefault(clock, {"target_mhz": constraint, "seeds": {}})
+        for net, (achieved, constraint) in report["fmax"].items():
+            last = net.removeprefix("$glbnet$").split(".")[-1]
+            clock = getattr(top, "clock_names", {}).get(last, net)
+            worst = clocks.setdefault(clock, {"net": net, "target_mhz": constraint,
+                                              "seeds": {}})
             worst["seeds"][seed] = achieved
     for clock in clocks.values():
         clock["worst_mhz"] = min(clock["seeds"].values())
