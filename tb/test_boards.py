@@ -20,9 +20,9 @@ import warnings
 import pytest
 from amaranth.hdl import UnusedElaboratable
 
-from gen.boards import (BOARDS, BoardError, EngineBoardTop, board, board_platform,
-                        pll_parameters, rgmii_ports)
+from gen.boards import BOARDS, BoardError, board, board_platform, rgmii_ports
 from hdl.params import ParameterError
+from host.board import board_top, pll_parameters
 
 from .harness import run_rosgate
 
@@ -50,7 +50,8 @@ def lpf_sites(lpf, port_prefix):
 def test_board_top_pins_are_the_board_definition(name):
     b = board(name)
     platform = board_platform(b)
-    top = EngineBoardTop(b, mac="02:00:00:00:00:01", ip="10.0.0.2", sessions=1)
+    top = board_top("engine", b, platform, {"mac": "02:00:00:00:00:01", "ip": "10.0.0.2",
+                                            "sessions": 1})
     plan = platform.prepare(top, name="top")
     lpf = plan.files["top.lpf"]
     first = rgmii_ports(platform)[0]

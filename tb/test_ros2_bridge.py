@@ -438,6 +438,23 @@ def test_gateway_demo_from_dds(tmp_path):
 SORT_SERVICE = ROOT / "examples" / "sort_service" / "build.cfg"
 
 
+def call_sort(p, service, guid, calls):
+    """Calls of the ``my_reconros_services/srv/Sort`` service ``service`` from participant
+    ``p`` as client ``guid``, written back to back (``calls``: sequence number -> values);
+    the replies, sequence number -> sorted values, each checked to be this client's."""
+    requests = p.writer(f"rq/{service}Request", peer.SortRequest)
+    replies = p.reader(f"rr/{service}Reply", peer.SortResponse)
+    p.wait_matched(requests, replies)
+    for seq, values in calls.items():
+        requests.write(peer.SortRequest(guid, seq, values))
+    got = {}
+    for _ in calls:
+        reply = peer.SortResponse.deserialize(p.take_raw(replies))
+        assert reply.guid == guid, (reply.guid, guid)
+        got[reply.seq] = list(reply.sorted)
+    return got
+
+
 def test_sort_service_from_dds(tmp_path):
     """examples/sort_service (two hardware servers of "srv" in slots on their own 120 MHz
     clock, Icarus) called from a DDS client: concurrent calls with their own sequence
@@ -446,20 +463,10 @@ def test_sort_service_from_dds(tmp_path):
     out = tmp_path / "out"
     rng = random.Random()
     with peer.ros2_sim(SORT_SERVICE, "icarus", out, domain):
-        p = peer.Peer(domain)
-        requests = p.writer("rq/srvRequest", peer.SortRequest)
-        replies = p.reader("rr/srvReply", peer.SortResponse)
-        p.wait_matched(requests, replies)
         guid = rng.randrange(1, 1 << 63)
         calls = {seq: [rng.randrange(1 << 32) for _ in range(rng.randrange(1, 80))]
                  for seq in (7, 8, 9)}
-        for seq, values in calls.items():
-            requests.write(peer.SortRequest(guid, seq, values))
-        got = {}
-        for _ in calls:
-            reply = peer.SortResponse.deserialize(p.take_raw(replies))
-            assert reply.guid == guid
-            got[reply.seq] = list(reply.sorted)
+        got = call_sort(peer.Peer(domain), "srv", guid, calls)
     assert got == {seq: sorted(values) for seq, values in calls.items()}
 
 
@@ -514,18 +521,9 @@ def test_service_calls_beyond_the_queue_are_refused_not_lost(tmp_path):
     rng = random.Random()
     with peer.ros2_sim(SORT_SERVICE, "icarus", out, domain, "--service-queue", "3",
                        "--param", "SortDemo.block_size=64"):
-        p = peer.Peer(domain)
-        requests = p.writer("rq/srvRequest", peer.SortRequest)
-        replies = p.reader("rr/srvReply", peer.SortResponse)
-        p.wait_matched(requests, replies)
         calls = {seq: [rng.randrange(1 << 32) for _ in range(rng.randrange(1, 65))]
                  for seq in range(1, 11)}
-        for seq, values in calls.items():
-            requests.write(peer.SortRequest(7, seq, values))
-        got = {}
-        for _ in calls:
-            reply = peer.SortResponse.deserialize(p.take_raw(replies))
-            got[reply.seq] = list(reply.sorted)
+        got = call_sort(peer.Peer(domain), "srv", 7, calls)
     assert set(got) == set(calls)
     refused = [seq for seq in calls if got[seq] == []]
     assert all(got[seq] == sorted(calls[seq]) for seq in calls if seq not in refused)
@@ -956,18 +954,9 @@ def test_hardware_service_between_threads_from_dds(tmp_path):
     domain = peer.unique_domain()
     rng = random.Random()
     with peer.ros2_sim(HW_SERVICES, "icarus", tmp_path / "out", domain, *HW_SERVICES_PARAMS):
-        p = peer.Peer(domain)
-        requests = p.writer("rq/sortRequest", peer.SortRequest)
-        replies = p.reader("rr/sortReply", peer.SortResponse)
-        p.wait_matched(requests, replies)
         calls = {seq: [rng.randrange(1 << 32) for _ in range(n)]
                  for seq, n in ((1, 64), (2, 1), (3, 65), (4, 0), (5, rng.randrange(2, 64)))}
-        for seq, values in calls.items():
-            requests.write(peer.SortRequest(99, seq, values))
-        got = {}
-        for _ in calls:
-            reply = peer.SortResponse.deserialize(p.take_raw(replies))
-            got[reply.seq] = list(reply.sorted)
+        got = call_sort(peer.Peer(domain), "sort", 99, calls)
     assert got == {seq: sorted(v) if len(v) <= 64 else [] for seq, v in calls.items()}
 
 

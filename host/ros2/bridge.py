@@ -18,8 +18,8 @@ import os
 import time
 
 from gen.msg.parser import parse_srv
-from hdl.dds.action import CancelStatus, GoalStatus
 from gen.msg.wire import CDR_LE_HEADER, WireError, decode_cdr, default_value, encode_cdr
+from hdl.dds.action import CancelStatus, GoalStatus
 
 from .graph import dds_topic_name, service_topic_names
 from .types import DdsTypes, pack_request_header, unpack_request_header
@@ -696,8 +696,6 @@ class Ros2Bridge:
                     return
                 if record.status == STATUS_ACCEPTED:
                     record.status = STATUS_EXECUTING
-                elif record.status == STATUS_CANCELING:
-                    goal.cancel()     # canceled while queued but already taken: still asked
                 goal.request_result()
                 self.spawn(self._goal_feedback(ep, goal))
                 self.spawn(self._goal_result(ep, record))
