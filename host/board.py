@@ -93,9 +93,9 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     say = progress or (lambda text: None)
     b = board(board_name)
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     platform = board_platform(b)
     top = board_top(design, b, platform, options or {})
+    out.mkdir(parents=True, exist_ok=True)
     say(f"elaborating {design} for {b.title} ({b.fpga()})")
     plan = platform.build(top, name=TOP, build_dir=str(out), do_build=False)
     for name, content in plan.files.items():

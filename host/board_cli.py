@@ -71,7 +71,12 @@ def _run_build(args):
                 range(1, args.seeds + 1)), options={"ip": args.ip, "mac": args.mac,
                                                     "sessions": args.sessions},
                 progress=progress)
-    except (BoardError, ParameterError) as exc:
+    except ParameterError as exc:
+        option = {"sessions": "--sessions", "ip": "--ip", "mac": "--mac"}.get(exc.name,
+                                                                              exc.name)
+        console.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
+        return 2
+    except BoardError as exc:
         console.error(exc)
         return 2
     except RuntimeError as exc:

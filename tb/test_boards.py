@@ -98,7 +98,7 @@ def test_pll_parameters_make_the_clocks(f_in, f_op, f_os):
     assert 400 <= vco <= 800 and 3.125 <= f_in / p["CLKI_DIV"] <= 400   # ECP5 data sheet
 
 
-def test_board_list_and_refusals():
+def test_board_list_and_refusals(tmp_path):
     result = run_rosgate("board", "list")
     assert result.returncode == 0, result.stderr
     for b in BOARDS.values():
@@ -109,6 +109,14 @@ def test_board_list_and_refusals():
     assert result.returncode == 2 and "--board 'colorlight': rosgate knows" in result.stderr
     result = run_rosgate("board", "build", "gateway", "--board", "butterstick")
     assert result.returncode == 2 and "invalid choice: 'gateway'" in result.stderr
+    for options, message in ((["--sessions", "9"], "--sessions must be an integer in 1..8, "
+                                                   "not 9"),
+                             (["--ip", "300.1.1.1"], "--ip must be an IPv4 address"),
+                             (["--seeds", "0"], "--seeds 0: expected 1 or more")):
+        result = run_rosgate("board", "build", "engine", "--board", "butterstick", *options,
+                             "-o", str(tmp_path / "out"))
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert not (tmp_path / "out").exists(), "refused before anything was written"
     with pytest.raises(BoardError, match="rosgate knows butterstick"):
         board("nope")
 
