@@ -9,14 +9,22 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from gen.boards import BoardError, EngineBoardTop, board, board_platform
+from gen.boards import (BoardError, EngineBoardTop, FinembBoardTop, TcprosBoardTop, board,
+                        board_platform, rgmii_ports)
 
 from .timing import MARGIN, SEEDS, find_tool, run_tool
 
 __all__ = ["DESIGNS", "build_board", "BoardBuild", "pll_parameters"]
 
 #: the designs ``rosgate board build`` makes, with what each is
-DESIGNS = {"engine": "the TCP/IP engine: ARP, ICMP echo, RBCP registers, TCP echo sessions"}
+DESIGNS = {
+    "engine": "the TCP/IP engine: ARP, ICMP echo, RBCP registers, TCP echo sessions",
+    "tcpros": "the engine with a TCPROS subscriber whose messages a TCPROS publisher sends on "
+              "(the SiTCP ROS component; any message type)",
+    "finemb": "a FinEmbP PID node on the board's first two Ethernet ports (a line)",
+}
+#: the FinEmbP node's IO description when none is given
+FINEMB_IO = Path(__file__).resolve().parents[1] / "examples" / "finemb" / "pid_node.toml"
 TOP = "top"
 
 
@@ -50,15 +58,25 @@ def pll_parameters(f_in_mhz, f_out_mhz, f_out2_mhz):
 
 def board_top(design, b, platform, options):
     """The board top of ``design`` for board ``b`` (its ``platform``), ``options`` from the
-    command line (``ip``, ``mac``, ``sessions``)."""
+    command line (``ip``, ``mac``, ``sessions``; ``io``, ``serial`` for finemb)."""
     if design not in DESIGNS:
-        raise BoardError(f"design {design!r}: rosgate board builds {', '.join(DESIGNS)} "
-                         f"(tcpros and finemb are not board designs yet)")
-    pll = pll_parameters(platform.default_clk_frequency / 1e6, EngineBoardTop.GMII_MHZ,
-                         EngineBoardTop.SYNC_MHZ)
-    return EngineBoardTop(b, pll=pll, mac=options.get("mac", "02:00:c0:a8:0a:10"),
-                          ip=options.get("ip", "192.168.10.16"),
-                          sessions=int(options.get("sessions", 2)))
+        raise BoardError(f"design {design!r}: rosgate board builds {', '.join(DESIGNS)}")
+    pll = pll_parameters(platform.default_clk_frequency / 1e6, FinembBoardTop.GMII_MHZ,
+                         FinembBoardTop.SYNC_MHZ)
+    mac = options.get("mac")
+    if design == "engine":
+        return EngineBoardTop(b, pll=pll, mac=mac or "02:00:c0:a8:0a:10",
+                              ip=options.get("ip", "192.168.10.16"),
+                              sessions=int(options.get("sessions", 2)))
+    if design == "tcpros":
+        return TcprosBoardTop(b, pll=pll, mac=mac or "02:00:c0:a8:0a:10",
+                              ip=options.get("ip", "192.168.10.16"))
+    from gen.finemb import load_io_description
+    if not rgmii_ports(platform):
+        raise BoardError(f"{b.name} has no RGMII port")
+    descriptor = load_io_description(options.get("io") or FINEMB_IO)
+    return FinembBoardTop(b, pll=pll, descriptor=descriptor, mac=mac or "02:00:00:00:46:01",
+                          serial=int(options.get("serial", 1)))
 
 
 def _nextpnr_device(script):

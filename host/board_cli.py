@@ -29,9 +29,17 @@ def add_board_commands(commands):
     q.add_argument("--board", required=True, help="a board of `rosgate board list`")
     q.add_argument("-o", "--output", type=Path, default=None,
                    help="output folder (default build/board/<design>-<board>)")
-    q.add_argument("--ip", default="192.168.10.16", help="the engine's IPv4 address")
-    q.add_argument("--mac", default="02:00:c0:a8:0a:10", help="the engine's MAC address")
-    q.add_argument("--sessions", type=int, default=2, help="TCP echo sessions, 1..8")
+    q.add_argument("--ip", default="192.168.10.16",
+                   help="the engine's IPv4 address (engine, tcpros; default 192.168.10.16)")
+    q.add_argument("--mac", default=None,
+                   help="the design's MAC address (default 02:00:c0:a8:0a:10; finemb: "
+                        "02:00:00:00:46:01)")
+    q.add_argument("--sessions", type=int, default=2, help="TCP echo sessions, 1..8 (engine)")
+    q.add_argument("--io", type=Path, default=None,
+                   help="the FinEmbP node's IO description (finemb; default "
+                        "examples/finemb/pid_node.toml)")
+    q.add_argument("--serial", type=int, default=1,
+                   help="the FinEmbP node's serial number (finemb; default 1)")
     q.add_argument("--seeds", type=int, default=3,
                    help="place-and-route seeds (1, 2, ...; default 3): each clock's worst")
     q.set_defaults(func=_run_build, parser=q, options={})
@@ -50,6 +58,7 @@ def _run_list(args):
 
 def _run_build(args):
     from gen.boards import BoardError
+    from gen.finemb import IoDescriptionError
     from hdl.params import ParameterError
 
     from .board import build_board
@@ -69,14 +78,15 @@ def _run_build(args):
         with console.step(f"building {args.design} for {args.board}"):
             result = build_board(args.design, args.board, out, seeds=tuple(
                 range(1, args.seeds + 1)), options={"ip": args.ip, "mac": args.mac,
-                                                    "sessions": args.sessions},
+                                                    "sessions": args.sessions,
+                                                    "io": args.io, "serial": args.serial},
                 progress=progress)
     except ParameterError as exc:
-        option = {"sessions": "--sessions", "ip": "--ip", "mac": "--mac"}.get(exc.name,
-                                                                              exc.name)
+        option = {"sessions": "--sessions", "ip": "--ip", "mac": "--mac",
+                  "serial": "--serial"}.get(exc.name, exc.name)
         console.error(f"{option} must be {exc.allowed}, not {exc.value!r}")
         return 2
-    except BoardError as exc:
+    except (BoardError, IoDescriptionError) as exc:
         console.error(exc)
         return 2
     except RuntimeError as exc:

@@ -100,6 +100,20 @@ def add_tap_commands(commands):
                         "nodes' MACs, then shows the nodes' states until Ctrl-C")
     _add_common(p)
     p.set_defaults(func=_run_tap_finemb, parser=p, options={"nodes": "--nodes"})
+    from .board import DESIGNS
+    p = designs.add_parser(
+        "board", help="a board design's top as the bitstream has it, its PHY simulated",
+        description="A board design of `rosgate board build` (docs/boards.md), the same top "
+                    "with only the ECP5 primitives (PLL, DDR registers, delays, I/O buffers) "
+                    "replaced by simulation models, its first RGMII port driven by an RGMII "
+                    "PHY model bridged to the TAP device.")
+    p.add_argument("board_design", metavar="design", choices=sorted(DESIGNS),
+                   help="; ".join(f"{name}: {what}" for name, what in DESIGNS.items()))
+    p.add_argument("--board", required=True, help="a board of `rosgate board list`")
+    p.add_argument("--ip", default=ENGINE_IP,
+                   help=f"the engine's address (engine, tcpros; default {ENGINE_IP})")
+    _add_common(p)
+    p.set_defaults(func=_run_tap_board, parser=p, options={"ip": "--ip"})
 
 
 def _run_tap_engine(args):
@@ -141,6 +155,60 @@ def _run_tap_engine(args):
     finally:
         sim.stop()
     con.print(f"{PROG} tap engine: stopped after {_sim_line(status)}; namespace "
+              f"{sim.namespace} removed ({time.monotonic() - start:.0f} s)")
+    return 0
+
+
+def _run_tap_board(args):
+    from gen.boards import BoardError
+    from hdl.net.frames import DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT
+
+    from .board_sim import TOP, board_sim_verilog
+    from .tapsim import TapSimulation
+    con = Console(f"{PROG} tap board")
+    design = args.board_design
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    start = time.monotonic()
+    folder = _build_dir(args, f"board-{design}-{args.board}")
+    try:
+        with con.step(f"elaborating {design} for {args.board} with the primitives' models"):
+            verilog, pins = board_sim_verilog(design, args.board, folder, {"ip": args.ip})
+    except BoardError as exc:
+        con.error(exc)
+        return 2
+    with con.step(f"building the board top of {design} for Verilator"):
+        sim = TapSimulation(None, TOP, folder, exported=verilog, module="host.tap_board_serve",
+                            params={"pins": pins}, kernel_ip=args.kernel_ip,
+                            progress=con.progress).__enter__()
+    try:
+        ns = f"ip netns exec {sim.namespace}"
+        lines = [f"{design} on {args.board} (simulated) is up; the kernel is "
+                 f"{args.kernel_ip}/24 on {TAP_NAME} in namespace {sim.namespace}, on the "
+                 f"board's RGMII port {0}"]
+        if design != "finemb":
+            lines += [f"  ping       {ns} ping {args.ip}",
+                      f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp "
+                      f"as r; print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\""]
+        if design == "engine":
+            lines.append(f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}")
+        lines += [f"  capture    {ns} tcpdump -i {TAP_NAME} -w {design}.pcap",
+                  "Ctrl-C stops the simulation and removes the namespace."]
+        for line in lines:
+            con.print(line)
+        last = [0.0]
+
+        def tick():
+            if not sim.alive():
+                stop.set()
+            elif time.monotonic() - last[0] >= 10:
+                last[0] = time.monotonic()
+                con.print(f"   [{_sim_line(sim.status)}]")
+        _wait(stop, args.duration, tick)
+        status = sim.status
+    finally:
+        sim.stop()
+    con.print(f"{PROG} tap board: stopped after {_sim_line(status)}; namespace "
               f"{sim.namespace} removed ({time.monotonic() - start:.0f} s)")
     return 0
 

@@ -41,16 +41,22 @@ async def serve(dut):
     await ClockCycles(dut.aclk, 2)
     bridge = TapBridge(source, sink, dut.aclk, tap=params["tap"], strict=False,
                        poll_cycles=params.get("poll_cycles", 64))
+    await serve_until_stopped(dut, dut.aclk, [bridge], params)
+
+
+async def serve_until_stopped(dut, clock, bridges, params):
+    """Count ``clock``'s cycles and write the status file until the stop file appears."""
     stop = Path(params["stop_file"])
     status = Path(params["status_file"])
     watch = params.get("watch", [])
     cycles = 0
     started = time.monotonic()
     while not stop.exists():
-        await clock_cycles(dut.aclk, POLL_CYCLES)
+        await clock_cycles(clock, POLL_CYCLES)
         cycles += POLL_CYCLES
+        stats = {key: sum(b.stats[key] for b in bridges) for key in bridges[0].stats}
         report = {"cycles": cycles, "wall_s": time.monotonic() - started,
-                  "bridge": bridge.stats,
+                  "bridge": stats,
                   "signals": {name: int(getattr(dut, name).value) for name in watch}}
         tmp = status.with_suffix(".tmp")
         tmp.write_text(json.dumps(report))

@@ -50,6 +50,14 @@ class TapSimulation:
         ``progress(stage, text)`` while the simulator builds.
     ready_timeout_s : float
         How long the build and start may take.
+    module : str
+        The cocotb side (default :mod:`host.tap_serve`; a board top's is
+        :mod:`host.tap_board_serve`).
+    exported : path or None
+        Verilog already written for ``top`` (``component`` is then ``None``): built with the
+        bench options, not the lint options of an exported top.
+    params : dict
+        More parameters for the cocotb side.
 
     Attributes
     ----------
@@ -58,7 +66,8 @@ class TapSimulation:
     """
 
     def __init__(self, component, top, build_dir, *, port="gmii", kernel_ip=KERNEL_IP,
-                 prefix=24, watch=(), progress=None, ready_timeout_s=900):
+                 prefix=24, watch=(), progress=None, ready_timeout_s=900,
+                 module="host.tap_serve", exported=None, params=None):
         why = namespace_unavailable()
         if why:
             raise TapSimulationError(f"cannot run on a TAP device: {why}")
@@ -69,6 +78,8 @@ class TapSimulation:
         self.watch = list(watch)
         self.progress = progress
         self.ready_timeout_s = ready_timeout_s
+        self.module, self.exported = module, exported
+        self.params = dict(params or {})
         self.namespace = None
         self._ns = None
         self._thread = None
@@ -92,12 +103,14 @@ class TapSimulation:
 
     def _run(self):
         try:
-            run_top("host.tap_serve", self.top, self.component, "verilator", self.build_dir,
+            run_top(self.module, self.top, self.component, "verilator", self.build_dir,
                     params={"port": self.port, "tap": TAP_NAME,
                             "stop_file": str(self._files["stop"]),
-                            "status_file": str(self._files["status"]), "watch": self.watch},
-                    log_file=self.log_file, lint=True, progress=self.progress,
-                    run_name=self.namespace, cxx_opt=QUICK_CXX_OPT)
+                            "status_file": str(self._files["status"]), "watch": self.watch,
+                            **self.params},
+                    log_file=self.log_file, lint=self.exported is None,
+                    progress=self.progress, run_name=self.namespace, cxx_opt=QUICK_CXX_OPT,
+                    exported=self.exported)
         except BaseException as exc:        # reported by __enter__ or stop()
             self._error = exc
 

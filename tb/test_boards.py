@@ -61,6 +61,23 @@ def test_board_top_pins_are_the_board_definition(name):
     assert top.pin_clocks == {f"eth_rgmii_port{first}_{first}__rx_clk__io": 125.0}
 
 
+@pytest.mark.parametrize("name", ["versa_ecp5", "colorlight_5a75b_r7_0"])
+def test_finemb_top_has_the_node_on_both_ports(name):
+    b = board(name)
+    platform = board_platform(b)
+    top = board_top("finemb", b, platform, {})
+    lpf = platform.prepare(top, name="top").files["top.lpf"]
+    first = platform_pins(b.platform_class(), "eth_rgmii", 0)
+    for number in (0, 1):
+        want = platform_pins(b.platform_class(), "eth_rgmii", number)
+        if number == 1:
+            # pins the first port already has (the Colorlight's shared reset, MDC, MDIO)
+            want = {sub: pins for sub, pins in want.items() if pins != first.get(sub)}
+        assert lpf_sites(lpf, f"eth_rgmii_port{number}_{number}") == want
+    assert sorted(top.pin_clocks) == [f"eth_rgmii_port{k}_{k}__rx_clk__io" for k in (0, 1)]
+    assert len(top.sim_pins["ports"]) == 2
+
+
 @contextlib.contextmanager
 def requests_left_unbuilt():
     """Resources requested and never elaborated: their buffers' warnings are expected."""
@@ -114,6 +131,15 @@ def test_board_list_and_refusals(tmp_path):
                              (["--ip", "300.1.1.1"], "--ip must be an IPv4 address"),
                              (["--seeds", "0"], "--seeds 0: expected 1 or more")):
         result = run_rosgate("board", "build", "engine", "--board", "butterstick", *options,
+                             "-o", str(tmp_path / "out"))
+        assert result.returncode == 2 and message in result.stderr, result.stderr
+        assert not (tmp_path / "out").exists(), "refused before anything was written"
+    bad_io = tmp_path / "bad.toml"
+    bad_io.write_text("name = 'pid'\n[[port]]\nname = 'x'\n")
+    for options, message in ((["--mac", "03:00:00:00:46:01"], "--mac must be a unicast MAC"),
+                             (["--io", str(bad_io)], "bad.toml"),
+                             (["--io", str(tmp_path / "none.toml")], "none.toml")):
+        result = run_rosgate("board", "build", "finemb", "--board", "versa_ecp5", *options,
                              "-o", str(tmp_path / "out"))
         assert result.returncode == 2 and message in result.stderr, result.stderr
         assert not (tmp_path / "out").exists(), "refused before anything was written"

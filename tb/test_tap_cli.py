@@ -20,6 +20,21 @@ from .harness import ROOT, SIM_BUILD
 pytestmark = pytest.mark.skipif(namespace_unavailable() is not None,
                                 reason=f"rosgate tap needs {namespace_unavailable()}")
 ROSGATE = [sys.executable, "-m", "host.cli"]
+#: run in the namespace: RBCP (sitcpy) writes and reads back 16 registers, a TCP session
+#: echoes 5 KiB
+ENGINE_PROBE = ("import socket, sitcpy.rbcp as r\n"
+                "b = r.Rbcp('198.18.0.16', 4660)\n"
+                "b.write(0x20, bytes(range(40, 56)))\n"
+                "assert bytes(b.read(0x20, 16)) == bytes(range(40, 56))\n"
+                "s = socket.create_connection(('198.18.0.16', 24), timeout=60)\n"
+                "data = bytes(range(256)) * 20\n"
+                "s.sendall(data)\n"
+                "got = b''\n"
+                "while len(got) < len(data):\n"
+                "    got += s.recv(65536)\n"
+                "assert got == data\n"
+                "s.close()\n"
+                "print('rbcp and echo ok')\n")
 
 
 def in_namespace(ns, *cmd, timeout=120):
@@ -57,20 +72,7 @@ def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
                                     text=True).stdout
         ping = in_namespace(ns, "ping", "-c", "2", "-W", "10", "198.18.0.16")
         assert ping.returncode == 0, ping.stdout + ping.stderr
-        script = ("import socket, sitcpy.rbcp as r\n"
-                  "b = r.Rbcp('198.18.0.16', 4660)\n"
-                  "b.write(0x20, bytes(range(40, 56)))\n"
-                  "assert bytes(b.read(0x20, 16)) == bytes(range(40, 56))\n"
-                  "s = socket.create_connection(('198.18.0.16', 24), timeout=60)\n"
-                  "data = bytes(range(256)) * 20\n"
-                  "s.sendall(data)\n"
-                  "got = b''\n"
-                  "while len(got) < len(data):\n"
-                  "    got += s.recv(65536)\n"
-                  "assert got == data\n"
-                  "s.close()\n"
-                  "print('rbcp and echo ok')\n")
-        probe = in_namespace(ns, sys.executable, "-c", script, timeout=300)
+        probe = in_namespace(ns, sys.executable, "-c", ENGINE_PROBE, timeout=300)
         assert probe.returncode == 0 and "rbcp and echo ok" in probe.stdout, \
             probe.stdout + probe.stderr
         # the printed hints, run as printed (a user pastes them into a shell)
