@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from amaranth import ClockDomain, ClockSignal, Elaboratable, Module, Mux, Signal
 from amaranth.build import DiffPairs, Resource
 from amaranth.hdl import Instance
+from amaranth.lib import wiring
 from amaranth.lib.cdc import FFSynchronizer, ResetSynchronizer
 
 __all__ = ["Board", "BOARDS", "BoardError", "board", "board_platform", "rgmii_ports",
@@ -327,16 +328,29 @@ def EngineBoardTop(b, *, pll, mac, ip, sessions=2, registers=256, buffer_bytes=N
     return NetBoardTop(b, engine, pll=pll)
 
 
-def TcprosBoardTop(b, *, pll, mac, ip, buffer_bytes=None):
+class TcprosBoardTop(NetBoardTop):
     """The SiTCP ROS component's design (:class:`hdl.ros1.TcprosNode`): a subscriber endpoint
     whose messages a publisher endpoint sends on unchanged, any message type (the ROS master
     side in software writes the endpoints' registers over RBCP, docs/ros1.md), on a board's
-    first RGMII port (:class:`NetBoardTop`)."""
-    from hdl.ros1 import TcprosNode
-    depth = buffer_bytes or b.buffer_bytes
-    node = TcprosNode(["subscriber", "publisher"], loopback=[(0, 1)], mac=mac, ip=ip,
-                      tx_depth=depth, rx_depth=depth)
-    return NetBoardTop(b, node, pll=pll)
+    first RGMII port (:class:`NetBoardTop`). The messages pass from one endpoint to the other
+    through a register slice, so that no path runs from the subscriber's receive ring through
+    both endpoints."""
+
+    def __init__(self, b, *, pll, mac, ip, buffer_bytes=None):
+        from hdl.ros1 import TcprosNode
+        depth = buffer_bytes or b.buffer_bytes
+        node = TcprosNode(["subscriber", "publisher"], mac=mac, ip=ip, tx_depth=depth,
+                          rx_depth=depth)
+        super().__init__(b, node, pll=pll)
+
+    def elaborate(self, platform):
+        from hdl.ros1.tcpros import message_stream_signature
+        from hdl.stream import RegisterSlice
+        m = super().elaborate(platform)
+        m.submodules.relay = relay = RegisterSlice(message_stream_signature(2))
+        wiring.connect(m, self.core.sub0, relay.s_axis)
+        wiring.connect(m, relay.m_axis, self.core.pub1)
+        return m
 
 
 class FinembBoardTop(_BoardTop):

@@ -12,7 +12,8 @@ from gen.boards import board, board_platform
 
 from .board import board_top
 
-__all__ = ["PRIMITIVES", "DP16KD_MODEL", "board_sim_verilog", "netlist_sim_verilog"]
+__all__ = ["PRIMITIVES", "DP16KD_MODEL", "LINE_PPM", "board_sim_verilog", "board_line_sim_verilog",
+           "netlist_sim_verilog"]
 
 #: the primitives' simulation models
 PRIMITIVES = Path(__file__).resolve().parent / "compiled" / "ecp5_primitives.v"
@@ -90,4 +91,78 @@ def netlist_sim_verilog(build, out):
     path = out / "netlist.v"
     _write_if_changed(path, text)
     raw.unlink()
+    return path, pins
+
+
+#: the frequency offsets of a simulated line's oscillators from the nominal, in ppm: each
+#: board's own crystal, 2 ps of the 8 ns period apart (both half periods in whole picoseconds,
+#: the simulator's resolution; beyond the ±100 ppm Ethernet allows, within what the receive
+#: crossings are tested at)
+LINE_PPM = (0, 250, -250, 500)
+
+
+def board_line_sim_verilog(board_name, out, *, boards=2, descriptor_path=None):
+    """Write ``<out>/board_line.v``: ``boards`` boards of the ``finemb`` design (node k with
+    MAC ``02:00:00:00:46:<k+1>`` and serial k + 1) in a line, board k's port 1 wired to board
+    k + 1's port 0, module ``board_line`` with board 0's port 0 and every board's oscillator
+    as its ports; return its path and pins (``oscillators``, ``ppm``, ``ports``).
+
+    A wire of the line carries a board's transmit pins to the next board's receive pins as
+    they are: the transmitting ODDRX1F model changes clock and data pins in the same step,
+    and the receiving IDDRX1F model, clocked by that pin, samples the data the edge brought
+    (what the RGMII clock delay achieves on a board)."""
+    from amaranth.back.verilog import _convert_rtlil_text
+    b = board(board_name)
+    if not 2 <= boards <= len(LINE_PPM):
+        raise ValueError(f"boards={boards!r}: a simulated line has 2..{len(LINE_PPM)} boards")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    modules, tops = [], []
+    for k in range(boards):
+        platform = board_platform(b)
+        options = {"mac": f"02:00:00:00:46:{k + 1:02x}", "serial": k + 1}
+        if descriptor_path:
+            options["io"] = descriptor_path
+        top = board_top("finemb", b, platform, options)
+        name = f"board_top_{k}"
+        plan = platform.build(top, name=name, do_build=False)
+        modules.append(_convert_rtlil_text(plan.files[f"{name}.il"], strip_internal_attrs=True))
+        tops.append((name, top.sim_pins))
+    if len(tops[0][1]["ports"]) < 2:
+        raise ValueError(f"{board_name} has one RGMII port: a line needs boards with two")
+    lines = ["module board_line(", "  " + ", ".join(
+        [f"input osc{k}" for k in range(boards)]
+        + ["input rx_clk", "input rx_ctl", "input [3:0] rx_data", "output tx_clk",
+           "output tx_ctl", "output [3:0] tx_data"]), ");"]
+    for k in range(boards - 1):
+        lines += [f"  wire fwd{k}_clk, fwd{k}_ctl, back{k}_clk, back{k}_ctl;",
+                  f"  wire [3:0] fwd{k}_data, back{k}_data;"]
+    for k, (name, pins) in enumerate(tops):
+        p0, p1 = pins["ports"][0], pins["ports"][1]
+        conn = {pins["oscillator"]: f"osc{k}"}
+        if k == 0:
+            conn.update({p0["rx_clk"]: "rx_clk", p0["rx_ctl"]: "rx_ctl",
+                         p0["rx_data"]: "rx_data", p0["tx_clk"]: "tx_clk",
+                         p0["tx_ctl"]: "tx_ctl", p0["tx_data"]: "tx_data"})
+        else:
+            conn.update({p0["rx_clk"]: f"fwd{k - 1}_clk", p0["rx_ctl"]: f"fwd{k - 1}_ctl",
+                         p0["rx_data"]: f"fwd{k - 1}_data", p0["tx_clk"]: f"back{k - 1}_clk",
+                         p0["tx_ctl"]: f"back{k - 1}_ctl", p0["tx_data"]: f"back{k - 1}_data"})
+        if k < boards - 1:
+            conn.update({p1["tx_clk"]: f"fwd{k}_clk", p1["tx_ctl"]: f"fwd{k}_ctl",
+                         p1["tx_data"]: f"fwd{k}_data", p1["rx_clk"]: f"back{k}_clk",
+                         p1["rx_ctl"]: f"back{k}_ctl", p1["rx_data"]: f"back{k}_data"})
+        else:
+            conn.update({p1["rx_clk"]: "1'b0", p1["rx_ctl"]: "1'b0", p1["rx_data"]: "4'b0"})
+        lines.append(f"  {name} board{k} (" + ", ".join(
+            f".{port}({signal})" for port, signal in conn.items()) + ");")
+    lines.append("endmodule")
+    path = out / "board_line.v"
+    _write_if_changed(path, PRIMITIVES.read_text() + "\n" + "\n".join(modules) + "\n"
+                      + "\n".join(lines) + "\n")
+    pins = {"oscillators": [f"osc{k}" for k in range(boards)], "ppm": list(LINE_PPM[:boards]),
+            "ports": [{sub: sub for sub in ("rx_clk", "rx_ctl", "rx_data", "tx_clk", "tx_ctl",
+                                            "tx_data")}], "board": b.name, "design": "finemb",
+            "boards": boards}
+    _write_if_changed(out / "board_pins.json", json.dumps(pins, indent=2) + "\n")
     return path, pins

@@ -507,8 +507,9 @@ def start_clock(signal, period_ns):
     the design's outputs have left their initial ``x`` (Icarus).
     """
     from cocotb.clock import Clock
-    _CLOCK_PERIODS_PS[signal._path] = round(period_ns * 1000)
-    return Clock(signal, period_ns, unit="ns", impl="gpi").start(start_high=False)
+    period_ps = round(period_ns * 1000)
+    _CLOCK_PERIODS_PS[signal._path] = period_ps
+    return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
 
 
 @functools.cache

@@ -1,7 +1,8 @@
 """The cocotb side of ``rosgate tap board``: drives a board top's oscillator pin (at CLKOP's
-frequency, as the PLL model asks) and each RGMII port's receive clock, puts a cocotbext-eth
-RGMII PHY model on each port's pins, bridges port 0 to the TAP device and writes the status
-file until the stop file appears (:func:`host.tap_serve.serve_until_stopped`)."""
+frequency, as the PLL model asks; each board's of a line of boards) and port 0's receive
+clock, puts a cocotbext-eth RGMII PHY model on port 0's pins, bridges it to the TAP device and
+writes the status file until the stop file appears
+(:func:`host.tap_serve.serve_until_stopped`)."""
 
 import logging
 
@@ -18,8 +19,12 @@ async def serve(dut):
     """Run the board top on the TAP device until the stop file appears."""
     params = top_params()
     pins = params["pins"]
-    osc = getattr(dut, pins["oscillator"])
-    start_clock(osc, GMII_NS)
+    # a line of boards has one oscillator each, ``ppm`` apart from the nominal
+    names = pins.get("oscillators") or [pins["oscillator"]]
+    ppm = pins.get("ppm") or [0] * len(names)
+    for name, offset in zip(names, ppm):
+        start_clock(getattr(dut, name), round(GMII_NS * (1 + offset * 1e-6) * 1000) / 1000)
+    osc = getattr(dut, names[0])
     bridges = []
     for k, port in enumerate(pins["ports"][:1]):
         def pin(name):

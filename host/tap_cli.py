@@ -112,8 +112,15 @@ def add_tap_commands(commands):
     p.add_argument("--board", required=True, help="a board of `rosgate board list`")
     p.add_argument("--ip", default=ENGINE_IP,
                    help=f"the engine's address (engine, tcpros; default {ENGINE_IP})")
+    p.add_argument("--boards", type=int, default=2,
+                   help="finemb: boards in the line, 2..4 (default 2; the board needs two "
+                        "RGMII ports), each node on its own board and oscillator")
+    p.add_argument("--cycles", type=int, default=0,
+                   help="finemb: stop after this many master cycles (default: until Ctrl-C)")
+    p.add_argument("--period-ms", type=float, default=0.0,
+                   help="finemb: the shortest cycle period (default 0)")
     _add_common(p)
-    p.set_defaults(func=_run_tap_board, parser=p, options={"ip": "--ip"})
+    p.set_defaults(func=_run_tap_board, parser=p, options={"ip": "--ip"}, no_master=False)
 
 
 def _run_tap_engine(args):
@@ -163,7 +170,7 @@ def _run_tap_board(args):
     from gen.boards import BoardError
     from hdl.net.frames import DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT
 
-    from .board_sim import TOP, board_sim_verilog
+    from .board_sim import TOP, board_line_sim_verilog, board_sim_verilog
     from .tapsim import TapSimulation
     con = Console(f"{PROG} tap board")
     design = args.board_design
@@ -171,16 +178,28 @@ def _run_tap_board(args):
     _stop_on_signals(stop)
     start = time.monotonic()
     folder = _build_dir(args, f"board-{design}-{args.board}")
+    top = TOP
     try:
         with con.step(f"elaborating {design} for {args.board} with the primitives' models"):
-            verilog, pins = board_sim_verilog(design, args.board, folder, {"ip": args.ip})
-    except BoardError as exc:
+            if design == "finemb":
+                verilog, pins = board_line_sim_verilog(args.board, folder, boards=args.boards)
+                top = "board_line"
+            else:
+                verilog, pins = board_sim_verilog(design, args.board, folder, {"ip": args.ip})
+    except (BoardError, ValueError) as exc:
         con.error(exc)
         return 2
-    with con.step(f"building the board top of {design} for Verilator"):
-        sim = TapSimulation(None, TOP, folder, exported=verilog, module="host.tap_board_serve",
+    what = (f"a line of {args.boards} {args.board} boards of finemb" if design == "finemb"
+            else f"the board top of {design}")
+    with con.step(f"building {what} for Verilator"):
+        sim = TapSimulation(None, top, folder, exported=verilog, module="host.tap_board_serve",
                             params={"pins": pins}, kernel_ip=args.kernel_ip,
                             progress=con.progress).__enter__()
+    if design == "finemb":
+        con.print(f"board k's port 1 is wired to board k+1's port 0; board 0's port 0 is on "
+                  f"{TAP_NAME}; the oscillators are {', '.join(map(str, pins['ppm']))} ppm "
+                  f"off 125 MHz")
+        return _drive_line(con, args, sim, stop, start, args.boards, "tap board finemb")
     try:
         ns = f"ip netns exec {sim.namespace}"
         lines = [f"{design} on {args.board} (simulated) is up; the kernel is "
@@ -236,8 +255,7 @@ def _run_tap_finemb(args):
     from gen.finemb import load_io_description
     from hdl.params import check_int
 
-    from .finemb import FinembMaster
-    from .finemb.run import PlantModel, line_simulation
+    from .finemb.run import line_simulation
     con = Console(f"{PROG} tap finemb")
     check_int("nodes", args.nodes, 1, 32)
     if args.no_master and (args.cycles or args.period_ms):
@@ -253,6 +271,15 @@ def _run_tap_finemb(args):
                               kernel_ip=args.kernel_ip, progress=con.progress).__enter__()
     if args.no_master:
         return _serve_line(con, args, sim, stop, start)
+    return _drive_line(con, args, sim, stop, start, args.nodes, "tap finemb")
+
+
+def _drive_line(con, args, sim, stop, start, nodes, command):
+    """rosgate's FinEmbP master against the simulated line ``sim`` of ``nodes`` nodes: find
+    and initialise them, run ``args.cycles`` cycles (or until Ctrl-C) against a plant model,
+    show the nodes' states, stop the simulation and print a summary line."""
+    from .finemb import FinembMaster
+    from .finemb.run import PlantModel
     plant = PlantModel()
     try:
         con.print(f"the line is up on {TAP_NAME} in namespace {sim.namespace}; the master runs "
@@ -260,7 +287,7 @@ def _run_tap_finemb(args):
                   f"{TAP_NAME}); Ctrl-C stops it")
         with FinembMaster(args.kernel_ip, interface=TAP_NAME, timeout_s=5.0) as master:
             with con.step("finding and initialising the nodes"):
-                master.init(expected=args.nodes)
+                master.init(expected=nodes)
             for k, n in sorted(master.nodes.items()):
                 con.print(f"  node {k}: {n.mac_text} at {n.ip}, serial {n.serial}, "
                           f"{len(n.descriptor.ports)} ports ({n.descriptor.name})")
@@ -284,7 +311,7 @@ def _run_tap_finemb(args):
             live(None)
     finally:
         sim.stop()
-    con.print(f"{PROG} tap finemb: {summary}; namespace {sim.namespace} removed "
+    con.print(f"{PROG} {command}: {summary}; namespace {sim.namespace} removed "
               f"({time.monotonic() - start:.0f} s)")
     return 0
 

@@ -4,10 +4,14 @@ board build`` with only the ECP5 primitives replaced by cycle-level models, an R
 From the Linux side: the engine answers ping (iputils), RBCP (sitcpy) and a TCP echo
 (``rosgate tap board engine``, as a user runs it); the tcpros design relays a ROS 1 topic
 between software peers that speak TCPROS through the kernel's TCP, the ROS master and the
-hardware node's XML-RPC in software as docs/ros1.md describes."""
+hardware node's XML-RPC in software as docs/ros1.md describes; a line of two finemb boards is
+driven by the FinEmbP master (``rosgate tap board finemb``). The synthesised netlist of the
+engine answers ARP, ping and RBCP (``make test-full``)."""
 
+import os
 import re
 import signal
+import subprocess
 import sys
 import time
 
@@ -15,8 +19,8 @@ import pytest
 
 from host.tap import namespace_unavailable
 
-from .harness import SIM_BUILD
-from .test_tap_cli import ENGINE_PROBE, in_namespace, start_tap
+from .harness import ROOT, SIM_BUILD
+from .test_tap_cli import ENGINE_PROBE, ROSGATE, in_namespace, start_tap
 
 pytestmark = pytest.mark.skipif(namespace_unavailable() is not None,
                                 reason=f"board tops on TAP need {namespace_unavailable()}")
@@ -41,6 +45,22 @@ def test_tap_board_engine_answers_ping_rbcp_and_tcp_echo():
         rest, _ = proc.communicate(timeout=180)
     assert proc.returncode == 0, "".join(lines) + rest
     assert rest.strip().splitlines()[-1].startswith("rosgate tap board: stopped after")
+
+
+def test_tap_board_finemb_line_of_two_boards_runs_the_master():
+    """Two boards of the finemb design, board 0's port 1 wired to board 1's port 0, their
+    oscillators 250 ppm apart (the receive crossings at work), found, initialised and cycled
+    by rosgate's FinEmbP master over UDP sockets."""
+    result = subprocess.run([*ROSGATE, "tap", "board", "finemb", "--board", BOARD, "--cycles",
+                             "12", "--build-dir", str(SIM_BUILD / "tap-board-finemb")],
+                            cwd=ROOT, capture_output=True, text=True, timeout=900,
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "the oscillators are 0, 250 ppm off 125 MHz" in result.stdout
+    assert "node 2: 02:00:00:00:46:02 at 198.18.0.18, serial 2" in result.stdout
+    last = result.stdout.strip().splitlines()[-1]
+    assert re.match(r"rosgate tap board finemb: 12 cycles at [0-9.]+ cycles/s, 0 late answers, "
+                    r"nodes 1 OP, 2 OP; namespace rg[0-9a-f]+ removed", last), last
 
 
 def wait_for(what, condition, timeout_s=120):

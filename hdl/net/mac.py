@@ -363,6 +363,14 @@ class RxBeatBridge(wiring.Component):
         lost = Signal()                 # this frame has lost bytes: drop the rest
         end_waits = Signal()            # the lost frame's end waits for room
         skip = Signal()                 # a frame that started while an end waited
+        # the frame's first byte (index 0) from a flag rather than the 11-bit index: the
+        # receive clock's longest path runs from here into the FIFO's write pointer
+        in_frame = Signal()
+        first = ~in_frame
+        with m.If(i.end):
+            g += in_frame.eq(0)
+        with m.Elif(i.valid):
+            g += in_frame.eq(1)
         w = Signal(entry)
         held = Signal(entry)
         m.d.comb += fifo.w_data.eq(Mux(end_waits, held, w))
@@ -370,9 +378,9 @@ class RxBeatBridge(wiring.Component):
             m.d.comb += fifo.w_en.eq(1)
             with m.If(fifo.w_rdy):
                 g += end_waits.eq(0)
-            with m.If(i.valid & (i.index == 0)):
+            with m.If(i.valid & first):
                 g += skip.eq(1)
-        with m.Elif(i.valid & ((i.index == 0) | (~skip & ~lost))):
+        with m.Elif(i.valid & (first | (~skip & ~lost))):
             g += skip.eq(0)
             with m.If(i.index[0]):
                 m.d.comb += [w.data.eq(Cat(low, i.data)), w.beat.eq(1), fifo.w_en.eq(1)]
@@ -381,7 +389,7 @@ class RxBeatBridge(wiring.Component):
                     g += lost.eq(1)
             with m.Else():
                 g += [low.eq(i.data), odd.eq(1)]
-                with m.If(i.index == 0):
+                with m.If(first):
                     g += lost.eq(0)
         with m.Elif(i.end & ~skip):
             m.d.comb += [w.data.eq(Cat(low, Const(0, 8))), w.beat.eq(odd & ~lost), w.end.eq(1),

@@ -64,16 +64,18 @@ module IDDRX1F #(parameter GSR = "ENABLED") (input D, input SCLK, input RST,
   always @(negedge SCLK) fall <= D;
 endmodule
 
-// D0 and D1 taken on the rising edge; D0 out while SCLK is high, D1 while it is low
+// D0 and D1 taken on the rising edge; D0 out from that edge, D1 from the falling edge. The
+// output changes only through registers (never as a function of SCLK itself), so that a
+// receiver clocked from the same net samples what the pin held before the edge
 module ODDRX1F #(parameter GSR = "ENABLED") (input SCLK, input RST, input D0, input D1,
-                                             output Q);
-  reg d0, d1;
-  initial begin d0 = 0; d1 = 0; end
+                                             output reg Q);
+  reg d1;
+  initial begin d1 = 0; Q = 0; end
   always @(posedge SCLK) begin
-    d0 <= D0;
+    Q <= D0;
     d1 <= D1;
   end
-  assign Q = SCLK ? d0 : d1;
+  always @(negedge SCLK) Q <= d1;
 endmodule
 
 module EHXPLLL #(

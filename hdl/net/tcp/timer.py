@@ -1,7 +1,7 @@
 """The one timer of a TCP session: retransmission, ARP retry, TIME-WAIT and FIN-WAIT-2
 (docs/network.md "TCP session")."""
 
-from amaranth.hdl import Cat, Module, Signal
+from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import enum, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -58,7 +58,6 @@ class TcpTimer(wiring.Component):
 
     def elaborate(self, platform):
         m = Module()
-        count = Signal(32)
         limit = Signal(32)
         backoff = Signal(range(MAX_BACKOFF + 1))
         prescaler = Signal(FIN_WAIT_2_SCALE)
@@ -78,16 +77,23 @@ class TcpTimer(wiring.Component):
                 m.d.comb += scale.eq(FIN_WAIT_2_SCALE)
                 m.d.sync += limit.eq(self.msl_cycles)
         tick = Cat(*(prescaler[b] | (scale <= b) for b in range(FIN_WAIT_2_SCALE))).all()
-        m.d.comb += [self.done.eq(count >= limit), self.expired.eq(self.running & self.done)]
-
+        # a command acts through three flip-flops: the count and the running flag this cycle
+        # are what they would be had it acted on the registers at once, so the path from the
+        # connection's decisions ends at those flip-flops, not at the count's 32 resets
+        count_reg, running_reg = Signal(32), Signal()
+        zero_pending, run_pending, run_set = Signal(), Signal(), Signal()
+        count = Signal(32)
+        m.d.comb += [count.eq(Mux(zero_pending, 0, count_reg)),
+                     self.running.eq(Mux(run_set, run_pending, running_reg)),
+                     self.done.eq(count >= limit), self.expired.eq(self.running & self.done)]
+        m.d.sync += [count_reg.eq(count + (self.running & tick)), running_reg.eq(self.running),
+                     zero_pending.eq(0), run_set.eq(0)]
         with m.If(self.stop):
-            m.d.sync += [count.eq(0), self.running.eq(0)]
+            m.d.sync += [zero_pending.eq(1), run_set.eq(1), run_pending.eq(0)]
         with m.Elif(self.restart | (self.start & ~self.running)):
-            m.d.sync += [count.eq(0), self.running.eq(1)]
+            m.d.sync += [zero_pending.eq(1), run_set.eq(1), run_pending.eq(1)]
         with m.Elif(self.zero):
-            m.d.sync += count.eq(0)
-        with m.Elif(self.running & tick):
-            m.d.sync += count.eq(count + 1)
+            m.d.sync += zero_pending.eq(1)
 
         with m.If(self.backoff_reset):
             m.d.sync += backoff.eq(0)
