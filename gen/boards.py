@@ -363,7 +363,8 @@ class FinembBoardTop(_BoardTop):
     def __init__(self, b, *, pll, descriptor, mac, serial=1):
         from hdl.finemb import FinembPidNode
         super().__init__(b, pll=pll)
-        self.node = FinembPidNode(descriptor, mac=mac, serial=serial)
+        # the queues' block RAM outputs end at flip-flops: 125 MHz with the board's pins
+        self.node = FinembPidNode(descriptor, mac=mac, serial=serial, registered_queues=True)
 
     def elaborate(self, platform):
         from hdl.net.gmii_crossing import GmiiRxCrossing

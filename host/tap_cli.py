@@ -136,18 +136,23 @@ def _run_tap_engine(args):
     with con.step(f"building the TCP/IP engine ({args.sessions} TCP sessions) for Verilator"):
         sim = TapSimulation(engine, "echo_engine", _build_dir(args, "engine"), port="gmii",
                             kernel_ip=args.kernel_ip, progress=con.progress).__enter__()
+    ns = f"ip netns exec {sim.namespace}"
+    lines = [f"the engine is up at {args.ip}; the kernel is {args.kernel_ip}/24 on {TAP_NAME} "
+             f"in namespace {sim.namespace}",
+             f"  ping       {ns} ping {args.ip}",
+             f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp as r; "
+             f"print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\"  "
+             f"({args.registers} registers at 0)",
+             f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}",
+             f"  capture    {ns} tcpdump -i {TAP_NAME} -w engine.pcap"]
+    return _serve(con, args, sim, stop, start, lines, "tap engine")
+
+
+def _serve(con, args, sim, stop, start, lines, command):
+    """Print ``lines`` (how to reach the design), report the simulation every 10 s until
+    Ctrl-C, ``--duration`` or its end, stop it and print what ran."""
     try:
-        ns = f"ip netns exec {sim.namespace}"
-        for line in (
-                f"the engine is up at {args.ip}; the kernel is {args.kernel_ip}/24 on {TAP_NAME} "
-                f"in namespace {sim.namespace}",
-                f"  ping       {ns} ping {args.ip}",
-                f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp as r; "
-                f"print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\"  "
-                f"({args.registers} registers at 0)",
-                f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}",
-                f"  capture    {ns} tcpdump -i {TAP_NAME} -w engine.pcap",
-                "Ctrl-C stops the simulation and removes the namespace."):
+        for line in lines + ["Ctrl-C stops the simulation and removes the namespace."]:
             con.print(line)
         last = [0.0]
 
@@ -161,7 +166,7 @@ def _run_tap_engine(args):
         status = sim.status
     finally:
         sim.stop()
-    con.print(f"{PROG} tap engine: stopped after {_sim_line(status)}; namespace "
+    con.print(f"{PROG} {command}: stopped after {_sim_line(status)}; namespace "
               f"{sim.namespace} removed ({time.monotonic() - start:.0f} s)")
     return 0
 
@@ -200,36 +205,16 @@ def _run_tap_board(args):
                   f"{TAP_NAME}; the oscillators are {', '.join(map(str, pins['ppm']))} ppm "
                   f"off 125 MHz")
         return _drive_line(con, args, sim, stop, start, args.boards, "tap board finemb")
-    try:
-        ns = f"ip netns exec {sim.namespace}"
-        lines = [f"{design} on {args.board} (simulated) is up; the kernel is "
-                 f"{args.kernel_ip}/24 on {TAP_NAME} in namespace {sim.namespace}, on the "
-                 f"board's RGMII port {0}"]
-        if design != "finemb":
-            lines += [f"  ping       {ns} ping {args.ip}",
-                      f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp "
-                      f"as r; print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\""]
-        if design == "engine":
-            lines.append(f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}")
-        lines += [f"  capture    {ns} tcpdump -i {TAP_NAME} -w {design}.pcap",
-                  "Ctrl-C stops the simulation and removes the namespace."]
-        for line in lines:
-            con.print(line)
-        last = [0.0]
-
-        def tick():
-            if not sim.alive():
-                stop.set()
-            elif time.monotonic() - last[0] >= 10:
-                last[0] = time.monotonic()
-                con.print(f"   [{_sim_line(sim.status)}]")
-        _wait(stop, args.duration, tick)
-        status = sim.status
-    finally:
-        sim.stop()
-    con.print(f"{PROG} tap board: stopped after {_sim_line(status)}; namespace "
-              f"{sim.namespace} removed ({time.monotonic() - start:.0f} s)")
-    return 0
+    ns = f"ip netns exec {sim.namespace}"
+    lines = [f"{design} on {args.board} (simulated) is up; the kernel is {args.kernel_ip}/24 "
+             f"on {TAP_NAME} in namespace {sim.namespace}, on the board's RGMII port 0",
+             f"  ping       {ns} ping {args.ip}",
+             f"  RBCP       {ns} {shlex.quote(sys.executable)} -c \"import sitcpy.rbcp as r; "
+             f"print(r.Rbcp('{args.ip}', {DEFAULT_RBCP_PORT}).read(0, 16))\""]
+    if design == "engine":
+        lines.append(f"  TCP echo   {ns} nc {args.ip} {DEFAULT_TCP_PORT}")
+    lines.append(f"  capture    {ns} tcpdump -i {TAP_NAME} -w {design}.pcap")
+    return _serve(con, args, sim, stop, start, lines, "tap board")
 
 
 def _node_table(master, rate, terminal):

@@ -318,11 +318,12 @@ def test_page_buffer_refuses_bad_sizes():
 
 # ---- the frame queue
 
-def run_queue(frames, *, depth=2048, backpressure=0.0, seed=0, hold_from=None):
+def run_queue(frames, *, depth=2048, backpressure=0.0, seed=0, hold_from=None,
+              registered=False):
     """Feed ``frames`` (``(bytes, keep, ok)``) through a FrameQueue as a MAC would, the
     decision at byte 6 (the reader held off from frame ``hold_from`` until all arrived);
     return ``(frames out with their status, overflows)``."""
-    dut = FrameQueue(depth)
+    dut = FrameQueue(depth, registered=registered)
     rng = random.Random(seed)
     sink = StreamSink(dut.m_axis, backpressure=backpressure, seed=seed)
     statuses = []
@@ -368,8 +369,9 @@ def run_queue(frames, *, depth=2048, backpressure=0.0, seed=0, hold_from=None):
     return [(bytes(msg), st) for msg, st in zip(messages, statuses)], overflow[0]
 
 
+@pytest.mark.parametrize("registered", [False, True])
 @pytest.mark.parametrize("backpressure", [0.0, 0.5])
-def test_frame_queue_keeps_what_it_is_told(backpressure):
+def test_frame_queue_keeps_what_it_is_told(backpressure, registered):
     """Kept frames leave whole, in order, with their status (bit 0 bad, bit 1 FCS); dropped
     ones never. A reader at full speed loses nothing; one that takes a byte every other cycle
     falls behind, and each kept frame that finds the queue full is dropped whole and
@@ -377,7 +379,8 @@ def test_frame_queue_keeps_what_it_is_told(backpressure):
     rng = random.Random(11)
     frames = [(rng.randbytes(rng.randrange(64, 300)), rng.random() < 0.6, rng.random() < 0.8)
               for _ in range(40)]
-    out, overflows = run_queue(frames, backpressure=backpressure, seed=5)
+    out, overflows = run_queue(frames, backpressure=backpressure, seed=5,
+                               registered=registered)
     expected = [(data, 0 if ok else 0b11) for data, keep, ok in frames if keep]
     if backpressure == 0:
         assert out == expected and overflows == 0
@@ -412,8 +415,9 @@ def test_frame_queue_is_full_at_any_pointer_phase(before):
     assert overflows == 7
 
 
+@pytest.mark.parametrize("registered", [False, True])
 @pytest.mark.parametrize("seed", [3, 4])
-def test_frame_queue_cuts_a_begun_frame_that_no_longer_fits(seed):
+def test_frame_queue_cuts_a_begun_frame_that_no_longer_fits(seed, registered):
     """A kept frame longer than the queue, read cut-through by a reader that takes a byte
     every other cycle: the reader has begun it when the queue fills, so it cannot be rewound;
     it leaves cut short where the queue filled, marked bad with a size error, and counted; the
@@ -423,7 +427,8 @@ def test_frame_queue_cuts_a_begun_frame_that_no_longer_fits(seed):
     long_frame = bytes(range(256)) * 4
     frames = [(long_frame, True, True), (bytes([0x55]) * 100, True, True),
               (bytes([0x66]) * 70, True, True)]
-    out, overflows = run_queue(frames, depth=depth, backpressure=0.5, seed=seed)
+    out, overflows = run_queue(frames, depth=depth, backpressure=0.5, seed=seed,
+                               registered=registered)
     assert overflows == 1
     (cut, cut_status), *rest = out
     assert cut_status == 0b1001

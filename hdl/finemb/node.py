@@ -78,6 +78,10 @@ class FinembNode(wiring.Component):
     queue_bytes : int
         Bytes of each forwarding and consuming queue (a power of two, at least 2048: a whole
         frame).
+    registered_queues : bool
+        The queues' outputs through register slices
+        (:class:`~hdl.net.queue.FrameQueue` ``registered``): a cycle more from a frame in to
+        it forwarded or consumed, for the GMII clock with real pins (a board's node).
 
     Members
     -------
@@ -98,7 +102,7 @@ class FinembNode(wiring.Component):
     """
 
     def __init__(self, descriptor, *, mac="02:00:00:00:46:01", serial=0, app_deadline=256,
-                 queue_bytes=2048):
+                 queue_bytes=2048, registered_queues=False):
         if not isinstance(descriptor, IoDescriptor):
             raise ParameterError("descriptor", descriptor, "an IoDescriptor")
         try:
@@ -111,6 +115,7 @@ class FinembNode(wiring.Component):
         self._serial = check_int("serial", serial, 0, (1 << 32) - 1)
         self._deadline = check_int("app_deadline", app_deadline, 0, 4095)
         self._queue = check_int("queue_bytes", queue_bytes, 2048, 65536)
+        self._registered = bool(registered_queues)
         super().__init__({
             "gmii_clk": In(1), "port0": Out(GmiiSignature()), "port1": Out(GmiiSignature()),
             "app": Out(PageAppSignature(descriptor.page_out_bytes, descriptor.page_in_bytes)),
@@ -148,8 +153,10 @@ class FinembNode(wiring.Component):
         for k, port in enumerate(ports):
             m.submodules[f"rx{k}"] = rx = gmii(GmiiRx())
             m.submodules[f"tx{k}"] = tx = gmii(GmiiTx(raw=True))
-            m.submodules[f"forward{k}"] = fq = gmii(FrameQueue(self._queue))   # k -> the other
-            m.submodules[f"consume{k}"] = cq = gmii(FrameQueue(self._queue))
+            m.submodules[f"forward{k}"] = fq = gmii(    # k -> the other
+                FrameQueue(self._queue, registered=self._registered))
+            m.submodules[f"consume{k}"] = cq = gmii(
+                FrameQueue(self._queue, registered=self._registered))
             m.d.comb += [rx.gmii_rxd.eq(port.rxd), rx.gmii_rx_dv.eq(port.rx_dv),
                          rx.gmii_rx_er.eq(port.rx_er),
                          port.txd.eq(tx.gmii_txd), port.tx_en.eq(tx.gmii_tx_en),

@@ -149,7 +149,7 @@ class FinembPidNode(wiring.Component):
     ----------
     descriptor : IoDescriptor
         With the ports of :data:`PID_PORTS`.
-    mac, serial, app_deadline : see :class:`~hdl.finemb.FinembNode`.
+    mac, serial, app_deadline, registered_queues : see :class:`~hdl.finemb.FinembNode`.
 
     Members
     -------
@@ -159,9 +159,11 @@ class FinembPidNode(wiring.Component):
         PID updates so far.
     """
 
-    def __init__(self, descriptor, *, mac="02:00:00:00:46:01", serial=0, app_deadline=256):
+    def __init__(self, descriptor, *, mac="02:00:00:00:46:01", serial=0, app_deadline=256,
+                 registered_queues=False):
         _check_descriptor(descriptor)
-        self._node = FinembNode(descriptor, mac=mac, serial=serial, app_deadline=app_deadline)
+        self._node = FinembNode(descriptor, mac=mac, serial=serial, app_deadline=app_deadline,
+                                registered_queues=registered_queues)
         members = {name: member for name, member in self._node.signature.members.items()
                    if name != "app"}
         members["updates"] = Out(32)

@@ -8,7 +8,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import ParameterError, check_int
-from ..stream import keep_count
+from ..stream import RegisterSlice, keep_count
 from .mac import BRIDGE_DEPTH, FrameStatus, FrameStreamSignature, RxBeatSignature
 
 __all__ = ["FrameStreamSignature", "FrameQueue", "FrameToRxBeats", "FrameStreamBridge"]
@@ -35,6 +35,10 @@ class FrameQueue(wiring.Component):
         Bytes of queue, a power of two in 64..65536.
     frames : int
         Kept frames the queue may hold at once (the status FIFO's depth), 2..64.
+    registered : bool
+        Put ``m_axis`` behind a register slice: the block RAM's read data then ends at a
+        flip-flop (its clock-to-output is most of a 125 MHz cycle on ECP5), for one more cycle
+        of latency.
 
     Members
     -------
@@ -54,8 +58,9 @@ class FrameQueue(wiring.Component):
         Bytes in the queue.
     """
 
-    def __init__(self, depth=2048, frames=8):
+    def __init__(self, depth=2048, frames=8, *, registered=False):
         check_int("depth", depth, 64, 65536)
+        self._registered = bool(registered)
         if depth & (depth - 1):
             raise ParameterError("depth", depth, "a power of two in 64..65536")
         self._depth = depth
@@ -148,6 +153,10 @@ class FrameQueue(wiring.Component):
         readable = Mux(reading_kept & has_bytes, rp != newest, rp != done_wp)
         out_valid = Signal()
         out = self.m_axis
+        if self._registered:
+            m.submodules.out_slice = out_slice = RegisterSlice(FrameStreamSignature())
+            wiring.connect(m, out_slice.m_axis, wiring.flipped(self.m_axis))
+            out = out_slice.s_axis
         fetch = readable & (~out_valid | out.tready)
         m.d.comb += [rd.addr.eq(rp[:aw]), rd.en.eq(fetch)]
         with m.If(fetch):
