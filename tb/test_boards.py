@@ -170,3 +170,32 @@ def test_engine_bitstream_for_the_butterstick(tmp_path):
     assert (tmp_path / "top.bit").stat().st_size > 100_000
     assert (tmp_path / "top.svf").is_file()
     assert set(result["clocks"]) and all("worst_mhz" in c for c in result["clocks"].values())
+
+
+NEXTPNR_UTILISATION = """Info: Device utilisation:
+Info: \t          TRELLIS_IO:      17/    197     8%
+Info: \t              DP16KD:     131/     56   233%
+Info: \t          TRELLIS_FF:   11285/  24288    46%
+Info: \t        TRELLIS_COMB:   40198/  24288   165%
+"""
+
+
+def test_a_design_too_large_for_the_device_is_named_by_resource(tmp_path):
+    """What nextpnr's log says about a design larger than the device (the engine with 8
+    sessions on the Colorlight's 25F, as the full test below builds) becomes the resources
+    and how many too many."""
+    from host.board import _over_capacity
+    log = tmp_path / "top_seed1.tim"
+    log.write_text(NEXTPNR_UTILISATION)
+    assert _over_capacity(log) == [("DP16KD", 131, 56), ("TRELLIS_COMB", 40198, 24288)]
+
+
+@pytest.mark.full
+def test_engine_with_eight_sessions_does_not_fit_the_colorlight(tmp_path):
+    result = run_rosgate("board", "build", "engine", "--board", "colorlight_5a75b_r7_0",
+                         "--sessions", "8", "--seeds", "1", "-o", str(tmp_path / "out"))
+    assert result.returncode == 2, result.stderr
+    assert "engine does not fit colorlight_5a75b_r7_0's LFE5U-25F-6BG256: DP16KD" in \
+        result.stderr and "too many" in result.stderr
+    assert not (tmp_path / "out" / "top.bit").exists()
+    assert not (tmp_path / "out" / "board.json").exists()

@@ -7,6 +7,7 @@ from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
 from ..params import check_power_of_two
+from ..stream import RegisterSlice
 from .frames import DEFAULT_IP, DEFAULT_MAC, DEFAULT_RBCP_PORT, DEFAULT_TCP_PORT
 from .mac import GmiiSignature
 from .stack import STACK_COUNTERS, NetStack
@@ -18,8 +19,9 @@ class EchoEngine(wiring.Component):
     """A :class:`NetStack` with something behind it: ``registers`` bytes of RAM at RBCP
     address 0 (read and written with SiTCP's RBCP, e.g. sitcpy), and every TCP session
     listening on the TCP port (``tcp_port``; several sessions serve as many connections) and
-    echoing each byte it receives. When the peer closes, the session closes too and listens
-    again.
+    echoing each byte it receives (through a register slice: no path runs from a session's
+    receive ring into its transmit buffer). When the peer closes, the session closes too and
+    listens again.
 
     Parameters
     ----------
@@ -71,7 +73,9 @@ class EchoEngine(wiring.Component):
         # TCP: listen, echo, close when the peer closes
         for k in range(self._sessions):
             s = getattr(stack, f"tcp{k}")
-            wiring.connect(m, s.rx, s.tx)
+            m.submodules[f"echo{k}"] = echo = RegisterSlice(s.rx.signature)
+            wiring.connect(m, s.rx, echo.s_axis)
+            wiring.connect(m, echo.m_axis, s.tx)
             m.d.comb += [s.open_req.eq(1), s.active.eq(0), s.local_port.eq(0),
                          s.close_ack.eq(s.close_req)]
         return m

@@ -465,11 +465,15 @@ class TcprosEndpoint(wiring.Component):
     def _publisher_stream(m, s, tx, streaming, ctrl, msg_len, msg_cnt, bump, error):
         block = ctrl[5]
         lenb = Signal(2)
+        # bytes of the message still to send, kept beside ``msg_cnt`` so that the decisions
+        # below compare a register with a beat's byte count, not a sum with the length
+        remaining = Signal(32)
         with m.FSM(name="publish"):
             with m.State("WAIT"):
                 with m.If(s.tvalid):
                     with m.If(streaming):
-                        m.d.sync += [msg_len.eq(s.tuser), msg_cnt.eq(0), lenb.eq(0)]
+                        m.d.sync += [msg_len.eq(s.tuser), msg_cnt.eq(0), lenb.eq(0),
+                                     remaining.eq(s.tuser)]
                         m.next = "LENGTH"
                     with m.Elif(~block):
                         m.next = "DROP"
@@ -489,16 +493,17 @@ class TcprosEndpoint(wiring.Component):
             with m.State("BODY"):
                 # the beat's bytes up to the message's length; a beat that runs past it is cut
                 n = keep_count(s.tkeep) if tx.lanes > 1 else Const(1, 1)
-                room = msg_len - msg_cnt
+                # ``n`` is at most 2: the room left only matters below 2
+                room = Mux(remaining[1:] == 0, remaining[:1], 3)
                 over = n > room
                 sent = Mux(over, room, n)
-                tx.body(m, s.tdata, Mux(over, room, n), s.tvalid)
+                tx.body(m, s.tdata, sent, s.tvalid)
                 m.d.comb += s.tready.eq(tx.tready)
                 with m.If(~streaming):
                     m.next = "DROP"
                 with m.Elif(s.tvalid & tx.tready):
-                    m.d.sync += msg_cnt.eq(msg_cnt + sent)
-                    with m.If(msg_cnt + sent == msg_len):
+                    m.d.sync += [msg_cnt.eq(msg_cnt + sent), remaining.eq(remaining - sent)]
+                    with m.If((remaining[2:] == 0) & (remaining[:2] == sent)):
                         m.d.sync += bump("messages_tx")
                         with m.If(s.tlast & ~over):
                             m.next = "WAIT"
@@ -516,8 +521,8 @@ class TcprosEndpoint(wiring.Component):
                 with m.If(~streaming):
                     m.next = "WAIT"
                 with m.Elif(tx.tready):
-                    m.d.sync += msg_cnt.eq(msg_cnt + 1)
-                    with m.If(msg_cnt + 1 == msg_len):
+                    m.d.sync += [msg_cnt.eq(msg_cnt + 1), remaining.eq(remaining - 1)]
+                    with m.If(remaining == 1):
                         m.d.sync += bump("messages_tx")
                         m.next = "WAIT"
             with m.State("DISCARD"):
