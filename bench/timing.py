@@ -275,10 +275,10 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     return _results(rows, parts)
 
 
-#: the board builds of ``--boards``: each design on the boards it closes on and the ones it is
-#: measured on
-BOARD_BUILDS = ("engine@butterstick", "engine@versa_ecp5", "tcpros@butterstick",
-                "tcpros@versa_ecp5", "finemb@versa_ecp5", "finemb@butterstick")
+#: the board builds of ``--boards``: each design on two boards (finemb on a board with two
+#: RGMII ports, and at the end of a line on one with one)
+BOARD_BUILDS = ("engine@butterstick", "engine@ecpix5_85", "tcpros@butterstick",
+                "tcpros@ecpix5_85", "finemb@versa_ecp5", "finemb@butterstick")
 
 
 def measure_boards(builds=BOARD_BUILDS, log=print):

@@ -101,12 +101,36 @@ BOARDS = {b.name: b for b in (
 
 
 def board(name):
-    """The :class:`Board` called ``name``, or a :class:`BoardError` listing the boards."""
+    """The :class:`Board` called ``name``, or a :class:`BoardError` listing the boards (and,
+    for a board amaranth-boards defines, why rosgate does not build for it)."""
     try:
         return BOARDS[name]
     except KeyError:
-        raise BoardError(f"--board {name!r}: rosgate knows {', '.join(sorted(BOARDS))} "
-                         f"(rosgate board list)") from None
+        known = f"rosgate knows {', '.join(sorted(BOARDS))} (rosgate board list)"
+        why = _unsupported(name)
+        raise BoardError(f"--board {name!r}: {why + '; ' if why else ''}{known}") from None
+
+
+def _unsupported(name):
+    """Why an amaranth-boards board called ``name`` is not one rosgate builds for, or
+    ``None`` when amaranth-boards has no such board."""
+    try:
+        module = importlib.import_module(f"amaranth_boards.{name}")
+    except ImportError:
+        return None
+    from amaranth.vendor import LatticeECP5Platform
+    platforms = [p for p in vars(module).values() if isinstance(p, type)
+                 and hasattr(p, "resources") and isinstance(getattr(p, "device", None), str)]
+    if not platforms:
+        return None
+    ethernet = sorted({r.name for p in platforms for r in p.resources
+                       if r.name.startswith("eth") and "clk" not in r.name})
+    if not any(issubclass(p, LatticeECP5Platform) for p in platforms):
+        return f"{name} is not an ECP5 board ({platforms[0].device})"
+    if "eth_rgmii" not in ethernet:
+        return (f"{name}'s Ethernet is {', '.join(ethernet) or 'absent'}: rosgate's PHY "
+                f"adapter speaks RGMII only")
+    return f"{name} has an RGMII port, but rosgate has no board data (PHYs, delays) for it"
 
 
 def rgmii_ports(platform):

@@ -145,6 +145,15 @@ def test_board_list_and_refusals(tmp_path):
         assert not (tmp_path / "out").exists(), "refused before anything was written"
     with pytest.raises(BoardError, match="rosgate knows butterstick"):
         board("nope")
+    # boards amaranth-boards defines that rosgate does not build for say why
+    with pytest.raises(BoardError, match="arty_a7 is not an ECP5 board"):
+        board("arty_a7")
+    with pytest.raises(BoardError, match="ulx3s's Ethernet is absent: rosgate's PHY adapter "
+                                         "speaks RGMII only"):
+        board("ulx3s")
+    with pytest.raises(BoardError, match="logicbone has an RGMII port, but rosgate has no "
+                                         "board data"):
+        board("logicbone")
 
 
 def test_rgmii_phy_refuses_delays_beyond_the_delay_line():
