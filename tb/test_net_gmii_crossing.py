@@ -77,7 +77,7 @@ def run_crossing(frames, local_ns):
 
 @pytest.mark.parametrize("ppm", [+500, -500])
 def test_frames_cross_byte_for_byte_between_clocks_500_ppm_apart(ppm):
-    frames = frames_for(ppm, 60)
+    frames = frames_for(ppm, 36)
     received, counts = run_crossing(frames, PHY_NS * (1 + ppm * 1e-6))
     assert received == [data for data, _ in frames]
     assert counts == {"overruns": 0, "underruns": 0}
@@ -86,7 +86,7 @@ def test_frames_cross_byte_for_byte_between_clocks_500_ppm_apart(ppm):
 @pytest.mark.parametrize("local_ns, pulse", [(PHY_NS * 1.25, "overruns"),
                                              (PHY_NS * 0.8, "underruns")])
 def test_a_far_off_clock_spoils_frames_visibly_and_loses_no_good_one(local_ns, pulse):
-    frames = frames_for(7, 40)
+    frames = frames_for(7, 24)
     received, counts = run_crossing(frames, local_ns)
     sent = [data for data, _ in frames]
     spoilt = [f for f in received if any(er for _, er in f)]
