@@ -154,8 +154,13 @@ class FrameQueue(wiring.Component):
         out_valid = Signal()
         out = self.m_axis
         if self._registered:
+            # the bytes and ``tlast`` through the slice; a frame's status joins its last byte
+            # after it, so the status FIFO is read from the slice's registers too
             m.submodules.out_slice = out_slice = RegisterSlice(FrameStreamSignature())
-            wiring.connect(m, out_slice.m_axis, wiring.flipped(self.m_axis))
+            sliced = out_slice.m_axis
+            m.d.comb += [self.m_axis.tvalid.eq(sliced.tvalid), self.m_axis.tdata.eq(sliced.tdata),
+                         self.m_axis.tlast.eq(sliced.tlast), sliced.tready.eq(self.m_axis.tready),
+                         out_slice.s_axis.tuser.eq(0)]
             out = out_slice.s_axis
         fetch = readable & (~out_valid | out.tready)
         m.d.comb += [rd.addr.eq(rp[:aw]), rd.en.eq(fetch)]
@@ -165,10 +170,11 @@ class FrameQueue(wiring.Component):
                 m.d.sync += began.eq(1)
         with m.Elif(out.tready):
             m.d.sync += out_valid.eq(0)
-        last = rd.data[8]
-        m.d.comb += [out.tvalid.eq(out_valid), out.tdata.eq(rd.data[:8]), out.tlast.eq(last),
-                     out.tuser.eq(Mux(last, status.r_data, 0)),
-                     status.r_en.eq(out.tvalid & out.tready & last)]
+        m.d.comb += [out.tvalid.eq(out_valid), out.tdata.eq(rd.data[:8]),
+                     out.tlast.eq(rd.data[8])]
+        done = self.m_axis
+        m.d.comb += [done.tuser.eq(Mux(done.tlast, status.r_data, 0)),
+                     status.r_en.eq(done.tvalid & done.tready & done.tlast)]
         return m
 
 
