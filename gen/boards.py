@@ -230,7 +230,8 @@ class _BoardTop(Elaboratable):
         self.pll = pll
         #: input clocks the LPF constrains by their pin (``FREQUENCY PORT``): name -> MHz
         self.pin_clocks = {}
-        #: the last part of a clock net's name after synthesis -> what the clock is
+        #: a clock net's name after synthesis (without ``$glbnet$``), or its last part -> what
+        #: the clock is
         self.clock_names = {"clk": "sync (62.5 MHz, the core)",
                             "clk125": "gmii_tx (125 MHz, TXC)"}
         #: the top's port names (after elaboration): ``oscillator`` and, per used RGMII port,
@@ -259,7 +260,7 @@ class _BoardTop(Elaboratable):
                                                  tx_delay_taps=self.board.tx_delay_taps)
         self.pin_clocks[pins.rx_clk.io.name] = self.GMII_MHZ
         self.sim_pins["ports"].append({sub: getattr(pins, sub).io.name for sub in RGMII_RAW})
-        self.clock_names[f"port{k}_rx_clk"] = f"port{k} rx (125 MHz, the PHY's RXC)"
+        self.clock_names[f"phy{k}.rx_clk"] = f"port{k} rx (125 MHz, the PHY's RXC)"
         domain = ClockDomain(f"port{k}_rx", local=True)
         m.domains += domain
         m.d.comb += domain.clk.eq(phy.rx_clk)
@@ -394,6 +395,7 @@ class FinembBoardTop(_BoardTop):
         from hdl.net.gmii_crossing import GmiiRxCrossing
         m = Module()
         clk125, locked = self._clocks(m, platform)
+        self.clock_names["line_clk"] = "line (125 MHz, the node's GMII and TXC)"
         # the node's transmit clock, onto which each port's receive side crosses
         m.domains.line = ClockDomain("line", local=True)
         m.d.comb += ClockSignal("line").eq(clk125)

@@ -176,8 +176,8 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     clocks = {}
     for seed, report in seeds_done.items():
         for net, (achieved, constraint) in report["fmax"].items():
-            last = net.removeprefix("$glbnet$").split(".")[-1]
-            clock = top.clock_names.get(last, net)
+            name = net.removeprefix("$glbnet$")
+            clock = top.clock_names.get(name) or top.clock_names.get(name.split(".")[-1], net)
             worst = clocks.setdefault(clock, {"net": net, "target_mhz": constraint,
                                               "seeds": {}})
             worst["seeds"][seed] = achieved
