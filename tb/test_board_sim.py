@@ -20,7 +20,7 @@ import pytest
 from host.tap import namespace_unavailable
 
 from .harness import ROOT, SIM_BUILD
-from .test_tap_cli import ENGINE_PROBE, ROSGATE, in_namespace, start_tap
+from .tap_tb import ENGINE_PROBE, ROSGATE, in_namespace, start_tap
 
 pytestmark = pytest.mark.skipif(namespace_unavailable() is not None,
                                 reason=f"board tops on TAP need {namespace_unavailable()}")
