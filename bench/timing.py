@@ -4,7 +4,8 @@ three seeds. ``python bench/run.py timing`` runs all, ``python bench/timing.py <
 (``--list`` names them); results in ``bench/results/timing.json`` and ``.md``, the Verilog each
 run placed under ``sim_build/timing/<core>/``. ``python bench/timing.py --boards
 [design@board ...]`` builds the board designs with their real pins (``rosgate board build``,
-docs/boards.md) into ``build/board/`` and adds their rows (``boards``) beside the cores'."""
+docs/boards.md) into ``build/board/`` and adds their rows (``boards``) beside the cores';
+with ``--collect`` it tabulates builds already there (made side by side) instead."""
 
 import json
 import sys
@@ -293,21 +294,36 @@ def measure_boards(builds=BOARD_BUILDS, log=print):
         out = ROOT / "build" / "board" / f"{design}-{name}"
         result = build_board(design, name, out, seeds=SEEDS,
                              progress=lambda text: log(f"    {text}"))
-        used = result["utilisation"]
-        rows.append({
-            "design": design, "board": name, "fpga": result["fpga"],
+        rows.append(board_row(result, out))
+        log(f"    {'PASS' if result['passed'] else 'FAIL'}: " + "; ".join(
+            f"{clock} {c['worst_mhz']:.1f} (needs {c['needed_mhz']:g})"
+            for clock, c in sorted(result["clocks"].items()))
+            + f" ({time.monotonic() - start:.0f} s)")
+    return rows
+
+
+def collect_boards(builds=BOARD_BUILDS):
+    """The rows of builds already made in ``build/board/`` (their ``board.json``): builds run
+    side by side with ``rosgate board build``, tabulated without building again."""
+    rows = []
+    for job in builds:
+        design, _, name = job.partition("@")
+        out = ROOT / "build" / "board" / f"{design}-{name}"
+        rows.append(board_row(json.loads((out / "board.json").read_text()), out))
+    return rows
+
+
+def board_row(result, out):
+    """A row of ``timing.json``'s ``boards`` from a build's result (its ``board.json``)."""
+    used = result["utilisation"]
+    return {"design": result["design"], "board": result["board"], "fpga": result["fpga"],
             "clocks": {clock: {"worst_mhz": c["worst_mhz"], "needed_mhz": c["needed_mhz"],
                                "per_seed": c["seeds"], "pass": c["pass"]}
                        for clock, c in sorted(result["clocks"].items())},
             "pass": result["passed"], "lut4": used["TRELLIS_COMB"][0],
             "ff": used["TRELLIS_FF"][0], "bram": used["DP16KD"][0],
             "bram_available": used["DP16KD"][1], "lut4_available": used["TRELLIS_COMB"][1],
-            "bitstream_bytes": (out / "top.bit").stat().st_size})
-        log(f"    {'PASS' if result['passed'] else 'FAIL'}: " + "; ".join(
-            f"{clock} {c['worst_mhz']:.1f} (needs {c['needed_mhz']:g})"
-            for clock, c in sorted(result["clocks"].items()))
-            + f" ({time.monotonic() - start:.0f} s)")
-    return rows
+            "bitstream_bytes": (Path(out) / "top.bit").stat().st_size}
 
 
 def _results(rows, parts=None, boards=None):
@@ -538,8 +554,8 @@ def _reference(row):
 def main(argv=None):
     args = sys.argv[1:] if argv is None else argv
     if "--boards" in args:
-        builds = [a for a in args if a != "--boards"] or list(BOARD_BUILDS)
-        rows = measure_boards(builds)
+        builds = [a for a in args if a not in ("--boards", "--collect")] or list(BOARD_BUILDS)
+        rows = collect_boards(builds) if "--collect" in args else measure_boards(builds)
         # read after measuring: another run's rows written meanwhile are kept
         old = json.loads((RESULTS / "timing.json").read_text())
         boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
