@@ -12,7 +12,7 @@ from pathlib import Path
 from gen.boards import (BoardError, EngineBoardTop, FinembBoardTop, TcprosBoardTop, board,
                         board_platform, rgmii_ports)
 
-from .timing import MARGIN, SEEDS, TimingError, find_tool, run_tool
+from .timing import MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, find_tool, run_tool
 
 __all__ = ["DESIGNS", "build_board", "synthesise_board", "BoardBuild", "pll_parameters"]
 
@@ -155,6 +155,7 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
     b, top, device = synthesise_board(design, board_name, out, options=options,
                                       progress=progress)
     seeds_done = {}
+    unrouted = []
     for seed in seeds:
         say(f"placing and routing with the board's pins, seed {seed} of {len(seeds)}")
         # a seed that misses a target still reports: the worst of the seeds decides
@@ -164,15 +165,23 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
                       "--timing-allow-fail", "--seed", str(seed), "--json", f"{TOP}.json",
                       "--lpf", f"{TOP}.lpf", "--textcfg", f"{TOP}_seed{seed}.config",
                       "--report", f"{TOP}_seed{seed}.json"],
-                     log, f"nextpnr-ecp5 (seed {seed})", out)
-        except TimingError:
+                     log, f"nextpnr-ecp5 (seed {seed})", out, timeout=PNR_TIMEOUT_S)
+        except TimingError as exc:
             over = _over_capacity(log)
             if over:
                 raise BoardError(f"{design} does not fit {b.name}'s {b.fpga()}: " + ", ".join(
                     f"{cell} {used} of {available} ({used - available} too many)"
                     for cell, used, available in over) + f" (nextpnr's log: {log})") from None
-            raise
+            if "did not finish" not in str(exc):
+                raise
+            # a seed that does not route in time counts: 0 MHz on every clock
+            say(f"seed {seed} did not route within {PNR_TIMEOUT_S // 60} minutes")
+            unrouted.append(seed)
+            continue
         seeds_done[seed] = _report(out / f"{TOP}_seed{seed}.json")
+    if not seeds_done:
+        raise BoardError(f"{design} on {b.name}: no seed routed within "
+                         f"{PNR_TIMEOUT_S // 60} minutes (logs: {out})")
     clocks = {}
     for seed, report in seeds_done.items():
         for net, (achieved, constraint) in report["fmax"].items():
@@ -182,6 +191,7 @@ def build_board(design, board_name, out, *, options=None, seeds=SEEDS, progress=
                                               "seeds": {}})
             worst["seeds"][seed] = achieved
     for clock in clocks.values():
+        clock["seeds"].update({seed: 0.0 for seed in unrouted})
         clock["worst_mhz"] = min(clock["seeds"].values())
         clock["needed_mhz"] = round(clock["target_mhz"] * MARGIN, 2)
         clock["pass"] = clock["worst_mhz"] >= clock["needed_mhz"]
