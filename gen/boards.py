@@ -97,6 +97,9 @@ BOARDS = {b.name: b for b in (
           notes=("the PHYs are strapped to delay both RGMII clocks themselves",)),
     Board("ecpix5_85", "amaranth_boards.ecpix5:ECPIX585Platform", "LambdaConcept ECPIX-5 85F",
           ("RGMII PHY",), rx_delay_ns=0.0, tx_delay_ns=2.0),
+    Board("logicbone_85", "amaranth_boards.logicbone:Logicbone85FPlatform",
+          "Logicbone ECP5 85F", ("RGMII PHY",), rx_delay_ns=2.0, tx_delay_ns=2.0,
+          notes=("LiteEth's target adds both RGMII delays in the FPGA",)),
 )}
 
 
@@ -127,6 +130,9 @@ def _unsupported(name):
                        if r.name.startswith("eth") and "clk" not in r.name})
     if not any(issubclass(p, LatticeECP5Platform) for p in platforms):
         return f"{name} is not an ECP5 board ({platforms[0].device})"
+    ours = [b.name for b in BOARDS.values() if b.platform.startswith(f"amaranth_boards.{name}:")]
+    if ours:
+        return f"amaranth-boards' {name} module is built for as {', '.join(ours)}"
     if "eth_rgmii" not in ethernet:
         return (f"{name}'s Ethernet is {', '.join(ethernet) or 'absent'}: rosgate's PHY "
                 f"adapter speaks RGMII only")

@@ -151,8 +151,10 @@ def test_board_list_and_refusals(tmp_path):
     with pytest.raises(BoardError, match="ulx3s's Ethernet is absent: rosgate's PHY adapter "
                                          "speaks RGMII only"):
         board("ulx3s")
-    with pytest.raises(BoardError, match="logicbone has an RGMII port, but rosgate has no "
+    with pytest.raises(BoardError, match="versa_ecp5_5g has an RGMII port, but rosgate has no "
                                          "board data"):
+        board("versa_ecp5_5g")
+    with pytest.raises(BoardError, match="module is built for as logicbone_85"):
         board("logicbone")
 
 
