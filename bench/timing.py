@@ -278,8 +278,8 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
 
 #: the board builds of ``--boards``: each design on two boards (finemb on a board with two
 #: RGMII ports, and at the end of a line on one with one)
-BOARD_BUILDS = ("engine@butterstick", "engine@ecpix5_85", "tcpros@butterstick",
-                "tcpros@ecpix5_85", "finemb@versa_ecp5", "finemb@butterstick")
+BOARD_BUILDS = ("engine@butterstick", "engine@logicbone_85", "tcpros@butterstick",
+                "tcpros@logicbone_85", "finemb@versa_ecp5", "finemb@butterstick")
 
 
 def measure_boards(builds=BOARD_BUILDS, log=print):
