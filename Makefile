@@ -28,7 +28,7 @@ SELECT = ($(SIM) or not (icarus or verilator))$(if $(CONFIG), and $(CONFIG)-)
 help:
 	@echo "rosgate make targets:"
 	@echo "  make demo        the main job: the Sobel/DIP application (export for Vivado, co-simulate, print the table)"
-	@echo "  make test        the default test suite (Icarus + Verilator, 8 to 10 min on 2 cores)"
+	@echo "  make test        the default test suite (Icarus + Verilator, 9 to 12 min on 2 cores)"
 	@echo "  make test-full   the long matrix as well"
 	@echo "  make sim TOP=topic SIM=icarus|verilator [CONFIG=4x4_w64] [WAVES=1] [SEED=n]   one bench"
 	@echo "      (TOP names tb/test_<TOP>.py: topic, msg_codec, net_stack, reconos_memif, ...)"
