@@ -350,13 +350,15 @@ class NetBoardTop(_BoardTop):
         return m
 
 
-def EngineBoardTop(b, *, pll, mac, ip, sessions=2, registers=256, buffer_bytes=None):
+class EngineBoardTop(NetBoardTop):
     """The TCP/IP engine (:class:`hdl.net.echo.EchoEngine`: ARP, ICMP echo, RBCP registers,
     TCP echo sessions) on a board's first RGMII port (:class:`NetBoardTop`)."""
-    from hdl.net.echo import EchoEngine
-    engine = EchoEngine(mac=mac, ip=ip, sessions=sessions, registers=registers,
-                        buffer_bytes=buffer_bytes or b.buffer_bytes)
-    return NetBoardTop(b, engine, pll=pll)
+
+    def __init__(self, b, *, pll, mac, ip, sessions=2, registers=256, buffer_bytes=None):
+        from hdl.net.echo import EchoEngine
+        engine = EchoEngine(mac=mac, ip=ip, sessions=sessions, registers=registers,
+                            buffer_bytes=buffer_bytes or b.buffer_bytes)
+        super().__init__(b, engine, pll=pll)
 
 
 class TcprosBoardTop(NetBoardTop):
