@@ -70,24 +70,41 @@ def verilator_public_config(top, names=None):
                                             for name in (names or ["*"]))
 
 
-def _top_only_runner():
-    """cocotb's Verilator runner without its ``--public-flat-rw``.
+#: rosgate's main for a Verilator simulation: cocotb's event loop with compiled clocks
+VERILATOR_MAIN = Path(__file__).resolve().parent / "compiled" / "verilator_main.cpp"
+#: Verilator options that let :func:`start_clock` find the compiled clocks in the simulator
+CLOCK_LINK_ARGS = ("-LDFLAGS", "-Wl,--export-dynamic-symbol=rosgate_clock_*")
 
-    That option makes every signal of the design visible through VPI, which keeps Verilator
-    from inlining and optimising any of it: a seven-thread system top became 28 MB of C++ (150 s
-    to compile on 2 cores) and simulated three times slower than with only its top module
-    visible (12 MB, 66 s). The visible part comes from :func:`verilator_public_config`.
-    cocotb 2.1 has no option for this, hence the override of its command (the version is
-    pinned in pyproject.toml).
+
+def _verilator_runner(top_only):
+    """cocotb's Verilator runner with :data:`VERILATOR_MAIN` for cocotb's ``verilator.cpp``
+    and, when ``top_only``, without its ``--public-flat-rw``.
+
+    The main toggles the clocks :func:`start_clock` starts in compiled code (a GPI clock costs
+    a VPI timer callback per half period, three times the model's own work on a system top).
+    ``--public-flat-rw`` makes every signal of the design visible through VPI, which keeps
+    Verilator from inlining and optimising any of it: a seven-thread system top became 28 MB
+    of C++ (150 s to compile on 2 cores) and simulated three times slower than with only its
+    top module visible (12 MB, 66 s). The visible part comes from
+    :func:`verilator_public_config`. cocotb 2.1 has no option for either, hence the override
+    of its command (the version is pinned in pyproject.toml).
     """
     from cocotb_tools.runner import Verilator
 
-    class TopOnlyVerilator(Verilator):
+    class RosgateVerilator(Verilator):
         def _build_command(self):
             commands = super()._build_command()
-            commands[0] = [word for word in commands[0] if word != "--public-flat-rw"]
+            words = []
+            for word in commands[0]:
+                if word == "--public-flat-rw" and top_only:
+                    continue
+                if word.endswith("verilator.cpp") and Path(word).parent.name == "verilator":
+                    words += [*CLOCK_LINK_ARGS, str(VERILATOR_MAIN)]
+                    continue
+                words.append(word)
+            commands[0] = words
             return commands
-    return TopOnlyVerilator()
+    return RosgateVerilator()
 
 
 class SimulationFailed(AssertionError):
@@ -392,7 +409,7 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
     # processes, and each module gets its own results file
     with exclusive(build_dir / ".build.lock"):
         top_only = sim == "verilator" and not internals
-        runner = _top_only_runner() if top_only else get_runner(sim)
+        runner = _verilator_runner(top_only) if sim == "verilator" else get_runner(sim)
         build_args, test_args, plusargs = [], [], []
         fst = build_dir / f"{top}.fst"
         # waveform builds get their own object folder, so switching waves never reuses the other
@@ -499,17 +516,58 @@ _CLOCK_PERIODS_PS = {}
 
 def start_clock(signal, period_ns):
     """Inside a cocotb test: drive ``signal`` as a free-running clock of ``period_ns``
-    nanoseconds (50 % duty); return its task.
+    nanoseconds (50 % duty); return its task (cancel it to stop the clock).
 
-    The simulator toggles it (cocotb's GPI clock) instead of a Python coroutine that wakes
-    twice a cycle: on Icarus, where cocotb would pick the coroutine, that is about a tenth of
-    a bench's time. It starts low, so the first rising edge comes half a period in, after
-    the design's outputs have left their initial ``x`` (Icarus).
+    Under Verilator the simulator's main toggles it in compiled code
+    (``host/compiled/verilator_main.cpp``): Python is not woken and no VPI callback runs per
+    half period. Elsewhere (Icarus) cocotb's GPI clock toggles it instead of a Python coroutine
+    that wakes twice a cycle, about a tenth of a bench's time. Either way the edges come at
+    the same times: it starts low, so the first rising edge comes half a period in, after the
+    design's outputs have left their initial ``x`` (Icarus).
     """
+    import cocotb
     from cocotb.clock import Clock
+    from cocotb.triggers import Event
+
     period_ps = round(period_ns * 1000)
     _CLOCK_PERIODS_PS[signal._path] = period_ps
-    return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
+    compiled = _compiled_clocks()
+    steps = _ps_to_steps(period_ps)
+    if compiled is None or steps % 2 or len(signal) != 1:
+        return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
+    start, stop = compiled
+    clock = start(signal._path.encode(), steps // 2, steps // 2, 0)
+    if clock < 0:
+        return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
+
+    async def drive():
+        try:
+            await Event().wait()
+        finally:
+            stop(clock)
+    return cocotb.start_soon(drive())
+
+
+@functools.cache
+def _compiled_clocks():
+    """``rosgate_clock_start`` and ``rosgate_clock_stop`` of the simulator's main (Verilator
+    built by :func:`run_top`), or ``None`` in a simulator without them."""
+    import ctypes
+    try:
+        program = ctypes.CDLL(None)
+        start, stop = program.rosgate_clock_start, program.rosgate_clock_stop
+    except (OSError, AttributeError):
+        return None
+    start.restype = ctypes.c_int
+    start.argtypes = [ctypes.c_char_p, ctypes.c_uint64, ctypes.c_uint64, ctypes.c_int]
+    stop.restype = None
+    stop.argtypes = [ctypes.c_int]
+    return start, stop
+
+
+def _ps_to_steps(ps):
+    from cocotb.utils import get_sim_steps
+    return get_sim_steps(ps, "ps")
 
 
 @functools.cache
