@@ -22,8 +22,8 @@ GOALS = {1: 250_000, 16: 40_000}
 #: the nodes' core clock (the benches' cycles are the GMII clock's)
 CORE_MHZ = NODE_CLOCKS_HZ["aclk"] / 1e6
 HOP_GOAL_NS = 200
-SOCKET_NODES = 2
-SOCKET_CYCLES = 200
+SOCKET_NODES = 4
+SOCKET_CYCLES = 1000
 #: lines this long are compiled optimised: the simulation, not the build, dominates
 OPTIMISE_FROM = 8
 

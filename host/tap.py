@@ -123,7 +123,7 @@ class TapBridge:
         self.poll_cycles = poll_cycles
         self.strict = strict
         self.capture = capture
-        self.fd = self._open(tap)
+        self.fd = self.open_tap(tap)
         self.stats = {"to_design": 0, "from_design": 0, "dropped": 0, "duplicated": 0,
                       "reordered": 0, "ipv6": 0, "bad_fcs": 0}
         self._held = {"in": None, "out": None}
@@ -134,7 +134,7 @@ class TapBridge:
     _fds = {}
 
     @classmethod
-    def _open(cls, tap):
+    def open_tap(cls, tap):
         """The TAP file descriptor, opened once per simulator process (a TAP device takes one
         attachment; every cocotb test of the run reuses it)."""
         if tap not in cls._fds:

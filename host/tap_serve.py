@@ -13,6 +13,7 @@ import cocotb
 from cocotb.triggers import ClockCycles
 from cocotbext.eth import GmiiSink, GmiiSource
 
+from host.compiled.gmii_tap import CompiledTapPort
 from host.simulator import clock_cycles, start_gmii_clocks, top_params
 from host.tap import TapBridge
 
@@ -26,6 +27,16 @@ async def serve(dut):
     params = top_params()
     port = params["port"]
     rx_clk, tx_clk = start_gmii_clocks(dut, port)
+    if not hasattr(dut, f"{port}_rxd"):
+        # the port is on the compiled TAP pump (host.compiled.gmii_tap)
+        dut.aresetn.value = 0
+        await ClockCycles(dut.aclk, 4)
+        dut.aresetn.value = 1
+        await ClockCycles(dut.aclk, 2)
+        pump = CompiledTapPort(TapBridge.open_tap(params["tap"]),
+                               poll_cycles=params.get("poll_cycles", 64))
+        await serve_until_stopped(dut, dut.aclk, [pump], params)
+        return
 
     def pin(name):
         return getattr(dut, f"{port}_{name}")
