@@ -17,7 +17,7 @@ import re
 from pathlib import Path
 
 __all__ = ["DEFAULT_MEMORY_MB", "MEMORY_OPTION", "SOURCES", "LINK_ARGS", "CompiledAxiRam",
-           "attach_memory", "cosim_wrapper", "memory_harness", "verilog_ports"]
+           "attach_memory", "cosim_wrapper", "memory_harness", "verilog_ports", "wrapper_head"]
 
 #: MiB of physical memory behind a system's AXI4 port in ``rosgate sim`` unless
 #: :data:`MEMORY_OPTION` says otherwise (only what is written is backed by the host's memory)
@@ -135,6 +135,18 @@ def verilog_ports(text, top):
             for m in _PORT.finditer(body)}
 
 
+def wrapper_head(name, ports, inner, what):
+    """The first lines of a simulation wrapper module ``name`` around a top with ``ports``
+    (:func:`verilog_ports`): a comment saying ``what`` it is, the module header and the
+    declarations of every port but ``inner``, which become wires."""
+    def decl(kind, port):
+        width = ports[port][1]
+        return f"    {kind} {'[%d:0] ' % (width - 1) if width > 1 else ''}{port};"
+    outer = [p for p in ports if p not in inner]
+    return ([f"// {name}: {what} (simulation only)", f"module {name}({', '.join(outer)});"]
+            + [decl(ports[p][0], p) for p in outer] + [decl("wire", p) for p in inner])
+
+
 def cosim_wrapper(text, top, *, memory="m_axi_mem", clock="aclk", reset="aresetn"):
     """Verilog of module ``<top>_cosim``: ``top`` (in Verilog ``text``) with its AXI4 master
     port ``memory`` connected to ``rosgate_axi_ram`` and its reset ``reset`` registered once
@@ -149,16 +161,8 @@ def cosim_wrapper(text, top, *, memory="m_axi_mem", clock="aclk", reset="aresetn
         if name not in ports or ports[name][0] != "input":
             raise ValueError(f"module {top!r} has no input {name!r}")
     name = f"{top}_cosim"
-    outer = [p for p in ports if not p.startswith(memory + "_")]
-
-    def decl(kind, port):
-        width = ports[port][1]
-        return f"    {kind} {'[%d:0] ' % (width - 1) if width > 1 else ''}{port};"
-
-    lines = [f"// {name}: {top} with its AXI4 port {memory} on rosgate_axi_ram (simulation only)",
-             f"module {name}({', '.join(outer)});"]
-    lines += [decl(ports[p][0], p) for p in outer]
-    lines += [decl("wire", p) for p in ports if p.startswith(memory + "_")]
+    lines = wrapper_head(name, ports, [p for p in ports if p.startswith(memory + "_")],
+                         f"{top} with its AXI4 port {memory} on rosgate_axi_ram")
     lines += [f"    reg {reset}_q = 1'b0;",
               f"    always @(posedge {clock}) {reset}_q <= {reset};",
               f"    {top} dut ("]

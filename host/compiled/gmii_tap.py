@@ -8,7 +8,7 @@ and reads the counters from the cocotb side."""
 import ctypes
 from pathlib import Path
 
-from . import verilog_ports
+from . import verilog_ports, wrapper_head
 
 __all__ = ["GMII_TAP_SOURCES", "GMII_TAP_LINK_ARGS", "CompiledTapPort", "gmii_tap_harness",
            "gmii_tap_wrapper"]
@@ -44,16 +44,8 @@ def gmii_tap_wrapper(text, top, port):
         raise ValueError(f"module {top!r} has no GMII port {port!r} (no {missing[0]})")
     rx_clk, tx_clk = port_clocks(ports, port)
     name = f"{top}_tap"
-    outer = [p for p in ports if p not in pins]
-
-    def decl(kind, p):
-        width = ports[p][1]
-        return f"    {kind} {'[%d:0] ' % (width - 1) if width > 1 else ''}{p};"
-
-    lines = [f"// {name}: {top} with its GMII port {port} on rosgate_gmii_tap (simulation only)",
-             f"module {name}({', '.join(outer)});"]
-    lines += [decl(ports[p][0], p) for p in outer]
-    lines += [decl("wire", p) for p in pins]
+    lines = wrapper_head(name, ports, list(pins), f"{top} with its GMII port {port} on "
+                                                  f"rosgate_gmii_tap")
     lines += [f"    {top} dut ("]
     lines.append(",\n".join(f"        .{p}({p})" for p in ports))
     lines += ["    );",
