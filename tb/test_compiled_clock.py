@@ -1,0 +1,69 @@
+"""The compiled clocks of rosgate's Verilator main (``host/compiled/verilator_main.cpp``)
+against cocotb's GPI clock, on ``two_clock_counters.v``: two clocks of unrelated periods
+(8 ns and 7.998 ns, the GMII clock and one 250 ppm fast), started at different times,
+counters on both edges. The same cocotb test runs with either clock implementation in one
+build: the times of every rising edge it sees, the values it reads at each edge and at timers
+between edges, and what a ``clock_cycles`` wait returns must be the same."""
+
+import json
+
+import cocotb
+from cocotb.triggers import FallingEdge, RisingEdge, Timer
+
+import host.simulator as simulator
+from host.simulator import QUICK_CXX_OPT, clock_cycles, run_top, start_clock, top_params
+
+from .harness import ROOT, SIM_BUILD
+
+TOP = ROOT / "tb" / "two_clock_counters.v"
+
+
+async def _edges(clock, values, count, out):
+    for _ in range(count):
+        await RisingEdge(clock)
+        out.append((cocotb.utils.get_sim_time("ps"), *(int(v.value) for v in values)))
+
+
+@cocotb.test()
+async def clocks_and_what_a_test_sees(dut):
+    p = top_params()
+    if p["gpi"]:
+        simulator._compiled_clocks.cache_clear()
+        simulator._compiled_clocks = lambda: None
+    seen = {"compiled": simulator._compiled_clocks() is not None}
+    values = (dut.count_a, dut.count_b, dut.fall_copy)
+    start_clock(dut.clk_a, 8)
+    await Timer(3, "ns")
+    start_clock(dut.clk_b, 7.998)
+    edges_a, edges_b = [], []
+    cocotb.start_soon(_edges(dut.clk_a, values, 300, edges_a))
+    cocotb.start_soon(_edges(dut.clk_b, values, 300, edges_b))
+    timers = []
+    for step in (1, 7, 13, 4001, 2, 999):
+        await Timer(step, "ps")
+        timers.append((cocotb.utils.get_sim_time("ps"), *(int(v.value) for v in values)))
+    await FallingEdge(dut.clk_a)
+    timers.append((cocotb.utils.get_sim_time("ps"), *(int(v.value) for v in values)))
+    await clock_cycles(dut.clk_b, 200)
+    timers.append((cocotb.utils.get_sim_time("ps"), *(int(v.value) for v in values)))
+    await Timer(3000, "ns")
+    seen.update(edges_a=edges_a, edges_b=edges_b, timers=timers)
+    with open(p["out"], "w") as f:
+        json.dump(seen, f)
+
+
+def _run(gpi, tmp_path):
+    out = tmp_path / f"{'gpi' if gpi else 'compiled'}.json"
+    run_top(__name__, TOP.stem, None, "verilator", SIM_BUILD / "compiled_clock",
+            params={"gpi": gpi, "out": str(out)}, extra_env={"PYTHONPATH": str(ROOT)},
+            lint=False, cxx_opt=QUICK_CXX_OPT, exported=TOP, run_name="gpi" if gpi else None)
+    return json.loads(out.read_text())
+
+
+def test_compiled_clocks_give_the_gpi_clocks_edges_and_values(tmp_path):
+    compiled, gpi = _run(False, tmp_path), _run(True, tmp_path)
+    assert compiled.pop("compiled") and not gpi.pop("compiled")
+    assert len(compiled["edges_a"]) == len(compiled["edges_b"]) == 300
+    # the edges come where the periods say: clock a every 8,000 ps from 4,000
+    assert [e[0] for e in compiled["edges_a"]][:3] == [4000, 12000, 20000]
+    assert compiled == gpi
