@@ -68,10 +68,10 @@ demo: setup
 	$(PY) bench/demo.py
 
 test: setup
-	$(PY) -m pytest -m "not full" -n $(JOBS) -q
+	$(PY) -m pytest -m "not full" -n $(JOBS) --dist worksteal -q
 
 test-full: setup
-	ROSGATE_FULL=1 $(PY) -m pytest -n $(JOBS) -q
+	ROSGATE_FULL=1 $(PY) -m pytest -n $(JOBS) --dist worksteal -q
 
 sim: setup
 	@test -f tb/test_$(TOP).py || { echo "make sim: no bench tb/test_$(TOP).py for TOP=$(TOP); benches:" \
