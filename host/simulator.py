@@ -39,8 +39,8 @@ from host.toolchain import cache_dir, put_verilator_on_path
 from .lint import LINT_ARGS
 
 __all__ = ["PROJECT_CXX_OPT", "SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
-           "top_manifest", "environment_seed", "failed_seeds", "start_clock",
-           "start_gmii_clocks", "clock_cycles", "source_digest", "verilator_make_env", "GMII_NS", "CORE_NS"]
+           "top_manifest", "environment_seed", "failed_seeds", "start_clock", "start_gmii_clocks",
+           "gmii_clocks", "clock_cycles", "source_digest", "verilator_make_env", "GMII_NS", "CORE_NS"]
 
 SIMULATORS = ("icarus", "verilator")
 
@@ -491,23 +491,28 @@ def run_top(module, top, component, sim, build_dir, *, params=None, testcase=Non
 GMII_NS, CORE_NS = 10**9 // GMII_HZ, 10**9 // DEFAULT_CLOCK_HZ[2]
 
 
+def gmii_clocks(names, port="gmii"):
+    """The clocks of a top whose ports include ``names``, with GMII port ``port``: the clocks
+    to start (name -> period in ns) and the port's receive and transmit clocks. A FinEmbP node
+    or line has a core clock ``aclk`` and one GMII clock ``gmii_clk``; a network engine with
+    two lanes has ``aclk`` and the port's ``<port>_rx_clk`` and ``<port>_tx_clk``; a one-clock
+    top runs everything on ``aclk`` at the GMII rate."""
+    if "gmii_clk" in names:
+        return {"aclk": CORE_NS, "gmii_clk": GMII_NS}, ("gmii_clk", "gmii_clk")
+    rx, tx = f"{port}_rx_clk", f"{port}_tx_clk"
+    if rx not in names:
+        return {"aclk": GMII_NS}, ("aclk", "aclk")
+    return {"aclk": CORE_NS, rx: GMII_NS, tx: GMII_NS}, (rx, tx)
+
+
 def start_gmii_clocks(dut, port="gmii"):
-    """Inside a cocotb test: start a top's core clock ``aclk`` and, when the top has them (a
-    network engine with two lanes), the GMII receive and transmit clocks of ``port``, or its
-    one GMII clock ``gmii_clk`` (a FinEmbP node or line); return the clocks ``port``'s
-    receiver and transmitter run on (``aclk`` for a one-clock top)."""
-    if hasattr(dut, "gmii_clk"):
-        start_clock(dut.aclk, CORE_NS)
-        start_clock(dut.gmii_clk, GMII_NS)
-        return dut.gmii_clk, dut.gmii_clk
-    if not hasattr(dut, f"{port}_rx_clk"):
-        start_clock(dut.aclk, GMII_NS)
-        return dut.aclk, dut.aclk
-    start_clock(dut.aclk, CORE_NS)
-    clocks = getattr(dut, f"{port}_rx_clk"), getattr(dut, f"{port}_tx_clk")
-    for clock in clocks:
-        start_clock(clock, GMII_NS)
-    return clocks
+    """Inside a cocotb test: start a top's clocks as :func:`gmii_clocks` names them; return
+    the clocks ``port``'s receiver and transmitter run on."""
+    present = [n for n in ("gmii_clk", f"{port}_rx_clk") if hasattr(dut, n)]
+    periods, (rx, tx) = gmii_clocks(present, port)
+    for name, period_ns in periods.items():
+        start_clock(getattr(dut, name), period_ns)
+    return getattr(dut, rx), getattr(dut, tx)
 
 
 #: clock handle path -> period in picoseconds, of the clocks :func:`start_clock` started
@@ -533,12 +538,12 @@ def start_clock(signal, period_ns):
     _CLOCK_PERIODS_PS[signal._path] = period_ps
     compiled = _compiled_clocks()
     steps = _ps_to_steps(period_ps)
-    if compiled is None or steps % 2 or len(signal) != 1:
-        return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
-    start, stop = compiled
-    clock = start(signal._path.encode(), steps // 2, steps // 2, 0)
+    clock = -1
+    if compiled is not None and steps % 2 == 0 and len(signal) == 1:
+        clock = compiled[0](signal._path.encode(), steps // 2, steps // 2, 0)
     if clock < 0:
         return Clock(signal, period_ps, unit="ps", impl="gpi").start(start_high=False)
+    stop = compiled[1]
 
     async def drive():
         try:

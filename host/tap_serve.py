@@ -4,14 +4,12 @@ time, and whatever the design reports), and ends when the stop file appears. Run
 simulator; :class:`~host.tapsim.TapSimulation` starts it."""
 
 import json
-import logging
 import os
 import time
 from pathlib import Path
 
 import cocotb
 from cocotb.triggers import ClockCycles
-from cocotbext.eth import GmiiSink, GmiiSource
 
 from host.compiled.gmii_tap import CompiledTapPort
 from host.simulator import clock_cycles, start_gmii_clocks, top_params
@@ -23,36 +21,17 @@ POLL_CYCLES = 4096
 
 @cocotb.test()
 async def serve(dut):
-    """Run the design on the TAP device until the stop file appears."""
+    """Run the design on the TAP device until the stop file appears. Its GMII port is on the
+    compiled TAP port (the wrapper of :func:`host.compiled.gmii_tap.gmii_tap_harness`)."""
     params = top_params()
-    port = params["port"]
-    rx_clk, tx_clk = start_gmii_clocks(dut, port)
-    if not hasattr(dut, f"{port}_rxd"):
-        # the port is on the compiled TAP pump (host.compiled.gmii_tap)
-        dut.aresetn.value = 0
-        await ClockCycles(dut.aclk, 4)
-        dut.aresetn.value = 1
-        await ClockCycles(dut.aclk, 2)
-        pump = CompiledTapPort(TapBridge.open_tap(params["tap"]),
-                               poll_cycles=params.get("poll_cycles", 64))
-        await serve_until_stopped(dut, dut.aclk, [pump], params)
-        return
-
-    def pin(name):
-        return getattr(dut, f"{port}_{name}")
-    source = GmiiSource(pin("rxd"), pin("rx_er"), pin("rx_dv"), rx_clk, dut.aresetn,
-                        reset_active_level=False)
-    sink = GmiiSink(pin("txd"), pin("tx_er"), pin("tx_en"), tx_clk, dut.aresetn,
-                    reset_active_level=False)
-    for model in (source, sink):
-        model.log.setLevel(logging.WARNING)
+    start_gmii_clocks(dut, params["port"])
     dut.aresetn.value = 0
     await ClockCycles(dut.aclk, 4)
     dut.aresetn.value = 1
     await ClockCycles(dut.aclk, 2)
-    bridge = TapBridge(source, sink, dut.aclk, tap=params["tap"], strict=False,
-                       poll_cycles=params.get("poll_cycles", 64))
-    await serve_until_stopped(dut, dut.aclk, [bridge], params)
+    port = CompiledTapPort(TapBridge.open_tap(params["tap"]),
+                           poll_cycles=params.get("poll_cycles", 64))
+    await serve_until_stopped(dut, dut.aclk, [port], params)
 
 
 async def serve_until_stopped(dut, clock, bridges, params):

@@ -12,6 +12,7 @@ __all__ = [
     "ETH_HEADER", "ETH_SRC_OFFSET", "ARP_SHA_OFFSET", "ARP_SPA_OFFSET", "IP_PROTO_OFFSET",
     "IP_CSUM_OFFSET", "IP_SRC_OFFSET", "L4_OFFSET", "UDP_CSUM_OFFSET", "TCP_CSUM_OFFSET",
     "ETHERTYPE_IPV4", "ETHERTYPE_ARP", "ETHERTYPE_IPV6", "MIN_FRAME", "MAX_FRAME", "PREAMBLE",
+    "PREAMBLE_BYTE",
     "SFD", "IFG", "ARP_OFFSET", "ARP_LENGTH", "ARP_REQUEST", "ARP_REPLY", "IP_OFFSET", "IP_VERSION",
     "MIN_HEADER_WORDS", "IP_PROTO_ICMP",
     "IP_PROTO_TCP", "IP_PROTO_UDP", "IP_TTL", "ICMP_ECHO_REQUEST", "ICMP_ECHO_REPLY",
@@ -24,7 +25,8 @@ __all__ = [
     "DROP_REASONS",
 ]
 
-PREAMBLE = 7                  # 0x55 bytes before the SFD
+PREAMBLE = 7                  # PREAMBLE_BYTE bytes before the SFD
+PREAMBLE_BYTE = 0x55
 SFD = 0xD5
 IFG = 12                      # byte times between frames at the transmitter
 ETH_HEADER = 14

@@ -8,7 +8,7 @@ from amaranth.lib.wiring import In, Out
 from ..params import check_int
 from ..stream import AXIStreamSignature, RegisterSlice
 from .crc import Crc32
-from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, SFD
+from .frames import IFG, MAX_FRAME, MIN_FRAME, PREAMBLE, PREAMBLE_BYTE, SFD
 
 __all__ = ["GmiiSignature", "GmiiRx", "GmiiTx", "RxBeatSignature", "FrameStreamSignature",
            "FrameStatus", "RxBeatBridge", "TxBeatBridge", "GMII_HZ", "DEFAULT_CLOCK_HZ"]
@@ -19,7 +19,6 @@ GMII_HZ = 125_000_000
 #: slowest that carries the line rate through an :class:`RxBeatBridge`)
 DEFAULT_CLOCK_HZ = {1: GMII_HZ, 2: GMII_HZ // 2}
 
-_PREAMBLE_BYTE = 0x55
 
 
 class GmiiSignature(wiring.Signature):
@@ -156,7 +155,7 @@ class GmiiRx(wiring.Component):
                     m.d.comb += crc.clear.eq(1)
                     m.d.sync += [count.eq(0), er_seen.eq(er)]
                     m.next = "DATA"
-                with m.Elif(dv & (rxd == _PREAMBLE_BYTE)):
+                with m.Elif(dv & (rxd == PREAMBLE_BYTE)):
                     m.next = "PREAMBLE"
                 with m.Elif(dv):
                     m.next = "DISCARD"
@@ -167,7 +166,7 @@ class GmiiRx(wiring.Component):
                     m.d.comb += crc.clear.eq(1)
                     m.d.sync += [count.eq(0), er_seen.eq(er)]
                     m.next = "DATA"
-                with m.Elif(rxd != _PREAMBLE_BYTE):
+                with m.Elif(rxd != PREAMBLE_BYTE):
                     m.next = "DISCARD"
             with m.State("DATA"):
                 with m.If(dv):
@@ -263,7 +262,7 @@ class GmiiTx(wiring.Component):
                         m.d.sync += count.eq(0)
                         m.next = "PREAMBLE"
             with m.State("PREAMBLE"):
-                m.d.comb += [en.eq(1), byte.eq(Mux(count == PREAMBLE, SFD, _PREAMBLE_BYTE)),
+                m.d.comb += [en.eq(1), byte.eq(Mux(count == PREAMBLE, SFD, PREAMBLE_BYTE)),
                              crc.clear.eq(1)]
                 m.d.sync += count.eq(count + 1)
                 with m.If(count == PREAMBLE):

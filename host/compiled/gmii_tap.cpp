@@ -1,21 +1,30 @@
 // The C++ side of rosgate_gmii_tap (gmii_tap.sv): frames between a TAP device and a design's
 // GMII port, a byte per clock edge, without Python. Python (host.compiled.gmii_tap) attaches
-// the TAP file descriptor and reads the counters through ctypes.
+// the TAP file descriptor and reads the counters through ctypes. The framing (preamble, SFD,
+// gap, minimum frame, FCS polynomial, the IPv6 EtherType it counts) comes as ROSGATE_GMII_*
+// defines from hdl.net.frames and hdl.net.crc (host.compiled.gmii_tap.GMII_TAP_LINK_ARGS).
 
 #include <unistd.h>
 
-#include <cerrno>
 #include <cstdint>
 #include <deque>
 #include <vector>
 
 namespace {
 
+#ifndef ROSGATE_GMII_PREAMBLE
+#error "build with host.compiled.gmii_tap.GMII_TAP_LINK_ARGS (the ROSGATE_GMII_* framing)"
+#endif
+
 const int MAX_PORTS = 8;
-const int IFG_CYCLES = 12;
-const int MIN_FRAME = 60;           // bytes before the FCS
+const size_t PREAMBLE = ROSGATE_GMII_PREAMBLE;          // preamble bytes before the SFD
+const uint8_t PREAMBLE_BYTE = ROSGATE_GMII_PREAMBLE_BYTE;
+const uint8_t SFD = ROSGATE_GMII_SFD;
+const int IFG_CYCLES = ROSGATE_GMII_IFG;
+const size_t MIN_FRAME = ROSGATE_GMII_MIN_FRAME - 4;     // bytes before the FCS
+const uint32_t CRC32_POLY_REFLECTED = ROSGATE_GMII_CRC32_POLY_REFLECTED;
+const uint16_t ETHERTYPE_IPV6 = ROSGATE_GMII_ETHERTYPE_IPV6;
 const int FRAMES_PER_POLL = 8;
-const uint16_t ETHERTYPE_IPV6 = 0x86dd;
 
 enum Stat { TO_DESIGN, FROM_DESIGN, DROPPED, IPV6, BAD_FCS, STATS };
 
@@ -39,7 +48,7 @@ uint32_t crc_table[256];
 void make_crc_table() {
     for (uint32_t n = 0; n < 256; n++) {
         uint32_t c = n;
-        for (int k = 0; k < 8; k++) c = c & 1 ? 0xedb88320u ^ (c >> 1) : c >> 1;
+        for (int k = 0; k < 8; k++) c = c & 1 ? CRC32_POLY_REFLECTED ^ (c >> 1) : c >> 1;
         crc_table[n] = c;
     }
 }
@@ -51,11 +60,11 @@ uint32_t crc32(const uint8_t* data, size_t len) {
 }
 
 std::vector<uint8_t> on_the_wire(const uint8_t* frame, size_t len) {
-    std::vector<uint8_t> wire(7, 0x55);
-    wire.push_back(0xd5);
+    std::vector<uint8_t> wire(PREAMBLE, PREAMBLE_BYTE);
+    wire.push_back(SFD);
     wire.insert(wire.end(), frame, frame + len);
-    while (wire.size() < 8 + MIN_FRAME) wire.push_back(0);
-    const uint32_t fcs = crc32(wire.data() + 8, wire.size() - 8);
+    while (wire.size() < PREAMBLE + 1 + MIN_FRAME) wire.push_back(0);
+    const uint32_t fcs = crc32(wire.data() + PREAMBLE + 1, wire.size() - PREAMBLE - 1);
     for (int k = 0; k < 4; k++) wire.push_back((fcs >> (8 * k)) & 0xff);
     return wire;
 }
@@ -74,8 +83,8 @@ void poll(Port& p) {
 void frame_ended(Port& p) {
     const std::vector<uint8_t>& f = p.receiving;
     size_t i = 0;
-    while (i < f.size() && f[i] == 0x55) i++;
-    const bool framed = i < f.size() && f[i] == 0xd5 && f.size() - i - 1 >= 4;
+    while (i < f.size() && f[i] == PREAMBLE_BYTE) i++;
+    const bool framed = i < f.size() && f[i] == SFD && f.size() - i - 1 >= 4;
     if (!framed || p.error) {
         p.stats[BAD_FCS]++;
         return;

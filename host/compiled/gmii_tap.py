@@ -8,6 +8,10 @@ and reads the counters from the cocotb side."""
 import ctypes
 from pathlib import Path
 
+from hdl.net.crc import CRC32_POLY_REFLECTED
+from hdl.net.frames import ETHERTYPE_IPV6, IFG, MIN_FRAME, PREAMBLE, PREAMBLE_BYTE, SFD
+
+from ..simulator import gmii_clocks
 from . import verilog_ports, wrapper_head
 
 __all__ = ["GMII_TAP_SOURCES", "GMII_TAP_LINK_ARGS", "CompiledTapPort", "gmii_tap_harness",
@@ -15,22 +19,18 @@ __all__ = ["GMII_TAP_SOURCES", "GMII_TAP_LINK_ARGS", "CompiledTapPort", "gmii_ta
 
 HERE = Path(__file__).resolve().parent
 GMII_TAP_SOURCES = (HERE / "gmii_tap.sv", HERE / "gmii_tap.cpp")
-GMII_TAP_LINK_ARGS = ("-LDFLAGS", "-Wl,--export-dynamic-symbol=rosgate_gmii_tap_*")
-#: the port's pins the wrapper takes, by suffix, and the pump's port each goes to
-_PINS = {"rxd": "rxd", "rx_dv": "rx_dv", "rx_er": "rx_er", "txd": "txd", "tx_en": "tx_en",
-         "tx_er": "tx_er"}
+#: Verilator options of a build with the pump: its framing from hdl.net (defined once there),
+#: and its functions visible to Python
+GMII_TAP_LINK_ARGS = (
+    "-CFLAGS", " ".join(f"-DROSGATE_GMII_{name}={value}" for name, value in (
+        ("PREAMBLE", PREAMBLE), ("PREAMBLE_BYTE", PREAMBLE_BYTE), ("SFD", SFD), ("IFG", IFG),
+        ("MIN_FRAME", MIN_FRAME), ("CRC32_POLY_REFLECTED", f"{CRC32_POLY_REFLECTED:#x}u"),
+        ("ETHERTYPE_IPV6", ETHERTYPE_IPV6))),
+    "-LDFLAGS", "-Wl,--export-dynamic-symbol=rosgate_gmii_tap_*")
+#: the port's pins the wrapper takes (by suffix), each to the pump's port of that name
+_PINS = ("rxd", "rx_dv", "rx_er", "txd", "tx_en", "tx_er")
 #: the counters of ``rosgate_gmii_tap_stat``, in its order
 STATS = ("to_design", "from_design", "dropped", "ipv6", "bad_fcs")
-
-
-def port_clocks(ports, port):
-    """The receive and transmit clocks of GMII port ``port`` among a top's ``ports`` (as
-    :func:`host.simulator.start_gmii_clocks` starts them)."""
-    if "gmii_clk" in ports:
-        return "gmii_clk", "gmii_clk"
-    if f"{port}_rx_clk" in ports:
-        return f"{port}_rx_clk", f"{port}_tx_clk"
-    return "aclk", "aclk"
 
 
 def gmii_tap_wrapper(text, top, port):
@@ -38,11 +38,11 @@ def gmii_tap_wrapper(text, top, port):
     ``port`` on ``rosgate_gmii_tap``; every other port of ``top`` is a port of the wrapper
     with the same name. Return ``(name, verilog)``."""
     ports = verilog_ports(text, top)
-    pins = {f"{port}_{suffix}": pump for suffix, pump in _PINS.items()}
+    pins = {f"{port}_{pin}": pin for pin in _PINS}
     missing = [p for p in pins if p not in ports]
     if missing:
         raise ValueError(f"module {top!r} has no GMII port {port!r} (no {missing[0]})")
-    rx_clk, tx_clk = port_clocks(ports, port)
+    _, (rx_clk, tx_clk) = gmii_clocks(ports, port)
     name = f"{top}_tap"
     lines = wrapper_head(name, ports, list(pins), f"{top} with its GMII port {port} on "
                                                   f"rosgate_gmii_tap")
@@ -93,7 +93,5 @@ class CompiledTapPort:
 
     @property
     def stats(self):
-        counts = {name: int(self._stat(0, k)) for k, name in enumerate(STATS)}
-        return {"to_design": counts["to_design"], "from_design": counts["from_design"],
-                "dropped": counts["dropped"], "duplicated": 0, "reordered": 0,
-                "ipv6": counts["ipv6"], "bad_fcs": counts["bad_fcs"]}
+        return {**{name: int(self._stat(0, k)) for k, name in enumerate(STATS)},
+                "duplicated": 0, "reordered": 0}
