@@ -3,9 +3,14 @@ against cocotb's GPI clock, on ``two_clock_counters.v``: two clocks of unrelated
 (8 ns and 7.998 ns, the GMII clock and one 250 ppm fast), started at different times,
 counters on both edges. The same cocotb test runs with either clock implementation in one
 build: the times of every rising edge it sees, the values it reads at each edge and at timers
-between edges, and what a ``clock_cycles`` wait returns must be the same."""
+between edges, and what a ``clock_cycles`` wait returns must be the same.
+
+A second test checks that Python threads run while the model does: the main loop lets the
+interpreter's lock go between callbacks."""
 
 import json
+import sys
+import threading
 
 import cocotb
 from cocotb.triggers import FallingEdge, RisingEdge, Timer
@@ -52,11 +57,42 @@ async def clocks_and_what_a_test_sees(dut):
         json.dump(seen, f)
 
 
+@cocotb.test()
+async def python_threads_run_while_the_model_runs(dut):
+    """With a switch interval of an hour, a thread that wants the interpreter's lock gets it
+    only when the holder lets it go: if the simulator kept it while the model runs (cocotb's
+    own main does), the thread would wait until the test ends. Bounded in simulated time."""
+    p = top_params()
+    start_clock(dut.clk_a, 8)
+    go, ran = threading.Event(), threading.Event()
+
+    def thread():
+        go.wait()                   # lock released while it waits, wanted back when go is set
+        sum(range(1000))
+        ran.set()
+
+    saved = sys.getswitchinterval()
+    sys.setswitchinterval(3600)
+    try:
+        worker = threading.Thread(target=thread, daemon=True)
+        worker.start()
+        go.set()
+        steps = 0
+        while not ran.is_set() and steps < p["steps"]:
+            await Timer(8000, "ns")         # Python calls nothing that lets the lock go
+            steps += 1
+    finally:
+        sys.setswitchinterval(saved)
+    with open(p["out"], "w") as f:
+        json.dump({"ran": ran.is_set(), "steps": steps}, f)
+
+
 def _run(gpi, tmp_path):
     out = tmp_path / f"{'gpi' if gpi else 'compiled'}.json"
     run_top(__name__, TOP.stem, None, "verilator", SIM_BUILD / "compiled_clock",
             params={"gpi": gpi, "out": str(out)}, extra_env={"PYTHONPATH": str(ROOT)},
-            lint=False, cxx_opt=QUICK_CXX_OPT, exported=TOP, run_name="gpi" if gpi else None)
+            lint=False, cxx_opt=QUICK_CXX_OPT, exported=TOP, run_name="gpi" if gpi else None,
+            testcase=["clocks_and_what_a_test_sees"])
     return json.loads(out.read_text())
 
 
@@ -67,3 +103,14 @@ def test_compiled_clocks_give_the_gpi_clocks_edges_and_values(tmp_path):
     # the edges come where the periods say: clock a every 8,000 ps from 4,000
     assert [e[0] for e in compiled["edges_a"]][:3] == [4000, 12000, 20000]
     assert compiled == gpi
+
+
+def test_python_threads_run_while_the_model_runs(tmp_path):
+    out = tmp_path / "threads.json"
+    run_top(__name__, TOP.stem, None, "verilator", SIM_BUILD / "compiled_clock",
+            params={"out": str(out), "steps": 200}, extra_env={"PYTHONPATH": str(ROOT)},
+            lint=False, cxx_opt=QUICK_CXX_OPT, exported=TOP, run_name="threads",
+            testcase=["python_threads_run_while_the_model_runs"])
+    seen = json.loads(out.read_text())
+    assert seen["ran"], f"a Python thread did not run in {seen['steps']} x 1,000 cycles"
+    assert seen["steps"] <= 2, seen

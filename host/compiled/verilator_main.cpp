@@ -11,9 +11,17 @@
 // clock would have written it (its timer callback), and value-change callbacks (RisingEdge)
 // see it as before.
 //
+// The Python interpreter cocotb embeds keeps its GIL in this thread from its start; every
+// callback into Python takes it again (PyGILState_Ensure). While the model runs, the loop lets
+// it go, so that Python threads of a test or a node (a socket client, a DDS bridge) run while
+// the simulator computes instead of waiting for the next Python callback and the
+// interpreter's switch interval (5 ms per hand-over: an RBCP exchange through TAP took 3 s).
+//
 // Python (host.simulator.start_clock) finds rosgate_clock_start/_stop with ctypes in this
 // executable (linked with --export-dynamic-symbol=rosgate_clock_*); a simulator without them
 // (Icarus, an older build) keeps cocotb's GPI clock.
+
+#include <dlfcn.h>
 
 #include <cstdint>
 #include <cstdio>
@@ -82,7 +90,33 @@ bool settle_value_callbacks() {
     return called;
 }
 
+// The embedded interpreter's GIL, found at run time (the executable does not link Python)
+struct PythonLock {
+    void* (*save)() = nullptr;
+    void (*restore)(void*) = nullptr;
+    int (*held)() = nullptr;
+    int (*alive)() = nullptr;
+    void* state = nullptr;
+
+    void release() {
+        if (!save) {
+            alive = reinterpret_cast<int (*)()>(dlsym(RTLD_DEFAULT, "Py_IsInitialized"));
+            save = reinterpret_cast<void* (*)()>(dlsym(RTLD_DEFAULT, "PyEval_SaveThread"));
+            restore = reinterpret_cast<void (*)(void*)>(dlsym(RTLD_DEFAULT, "PyEval_RestoreThread"));
+            held = reinterpret_cast<int (*)()>(dlsym(RTLD_DEFAULT, "PyGILState_Check"));
+        }
+        // not when the tests ended before the first time step (Python finalized then)
+        if (save && restore && held && alive && !state && alive() && held()) state = save();
+    }
+    void take_back() {
+        // cocotb's shutdown may have taken it already (its finalize does not give it back)
+        if (state && alive() && !held()) restore(state);
+        state = nullptr;
+    }
+} python_lock;
+
 void wrap_up() {
+    python_lock.take_back();
     VerilatedVpi::callCbs(cbEndOfSimulation);
 #if VM_TRACE
     if (tfp) tfp->close();
@@ -170,6 +204,7 @@ int main(int argc, char** argv) {
     Verilated::addExitCb([](void*) { wrap_up(); }, nullptr);
     VerilatedVpi::callCbs(cbStartOfSimulation);
     settle_value_callbacks();
+    python_lock.release();
 
     while (!Verilated::gotFinish()) {
         do {
@@ -207,6 +242,7 @@ int main(int argc, char** argv) {
         if (clock_time == main_time || timed_time == main_time) settle_value_callbacks();
     }
 
+    python_lock.take_back();
     top->final();
     wrap_up();
 #if VM_TRACE
