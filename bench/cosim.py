@@ -1,30 +1,44 @@
 """The co-simulation's pace beside the bare model's, in simulated cycles per CPU-second.
 
-For each system, side by side in one run:
+For each run, side by side:
 
-* the **bare model**: the system's Verilator model (the same Verilog, wrapper and options as
-  the co-simulation) driven by a C++ main that only toggles the clock, reset released, every
-  other input idle (``bench/cosim_bare_main.cpp``);
-* the **co-simulation** doing its real work under ``rosgate sim``: cycles simulated over the
-  simulator process's CPU time while the nodes ran (``cpu_seconds`` of ``sim_results.json``).
+* the **bare model**: the run's Verilator model (the same Verilog, wrapper, public ports and
+  options) driven by a C++ main that only toggles the clocks, reset released, every other
+  input idle (``bench/cosim_bare_main.cpp``);
+* the **co-simulation** doing its real work: cycles simulated over the simulator process's
+  CPU time (model and Python together) while it ran.
 
-The co-simulation's figures before the compiled memory were measured once on commit 7822329
-(cocotbext-axi's ``AxiRam`` in Python, ``ClockCycles`` waits, the model at -O1) with the same
-CPU-time measure; they are kept here as measured (none at 1 px/clk). Both models now build at
-:data:`host.simulator.PROJECT_CXX_OPT`.
+The runs: the two project systems under ``rosgate sim`` (``cpu_seconds`` of
+``sim_results.json``); the 4:4 64-bit topic bench (every case of ``bench/hmt.py``); the network
+engine with the Python TCP peer moving 1 MiB each way (``bench/net.py``'s ``seed_16k`` case);
+a line of 4 FinEmbP nodes on the TAP device driven by the Python master over UDP sockets for
+1,000 cycles (the simulator's CPU time from its status file; the master and the kernel run in
+other processes and set the pace of the wall clock). Cycles are those of the run's first
+clock: ``aclk`` for the systems, the topic and the FinEmbP line, the GMII clock for the engine.
+
+The figures before were measured once and are kept here as measured: the project systems on
+commit 7822329 (cocotbext-axi's ``AxiRam`` in Python, ``ClockCycles`` waits, the model at
+-O1; none at 1 px/clk), the topic and the engine on 1297819 (cocotb's GPI clock, the engine's
+peer waiting with ``ClockCycles``), each with the same CPU-time measure. None for the FinEmbP
+line: its TAP port was Python's then, at 87 FinEmbP cycles per second with 2 nodes.
 """
 
 import json
 import subprocess
 from pathlib import Path
 
+from bench.hmt import PAPER_TABLE_I, run_topology, single_cases, stream_cases
 from bench.report import write_report
-from host.compiled import SOURCES
 from gen.config import apply_parameters, load_project
+from host.compiled import SOURCES as AXI_RAM_SOURCES
+from host.compiled.gmii_tap import GMII_TAP_LINK_ARGS, GMII_TAP_SOURCES
 from host.project_sim import project_build_dir, run_project_sim
-from host.simulator import PROJECT_CXX_OPT, VERILATOR_TOP_ARGS, verilator_make_env
+from host.simulator import (CORE_NS, DEFAULT_CXX_OPT, GMII_NS, PROJECT_CXX_OPT,
+                            VERILATOR_BENCH_ARGS, VERILATOR_TOP_ARGS, verilator_make_env)
 from host.toolchain import put_verilator_on_path
-from tb.harness import ROOT, SIM_BUILD
+from tb.harness import ROOT, SIM_BUILD, run_bench
+from tb.finemb_tb import PID_IO
+from tb.net_bench_tops import NET_BENCH_CONFIGS, build_net_bench_top
 
 BARE_MAIN = Path(__file__).resolve().parent / "cosim_bare_main.cpp"
 
@@ -38,26 +52,50 @@ SYSTEMS = {
     "av_chain_p1": ("examples/av_chain/build.cfg", {"frames": "1"}, ["*.pixels_per_beat=1"],
                     500_000),
 }
-#: measured on 7822329 (before): cycles and the simulator's CPU seconds while the nodes ran
+#: before: the systems measured on 7822329 (cycles and the simulator's CPU seconds while the
+#: nodes ran); the topic and the engine on 1297819, before the compiled clocks (cocotb's GPI
+#: clock; the engine's peer waiting with cocotb's ClockCycles), with the same PaceMeter
 BEFORE = {"sobel_dip": {"cycles": 877204, "cpu_seconds": 24.036},
           "av_chain_p4": {"cycles": 1407326, "cpu_seconds": 95.41},
-          "av_chain_p1": {"cycles": None, "cpu_seconds": None}}
-#: the issue's goal: the co-simulation at this share of the bare model's pace
+          "av_chain_p1": {"cycles": None, "cpu_seconds": None},
+          "topic_4x4_w64": {"cycles": 2699286, "cpu_seconds": 3.054},
+          "net_tcp_1mib": {"cycles": 3641901, "cpu_seconds": 27.132}}
+#: the issue's goals: the co-simulation at this share of the bare model's pace
 GOAL = 0.5
+NETWORK_GOAL = 0.25
+#: the topic bench's configuration and the engine's case
+TOPIC = (4, 4, 64)
+NET_CASE = "seed_16k"
+NET_BYTES = 1024 * 1024
+FINEMB_NODES, FINEMB_CYCLES = 4, 1000
 
 
-def bare_model(build_dir, cycles, log):
-    """Build the bare model beside the co-simulation's build (same Verilog and options) and
-    run it for ``cycles``; return its cycles and CPU seconds."""
-    exe_dir = Path(build_dir) / "bare"
+def bare_model(build_dir, toplevel, sources, args, clocks, cycles, cxx_opt, log, *,
+               axi_ram=False):
+    """Build the bare model of ``toplevel`` beside its co-simulation build (``sources`` and
+    Verilator ``args`` as that build has them, its control file when there is one) and run it
+    for ``cycles`` cycles of the first of ``clocks`` (name -> period in ns); return its cycles
+    and CPU seconds."""
+    build_dir = Path(build_dir)
+    exe_dir = build_dir / "bare"
+    exe_dir.mkdir(parents=True, exist_ok=True)
+    # the template with this top's clocks and reset defined in front (a forced include would
+    # come before the model's precompiled header and make the compiler refuse it)
+    lines = ["#define BARE_CLOCKS " + " ".join(
+        f"X({name}, {round(period * 500)})" for name, period in clocks.items()),
+        "#define BARE_RESET_N aresetn"]
+    if axi_ram:
+        lines.append("#define BARE_AXI_RAM 1")
+    main = exe_dir / "bare_main.cpp"
+    main.write_text("\n".join(lines) + "\n" + BARE_MAIN.read_text())
+    control = build_dir / f"{toplevel}.vlt"
     verilator = put_verilator_on_path()
-    sources = [BARE_MAIN, Path(build_dir) / "rosgate_system.v",
-               Path(build_dir) / "rosgate_system_cosim.v", *SOURCES]
     command = [verilator, "-cc", "--exe", "--build", "-j", "2", "-Mdir", str(exe_dir),
-               "--top-module", "rosgate_system_cosim", "--prefix", "Vtop", "-o", "bare",
-               *VERILATOR_TOP_ARGS, "--timescale", "1ns/1ps", *map(str, sources)]
+               "--top-module", toplevel, "--prefix", "Vtop", "-o", "bare", *args,
+               "--timescale", "1ns/1ps", *([str(control)] if control.exists() else []),
+               str(main), *map(str, sources)]
     log(f"    building the bare model in {exe_dir}")
-    with verilator_make_env("verilator", PROJECT_CXX_OPT):
+    with verilator_make_env("verilator", cxx_opt):
         subprocess.run(command, check=True, capture_output=True, text=True)
     run = subprocess.run([str(exe_dir / "bare"), str(cycles)], check=True, capture_output=True,
                          text=True)
@@ -68,8 +106,20 @@ def _rate(r):
     return r["cycles"] / r["cpu_seconds"] if r and r.get("cpu_seconds") else None
 
 
-def measure(log=print):
-    runs = []
+def _row(name, kind, bare, after, before, goal, log):
+    row = {"system": name, "kind": kind, "bare": bare, "cosim": after, "cosim_before": before,
+           "goal": goal}
+    for key, r in (("bare", bare), ("cosim", after), ("cosim_before", before)):
+        row[f"{key}_cycles_per_cpu_s"] = round(_rate(r)) if _rate(r) else None
+    row["ratio"] = round(_rate(after) / _rate(bare), 3)
+    row["ratio_before"] = round(_rate(before) / _rate(bare), 3) if _rate(before) else None
+    log(f"    bare {row['bare_cycles_per_cpu_s']:,} cycles/CPU-s, co-simulation "
+        f"{row['cosim_cycles_per_cpu_s']:,} ({row['ratio']:.0%} of bare)")
+    return row
+
+
+def measure_systems(log):
+    rows = []
     for name, (cfg, args, params, bare_cycles) in SYSTEMS.items():
         build_cfg = ROOT / cfg
         log(f"  {name}: rosgate sim {cfg}")
@@ -77,17 +127,79 @@ def measure(log=print):
                               args=args, thread_params=params, limit_ms=1000)
         after = {"cycles": sim["cycles"], "cpu_seconds": sim["cpu_seconds"]}
         project = apply_parameters(load_project(build_cfg), params)
-        bare = bare_model(project_build_dir(project, params, "verilator"), bare_cycles, log)
-        row = {"system": name, "bare": bare, "cosim": after, "cosim_before": BEFORE[name]}
-        for key, r in (("bare", bare), ("cosim", after), ("cosim_before", BEFORE[name])):
-            row[f"{key}_cycles_per_cpu_s"] = round(_rate(r)) if _rate(r) else None
-        row["ratio"] = round(_rate(after) / _rate(bare), 3)
-        row["ratio_before"] = round(_rate(BEFORE[name]) / _rate(bare), 3) \
-            if _rate(BEFORE[name]) else None
-        log(f"    bare {row['bare_cycles_per_cpu_s']:,} cycles/CPU-s, co-simulation "
-            f"{row['cosim_cycles_per_cpu_s']:,} ({row['ratio']:.0%} of bare)")
-        runs.append(row)
-    return {"runs": runs, "goal_ratio": GOAL}
+        build_dir = Path(project_build_dir(project, params, "verilator"))
+        bare = bare_model(build_dir, "rosgate_system_cosim",
+                          [build_dir / "rosgate_system.v", build_dir / "rosgate_system_cosim.v",
+                           *AXI_RAM_SOURCES], VERILATOR_TOP_ARGS, {"aclk": 10}, bare_cycles,
+                          PROJECT_CXX_OPT, log, axi_ram=True)
+        rows.append(_row(name, "system", bare, after, BEFORE[name], GOAL, log))
+    return rows
+
+
+def measure_topic(log):
+    pubs, subs, width = TOPIC
+    name = f"topic_{pubs}x{subs}_w{width}"
+    log(f"  {name}: the topic bench's cases (bench/hmt.py)")
+    pace = SIM_BUILD / f"bench-cosim-{name}.json"
+    run_topology(pubs, subs, width,
+                 single_cases(pubs, width, tuple(PAPER_TABLE_I)) + stream_cases(pubs, width),
+                 pace=pace)
+    after = json.loads(pace.read_text())
+    build_dir = SIM_BUILD / f"topic_bench-{pubs}x{subs}_w{width}-verilator-opt"
+    bare = bare_model(build_dir, "topic_bench", [build_dir / "topic_bench.v"],
+                      VERILATOR_BENCH_ARGS, {"aclk": 10}, 5_000_000, None, log)
+    return _row(name, "topic", bare, after, BEFORE[name], None, log)
+
+
+def measure_net(log):
+    name = "net_tcp_1mib"
+    log(f"  {name}: the engine with the Python TCP peer, 1 MiB each way (bench/net.py)")
+    pace = SIM_BUILD / f"bench-cosim-{name}.json"
+    run_bench("bench.net_bench", "net_bench", NET_CASE, NET_BENCH_CONFIGS[NET_CASE],
+              "verilator", quiet=True, optimise=True, build=build_net_bench_top,
+              testcase="measure_tcp",
+              extra_env={"ROSGATE_BENCH_OUT": str(SIM_BUILD / f"bench-cosim-{name}-out.json"),
+                         "ROSGATE_BENCH_PACE": str(pace),
+                         "ROSGATE_BENCH_CASE": json.dumps(dict(
+                             bytes=NET_BYTES, peer=dict(ack_every=1000, ack_delay=19_840,
+                                                        delay_from_last=True)))})
+    after = json.loads(pace.read_text())
+    build_dir = SIM_BUILD / f"net_bench-{NET_CASE}-verilator-opt"
+    bare = bare_model(build_dir, "net_bench", [build_dir / "net_bench.v"],
+                      VERILATOR_BENCH_ARGS, {"gmii_clk": GMII_NS, "aclk": CORE_NS}, 2_000_000,
+                      None, log)
+    return _row(name, "network", bare, after, BEFORE[name], NETWORK_GOAL, log)
+
+
+def measure_finemb(log):
+    from gen.finemb import load_io_description
+    from host.finemb.run import run_line_with_master
+    from host.tap import namespace_unavailable
+    name = f"finemb_tap_line{FINEMB_NODES}"
+    why = namespace_unavailable()
+    if why:
+        log(f"  {name} skipped: {why}")
+        return None
+    log(f"  {name}: the Python master over UDP sockets through TAP, {FINEMB_CYCLES} cycles")
+    build_dir = SIM_BUILD / f"tap-finemb-n{FINEMB_NODES}"
+    stats = run_line_with_master(load_io_description(PID_IO), FINEMB_NODES,
+                                 cycles=FINEMB_CYCLES, build_dir=build_dir)
+    status = stats["simulation"]
+    after = {"cycles": status["cycles"], "cpu_seconds": round(status["cpu_seconds"], 3),
+             "wall_s": round(status["wall_s"], 3),
+             "finemb_cycle_rate_hz": round(stats["cycle_rate_hz"], 1)}
+    bare = bare_model(build_dir, "finemb_line_tap",
+                      [build_dir / "finemb_line.v", build_dir / "finemb_line_tap.v",
+                       GMII_TAP_SOURCES[0], GMII_TAP_SOURCES[1]],
+                      [*VERILATOR_TOP_ARGS, *GMII_TAP_LINK_ARGS[:2]],
+                      {"aclk": CORE_NS, "gmii_clk": GMII_NS}, 1_000_000, DEFAULT_CXX_OPT, log)
+    return _row(name, "network (TAP)", bare, after, None, NETWORK_GOAL, log)
+
+
+def measure(log=print):
+    runs = measure_systems(log)
+    runs += [row for row in (measure_topic(log), measure_net(log), measure_finemb(log)) if row]
+    return {"runs": runs, "goal_ratio": GOAL, "network_goal_ratio": NETWORK_GOAL}
 
 
 def measure_resources(log=print):
@@ -96,20 +208,32 @@ def measure_resources(log=print):
 
 def markdown(r):
     lines = ["# Co-simulation pace against the bare model", "",
-             "Simulated cycles per CPU-second (`python bench/run.py cosim`). The bare model is "
-             "the same Verilator model with a C++ main that only toggles the clock; the "
-             "co-simulation is `rosgate sim` doing the run's real work. Before: commit 7822329 "
-             "(the process memory in cocotbext-axi's `AxiRam`, `ClockCycles` waits).", "",
-             "| system | bare | co-simulation before | co-simulation now | before / bare | "
-             "now / bare | goal |", "|---|---|---|---|---|---|---|"]
+             "Simulated cycles per CPU-second of the simulator process (`python bench/run.py "
+             "cosim`). The bare model is the same Verilator model with a C++ main that only "
+             "toggles the clocks; the co-simulation is the run doing its real work: "
+             "`rosgate sim` for the systems, the cocotb bench for the topic and the engine, "
+             "the TAP simulation under the Python FinEmbP master for the line. Before: the "
+             "systems on commit 7822329 (the process memory in cocotbext-axi's `AxiRam`, "
+             "`ClockCycles` waits), the topic and the engine on 1297819 (cocotb's GPI clock, "
+             "the engine's peer waiting with `ClockCycles`).",
+             "", "| run | kind | bare | co-simulation before | co-simulation now | "
+             "before / bare | now / bare | goal |", "|---|---|---|---|---|---|---|---|"]
     for row in r["runs"]:
         def fmt(v):
             return f"{v:,}" if v else "-"
         before = f"{row['ratio_before']:.1%}" if row["ratio_before"] else "-"
-        lines.append(f"| {row['system']} | {fmt(row['bare_cycles_per_cpu_s'])} | "
+        goal = row.get("goal", r["goal_ratio"] if row.get("kind", "system") == "system" else None)
+        lines.append(f"| {row['system']} | {row.get('kind', 'system')} | "
+                     f"{fmt(row['bare_cycles_per_cpu_s'])} | "
                      f"{fmt(row['cosim_before_cycles_per_cpu_s'])} | "
                      f"{fmt(row['cosim_cycles_per_cpu_s'])} | {before} | {row['ratio']:.1%} | "
-                     f">= {r['goal_ratio']:.0%} |")
+                     f"{f'>= {goal:.0%}' if goal else '-'} |")
+    finemb = [row for row in r["runs"] if "finemb_cycle_rate_hz" in row["cosim"]]
+    for row in finemb:
+        lines += ["", f"{row['system']}: {row['cosim']['finemb_cycle_rate_hz']} FinEmbP cycles "
+                      f"per second of wall time, {row['cosim']['cycles']:,} simulated cycles "
+                      f"in {row['cosim']['wall_s']} s wall, {row['cosim']['cpu_seconds']} s of "
+                      f"the simulator's CPU (the master and the kernel set the pace)."]
     return "\n".join(lines) + "\n"
 
 

@@ -58,7 +58,9 @@ def stream_cases(pubs, width):
     return cases
 
 
-def run_topology(pubs, subs, width, cases, *, sim="verilator"):
+def run_topology(pubs, subs, width, cases, *, sim="verilator", pace=None):
+    """Run ``cases`` on the ``pubs``:``subs`` topic of ``width`` bits; return their records.
+    ``pace``: a file for the run's cycles and CPU seconds (:class:`bench.pace.PaceMeter`)."""
     config_id = f"{pubs}x{subs}_w{width}"
     out = SIM_BUILD / f"bench-{config_id}-{sim}" / "records.json"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -66,7 +68,8 @@ def run_topology(pubs, subs, width, cases, *, sim="verilator"):
               {"pubs": pubs, "subs": subs, "data_width": width}, sim,
               build=build_topic_bench_top, optimise=True,
               extra_env={"ROSGATE_BENCH_CASES": json.dumps(cases),
-                         "ROSGATE_BENCH_OUT": str(out)}, quiet=True)
+                         "ROSGATE_BENCH_OUT": str(out),
+                         **({"ROSGATE_BENCH_PACE": str(pace)} if pace else {})}, quiet=True)
     return json.loads(out.read_text())
 
 

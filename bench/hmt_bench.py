@@ -7,6 +7,7 @@ import os
 import cocotb
 from cocotb.triggers import ClockCycles, RisingEdge, Timer
 
+from bench.pace import PaceMeter
 from host.simulator import start_clock
 from tb.harness import bench_params
 
@@ -24,6 +25,7 @@ async def measure(dut):
     pubs, subs = params["pubs"], params["subs"]
     cases = json.loads(os.environ["ROSGATE_BENCH_CASES"])
     start_clock(dut.aclk, CLOCK_NS)
+    pace = PaceMeter(CLOCK_NS)
     dut.start.value = 0
     for i in range(pubs):
         getattr(dut, f"beats{i}").value = 1
@@ -62,5 +64,6 @@ async def measure(dut):
         assert record["sub_errors"] == [0] * subs, f"case {case['name']}: corrupted delivery"
         assert record["sub_beats"] == [expected] * subs, f"case {case['name']}: beats lost"
         records.append(record)
+    pace.write()
     with open(os.environ["ROSGATE_BENCH_OUT"], "w") as f:
         json.dump(records, f)

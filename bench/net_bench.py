@@ -13,7 +13,7 @@ import zlib
 from pathlib import Path
 
 import cocotb
-from cocotb.triggers import ClockCycles, RisingEdge
+from cocotb.triggers import RisingEdge
 
 from hdl.net.frames import (
     ARP_REPLY,
@@ -30,8 +30,9 @@ from hdl.net.frames import (
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1.registers import PHASES
 from host.pcap import SimCapture
+from bench.pace import PaceMeter
 from host.ros1.rbcp import RbcpClient, rbcp_reply_ok
-from host.simulator import start_clock
+from host.simulator import clock_cycles, start_clock
 from tb.models.tcp_peer import TcpPeerModel, udp_frame
 from tb.net_bench_tops import WORD_BYTES, pattern_bytes
 from tb.net_tb import CLOCK_NS, GMII_NS, PEER_MAC, read_counter_bank
@@ -113,7 +114,7 @@ class WordLink:
             if not moved:
                 dut.peer_in_tvalid.value = 0
                 dut.peer_out_tready.value = 0
-                await ClockCycles(dut.gmii_clk, self.idle)
+                await clock_cycles(dut.gmii_clk, self.idle)
                 self.cycle += self.idle
 
 
@@ -188,12 +189,12 @@ class LinkRbcp(RbcpClient):
             try:
                 request, ident, done, box = self.requests.get_nowait()
             except queue.Empty:
-                await ClockCycles(dut.aclk, 256)
+                await clock_cycles(dut.aclk, 256)
                 continue
             peer.link.send(udp_frame(peer.mac, mac_to_int(ENGINE_MAC), peer.ip,
                                      ip_to_int(ENGINE_IP), 50000, DEFAULT_RBCP_PORT, request))
             for _ in range(200):
-                await ClockCycles(dut.aclk, 64)
+                await clock_cycles(dut.aclk, 64)
                 box["reply"] = peer.rbcp_replies.pop(ident, None)
                 if box["reply"] is not None:
                     break
@@ -213,7 +214,7 @@ async def wait_for(peer, predicate, limit, what):
     start = peer.link.cycle
     while not predicate():
         assert peer.link.cycle - start < limit, f"{what}: not within {limit} cycles"
-        await ClockCycles(peer.dut.aclk, 256)
+        await clock_cycles(peer.dut.aclk, 256)
 
 
 def goodput_record(nbytes, cycles, start_cycle, marks):
@@ -230,12 +231,13 @@ async def measure_tcp(dut):
     """Goodput engine -> peer (pattern generator) and peer -> engine (checking sink)."""
     case = json.loads(os.environ["ROSGATE_BENCH_CASE"])
     peer = await setup(dut)
+    pace = PaceMeter(GMII_NS)
     nbytes = case["bytes"]
     dut.open_req.value = 1
     dut.active.value = 0
     dut.local_port.value = 24
     dut.gen_start.value = 0
-    await ClockCycles(dut.aclk, 10)
+    await clock_cycles(dut.aclk, 10)
     mdl = peer.model(40000, 24, isn=0xFFFF0000, **case["peer"])
     peer.link.send(mdl.syn())
     await wait_for(peer, lambda: mdl.established, 100_000, "handshake")
@@ -251,7 +253,7 @@ async def measure_tcp(dut):
         if not marks and len(mdl.received) >= nbytes // 4:
             marks = (len(mdl.received), peer.link.cycle)
         assert peer.link.cycle - start < 40 * nbytes, "transmit stalled"
-        await ClockCycles(dut.aclk, 256)
+        await clock_cycles(dut.aclk, 256)
     cycles = peer.link.cycle - start
     assert bytes(mdl.received) == pattern(nbytes), "engine sent other bytes than generated"
     records["engine_to_peer"] = goodput_record(nbytes, cycles, start, marks)
@@ -264,13 +266,14 @@ async def measure_tcp(dut):
         if not marks and got >= nbytes // 4:
             marks = (got, peer.link.cycle)
         assert peer.link.cycle - start < 40 * nbytes, "receive stalled"
-        await ClockCycles(dut.aclk, 256)
+        await clock_cycles(dut.aclk, 256)
     cycles = peer.link.cycle - start
     assert int(dut.sink_mismatches.value) == 0, "engine delivered other bytes than sent"
     records["peer_to_engine"] = goodput_record(nbytes, cycles, start, marks)
     records["engine_counters"] = await read_counter_bank(
         dut.aclk, dut.tcp_counter_index, dut.tcp_counter_value, TCP_COUNTERS)
     records["peer_acks"] = mdl.acks_sent
+    pace.write()
     Path(os.environ["ROSGATE_BENCH_OUT"]).write_text(json.dumps(records))
 
 

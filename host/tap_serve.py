@@ -40,12 +40,13 @@ async def serve_until_stopped(dut, clock, bridges, params):
     status = Path(params["status_file"])
     watch = params.get("watch", [])
     cycles = 0
-    started = time.monotonic()
+    started, cpu_started = time.monotonic(), time.process_time()
     while not stop.exists():
         await clock_cycles(clock, POLL_CYCLES)
         cycles += POLL_CYCLES
         stats = {key: sum(b.stats[key] for b in bridges) for key in bridges[0].stats}
         report = {"cycles": cycles, "wall_s": time.monotonic() - started,
+                  "cpu_seconds": time.process_time() - cpu_started,
                   "bridge": stats,
                   "signals": {name: int(getattr(dut, name).value) for name in watch}}
         tmp = status.with_suffix(".tmp")

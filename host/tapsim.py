@@ -102,7 +102,8 @@ class TapSimulation:
 
     @property
     def status(self):
-        """The last status the simulation wrote: ``cycles`` (simulated), ``wall_s``,
+        """The last status the simulation wrote: ``cycles`` (simulated), ``wall_s`` and
+        ``cpu_seconds`` (the simulator process's, from the same moment on),
         ``bridge`` (frames each way) and ``signals`` (the watched outputs); ``None`` before
         the first."""
         try:

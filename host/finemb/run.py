@@ -47,10 +47,11 @@ def run_line_with_master(descriptor, nodes, *, cycles, build_dir, period_s=0.0,
     """Simulate a line, initialise it with a :class:`FinembMaster` through the kernel and run
     ``cycles`` cycles (``period_s`` apart at the least); ``outputs(cycle, node_ids)`` gives
     each node's output page (default: a :class:`PlantModel`), ``on_cycle(master, inputs)``
-    is called after each. Returns the statistics."""
+    is called after each. Returns the statistics, ``simulation`` being the simulator's last
+    status (:attr:`~host.tapsim.TapSimulation.status`)."""
     plant = PlantModel()
     outputs = outputs or plant.outputs
-    with line_simulation(descriptor, nodes, build_dir, progress=progress), \
+    with line_simulation(descriptor, nodes, build_dir, progress=progress) as simulation, \
             FinembMaster(KERNEL_IP, interface=TAP_NAME, timeout_s=answer_timeout_s) as master:
         master.init(expected=nodes)
         for _ in range(cycles):
@@ -64,4 +65,5 @@ def run_line_with_master(descriptor, nodes, *, cycles, build_dir, period_s=0.0,
         return {"cycles": master.cycles_run, "cycle_rate_hz": master.cycle_rate_hz(),
                 "late": sum(n.late for n in master.nodes.values()),
                 "states": {k: n.state.name for k, n in master.nodes.items()},
-                "answered": {k: n.answered for k, n in master.nodes.items()}}
+                "answered": {k: n.answered for k, n in master.nodes.items()},
+                "simulation": simulation.status}
