@@ -13,6 +13,7 @@ from hdl.params import ParameterError
 from host.cli import main
 from host.lint import lint_verilog
 
+from .fst_names import fst_signal_names
 from .harness import run_rosgate
 
 
@@ -250,3 +251,34 @@ def test_waves_are_written_into_the_output_folder(tmp_path, capsys):
     fst = out / "rosgate_system.fst"
     assert f"waveform (every signal of the system, FST): {fst}" in printed
     assert fst.stat().st_size > 10_000
+
+
+def _design_signals(fst, prefix):
+    """The signal names below ``prefix`` in ``fst``, without widths, escapes and the ``$n``
+    suffixes a conversion numbers differently per simulator flavour, nor yosys' temporaries."""
+    names = set()
+    for name in fst_signal_names(fst):
+        name = re.sub(r" \[.*\]$", "", name)
+        if name.startswith(prefix):
+            parts = [re.sub(r"\$\d+$", "", p.lstrip("\\")) for p in name[len(prefix):].split(".")]
+            if not re.fullmatch(r"_\d+_|\$.*", parts[-1]):
+                names.add(".".join(parts))
+    return names
+
+
+@pytest.mark.full
+def test_verilator_waves_hold_every_signal_icarus_records(tmp_path):
+    """--waves under Verilator (a model that shows only its ports to cocotb) records the
+    design's inner signals all the same: every signal Icarus' waveform of the same run has,
+    down to the threads' own registers."""
+    fst = {}
+    for sim in ("icarus", "verilator"):
+        out = tmp_path / sim
+        assert main(["sim", "examples/inverse_kinematics/build.cfg", "--sim", sim, "--waves",
+                     "--arg", "requests=2", "-o", str(out)]) == 0
+        fst[sim] = out / "rosgate_system.fst"
+    icarus = _design_signals(fst["icarus"], "rosgate_system.")
+    verilator = _design_signals(fst["verilator"], "rosgate_system_cosim.dut.")
+    assert len([n for n in icarus if n.startswith("core.reconos.slot0.kernel.")]) > 100
+    missing = sorted(icarus - verilator)
+    assert not missing, f"{len(missing)} signals missing under Verilator: {missing[:20]}"
