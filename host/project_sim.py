@@ -177,7 +177,7 @@ class SimContext:
     @property
     def threads(self):
         if self._threads is None:
-            from gen.system import build_system, thread_code
+            from gen.system import build_system
             self._threads = thread_components(self.project, build_system(self.project))
         return self._threads
 

@@ -9,7 +9,7 @@ number of each request chosen."""
 import random
 
 from hdl.net.tcp import TcpRequest, TcpSequenceEngine
-from hdl.net.tcp.sequence_engine import ARRIVAL_FLAGS, SEQUENCE_INTENT
+from hdl.net.tcp.sequence_engine import SEQUENCE_INTENT
 
 from .streamsim import simulate
 

@@ -5,8 +5,7 @@ the Fibonacci sequence the action server computes. Bodies come from rosbags."""
 import struct
 
 __all__ = ["KIND", "REPLY_OK", "BAD_REQUEST", "GOAL_STATUS", "CANCEL_STATUS", "MAX_ORDER",
-           "frame", "parse_header", "fibonacci", "cdr_uint32_sequence", "cdr_int32_sequence",
-           "cdr_int32"]
+           "frame", "parse_header", "fibonacci"]
 
 KIND = {"REQUEST": 1, "REPLY": 2, "GOAL": 3, "GOAL_RESPONSE": 4, "CANCEL": 5,
         "CANCEL_RESPONSE": 6, "FEEDBACK": 7, "RESULT": 8}
