@@ -33,12 +33,10 @@ from gen.config import apply_parameters, load_project
 from host.compiled import SOURCES as AXI_RAM_SOURCES
 from host.compiled.gmii_tap import GMII_TAP_LINK_ARGS, GMII_TAP_SOURCES
 from host.project_sim import project_build_dir, run_project_sim
-from host.simulator import (CORE_NS, DEFAULT_CXX_OPT, GMII_NS, PROJECT_CXX_OPT,
+from host.simulator import (CORE_NS, DEFAULT_CXX_OPT, GMII_NS, PROJECT_CXX_OPT, gmii_clocks,
                             VERILATOR_BENCH_ARGS, VERILATOR_TOP_ARGS, verilator_make_env)
 from host.toolchain import put_verilator_on_path
-from tb.harness import ROOT, SIM_BUILD, run_bench
-from tb.finemb_tb import PID_IO
-from tb.net_bench_tops import NET_BENCH_CONFIGS, build_net_bench_top
+from tb.harness import ROOT, SIM_BUILD
 
 BARE_MAIN = Path(__file__).resolve().parent / "cosim_bare_main.cpp"
 
@@ -63,11 +61,9 @@ BEFORE = {"sobel_dip": {"cycles": 877204, "cpu_seconds": 24.036},
 #: the issue's goals: the co-simulation at this share of the bare model's pace
 GOAL = 0.5
 NETWORK_GOAL = 0.25
-#: the topic bench's configuration and the engine's case
+#: the topic bench's configuration and the engine's case of bench/net.py (1 MiB each way)
 TOPIC = (4, 4, 64)
 NET_CASE = "seed_16k"
-NET_BYTES = 1024 * 1024
-FINEMB_NODES, FINEMB_CYCLES = 4, 1000
 
 
 def bare_model(build_dir, toplevel, sources, args, clocks, cycles, cxx_opt, log, *,
@@ -152,17 +148,12 @@ def measure_topic(log):
 
 
 def measure_net(log):
+    from bench.net import TCP_CASES, run_tcp_case
     name = "net_tcp_1mib"
-    log(f"  {name}: the engine with the Python TCP peer, 1 MiB each way (bench/net.py)")
+    log(f"  {name}: the engine with the Python TCP peer, {NET_CASE} case of bench/net.py "
+        f"({TCP_CASES[NET_CASE][3]:,} bytes each way)")
     pace = SIM_BUILD / f"bench-cosim-{name}.json"
-    run_bench("bench.net_bench", "net_bench", NET_CASE, NET_BENCH_CONFIGS[NET_CASE],
-              "verilator", quiet=True, optimise=True, build=build_net_bench_top,
-              testcase="measure_tcp",
-              extra_env={"ROSGATE_BENCH_OUT": str(SIM_BUILD / f"bench-cosim-{name}-out.json"),
-                         "ROSGATE_BENCH_PACE": str(pace),
-                         "ROSGATE_BENCH_CASE": json.dumps(dict(
-                             bytes=NET_BYTES, peer=dict(ack_every=1000, ack_delay=19_840,
-                                                        delay_from_last=True)))})
+    run_tcp_case(NET_CASE, SIM_BUILD / f"bench-cosim-{name}-out.json", pace=pace)
     after = json.loads(pace.read_text())
     build_dir = SIM_BUILD / f"net_bench-{NET_CASE}-verilator-opt"
     bare = bare_model(build_dir, "net_bench", [build_dir / "net_bench.v"],
@@ -172,27 +163,19 @@ def measure_net(log):
 
 
 def measure_finemb(log):
-    from gen.finemb import load_io_description
-    from host.finemb.run import run_line_with_master
-    from host.tap import namespace_unavailable
-    name = f"finemb_tap_line{FINEMB_NODES}"
-    why = namespace_unavailable()
-    if why:
-        log(f"  {name} skipped: {why}")
+    from bench.finemb import SOCKET_NODES, measure_socket_master
+    name = f"finemb_tap_line{SOCKET_NODES}"
+    socket = measure_socket_master(log)
+    if "skipped" in socket:
         return None
-    log(f"  {name}: the Python master over UDP sockets through TAP, {FINEMB_CYCLES} cycles")
-    build_dir = SIM_BUILD / f"tap-finemb-n{FINEMB_NODES}"
-    stats = run_line_with_master(load_io_description(PID_IO), FINEMB_NODES,
-                                 cycles=FINEMB_CYCLES, build_dir=build_dir)
-    status = stats["simulation"]
-    after = {"cycles": status["cycles"], "cpu_seconds": round(status["cpu_seconds"], 3),
-             "wall_s": round(status["wall_s"], 3),
-             "finemb_cycle_rate_hz": round(stats["cycle_rate_hz"], 1)}
+    after = dict(socket["simulation"], finemb_cycle_rate_hz=socket["cycle_rate_hz"])
+    build_dir = SIM_BUILD / f"tap-finemb-n{SOCKET_NODES}"
+    clocks, _ = gmii_clocks(["gmii_clk"])
     bare = bare_model(build_dir, "finemb_line_tap",
                       [build_dir / "finemb_line.v", build_dir / "finemb_line_tap.v",
-                       GMII_TAP_SOURCES[0], GMII_TAP_SOURCES[1]],
-                      [*VERILATOR_TOP_ARGS, *GMII_TAP_LINK_ARGS[:2]],
-                      {"aclk": CORE_NS, "gmii_clk": GMII_NS}, 1_000_000, DEFAULT_CXX_OPT, log)
+                       *GMII_TAP_SOURCES],
+                      [*VERILATOR_TOP_ARGS, *GMII_TAP_LINK_ARGS], clocks, 1_000_000,
+                      DEFAULT_CXX_OPT, log)
     return _row(name, "network (TAP)", bare, after, None, NETWORK_GOAL, log)
 
 

@@ -55,7 +55,8 @@ def measure_lines(log=print):
 
 
 def measure_socket_master(log=print):
-    """The Python master over UDP sockets through a TAP device against a simulated line."""
+    """The Python master over UDP sockets through a TAP device against a simulated line;
+    ``simulation``: the simulator's own cycles (``aclk``), wall and CPU seconds."""
     from host.finemb.run import run_line_with_master
     from host.tap import namespace_unavailable
     why = namespace_unavailable()
@@ -67,9 +68,13 @@ def measure_socket_master(log=print):
     stats = run_line_with_master(load_io_description(PID_IO), SOCKET_NODES,
                                  cycles=SOCKET_CYCLES,
                                  build_dir=SIM_BUILD / f"tap-finemb-n{SOCKET_NODES}")
+    simulation = stats["simulation"]
     return {"nodes": SOCKET_NODES, "polling": "pipelined", "cycles": stats["cycles"],
             "cycle_rate_hz": round(stats["cycle_rate_hz"], 1), "late": stats["late"],
             "states": stats["states"],
+            "simulation": {"cycles": simulation["cycles"],
+                           "wall_s": round(simulation["wall_s"], 3),
+                           "cpu_seconds": round(simulation["cpu_seconds"], 3)},
             "note": "wall-clock rate of this machine against the simulated line (the "
                     "simulator runs far slower than the hardware): not comparable with the "
                     "simulated rows"}

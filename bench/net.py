@@ -46,18 +46,29 @@ IMAGES = [("1 MB", 1024, 1024, "mono8", 1), ("2 MB", 1024, 683, "rgb8", 3),
           ("6 MB", 1920, 1080, "rgb8", 3)]
 
 
+def run_tcp_case(case, out, *, pcap=None, pace=None):
+    """Run the long transfer of :data:`TCP_CASES` ``case`` on its bench top; return its
+    records (also in ``out``). ``pcap``: where the frames go; ``pace``: a file for the run's
+    cycles and CPU seconds (:class:`bench.pace.PaceMeter`)."""
+    _, top, peer, nbytes = TCP_CASES[case]
+    env = {"ROSGATE_BENCH_OUT": str(out),
+           "ROSGATE_BENCH_CASE": json.dumps(dict(bytes=nbytes, peer=peer))}
+    if pcap:
+        env["ROSGATE_BENCH_PCAP"] = str(pcap)
+    if pace:
+        env["ROSGATE_BENCH_PACE"] = str(pace)
+    run_bench("bench.net_bench", "net_bench", case, top, "verilator", quiet=True,
+              optimise=True, build=build_net_bench_top, testcase="measure_tcp", extra_env=env)
+    return json.loads(Path(out).read_text())
+
+
 def measure(log=print):
     results = {"clock_mhz": CLOCK_MHZ, "tcp": {}, "image": {}}
-    for case, (label, top, peer, nbytes) in TCP_CASES.items():
-        out = SIM_BUILD / f"bench-net-{case}.json"
+    for case, (label, _, _, nbytes) in TCP_CASES.items():
         log(f"  simulating {case}: {nbytes} bytes each way (Verilator)...")
-        run_bench("bench.net_bench", "net_bench", case, top, "verilator", quiet=True,
-                  optimise=True,
-                  build=build_net_bench_top, testcase="measure_tcp",
-                  extra_env={"ROSGATE_BENCH_OUT": str(out),
-                             "ROSGATE_BENCH_PCAP": str(RESULTS / f"net_{case}.pcap"),
-                             "ROSGATE_BENCH_CASE": json.dumps(dict(bytes=nbytes, peer=peer))})
-        results["tcp"][case] = dict(json.loads(out.read_text()), label=label)
+        records = run_tcp_case(case, SIM_BUILD / f"bench-net-{case}.json",
+                               pcap=RESULTS / f"net_{case}.pcap")
+        results["tcp"][case] = dict(records, label=label)
     out = SIM_BUILD / "bench-net-images.json"
     log("  simulating the TCPROS node: 1, 2 and 6 MB images, receive, send, round trip...")
     run_bench("bench.net_bench", "ros1_bench", "images", ROS1_BENCH_CONFIG,

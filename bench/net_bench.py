@@ -15,6 +15,7 @@ from pathlib import Path
 import cocotb
 from cocotb.triggers import RisingEdge
 
+from bench.pace import PaceMeter
 from hdl.net.frames import (
     ARP_REPLY,
     ARP_REQUEST,
@@ -30,7 +31,6 @@ from hdl.net.frames import (
 from hdl.net.tcp import TCP_COUNTERS
 from hdl.ros1.registers import PHASES
 from host.pcap import SimCapture
-from bench.pace import PaceMeter
 from host.ros1.rbcp import RbcpClient, rbcp_reply_ok
 from host.simulator import clock_cycles, start_clock
 from tb.models.tcp_peer import TcpPeerModel, udp_frame

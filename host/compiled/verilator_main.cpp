@@ -242,7 +242,6 @@ int main(int argc, char** argv) {
         if (clock_time == main_time || timed_time == main_time) settle_value_callbacks();
     }
 
-    python_lock.take_back();
     top->final();
     wrap_up();
 #if VM_TRACE
