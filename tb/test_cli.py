@@ -12,6 +12,7 @@ from hdl.dds import Topic
 from hdl.params import ParameterError
 from host.cli import main
 from host.lint import lint_verilog
+from host.project_sim import TOP, WAVES
 
 from .fst_names import fst_signal_names
 from .harness import run_rosgate
@@ -276,9 +277,10 @@ def test_verilator_waves_hold_every_signal_icarus_records(tmp_path):
         out = tmp_path / sim
         assert main(["sim", "examples/inverse_kinematics/build.cfg", "--sim", sim, "--waves",
                      "--arg", "requests=2", "-o", str(out)]) == 0
-        fst[sim] = out / "rosgate_system.fst"
-    icarus = _design_signals(fst["icarus"], "rosgate_system.")
-    verilator = _design_signals(fst["verilator"], "rosgate_system_cosim.dut.")
+        fst[sim] = out / WAVES
+    # under Verilator the system is instance ``dut`` of its compiled-memory wrapper
+    icarus = _design_signals(fst["icarus"], f"{TOP}.")
+    verilator = _design_signals(fst["verilator"], f"{TOP}_cosim.dut.")
     assert len([n for n in icarus if n.startswith("core.reconos.slot0.kernel.")]) > 100
     missing = sorted(icarus - verilator)
     assert not missing, f"{len(missing)} signals missing under Verilator: {missing[:20]}"
