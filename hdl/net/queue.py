@@ -43,7 +43,8 @@ class FrameQueue(wiring.Component):
     Members
     -------
     rx : In(RxBeatSignature(1))
-        Bytes and end status from a :class:`~hdl.net.mac.GmiiRx`.
+        Bytes and end status from a :class:`~hdl.net.mac.GmiiRx`. Every frame ends with
+        ``end`` (as a MAC's do): the first beat after an end begins the next frame.
     decide : In(1)
         Pulse while the frame arrives (at or after its first byte, before its end): the
         decision ...
@@ -101,16 +102,17 @@ class FrameQueue(wiring.Component):
         full = wp == full_wp
 
         with m.If(rx.valid):
-            with m.If(rx.index == 0):
-                # a new frame (one cut off without an end is overwritten)
-                base = Mux(arriving, start, wp)
-                m.d.sync += [arriving.eq(1), kept.eq(0), decided.eq(0), start.eq(base),
+            # a frame's first byte is the first beat after an end (every frame has one),
+            # known from ``arriving`` rather than from the 11-bit index: the receive clock's
+            # longest path ran from that comparison into ``wp``
+            with m.If(~arriving):
+                m.d.sync += [arriving.eq(1), kept.eq(0), decided.eq(0), start.eq(wp),
                              full_seen.eq(0), began.eq(0)]
-                with m.If(base == full_wp):
-                    m.d.sync += [full_seen.eq(1), wp.eq(base), has_bytes.eq(0)]
+                with m.If(full):
+                    m.d.sync += [full_seen.eq(1), has_bytes.eq(0)]
                 with m.Else():
-                    m.d.comb += [wr.en.eq(1), wr.addr.eq(base[:aw]), wr.data.eq(rx.data)]
-                    m.d.sync += [wp.eq(base + 1), last_byte.eq(rx.data), newest.eq(base),
+                    m.d.comb += [wr.en.eq(1), wr.addr.eq(wp[:aw]), wr.data.eq(rx.data)]
+                    m.d.sync += [wp.eq(wp + 1), last_byte.eq(rx.data), newest.eq(wp),
                                  has_bytes.eq(1)]
             with m.Elif(arriving & ~full_seen):
                 with m.If(full):
