@@ -466,14 +466,22 @@ class TcprosEndpoint(wiring.Component):
         block = ctrl[5]
         lenb = Signal(2)
         # bytes of the message still to send, kept beside ``msg_cnt`` so that the decisions
-        # below compare a register with a beat's byte count, not a sum with the length
+        # below compare a register with a beat's byte count, not a sum with the length; and
+        # the same number saturated at 3 (a beat carries at most 2), so that a beat's byte
+        # count, and with it the session's segment arithmetic, waits for two bits, not for
+        # a comparison of 30
         remaining = Signal(32)
+        few = Signal(2)
+
+        def set_remaining(value):
+            value = value[:32]
+            m.d.sync += [remaining.eq(value), few.eq(Mux(value[2:] == 0, value[:2], 3))]
         with m.FSM(name="publish"):
             with m.State("WAIT"):
                 with m.If(s.tvalid):
                     with m.If(streaming):
-                        m.d.sync += [msg_len.eq(s.tuser), msg_cnt.eq(0), lenb.eq(0),
-                                     remaining.eq(s.tuser)]
+                        m.d.sync += [msg_len.eq(s.tuser), msg_cnt.eq(0), lenb.eq(0)]
+                        set_remaining(s.tuser)
                         m.next = "LENGTH"
                     with m.Elif(~block):
                         m.next = "DROP"
@@ -494,7 +502,7 @@ class TcprosEndpoint(wiring.Component):
                 # the beat's bytes up to the message's length; a beat that runs past it is cut
                 n = keep_count(s.tkeep) if tx.lanes > 1 else Const(1, 1)
                 # ``n`` is at most 2: the room left only matters below 2
-                room = Mux(remaining[1:] == 0, remaining[:1], 3)
+                room = Mux(few[1], 3, few)
                 over = n > room
                 sent = Mux(over, room, n)
                 tx.body(m, s.tdata, sent, s.tvalid)
@@ -502,8 +510,9 @@ class TcprosEndpoint(wiring.Component):
                 with m.If(~streaming):
                     m.next = "DROP"
                 with m.Elif(s.tvalid & tx.tready):
-                    m.d.sync += [msg_cnt.eq(msg_cnt + sent), remaining.eq(remaining - sent)]
-                    with m.If((remaining[2:] == 0) & (remaining[:2] == sent)):
+                    m.d.sync += msg_cnt.eq(msg_cnt + sent)
+                    set_remaining(remaining - sent)
+                    with m.If(few == sent):
                         m.d.sync += bump("messages_tx")
                         with m.If(s.tlast & ~over):
                             m.next = "WAIT"
@@ -521,8 +530,9 @@ class TcprosEndpoint(wiring.Component):
                 with m.If(~streaming):
                     m.next = "WAIT"
                 with m.Elif(tx.tready):
-                    m.d.sync += [msg_cnt.eq(msg_cnt + 1), remaining.eq(remaining - 1)]
-                    with m.If(remaining == 1):
+                    m.d.sync += msg_cnt.eq(msg_cnt + 1)
+                    set_remaining(remaining - 1)
+                    with m.If(few == 1):
                         m.d.sync += bump("messages_tx")
                         m.next = "WAIT"
             with m.State("DISCARD"):
@@ -539,6 +549,17 @@ class TcprosEndpoint(wiring.Component):
     def _subscriber_stream(m, rx, window, mo, streaming, max_msg, msg_len, msg_cnt, bump):
         lenb = Signal(2)
         lanes = len(mo.tdata) // 8
+        # ``msg_len - msg_cnt`` as a register, and saturated at ``lanes + 1``: a beat's byte
+        # count and ``tlast`` then come from a few bits, not from a subtraction and a sum
+        # compared with the length (a path through the relay into the session that missed
+        # the board clock)
+        left = Signal(32)
+        few = Signal(range(lanes + 2))
+
+        def set_left(value):
+            value = value[:32]
+            m.d.sync += [left.eq(value),
+                         few.eq(Mux(value < lanes + 1, value[:len(few)], lanes + 1))]
         with m.FSM(name="subscribe"):
             with m.State("LENGTH"):
                 with m.If(streaming):
@@ -548,6 +569,7 @@ class TcprosEndpoint(wiring.Component):
                                      msg_cnt.eq(0)]
                         with m.If(lenb == 3):
                             full = Cat(msg_len[8:], rx.tdata)
+                            set_left(full)
                             with m.If(full == 0):
                                 m.d.sync += bump("messages_dropped")
                             with m.Elif(full > max_msg):
@@ -558,12 +580,11 @@ class TcprosEndpoint(wiring.Component):
             with m.State("BODY"):
                 # up to ``lanes`` bytes of the message a beat, from the window; a beat once
                 # offered keeps its bytes until taken, though more may arrive behind them
-                room = msg_len - msg_cnt
                 have = Mux(window.avail < lanes, window.avail, lanes)
                 n = Signal(range(lanes + 1))
                 offered = Signal(range(lanes + 1))
-                m.d.comb += n.eq(Mux(offered != 0, offered, Mux(room < have, room, have)))
-                last = msg_cnt + n == msg_len
+                m.d.comb += n.eq(Mux(offered != 0, offered, Mux(few < have, few, have)))
+                last = few == n
                 keep = Cat(*(n > k for k in range(lanes)))
                 m.d.comb += [mo.tvalid.eq(window.avail != 0),
                              mo.tdata.eq(byte_mask(window.window, lanes, n)),
@@ -576,19 +597,20 @@ class TcprosEndpoint(wiring.Component):
                 with m.Elif(mo.tvalid & mo.tready):
                     rx.take_bytes(m, n)
                     m.d.sync += msg_cnt.eq(msg_cnt + n)
+                    set_left(left - n)
                     with m.If(last):
                         m.d.sync += bump("messages_rx")
                         m.next = "LENGTH"
             with m.State("SKIP"):
-                room = msg_len - msg_cnt
                 have = Mux(window.avail < lanes, window.avail, lanes)
-                n = Mux(room < have, room, have)
+                n = Mux(few < have, few, have)
                 with m.If(~streaming):
                     m.next = "LENGTH"
                 with m.Elif(window.avail != 0):
                     rx.take_bytes(m, n)
                     m.d.sync += msg_cnt.eq(msg_cnt + n)
-                    with m.If(msg_cnt + n == msg_len):
+                    set_left(left - n)
+                    with m.If(few == n):
                         m.next = "LENGTH"
 
 
