@@ -33,7 +33,7 @@ from gen.config import apply_parameters, load_project
 from host.compiled import SOURCES as AXI_RAM_SOURCES
 from host.compiled.gmii_tap import GMII_TAP_LINK_ARGS, GMII_TAP_SOURCES
 from host.project_sim import project_build_dir, run_project_sim
-from host.simulator import (CORE_NS, DEFAULT_CXX_OPT, GMII_NS, PROJECT_CXX_OPT, gmii_clocks,
+from host.simulator import (CORE_NS, DEFAULT_CXX_OPT, GMII_NS, gmii_clocks, project_cxx_opt,
                             VERILATOR_BENCH_ARGS, VERILATOR_TOP_ARGS, verilator_make_env)
 from host.toolchain import put_verilator_on_path
 from tb.harness import ROOT, SIM_BUILD
@@ -127,7 +127,7 @@ def measure_systems(log):
         bare = bare_model(build_dir, "rosgate_system_cosim",
                           [build_dir / "rosgate_system.v", build_dir / "rosgate_system_cosim.v",
                            *AXI_RAM_SOURCES], VERILATOR_TOP_ARGS, {"aclk": 10}, bare_cycles,
-                          PROJECT_CXX_OPT, log, axi_ram=True)
+                          project_cxx_opt(), log, axi_ram=True)
         rows.append(_row(name, "system", bare, after, BEFORE[name], GOAL, log))
     return rows
 

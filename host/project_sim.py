@@ -53,8 +53,8 @@ from .ros2.bridge import SERVICE_QUEUE, BridgeQos
 from .ros2.cosim import (JOINED, catch_stop_signals, clock_offset_ns, serve_ros2,
                          start_bridge, start_recorders)
 from .sim_args import ArgumentError, check_args
-from .simulator import (PROJECT_CXX_OPT, SimulationFailed, clock_cycles, export_top, run_top,
-                        source_digest, top_params)
+from .simulator import (SimulationFailed, clock_cycles, export_top, project_cxx_opt,
+                        run_top, source_digest, top_params)
 from .toolchain import cache_dir
 
 __all__ = ["SimContext", "CheckContext", "ProjectError", "run_project_sim", "model_resources",
@@ -459,7 +459,7 @@ def _follow(path, show, stop):
 def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params=(),
                     limit_ms=1000.0, stall_ms=10.0, memory_mb=DEFAULT_MEMORY_MB, seed=None,
                     build_dir=None, quiet=True, waves=False, progress=None, log=None, ros2=None,
-                    record=None, trace=None, play=None, cxx_opt=PROJECT_CXX_OPT, status=None,
+                    record=None, trace=None, play=None, cxx_opt=None, status=None,
                     status_seconds=STATUS_SECONDS):
     """Export, build and run the project's system under ``sim``; return the nodes' results.
 
@@ -514,7 +514,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
         ``sim.py``'s ``PLAY_NODES`` end.
     cxx_opt : str or None
         The C++ optimisation of a Verilator model (:func:`host.simulator.run_top`); a build
-        folder is built with one.
+        folder is built with one. ``None``: :func:`host.simulator.project_cxx_opt` (``-O3``
+        unless ``ROSGATE_CXX_OPT`` says otherwise).
 
     Raises
     ------
@@ -527,6 +528,8 @@ def run_project_sim(build_cfg, sim="verilator", *, out, args=None, thread_params
     from gen.system import build_system, thread_code
 
     build_cfg = Path(build_cfg).resolve()
+    if sim == "verilator" and cxx_opt is None:
+        cxx_opt = project_cxx_opt()
     project = apply_parameters(load_project(build_cfg), thread_params)
     out = Path(out).resolve()
     module = load_sim_module(project)
@@ -703,11 +706,14 @@ def _check_output(option, path, kind):
         raise ProjectError(f"{option} {path}: {found}")
 
 
-def project_build_dir(project, thread_params, sim, cxx_opt=PROJECT_CXX_OPT):
+def project_build_dir(project, thread_params, sim, cxx_opt=None):
     """The folder of the per-user cache a project's system is built in for ``sim`` (and, for
-    Verilator, at C++ optimisation ``cxx_opt``: make does not rebuild for another)."""
+    Verilator, at C++ optimisation ``cxx_opt``, ``None`` for :func:`project_cxx_opt`: make
+    does not rebuild for another)."""
     digest = hashlib.sha1(f"{Path(project.path).resolve()} {sorted(thread_params)}"
                           .encode()).hexdigest()[:8]
+    if sim == "verilator" and cxx_opt is None:
+        cxx_opt = project_cxx_opt()
     opt = f"{cxx_opt.lstrip('-')}-" if sim == "verilator" and cxx_opt else ""
     return cache_dir() / "sim" / f"{project.name.lower()}-{digest}-{opt}{sim}"
 

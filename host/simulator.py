@@ -34,11 +34,12 @@ from gen.export.verilog import (
     write_if_changed,
 )
 from hdl.net.mac import DEFAULT_CLOCK_HZ, GMII_HZ
+from hdl.params import ParameterError
 from host.toolchain import cache_dir, put_verilator_on_path
 
 from .lint import LINT_ARGS
 
-__all__ = ["PROJECT_CXX_OPT", "SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
+__all__ = ["PROJECT_CXX_OPT", "project_cxx_opt", "SIMULATORS", "SimulationFailed", "exclusive", "export_top", "run_top", "top_params",
            "top_manifest", "environment_seed", "failed_seeds", "start_clock", "start_gmii_clocks",
            "gmii_clocks", "clock_cycles", "source_digest", "verilator_make_env", "GMII_NS", "CORE_NS"]
 
@@ -53,8 +54,23 @@ QUICK_CXX_OPT = "-O0"
 #: the C++ optimisation of a project's system under ``rosgate sim``, whose runs are long: the
 #: lane-following system (seven threads) simulates 141,800 cycles per CPU-second at -O3,
 #: 117,700 at -O2 and 115,600 at -O1 (``--x-assign fast`` instead of ``unique``: 138,600 at
-#: -O3, 117,300 at -O1), and builds in 66 s instead of 50
+#: -O3, 117,300 at -O1), and builds in 66 s instead of 50 (:func:`project_cxx_opt`)
 PROJECT_CXX_OPT = "-O3"
+#: what ``ROSGATE_CXX_OPT`` may say
+CXX_OPTS = ("-O0", "-O1", "-O2", "-O3", "-Os", "-Og")
+
+
+
+def project_cxx_opt():
+    """The C++ optimisation of a project's system: ``ROSGATE_CXX_OPT`` from the environment
+    (one of :data:`CXX_OPTS`), for runs too short to earn the longer build (the test suite:
+    the fifth-size chain builds in 19 s at -O1, 34 at -O3), else :data:`PROJECT_CXX_OPT`."""
+    value = os.environ.get("ROSGATE_CXX_OPT", PROJECT_CXX_OPT)
+    if value not in CXX_OPTS:
+        raise ParameterError("ROSGATE_CXX_OPT", value,
+                             f"one of {', '.join(CXX_OPTS)} (in the environment)")
+    return value
+
 
 VERILATOR_X_ARGS = ["--x-assign", "unique", "--x-initial", "unique"]
 #: Verilator options of an exported top: its build is also its lint

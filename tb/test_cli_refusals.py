@@ -2,6 +2,7 @@
 and what would have been accepted, before anything is built; paths a user types are read
 against the folder the command was started in."""
 
+import os
 import shutil
 
 import pytest
@@ -49,6 +50,13 @@ def test_sim_refuses_a_value_its_argument_cannot_read(tmp_path):
                    "--arg frames=ten", "'ten' is not a whole number")
     assert_refused(run_rosgate("sim", AV_CHAIN, "--arg", "bad_frames=yes", cwd=tmp_path),
                    "'yes' is not one of 0, 1")
+
+
+def test_sim_refuses_an_optimisation_the_compiler_does_not_know(tmp_path):
+    result = run_rosgate("sim", AV_CHAIN, cwd=tmp_path,
+                         env=dict(os.environ, ROSGATE_CXX_OPT="-O9"))
+    assert_refused(result, "ROSGATE_CXX_OPT must be one of -O0, -O1, -O2, -O3, -Os, -Og",
+                   "'-O9'")
 
 
 def test_help_args_lists_what_sim_py_declares():

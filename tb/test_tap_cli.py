@@ -6,6 +6,7 @@ echo (a socket) from inside the namespace; the FinEmbP line is found and cycled 
 
 import os
 import re
+import select
 import signal
 import subprocess
 import sys
@@ -44,10 +45,19 @@ def test_tap_engine_serves_ping_rbcp_and_tcp_until_sigint():
         # the hint reads 16 bytes at 0, which nothing wrote (the registers start cleared)
         assert rbcp.returncode == 0 and rbcp.stdout.strip() == repr(bytearray(16)), \
             rbcp.stdout + rbcp.stderr
-        echo = subprocess.run(f"(printf 'hello rosgate\\n'; sleep 3) | timeout 20 "
-                              f"{hints['TCP echo']}", shell=True, capture_output=True, text=True,
-                              timeout=60)
-        assert "hello rosgate" in echo.stdout, (echo.returncode, echo.stdout, echo.stderr)
+        # nc stays connected after its input ends: the line back is all the test waits for
+        echo = subprocess.Popen(hints["TCP echo"], shell=True, stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=True)
+        try:
+            echo.stdin.write("hello rosgate\n")
+            echo.stdin.flush()
+            ready, _, _ = select.select([echo.stdout], [], [], 20)
+            line = echo.stdout.readline() if ready else ""
+        finally:
+            os.killpg(echo.pid, signal.SIGTERM)
+            echo.wait(timeout=10)
+        assert line == "hello rosgate\n", (line, echo.stderr.read())
     finally:
         proc.send_signal(signal.SIGINT)
         rest, _ = proc.communicate(timeout=180)
