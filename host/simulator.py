@@ -60,7 +60,6 @@ PROJECT_CXX_OPT = "-O3"
 CXX_OPTS = ("-O0", "-O1", "-O2", "-O3", "-Os", "-Og")
 
 
-
 def project_cxx_opt():
     """The C++ optimisation of a project's system: ``ROSGATE_CXX_OPT`` from the environment
     (one of :data:`CXX_OPTS`), for runs too short to earn the longer build (the test suite:

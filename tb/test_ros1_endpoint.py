@@ -4,14 +4,16 @@ than MAX_MSG whole and stays in step with the stream; a publisher pads a message
 ``tlast`` comes before its ``tuser`` length with zeros and cuts one that runs past it, so the
 peer's framing survives (``length_mismatch``). The session's byte streams and the message
 streams run under random idle and backpressure, with beats of one byte anywhere in the
-session's stream. The golden model is TCPROS' framing as the ROS 1 wiki gives it
-(``uint32_le`` length, then the body), not the RTL."""
+session's stream. The inputs are framed by gen.msg.ros1; the publisher's expected bytes
+are TCPROS' framing as the ROS 1 wiki gives it (``uint32_le`` length, then the body),
+written out here, not taken from the RTL or from gen.msg.ros1."""
 
 import random
 import struct
 
 import pytest
 
+from gen.msg.ros1 import encode_connection_header, frame_message
 from hdl.net.tcp import TcpState
 from hdl.ros1.registers import COUNTERS, COUNTERS_OFFSET, CTRL, ERRORS, REG
 from hdl.ros1.tcpros import TcprosEndpoint
@@ -46,13 +48,6 @@ def message_beats(body, declared, lanes):
         beats.append((int.from_bytes(chunk, "little"), (1 << len(chunk)) - 1,
                       int(k == len(chunks) - 1), declared))
     return beats
-
-
-def header(**fields):
-    """A TCPROS connection header: its length, then each ``len`` + ``key=value``."""
-    body = b"".join(struct.pack("<I", len(f)) + f
-                    for f in (f"{k}={v}".encode() for k, v in fields.items()))
-    return struct.pack("<I", len(body)) + body
 
 
 class EndpointTB:
@@ -135,8 +130,8 @@ def test_subscriber_drops_empty_and_oversized_messages_and_stays_in_step(lanes):
     lengths = [5, 0, 1, 2, 3, 41, 4, 40, 300, 39, 0, 7, 2, 41, 1] + \
         [rng.randrange(0, 60) for _ in range(30)]
     bodies = [rng.randbytes(n) for n in lengths]
-    stream = header(type="std_msgs/String", md5sum="*") + b"".join(
-        struct.pack("<I", len(b)) + b for b in bodies)
+    stream = encode_connection_header({"type": "std_msgs/String", "md5sum": "*"}) + \
+        b"".join(frame_message(b) for b in bodies)
     expected = [b for b in bodies if 1 <= len(b) <= 40]
     tb = EndpointTB("subscriber", lanes, stream, seed=lanes)
     dut = tb.dut
@@ -192,7 +187,8 @@ def test_publisher_pads_short_and_cuts_long_messages(lanes):
     expected = b"".join(struct.pack("<I", declared) +
                         (body[:declared] + bytes(max(0, declared - len(body))))
                         for body, declared in messages)
-    subscriber = header(topic="/chatter", type="std_msgs/String", md5sum="*")
+    subscriber = encode_connection_header({"topic": "/chatter", "type": "std_msgs/String",
+                                           "md5sum": "*"})
     tb = EndpointTB("publisher", lanes, subscriber, seed=20 + lanes)
     dut = tb.dut
     state = {}
