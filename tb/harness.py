@@ -161,7 +161,7 @@ def rerun_hint(seed):
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
-              extra_env=None, quiet=False, run_name=None, optimise=False):
+              extra_env=None, quiet=False, run_name=None, optimise=False, harness=None):
     """Export, build and run the cocotb tests of ``module`` against ``top`` in
     ``sim_build/<top>-<config_id>-<sim>/``; raise on failure, naming each failed test's seed
     and the command that repeats the pytest item with it.
@@ -170,7 +170,9 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     (built without lint); ``quiet`` sends the simulator's log to ``sim-<module>.log`` in the
     build folder; ``run_name`` keeps the results and log of one case of a parametrised test
     apart from the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
-    environment, else a new one) seeds cocotb.
+    environment, else a new one) seeds cocotb. ``harness(params)``, if given, returns the
+    Verilator harness of :func:`host.simulator.run_top` (compiled models around the top) for
+    the configuration.
 
     A Verilator model is compiled without optimisation (``OPT_FAST=-O0``): cocotb's Python
     side sets the pace of a test's simulation, so the C++ build is most of a bench's time
@@ -195,7 +197,8 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
                        testcase=testcase, seed=seed, extra_env=env,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
                        run_name=run_name, lint=build is None, cxx_opt=cxx_opt,
-                       waves=_waves(), verilog_key=verilog_key(top, params, build))
+                       waves=_waves(), verilog_key=verilog_key(top, params, build),
+                       harness=harness(params) if harness else None)
     except SimulationFailed as exc:
         seeds = sorted({s for s in exc.failed.values() if s is not None})
         again = "".join(f"; again with: {rerun_hint(s)}" for s in seeds)
@@ -214,7 +217,8 @@ def config_params(value):
     return value.values[0], value.marks
 
 
-def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), testcases=None):
+def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), testcases=None,
+                 harness=None):
     """Return a pytest test running this module's cocotb tests on every config and simulator.
 
     Parameters
@@ -233,6 +237,9 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), t
     testcases : list of str or None
         Run only these cocotb tests of the module (for configurations that exist for one
         behaviour); default: all.
+    harness : callable or None
+        ``harness(params)``: the Verilator harness of a configuration (see :func:`run_bench`),
+        such as :func:`host.compiled.streams.stream_harness` for its stream ports.
     """
     long = set(long)
     import inspect
@@ -249,7 +256,7 @@ def cocotb_bench(top, configs, *, module=None, simulators=SIMULATORS, long=(), t
 
     @pytest.mark.parametrize("config_id,params,sim", cases)
     def bench(config_id, params, sim):
-        run_bench(module, top, config_id, params, sim, testcase=testcases)
+        run_bench(module, top, config_id, params, sim, testcase=testcases, harness=harness)
 
     bench.__name__ = f"test_{top}"
     return bench

@@ -1,7 +1,8 @@
 """Bench of the exported ``topic`` top (hdl.dds.Topic; docs/topics.md, issue: foundation).
 
-Every publisher port gets random idle, every subscriber port random backpressure
-(cocotbext-axi pause generators); :class:`tb.models.topic.TopicScoreboard` checks that each
+Every publisher port gets random idle, every subscriber port random backpressure (drawn in
+the simulator on Verilator's compiled ports, by cocotbext-axi pause generators on Icarus);
+:class:`tb.models.topic.TopicScoreboard` checks that each
 subscriber gets every message exactly once, whole, in per-publisher order, never interleaved.
 """
 
@@ -12,16 +13,15 @@ from cocotb.triggers import RisingEdge, gather, with_timeout
 
 from tb.harness import cocotb_bench
 from tb.models.topic import TopicScoreboard, tagged_message
-from tb.streams import bursty_pauses, random_pauses
 
-from .topic_tb import CLOCK_NS, CONFIGS, LOSSY, ONE_PUBLISHER, TopicTB, lossless
+from .topic_tb import CLOCK_NS, CONFIGS, LOSSY, ONE_PUBLISHER, TopicTB, lossless, topic_harness
 
 #: Verilator runs these in test-full only; make test keeps them on Icarus, and Verilator on
 #: the configurations that differ in kind (one publisher, widest, FIFO depth, QoS)
 LONG = [(config_id, "verilator") for config_id in
         ("1x3_w8", "3x1_w8", "4x4_w8", "1x1_w64", "1x3_w64", "3x1_w64", "3x3_w64", "4x4_w64")]
 
-test_topic = cocotb_bench("topic", CONFIGS, long=LONG)
+test_topic = cocotb_bench("topic", CONFIGS, long=LONG, harness=topic_harness)
 
 
 @cocotb.test()
@@ -29,9 +29,9 @@ async def random_traffic_idle_and_backpressure(dut):
     """Random lengths (1 beat .. 4 KiB), random idle on publishers, backpressure on subscribers."""
     tb = TopicTB(dut)
     await tb.reset()
-    tb.set_idle_generator(lambda: random_pauses(tb.rng, 0.3))
+    tb.set_idle(0.3)
     if lossless(tb):
-        tb.set_backpressure_generator(lambda: bursty_pauses(tb.rng, 0.35, 8))
+        tb.set_backpressure(0.35, max_run=8)
     plan = tb.random_plan(10, max_bytes=min(4096, 32 * tb.bytes_per_beat),
                           with_4k=lossless(tb))
     if not lossless(tb):
@@ -155,8 +155,8 @@ async def reset_in_mid_traffic(dut):
     """Reset during traffic leaves no stuck grant or partial message behind."""
     tb = TopicTB(dut)
     await tb.reset()
-    tb.set_idle_generator(lambda: random_pauses(tb.rng, 0.2))
-    tb.set_backpressure_generator(lambda: random_pauses(tb.rng, 0.2))
+    tb.set_idle(0.2)
+    tb.set_backpressure(0.2)
     for pub, source in enumerate(tb.sources):
         for seq in range(3):
             await source.send(tb.frame(tagged_message(pub, seq, 40 * tb.bytes_per_beat, tb.rng)))
@@ -178,7 +178,7 @@ async def reset_in_mid_traffic(dut):
         assert all(tb.counter(f"pub{i}_beats") == 0 for i in range(tb.pubs))
     plan = tb.random_plan(4, max_bytes=8 * tb.bytes_per_beat, with_4k=False)
     if not lossless(tb):
-        tb.set_backpressure_generator(None)
+        tb.set_backpressure(0)
     beats = sum(tb.beats(m) for messages in plan for m in messages)
     scoreboard = await tb.run_traffic(plan, timeout_cycles=20 * beats + 2000)
     await tb.cycles(4)

@@ -1,5 +1,9 @@
 """The test bench of the ``topic`` top: publisher sources and subscriber sinks under random idle
-and backpressure, and the delivery scoreboard."""
+and backpressure, and the delivery scoreboard.
+
+Under Verilator the ports are compiled (:func:`host.compiled.streams.stream_harness`): packets
+move and pauses are drawn in the simulator, and the beat, message and stall counts come from
+its counters; under Icarus they are cocotbext-axi's, watched by :class:`PortWatch`."""
 
 import logging
 import os
@@ -8,15 +12,23 @@ import random
 import cocotb
 import pytest
 from cocotb.triggers import RisingEdge, gather, with_timeout
-from cocotbext.axi import AxiStreamBus, AxiStreamFrame, AxiStreamSink, AxiStreamSource
+from cocotbext.axi import AxiStreamFrame
 
+from host.compiled.streams import (
+    CompiledStreamSink,
+    CompiledStreamSource,
+    pause_randomly,
+    stream_harness,
+    stream_sink,
+    stream_source,
+)
 from host.simulator import clock_cycles, start_clock
 from tb.harness import bench_params
 from tb.models.topic import TopicScoreboard, random_lengths, tagged_message
 from tb.streams import reset_aresetn
 
-__all__ = ["CLOCK_NS", "CONFIGS", "PARAMS", "ONE_PUBLISHER", "LOSSY", "PortWatch", "TopicTB",
-           "lossless"]
+__all__ = ["CLOCK_NS", "CONFIGS", "PARAMS", "ONE_PUBLISHER", "LOSSY", "CompiledPortWatch",
+           "PortWatch", "TopicTB", "lossless", "topic_harness"]
 
 
 CLOCK_NS = 10
@@ -59,6 +71,46 @@ ONE_PUBLISHER = PARAMS.get("pubs", 2) == 1
 
 
 LOSSY = PARAMS.get("qos", "keep_all") != "keep_all"
+
+
+def topic_harness(params):
+    """The Verilator harness of a topic configuration: every publisher and subscriber port on
+    a compiled FIFO."""
+    return stream_harness(sources=[f"s{i}_axis" for i in range(params["pubs"])],
+                          sinks=[f"m{j}_axis" for j in range(params["subs"])])
+
+
+class CompiledPortWatch:
+    """:class:`PortWatch`'s counts of a compiled port, kept by the simulator."""
+
+    def __init__(self, port):
+        self.port = port
+        self._keep = False
+
+    beats = property(lambda self: self.port.counter("beats"))
+    messages = property(lambda self: self.port.counter("packets"))
+    stalls = property(lambda self: self.port.counter("stalls"))
+    transfer_cycles = property(lambda self: self.port.transfers)
+
+    @property
+    def keep_cycles(self):
+        return self._keep
+
+    @keep_cycles.setter
+    def keep_cycles(self, value):
+        self._keep = bool(value)
+        self.port.record_transfers(self._keep)
+
+    def clear(self):
+        self.port.clear_counters()
+
+
+def port_watch(clock, port):
+    """The watch of a source or sink: the simulator's counts for a compiled port, else a
+    :class:`PortWatch` on its wires."""
+    if isinstance(port, (CompiledStreamSource, CompiledStreamSink)):
+        return CompiledPortWatch(port)
+    return PortWatch(clock, port.bus)
 
 
 class PortWatch:
@@ -106,28 +158,20 @@ class TopicTB:
         self.rng = random.Random(seed if seed is not None else cocotb.RANDOM_SEED)
         self.log = logging.getLogger("cocotb.tb")
         start_clock(dut.aclk, CLOCK_NS)
-        self.sources = [AxiStreamSource(AxiStreamBus.from_prefix(dut, f"s{i}_axis"), dut.aclk,
-                                        dut.aresetn, reset_active_level=False)
-                        for i in range(self.pubs)]
-        self.sinks = [AxiStreamSink(AxiStreamBus.from_prefix(dut, f"m{j}_axis"), dut.aclk,
-                                    dut.aresetn, reset_active_level=False)
-                      for j in range(self.subs)]
-        for port in self.sources + self.sinks:
-            port.log.setLevel(logging.WARNING)
-        self.pub_watch = [PortWatch(dut.aclk, s.bus) for s in self.sources]
-        self.sub_watch = [PortWatch(dut.aclk, s.bus) for s in self.sinks]
+        self.sources = [stream_source(dut, f"s{i}_axis") for i in range(self.pubs)]
+        self.sinks = [stream_sink(dut, f"m{j}_axis") for j in range(self.subs)]
+        self.pub_watch = [port_watch(dut.aclk, s) for s in self.sources]
+        self.sub_watch = [port_watch(dut.aclk, s) for s in self.sinks]
 
-    def set_idle_generator(self, factory=None):
+    def set_idle(self, probability, max_run=1):
+        """Random idle cycles on every publisher port (0: none)."""
         for source in self.sources:
-            source.set_pause_generator(factory() if factory else None)
-            if factory is None:
-                source.pause = False  # the generator may have stopped on a pause
+            pause_randomly(source, self.rng, probability, max_run)
 
-    def set_backpressure_generator(self, factory=None):
+    def set_backpressure(self, probability, max_run=1):
+        """Random backpressure on every subscriber port (0: none)."""
         for sink in self.sinks:
-            sink.set_pause_generator(factory() if factory else None)
-            if factory is None:
-                sink.pause = False
+            pause_randomly(sink, self.rng, probability, max_run)
 
     async def reset(self):
         await reset_aresetn(self.dut)
