@@ -12,8 +12,10 @@ import os
 import cocotb
 import pytest
 from cocotb.triggers import RisingEdge, gather
+from cocotbext.axi import AxiStreamFrame
 
 from host.compiled.streams import stream_wrapper
+from host.simulator import start_clock
 from tb.harness import run_bench
 from tb.models.topic import TopicScoreboard, tagged_message
 
@@ -66,12 +68,40 @@ async def record_transfer_cycles(dut):
         json.dump(record, f)
 
 
+@cocotb.test()
+async def compiled_ports_refuse_bad_input(dut):
+    """Bad input to a compiled port is refused with a message naming it."""
+    from host.compiled.streams import CompiledStreamSink, CompiledStreamSource
+    start_clock(dut.aclk, 10)
+    source, sink = CompiledStreamSource(dut, "s0_axis"), CompiledStreamSink(dut, "m0_axis")
+    refusals = [
+        (lambda: source.send_nowait(b""), "s0_axis: a packet needs at least one byte"),
+        (lambda: source.send_nowait(AxiStreamFrame(b"ab", tuser=[0, 1])),
+         "s0_axis: a compiled source sends one tuser per packet, not [0, 1]"),
+        (lambda: source.set_random_pause(1.5, 1), "pause probability 1.5: expected 0..1"),
+        (lambda: sink.set_random_pause(0.5, 1, max_run=0),
+         "max_run 0: expected a positive integer"),
+        (lambda: sink.recv_nowait(), "m0_axis: no packet"),
+        (lambda: CompiledStreamSource(dut, "m0_axis"),
+         "'m0_axis' is not a compiled stream source of this simulation (no m0_axis_sent: see "
+         "stream_harness)"),
+    ]
+    for call, message in refusals:
+        try:
+            call()
+        except (ValueError, IndexError) as exc:
+            assert str(exc) == message, str(exc)
+        else:
+            raise AssertionError(f"not refused: {message}")
+    assert source.idle() and sink.empty()
+
+
 def run_case(sim, compiled, out):
     name = f"cycles-{'compiled' if compiled else 'cocotbext'}"
     # a build folder of each kind: the wrapped top is another model
     run_bench(__name__, "topic", "2x2_w32" + ("-compiled" if compiled else ""), PARAMS, sim,
               extra_env={"ROSGATE_BENCH_OUT": str(out)}, run_name=name,
-              harness=topic_harness if compiled else None)
+              harness=topic_harness if compiled else None, testcase=["record_transfer_cycles"])
     return json.loads(out.read_text())
 
 
@@ -85,6 +115,11 @@ def test_compiled_ports_take_the_cycles_of_cocotbext(tmp_path):
     assert len(reference["sub"][0]) == len(reference["sub"][1]) == beats
     for case, record in records.items():
         assert record == reference, f"{case}: not the cycles of cocotbext-axi on Icarus"
+
+
+def test_compiled_ports_refuse_bad_input():
+    run_bench(__name__, "topic", "2x2_w32-compiled", PARAMS, "verilator", run_name="refusals",
+              harness=topic_harness, testcase=["compiled_ports_refuse_bad_input"])
 
 
 TOP = """module dut(aclk, aresetn, a_tdata, a_tvalid, a_tready, a_tlast, b_tdata, b_tkeep,
