@@ -1,13 +1,13 @@
 """The MEMIF AXI4 memory controller (docs/reconos.md, with defects 6 and 9 fixed)."""
 
-from amaranth.hdl import Module, Mux, Signal
+from amaranth.hdl import Array, Cat, Module, Mux, Signal
 from amaranth.lib import data, stream, wiring
-from amaranth.lib.fifo import SyncFIFO
 from amaranth.lib.wiring import In, Out
 
 from ..bus import AXI4Signature, AXIBurst, AXIResp
 from ..params import check_int
 from .memif import rdata_layout, request_layout, request_words, wdata_layout
+from .mmu import PAGE_BITS
 from .protocol import MEMIF_CHUNK, MemStatus, arch as get_arch
 
 __all__ = ["MemoryController", "READS_IN_FLIGHT"]
@@ -23,11 +23,15 @@ class MemoryController(wiring.Component):
     ``AxUSER`` from :class:`~hdl.reconos.protocol.Arch`, ``AxID``/``AxQOS``/``AxLOCK`` 0,
     ``WSTRB`` all ones (zero for ``null`` words).
 
-    Ordering: up to :data:`READS_IN_FLIGHT` read bursts overlap; a write starts only when no
-    read is outstanding, and the next request of any kind starts only after the write's
-    response (ReconROS defect 9, docs/reconos.md: ReconOS does not wait for B). ``RREADY``
-    follows the ready
-    of ``m_rdata``, i.e. the requester's FIFO space (defect 9).
+    Ordering (ReconROS defect 9, docs/reconos.md): requests are taken in order; up to
+    :data:`READS_IN_FLIGHT` read bursts overlap each other and one write, whose response the
+    controller waits for before it takes the next write. AXI does not order a read and a
+    write against each other, so the controller does, per 4 KiB page: a read of the page a
+    write is in waits for that write's response (read after write), and a write to the page of
+    an outstanding read waits until that read's data is in (write after read). Reads and
+    writes of other pages run side by side: a streaming copy moves a read word and a write
+    word in the same cycle. ``RREADY`` follows the ready of ``m_rdata``, i.e. the requester's
+    FIFO space.
 
     Bad requests (length 0, not a multiple of W, over 256 B, crossing a 256-B boundary, or
     marked ``bad`` by the MMU) never reach AXI (defect 6: ReconOS hangs): a read returns
@@ -46,7 +50,8 @@ class MemoryController(wiring.Component):
         One-cycle :class:`MemStatus` pulses, a cycle after the request or response that
         caused them.
     error_addr : Out(addr_bits)
-        Address of the request that caused ``error``.
+        Address of the request that caused ``error`` (of a read's, when a read's and another
+        request's error fall in the same cycle).
     busy : Out(1)
         A request is being executed or read data is outstanding.
     """
@@ -81,11 +86,37 @@ class MemoryController(wiring.Component):
                 getattr(axi, f"{ch}user").eq(a.axuser),
             ]
 
+        # the outstanding reads, in request order, in flip-flops: the write-after-read check
+        # compares a write's page with every one of them
         track_layout = data.StructLayout({"tag": len(req.tag), "words": lb, "bad": 1,
                                           "addr": a.addr_bits})
-        m.submodules.track = track = SyncFIFO(width=track_layout.size, depth=READS_IN_FLIGHT)
-        push = data.View(track_layout, track.w_data)
-        head = data.View(track_layout, track.r_data)
+        n = READS_IN_FLIGHT
+        reads = Array(Signal(track_layout, name=f"read{i}") for i in range(n))
+        pending = Signal(n)
+        w_ptr, r_ptr = Signal(range(n)), Signal(range(n))
+        track_w_rdy, track_r_rdy, track_push, track_pop = Signal(), Signal(), Signal(), Signal()
+        push = Signal(track_layout)
+        head = reads[r_ptr]
+        m.d.comb += [track_w_rdy.eq(~pending.all()), track_r_rdy.eq(pending.any())]
+        with m.If(track_push):
+            m.d.sync += [reads[w_ptr].eq(push), w_ptr.eq(w_ptr + 1)]
+        with m.If(track_pop):
+            m.d.sync += r_ptr.eq(r_ptr + 1)
+        for i in range(n):
+            with m.If(track_push & (w_ptr == i)):
+                m.d.sync += pending[i].eq(1)
+            with m.Elif(track_pop & (r_ptr == i)):
+                m.d.sync += pending[i].eq(0)
+
+        def page(addr):
+            return addr[PAGE_BITS:]
+
+        write_open = Signal()       # a write from its request to its response
+        w_addr = Signal(a.addr_bits)
+        read_after_write = write_open & (page(w_addr) == page(req.addr))
+        write_after_read = Signal()
+        m.d.comb += write_after_read.eq(
+            Cat(pending[i] & (page(reads[i].addr) == page(req.addr)) for i in range(n)).any())
 
         length = req.length
         cb = MEMIF_CHUNK.bit_length() - 1       # MEMIF_CHUNK is a power of two
@@ -103,7 +134,6 @@ class MemoryController(wiring.Component):
         # ---- request side ----
         remaining = Signal(lb)
         aw_done = Signal()
-        w_addr = Signal(a.addr_bits)
         with m.If(axi.arready):
             m.d.sync += axi.arvalid.eq(0)
         with m.If(axi.awready):
@@ -111,6 +141,7 @@ class MemoryController(wiring.Component):
 
         req_error = Signal(len(MemStatus))
         req_error_addr = Signal(a.addr_bits)
+        b_error = Signal(len(MemStatus))
         r_error = Signal(len(MemStatus))
         r_error_addr = Signal(a.addr_bits)
         # the addresses do not wait for the checks: each is the address an error of its kind
@@ -118,43 +149,43 @@ class MemoryController(wiring.Component):
         m.d.comb += [req_error_addr.eq(req.addr), r_error_addr.eq(head.addr)]
         # registered: the validity checks of a request stay out of the status registers' path
         m.d.sync += [
-            self.error.eq(req_error | r_error),
-            self.error_addr.eq(Mux(r_error.any(), r_error_addr, req_error_addr)),
+            self.error.eq(req_error | b_error | r_error),
+            self.error_addr.eq(Mux(r_error.any(), r_error_addr,
+                                   Mux(b_error.any(), w_addr, req_error_addr))),
         ]
 
         with m.FSM() as fsm:
             with m.State("IDLE"):
-                with m.If(self.s_req.valid):
-                    with m.If(~req.write):
-                        # A read: one AR (or, if bad, a zero-filled answer) per request.
-                        with m.If(track.w_rdy & (~axi.arvalid | axi.arready)):
-                            m.d.comb += [
-                                self.s_req.ready.eq(1), track.w_en.eq(1),
-                                push.tag.eq(req.tag), push.words.eq(words),
-                                push.bad.eq(~good), push.addr.eq(req.addr),
-                            ]
-                            with m.If(good):
-                                m.d.sync += [axi.araddr.eq(req.addr),
-                                             axi.arlen.eq(words - 1), axi.arvalid.eq(1)]
-                            with m.Elif(words != 0):
-                                m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
-                            with m.Else():
-                                # length 0: nothing to answer
-                                m.d.comb += [track.w_en.eq(0),
-                                             req_error.eq(MemStatus.BAD_REQUEST)]
-                    with m.Elif(~track.r_rdy & ~axi.arvalid):
-                        # A write waits until every read before it has completed.
-                        m.d.comb += self.s_req.ready.eq(1)
-                        m.d.sync += [remaining.eq(words), w_addr.eq(req.addr)]
+                with m.If(self.s_req.valid & ~req.write):
+                    # A read: one AR (or, if bad, a zero-filled answer) per request.
+                    with m.If(track_w_rdy & (~axi.arvalid | axi.arready) & ~read_after_write):
+                        m.d.comb += [
+                            self.s_req.ready.eq(1), track_push.eq(1),
+                            push.tag.eq(req.tag), push.words.eq(words),
+                            push.bad.eq(~good), push.addr.eq(req.addr),
+                        ]
                         with m.If(good):
-                            m.d.sync += [axi.awaddr.eq(req.addr), axi.awlen.eq(words - 1),
-                                         axi.awvalid.eq(1), aw_done.eq(0)]
-                            m.next = "WRITE"
-                        with m.Else():
+                            m.d.sync += [axi.araddr.eq(req.addr),
+                                         axi.arlen.eq(words - 1), axi.arvalid.eq(1)]
+                        with m.Elif(words != 0):
                             m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
-                            with m.If(words != 0):
-                                m.next = "DRAIN"
+                        with m.Else():
+                            # length 0: nothing to answer
+                            m.d.comb += [track_push.eq(0),
+                                         req_error.eq(MemStatus.BAD_REQUEST)]
+                with m.Elif(self.s_req.valid & ~write_open & ~write_after_read):
+                    m.d.comb += self.s_req.ready.eq(1)
+                    m.d.sync += [remaining.eq(words), w_addr.eq(req.addr)]
+                    with m.If(good):
+                        m.d.sync += [axi.awaddr.eq(req.addr), axi.awlen.eq(words - 1),
+                                     axi.awvalid.eq(1), aw_done.eq(0), write_open.eq(1)]
+                        m.next = "WRITE"
+                    with m.Else():
+                        m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
+                        with m.If(words != 0):
+                            m.next = "DRAIN"
             with m.State("WRITE"):
+                # the write's data, then back to taking requests while its response comes
                 with m.If(axi.awvalid & axi.awready):
                     m.d.sync += aw_done.eq(1)
                 m.d.comb += [
@@ -167,21 +198,23 @@ class MemoryController(wiring.Component):
                 with m.If(self.s_wdata.valid & axi.wready):
                     m.d.sync += remaining.eq(remaining - 1)
                     with m.If(remaining == 1):
-                        m.next = "WRITE_RESP"
-            with m.State("WRITE_RESP"):
-                m.d.comb += [axi.bready.eq(1), req_error_addr.eq(w_addr)]
-                with m.If(axi.bvalid):
-                    with m.If(axi.bresp == AXIResp.SLVERR):
-                        m.d.comb += req_error.eq(MemStatus.AXI_SLVERR)
-                    with m.Elif(axi.bresp == AXIResp.DECERR):
-                        m.d.comb += req_error.eq(MemStatus.AXI_DECERR)
-                    m.next = "IDLE"
+                        m.next = "IDLE"
             with m.State("DRAIN"):
                 m.d.comb += self.s_wdata.ready.eq(1)
                 with m.If(self.s_wdata.valid):
                     m.d.sync += remaining.eq(remaining - 1)
                     with m.If(remaining == 1):
                         m.next = "IDLE"
+
+        # ---- write response: taken whenever it comes after the write's data ----
+        with m.If(write_open & fsm.ongoing("IDLE")):
+            m.d.comb += axi.bready.eq(1)
+            with m.If(axi.bvalid):
+                m.d.sync += write_open.eq(0)
+                with m.If(axi.bresp == AXIResp.SLVERR):
+                    m.d.comb += b_error.eq(MemStatus.AXI_SLVERR)
+                with m.Elif(axi.bresp == AXIResp.DECERR):
+                    m.d.comb += b_error.eq(MemStatus.AXI_DECERR)
 
         # ---- read data side: bursts in request order ----
         count = Signal(lb)       # words of the head burst already delivered
@@ -190,7 +223,7 @@ class MemoryController(wiring.Component):
             last_word.eq(count + 1 == head.words),
             self.m_rdata.payload.tag.eq(head.tag),
         ]
-        with m.If(track.r_rdy):
+        with m.If(track_r_rdy):
             with m.If(head.bad):
                 m.d.comb += [self.m_rdata.valid.eq(1), self.m_rdata.payload.data.eq(0)]
             with m.Else():
@@ -205,7 +238,7 @@ class MemoryController(wiring.Component):
                     m.d.comb += r_error.eq(MemStatus.AXI_DECERR)
                 with m.If(last_word):
                     m.d.sync += count.eq(0)
-                    m.d.comb += track.r_en.eq(1)
+                    m.d.comb += track_pop.eq(1)
 
-        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE") | track.r_rdy | axi.arvalid)
+        m.d.comb += self.busy.eq(~fsm.ongoing("IDLE") | write_open | track_r_rdy | axi.arvalid)
         return m
