@@ -10,10 +10,13 @@ from .memif import rdata_layout, request_layout, request_words, wdata_layout
 from .mmu import PAGE_BITS
 from .protocol import MEMIF_CHUNK, MemStatus, arch as get_arch
 
-__all__ = ["MemoryController", "READS_IN_FLIGHT"]
+__all__ = ["MemoryController", "ORDER_PAGE_BITS", "READS_IN_FLIGHT"]
 
 #: Read bursts the controller keeps outstanding (AXI allows reads to overlap).
 READS_IN_FLIGHT = 4
+#: Page-number bits the read/write ordering compares: pages whose numbers agree in these
+#: (256 MiB apart) are ordered as if they were one, which is never wrong, only slower
+ORDER_PAGE_BITS = 16
 
 
 class MemoryController(wiring.Component):
@@ -28,8 +31,9 @@ class MemoryController(wiring.Component):
     controller waits for before it takes the next write. AXI does not order a read and a
     write against each other, so the controller does, per 4 KiB page: a read of the page a
     write is in waits for that write's response (read after write), and a write to the page of
-    an outstanding read waits until that read's data is in (write after read). Reads and
-    writes of other pages run side by side: a streaming copy moves a read word and a write
+    an outstanding read waits until that read's data is in (write after read); pages are
+    compared by the low :data:`ORDER_PAGE_BITS` bits of their numbers. Reads and writes of
+    other pages run side by side: a streaming copy moves a read word and a write
     word in the same cycle. ``RREADY`` follows the ready of ``m_rdata``, i.e. the requester's
     FIFO space.
 
@@ -109,7 +113,7 @@ class MemoryController(wiring.Component):
                 m.d.sync += pending[i].eq(0)
 
         def page(addr):
-            return addr[PAGE_BITS:]
+            return addr[PAGE_BITS:PAGE_BITS + ORDER_PAGE_BITS]
 
         write_open = Signal()       # a write from its request to its response
         w_addr = Signal(a.addr_bits)
