@@ -1,7 +1,7 @@
 """The compiled stream ports (host/compiled/streams.py, axis_stream.sv/.cpp) against
 cocotbext-axi's ``AxiStreamSource`` and ``AxiStreamSink``: on the ``topic`` top with every port
-ready, the beats of every port are taken at the same cycles by both, under Verilator and
-Icarus; the wrapper refuses what is not a stream port of the right direction.
+ready, the beats of every port are taken at the same cycles by the compiled ports under
+Verilator as by cocotbext-axi's under Icarus; the wrapper refuses what is not a stream port of the right direction.
 
 The scoreboards under random idle and backpressure are tb/test_topic.py's, which runs the
 compiled ports on Verilator and cocotbext-axi's on Icarus."""
@@ -19,14 +19,16 @@ from host.simulator import start_clock
 from tb.harness import run_bench
 from tb.models.topic import TopicScoreboard, tagged_message
 
-from .topic_tb import TopicTB, topic_harness
+from .topic_tb import CONFIGS, TopicTB, topic_harness
 
-PARAMS = dict(pubs=2, subs=2, data_width=32)
+#: tb/test_topic.py's 3x3_w8 configuration: its Icarus build and its compiled-port Verilator
+#: build are shared with that bench
+CONFIG, PARAMS = "3x3_w8", CONFIGS["3x3_w8"]
 
 
 @cocotb.test()
 async def record_transfer_cycles(dut):
-    """Messages queued on both publishers while paused, released together, then more sent one
+    """Messages queued on every publisher while paused, released together, then more sent one
     at a time from Python as the previous arrives: every port's beat cycles and the messages,
     to ``ROSGATE_BENCH_OUT``."""
     tb = TopicTB(dut, seed=7)
@@ -42,7 +44,7 @@ async def record_transfer_cycles(dut):
             message = tagged_message(pub, seq, n + pub, tb.rng)
             scoreboard.publish(pub, message)
             await source.send(tb.frame(message))
-    receivers = [cocotb.start_soon(tb.run_subscriber(scoreboard, j, 2 * len(lengths)))
+    receivers = [cocotb.start_soon(tb.run_subscriber(scoreboard, j, tb.pubs * len(lengths)))
                  for j in range(tb.subs)]
     await RisingEdge(dut.aclk)
     for source in tb.sources:
@@ -53,8 +55,8 @@ async def record_transfer_cycles(dut):
         scoreboard.publish(0, message)
         await tb.sources[0].send(tb.frame(message))
         await tb.sources[0].wait()
-        await tb.run_subscriber(scoreboard, 0, 1)
-        await tb.run_subscriber(scoreboard, 1, 1)
+        for j in range(tb.subs):
+            await tb.run_subscriber(scoreboard, j, 1)
     scoreboard.check_complete()
     await tb.cycles(3)
     first = tb.pub_watch[0].transfer_cycles[0]
@@ -98,27 +100,26 @@ async def compiled_ports_refuse_bad_input(dut):
 
 def run_case(sim, compiled, out):
     name = f"cycles-{'compiled' if compiled else 'cocotbext'}"
-    # a build folder of each kind: the wrapped top is another model
-    run_bench(__name__, "topic", "2x2_w32" + ("-compiled" if compiled else ""), PARAMS, sim,
+    run_bench(__name__, "topic", CONFIG, PARAMS, sim,
               extra_env={"ROSGATE_BENCH_OUT": str(out)}, run_name=name,
               harness=topic_harness if compiled else None, testcase=["record_transfer_cycles"])
     return json.loads(out.read_text())
 
 
 def test_compiled_ports_take_the_cycles_of_cocotbext(tmp_path):
-    records = {case: run_case(*case, tmp_path / f"{case[0]}-{case[1]}.json")
-               for case in (("icarus", False), ("verilator", False), ("verilator", True))}
-    reference = records["icarus", False]
-    beats = sum(-(-(n + pub) // 4) for pub in range(2) for n in (1, 4, 5, 17, 64, 3)) + \
-        sum(-(-(9 + s) // 4) for s in range(4))
-    assert len(reference["pub"][0]) + len(reference["pub"][1]) == beats
-    assert len(reference["sub"][0]) == len(reference["sub"][1]) == beats
-    for case, record in records.items():
-        assert record == reference, f"{case}: not the cycles of cocotbext-axi on Icarus"
+    reference = run_case("icarus", False, tmp_path / "icarus.json")
+    compiled = run_case("verilator", True, tmp_path / "compiled.json")
+    # one byte per beat
+    pubs, subs = PARAMS["pubs"], PARAMS["subs"]
+    beats = sum(n + pub for pub in range(pubs) for n in (1, 4, 5, 17, 64, 3)) + \
+        sum(9 + s for s in range(4))
+    assert sum(len(cycles) for cycles in reference["pub"]) == beats
+    assert all(len(reference["sub"][j]) == beats for j in range(subs))
+    assert compiled == reference, "not the cycles of cocotbext-axi's ports on Icarus"
 
 
 def test_compiled_ports_refuse_bad_input():
-    run_bench(__name__, "topic", "2x2_w32-compiled", PARAMS, "verilator", run_name="refusals",
+    run_bench(__name__, "topic", CONFIG, PARAMS, "verilator", run_name="refusals",
               harness=topic_harness, testcase=["compiled_ports_refuse_bad_input"])
 
 
