@@ -2,7 +2,8 @@
 frames for the hardware-topic (fpgaDDS) variant at 1 and 4 pixels per clock under Verilator,
 over the scene's 100 frames at full size and at a fifth of the size for the ReconROS variant
 (examples/av_chain: the same nodes as ReconOS threads, topics through memory and the broker)
-at 1 and 4 pixels per clock (``python -m bench.av_chain --reconros`` re-measures only those),
+at 1 and 4 pixels per clock (``python -m bench.av_chain --reconros`` re-measures only those,
+``--fpgadds`` the hardware-topic rows),
 and the software variant (the OpenCV nodes of host/autorace.py on this machine), beside the fpgaDDS paper's Table III; the whole chain's
 Yosys resources beside its Table II. Writes ``bench/results/av_chain.json`` with the
 ``chain_alpha`` list (and ``reconros_scaled``, ``resources``), the Markdown tables and the
@@ -15,6 +16,7 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+from bench.av_chain_bench import HARNESS
 from bench.report import RESOURCE_COLUMNS, component_resources, resource_table, write_report
 from gen.av_chain import NODES, chain_node, chain_topics, scaled_config, scaled_params
 from host.project_sim import run_project_sim
@@ -109,18 +111,34 @@ def reconros_entries(runs, scale=1.0):
 def measure(log=print):
     log(f"  generating {FRAMES} scene frames...")
     frames = list(scene.frames(FRAMES))
-    entries, per_frame = [], {}
-    ppcs = (4, 1)
+    results = measure_fpgadds({"chain_alpha": [], "per_frame_ms": {}}, log)
+    measure_reconros(results, log)
+    entries, per_frame = results["chain_alpha"], results["per_frame_ms"]
+    times, errors = _software(frames, log)
+    mean, sd = _stats(times)
+    entries.append({"variant": "software", "ppc": None, "clock_mhz": None,
+                    "frames": len(times), "mean_ms": round(mean, 3), "sd_ms": round(sd, 3),
+                    "lane_centre_max_error_px": round(max(errors), 3),
+                    "stages_bit_exact": True, "note": "wall-clock on this machine"})
+    per_frame["software"] = times
+    return {**results, "paper": PAPER, "paper_lut": PAPER_LUT, "overlay_frame": 50}
+
+
+def measure_fpgadds(results, log=print, ppcs=(4, 1)):
+    """Measure the hardware-topic (fpgaDDS) variant's rows into ``results`` (a ``measure()``
+    result), replacing the ones it has: ``FRAMES`` full-size frames per px/clk, side by side,
+    the camera and the image taps on compiled stream ports."""
     outs = {p: SIM_BUILD / f"bench-av_chain-p{p}.json" for p in ppcs}
 
     def simulate(p):
         run_bench("bench.av_chain_bench", "av_chain", f"bench_p{p}", scaled_params(1.0, p),
-                  "verilator", quiet=True, optimise=True,
+                  "verilator", quiet=True, optimise=True, harness=lambda params: HARNESS,
                   extra_env={"ROSGATE_BENCH_OUT": str(outs[p]), "ROSGATE_AV_FRAMES": str(FRAMES)})
     log(f"  simulating the hardware-topic chain at {' and '.join(map(str, ppcs))} px/clk over "
-        f"{FRAMES} frames each, side by side (Verilator; about half an hour)...")
+        f"{FRAMES} frames each, side by side (Verilator)...")
     with ThreadPoolExecutor(len(ppcs)) as pool:
         list(pool.map(simulate, ppcs))
+    entries, per_frame = [], {}
     for p in ppcs:
         rec = json.loads(outs[p].read_text())
         ms = [c / (CLOCK_MHZ * 1e3) for c in rec["latencies"]]
@@ -135,16 +153,11 @@ def measure(log=print):
                             r["off_by_one"] for r in rec["frames"] if "off_by_one" in r),
                         "stops": rec["stops"], "starts": rec["starts"]})
         per_frame[f"fpgadds_p{p}"] = ms
-    results = {"chain_alpha": entries, "per_frame_ms": per_frame}
-    measure_reconros(results, log)
-    times, errors = _software(frames, log)
-    mean, sd = _stats(times)
-    entries.append({"variant": "software", "ppc": None, "clock_mhz": None,
-                    "frames": len(times), "mean_ms": round(mean, 3), "sd_ms": round(sd, 3),
-                    "lane_centre_max_error_px": round(max(errors), 3),
-                    "stages_bit_exact": True, "note": "wall-clock on this machine"})
-    per_frame["software"] = times
-    return {**results, "paper": PAPER, "paper_lut": PAPER_LUT, "overlay_frame": 50}
+    rows = [e for e in results["chain_alpha"] if e["variant"] != "fpgadds"]
+    results["chain_alpha"] = entries + rows
+    results["per_frame_ms"] = per_frame | {k: v for k, v in results["per_frame_ms"].items()
+                                           if not k.startswith("fpgadds")}
+    return results
 
 
 def measure_reconros(results, log=print, ppcs=(4, 1)):
@@ -313,16 +326,20 @@ def write_results(results, resources, folder):
 
 
 def main(argv=None):
-    """``python -m bench.av_chain --reconros``: measure only the ReconROS rows again, into the
-    saved results (the hardware-topic and software rows and the resources are kept)."""
+    """``python -m bench.av_chain --fpgadds --reconros`` (either or both): measure only those
+    rows again, into the saved results (the other rows and the resources are kept)."""
     args = sys.argv[1:] if argv is None else argv
-    if args != ["--reconros"]:
-        raise SystemExit("usage: python -m bench.av_chain --reconros (all rows: "
+    parts = {"--fpgadds": measure_fpgadds, "--reconros": measure_reconros}
+    if not args or any(a not in parts for a in args):
+        raise SystemExit("usage: python -m bench.av_chain [--fpgadds] [--reconros] (all rows: "
                          "python bench/run.py av_chain)")
     folder = ROOT / "bench" / "results"
     saved = json.loads((folder / "av_chain.json").read_text())
     resources = saved.pop("resources")
-    print(write_results(measure_reconros(saved), resources, folder))
+    for name, part in parts.items():
+        if name in args:
+            saved = part(saved)
+    print(write_results(saved, resources, folder))
     print(f"wrote {folder / 'av_chain.json'}, {folder / 'av_chain.md'} and the plots")
     return 0
 

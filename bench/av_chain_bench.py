@@ -5,22 +5,29 @@ next once the command for the last one is out, as at 30 fps).
 Per frame: the chain-alpha latency (the cycle the frame's last beat enters the compensation to
 the cycle Lane Control's command leaves), the lane result and the command, checked against
 the software nodes; every ``CHECK_EVERY``-th frame also every stage's image against OpenCV.
-Nothing runs in Python on the cycles between beats: the taps are always ready, the rare
-results are read when their ``tvalid`` rises and cycles come from the simulation time, which
-keeps a 100-frame run to minutes. Results go to ``ROSGATE_BENCH_OUT``."""
+Nothing runs in Python on the cycles between beats: the camera port and the image taps are
+compiled stream ports (:data:`HARNESS`; the camera's frame goes in whole, the taps' images
+come out whole), the rare results are read when their ``tvalid`` rises and cycles come from the
+simulation time. Results go to ``ROSGATE_BENCH_OUT``."""
 
 import json
 import os
+from types import SimpleNamespace
 
 import cocotb
 from cocotb.triggers import Event, ReadOnly, RisingEdge
 from cocotb.utils import get_sim_time
 
+from host.compiled.streams import stream_harness, stream_sink, stream_source
 from tb.av_chain_tb import CLOCK_NS, AvChainTB
-from tb.streams import PacketSink
 
 #: frames whose images are captured and compared at every tap
 CHECK_EVERY = 25
+#: the image taps, always ready
+IMAGE_TAPS = ("tap_a", "tap_b", "tap_c")
+#: the Verilator harness of the bench (``run_bench(..., harness=...)``): the camera and the
+#: image taps on compiled stream ports
+HARNESS = stream_harness(sources=["camera"], sinks=list(IMAGE_TAPS))
 
 
 def cycle_now():
@@ -60,28 +67,26 @@ class FastChainTB(AvChainTB):
 
     def _start_sinks(self):
         dut = self.dut
-        dut.camera_tvalid.value = 0
-        for name in ("tap_a", "tap_b", "tap_c"):
-            getattr(dut, f"{name}_tready").value = 1
+        self.camera = stream_source(dut, "camera")
+        self.images = {n: stream_sink(dut, n) for n in IMAGE_TAPS}
         self.events = {n: EventTap(dut, n) for n in ("tap_d", "tap_e", "tap_f", "command")}
 
     async def send_frame(self, image):
-        """Drive the camera port beat by beat, no Python between frames; returns the cycle the
-        frame's last beat was taken."""
-        dut, clock = self.dut, self.dut.aclk
-        data = image.tobytes()
-        step = 3 * self.p
-        beats = [int.from_bytes(data[i:i + step], "little") for i in range(0, len(data), step)]
-        dut.camera_tvalid.value = 1
-        for k, beat in enumerate(beats):
-            dut.camera_tdata.value = beat
-            dut.camera_tlast.value = int(k == len(beats) - 1)
-            while True:
-                await RisingEdge(clock)
-                if dut.camera_tready.value == 1:
-                    break
-        dut.camera_tvalid.value = 0
+        """The frame into the camera port, whole; returns the cycle its last beat was taken."""
+        await self.camera.send(image.tobytes())
+        await self.camera.wait()
         return cycle_now()
+
+    def take_images(self):
+        """Each image tap's packets since the last call, as the :class:`tb.streams.PacketSink`
+        packets :meth:`check_result` reads."""
+        taken = {}
+        for name, sink in self.images.items():
+            packets = []
+            while not sink.empty():
+                packets.append(SimpleNamespace(data=bytes(sink.recv_nowait().tdata)))
+            taken[name] = SimpleNamespace(packets=packets)
+        return taken
 
 
 @cocotb.test()
@@ -92,9 +97,6 @@ async def measure_chain(dut):
     await tb.reset()
     for frame in tb.frames(count):
         check_images = frame.index % CHECK_EVERY == 0
-        sinks = {}
-        if check_images:
-            sinks = {n: PacketSink(dut, n, dut.aclk) for n in ("tap_a", "tap_b", "tap_c")}
         n = len(tb.events["command"].beats)
         tb.events["command"].arrived.clear()
         t_in = await tb.send_frame(frame.image)
@@ -105,9 +107,8 @@ async def measure_chain(dut):
         command, t_out = tb.events["command"].beats[-1]
         lane = tb.events["tap_d"].beats[-1][0]
         latencies.append(t_out - t_in)
-        report.append(tb.check_result(frame, lane, command, sinks if check_images else None))
-        for sink in sinks.values():
-            sink.stop()
+        images = tb.take_images()
+        report.append(tb.check_result(frame, lane, command, images if check_images else None))
         tb.log.info("frame %d: %d cycles", frame.index, latencies[-1])
     tb.check_event_beats([d for d, _ in tb.events["tap_e"].beats],
                          [d for d, _ in tb.events["tap_f"].beats])
