@@ -20,6 +20,19 @@
 /* verilator lint_off BLKSEQ */
 /* verilator lint_off WIDTHEXPAND */
 /* verilator lint_off WIDTHTRUNC */
+// the C++ side of both (axis_stream.cpp)
+package rosgate_axis_dpi;
+    import "DPI-C" function int rosgate_axis_open(input string name, input int sink,
+                                                  input int data_w, input int user_w,
+                                                  input int has_keep);
+    import "DPI-C" function int rosgate_axis_source_step(
+        input int port, input int resetn, input int valid, input int ready, input int last,
+        output bit [1023:0] data, output bit [127:0] keep, output bit [63:0] user);
+    import "DPI-C" function int rosgate_axis_sink_step(
+        input int port, input int resetn, input int valid, input int ready, input int last,
+        input bit [1023:0] data, input bit [127:0] keep, input bit [63:0] user);
+endpackage
+
 module rosgate_axis_source #(
     parameter string NAME = "",
     parameter int DATA_W = 64,
@@ -36,12 +49,7 @@ module rosgate_axis_source #(
     input  logic                tready,
     output logic [31:0]         sent
 );
-    import "DPI-C" function int rosgate_axis_open(input string name, input int sink,
-                                                  input int data_w, input int user_w,
-                                                  input int has_keep);
-    import "DPI-C" function int rosgate_axis_source_step(
-        input int port, input int resetn, input int valid, input int ready, input int last,
-        output bit [1023:0] data, output bit [127:0] keep, output bit [63:0] user);
+    import rosgate_axis_dpi::*;
 
     int port;
     int step;
@@ -91,12 +99,7 @@ module rosgate_axis_sink #(
     output logic                tready,
     output logic [31:0]         received
 );
-    import "DPI-C" function int rosgate_axis_open(input string name, input int sink,
-                                                  input int data_w, input int user_w,
-                                                  input int has_keep);
-    import "DPI-C" function int rosgate_axis_sink_step(
-        input int port, input int resetn, input int valid, input int ready, input int last,
-        input bit [1023:0] data, input bit [127:0] keep, input bit [63:0] user);
+    import rosgate_axis_dpi::*;
 
     int port;
     int step;
