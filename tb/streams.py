@@ -8,22 +8,20 @@ import logging
 import cocotb
 from cocotb.triggers import ClockCycles, RisingEdge
 
+from host.compiled.streams import pause_runs
+
 __all__ = ["random_pauses", "bursty_pauses", "count_pulses", "reset_aresetn", "StreamPort", "PacketSink", "HandshakeSource", "HandshakeSink",
            "Packet"]
 
 
 def random_pauses(rng, probability):
     """Pause generator: ``True`` (pause this cycle) with the given probability."""
-    while True:
-        yield rng.random() < probability
+    return pause_runs(rng, probability)
 
 
 def bursty_pauses(rng, probability, max_run=24):
     """Pause generator with runs: long stalls and long bursts."""
-    while True:
-        value = rng.random() < probability
-        for _ in range(rng.randint(1, max_run)):
-            yield value
+    return pause_runs(rng, probability, max_run)
 
 
 async def count_pulses(signal, counters, key):

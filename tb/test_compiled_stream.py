@@ -1,7 +1,8 @@
 """The compiled stream ports (host/compiled/streams.py, axis_stream.sv/.cpp) against
 cocotbext-axi's ``AxiStreamSource`` and ``AxiStreamSink``: on the ``topic`` top with every port
 ready, the beats of every port are taken at the same cycles by the compiled ports under
-Verilator as by cocotbext-axi's under Icarus; the wrapper refuses what is not a stream port of the right direction.
+Verilator as by cocotbext-axi's under Icarus; the wrapper refuses what is not a stream port
+of the right direction.
 
 The scoreboards under random idle and backpressure are tb/test_topic.py's, which runs the
 compiled ports on Verilator and cocotbext-axi's on Icarus."""

@@ -137,7 +137,6 @@ class MemoryController(wiring.Component):
 
         # ---- request side ----
         remaining = Signal(lb)
-        aw_done = Signal()
         with m.If(axi.arready):
             m.d.sync += axi.arvalid.eq(0)
         with m.If(axi.awready):
@@ -182,7 +181,7 @@ class MemoryController(wiring.Component):
                     m.d.sync += [remaining.eq(words), w_addr.eq(req.addr)]
                     with m.If(good):
                         m.d.sync += [axi.awaddr.eq(req.addr), axi.awlen.eq(words - 1),
-                                     axi.awvalid.eq(1), aw_done.eq(0), write_open.eq(1)]
+                                     axi.awvalid.eq(1), write_open.eq(1)]
                         m.next = "WRITE"
                     with m.Else():
                         m.d.comb += req_error.eq(MemStatus.BAD_REQUEST)
@@ -190,8 +189,6 @@ class MemoryController(wiring.Component):
                             m.next = "DRAIN"
             with m.State("WRITE"):
                 # the write's data, then back to taking requests while its response comes
-                with m.If(axi.awvalid & axi.awready):
-                    m.d.sync += aw_done.eq(1)
                 m.d.comb += [
                     axi.wvalid.eq(self.s_wdata.valid),
                     axi.wdata.eq(self.s_wdata.payload.data),

@@ -21,8 +21,8 @@ from pathlib import Path
 from . import verilog_ports, wrapper_head
 
 __all__ = ["STREAM_SOURCES", "STREAM_LINK_ARGS", "CompiledStreamSource", "CompiledStreamSink",
-           "StreamPacket", "pause_randomly", "stream_harness", "stream_sink", "stream_source",
-           "stream_wrapper"]
+           "StreamPacket", "pause_randomly", "pause_runs", "stream_harness", "stream_sink",
+           "stream_source", "stream_wrapper"]
 
 HERE = Path(__file__).resolve().parent
 #: the files a Verilator build with compiled stream ports adds to the exported Verilog
@@ -359,7 +359,10 @@ def stream_sink(dut, prefix, clock=None, reset=None):
                                 reset or dut.aresetn, reset_active_level=False))
 
 
-def _runs(rng, probability, max_run):
+def pause_runs(rng, probability, max_run=1):
+    """Pause generator (one value per cycle) of runs of 1..``max_run`` cycles, each run
+    pausing with ``probability``, drawn from ``rng``: what the compiled ports draw in C++,
+    for cocotbext-axi's and the benches' own Python drivers."""
     while True:
         value = rng.random() < probability
         for _ in range(rng.randint(1, max_run) if max_run > 1 else 1):
@@ -374,7 +377,7 @@ def pause_randomly(port, rng, probability, max_run=1):
         port.set_random_pause(probability, rng.getrandbits(64), max_run)
         return
     import random
-    port.set_pause_generator(_runs(random.Random(rng.getrandbits(64)), probability, max_run)
+    port.set_pause_generator(pause_runs(random.Random(rng.getrandbits(64)), probability, max_run)
                              if probability else None)
     if not probability:
         port.pause = False   # the generator may have stopped on a pause
