@@ -89,6 +89,26 @@ def test_photo_and_random_frames(p):
     assert off_by_one[2] == 0
 
 
+@pytest.mark.parametrize("p", [1, 4])
+def test_store_keeps_only_the_window_the_map_reads(p):
+    """A map that magnifies a part of the source in both directions: the store keeps a
+    window of the frame (smaller both ways), and every pixel still equals OpenCV's, the
+    window's edges included."""
+    import cv2
+    rng = np.random.default_rng(20 + p)
+    src = np.float32([[13.3, 7.6], [33.8, 9.1], [31.2, 21.7], [11.4, 19.9]])
+    dst = np.float32([[0, 0], [DW - 1, 0], [DW - 1, DH - 1], [0, DH - 1]])
+    matrix = cv2.getPerspectiveTransform(src, dst)
+    x0, y0, kw, kh = PerspectiveWarp(cv2.invert(matrix)[1], src_width=SW, src_height=SH,
+                                     dst_width=DW, dst_height=DH,
+                                     pixels_per_beat=p).stored_window
+    assert 0 < x0 and x0 + kw < SW and 0 < y0 and y0 + kh < SH
+    frames = [rng.integers(0, 256, (SH, SW, 3), dtype=np.uint8)]
+    outs, errors = warp_frames(matrix, frames, p=p, seed=p)
+    assert errors == {"short": 0, "long": 0}
+    check(outs[0], frames[0], matrix)
+
+
 def test_bad_frames_flagged_then_resynchronised():
     rng = np.random.default_rng(7)
     matrix = bird_view_map(rng)
@@ -116,41 +136,49 @@ def test_map_to_infinity_refused():
 
 
 def divide_model(n, w, quotient_bits=QUOTIENT_BITS):
-    """``floor(2**16 n / w)`` as the divider defines it, and whether its magnitude reaches
-    ``2**quotient_bits`` (outside)."""
-    mag = (abs(n) << COORD_FRACTION_BITS) // w
-    exact = (abs(n) << COORD_FRACTION_BITS) % w == 0
-    q = mag if n >= 0 else -mag - (0 if exact else 1)
-    return q, mag >= 1 << quotient_bits
+    """``floor(2**16 n / w)`` and whether it lies outside ``[-2**quotient_bits,
+    2**quotient_bits)``."""
+    q = (n << COORD_FRACTION_BITS) // w
+    return q, not -(1 << quotient_bits) <= q < 1 << quotient_bits
 
 
-@pytest.mark.parametrize("width, denominator_width, quotient_bits",
-                         [(40, None, QUOTIENT_BITS), (48, 30, 21), (36, 36, 17)])
-def test_coordinate_divider_shares_its_denominator(width, denominator_width, quotient_bits):
-    """Pairs of numerators over one denominator, a new set every cycle: both quotients equal
-    exact integer division (floor, negative numerators included), ``outside`` where the
-    quotient's magnitude does not fit, each ``latency`` cycles after its inputs; numerators
-    wider than the denominator (the warp's) and fewer quotient bits included."""
-    dut = CoordinateDivider(width, 2, denominator_width=denominator_width,
+@pytest.mark.parametrize("width, denominator_range, quotient_bits", [
+    (40, (1, (1 << 24) - 1), QUOTIENT_BITS),      # a wide range, scaled up (w < 2**T)
+    (76, (15 << 60, 77 << 60), 26),               # the chain's: scaled down by 2**34
+    (48, (1 << 29, 1 << 29), 21),                 # one denominator, a power of two
+    (36, (3, 5000), 17)])
+def test_coordinate_divider_shares_its_denominator(width, denominator_range, quotient_bits):
+    """Pairs of numerators over one denominator, a new set every cycle: each quotient within
+    1 of exact integer division (floor, negative numerators included), ``outside`` where the
+    exact quotient does not fit (within 1 of the limit, either answer), each ``latency``
+    cycles after its inputs; numerators far beyond the limit, the range's ends, exact
+    quotients."""
+    lo, hi = denominator_range
+    dut = CoordinateDivider(width, 2, denominator_range=denominator_range,
                             quotient_bits=quotient_bits)
-    assert dut.latency == quotient_bits + 1
-    wd = denominator_width or width
     limit = 1 << (quotient_bits - COORD_FRACTION_BITS)
+    top = (1 << (width - 1)) - 1
     rng = np.random.default_rng(11 + quotient_bits)
+
+    def numerator(x, w):
+        return min(max(int(round(x * w)), -top - 1), top)
+
     cases = []
-    for _ in range(120):
-        w = int(rng.integers(1, 1 << int(rng.integers(1, wd + 1))))
-        ns = [int(rng.integers(-(1 << (width - 2)), 1 << (width - 2))) for _ in range(2)]
-        cases.append((ns, w))
-    for _ in range(60):
+    for _ in range(100):
+        w = lo + int(rng.random() * (hi - lo + 1))
+        cases.append(([numerator(rng.uniform(-1.2, 1.2) * limit, w) for _ in range(2)], w))
+    for _ in range(40):
         # quotients around the outside limit, both signs
-        w = int(rng.integers(1, 1 << wd))
-        ns = [min(max(int(w * (limit + int(rng.integers(-2, 2))) + int(rng.integers(-w, w))),
-                      -(1 << (width - 1))), (1 << (width - 1)) - 1) * s for s in (1, -1)]
-        cases.append((ns, w))
-    cases += [([w * 5, -w * 5], w) for w in (1, 3, 1 << 20) if w < 1 << wd]  # exact quotients
-    cases += [([limit * ((1 << 18) - 1), -limit * (1 << 18)], 1 << 18)]      # at the limit
-    cases += [([-(1 << (width - 1)), (1 << (width - 1)) - 1], (1 << wd) - 1)]  # widest
+        w = lo + int(rng.random() * (hi - lo + 1))
+        x = limit + rng.uniform(-2, 2) / (1 << COORD_FRACTION_BITS)
+        cases.append(([numerator(x, w), numerator(-x, w)], w))
+    for _ in range(20):
+        # anything the numerator's width holds
+        w = lo + int(rng.random() * (hi - lo + 1))
+        cases.append(([int(rng.integers(-(1 << 62), 1 << 62)) >> max(0, 63 - width)
+                       for _ in range(2)], w))
+    cases += [([numerator(5, w), numerator(-5, w)], w) for w in (lo, hi)]   # exact quotients
+    cases += [([top, -top - 1], w) for w in (lo, hi)]                          # widest
     got = []
 
     async def drive(ctx):
@@ -164,25 +192,34 @@ def test_coordinate_divider_shares_its_denominator(width, denominator_width, quo
         await ctx.tick().repeat(dut.latency + 2)
 
     async def watch(ctx):
+        cycle = 0
         async for _, _, valid, q0, q1, o0, o1 in ctx.tick().sample(
                 dut.q_valid, dut.q[0], dut.q[1], dut.outside[0], dut.outside[1]):
             if valid:
-                got.append(((q0, o0), (q1, o1)))
+                got.append((cycle, (q0, o0), (q1, o1)))
+            cycle += 1
 
     simulate(dut, drive, background=[watch])
     assert len(got) == len(cases)
-    for (ns, w), answer in zip(cases, got):
+    assert [cycle for cycle, _, _ in got] == list(range(dut.latency, dut.latency + len(cases)))
+    edge = 1 << quotient_bits
+    for (ns, w), (_, *answer) in zip(cases, got):
         for n, (q, outside) in zip(ns, answer):
             want, want_outside = divide_model(n, w, quotient_bits)
-            assert bool(outside) == want_outside, (n, w)
-            if not want_outside:
-                assert q == want, (n, w, q, want)
+            if bool(outside) != want_outside:
+                assert min(abs(want - edge), abs(want + 1 - edge), abs(want + edge),
+                           abs(want + 1 + edge)) <= 1, (n, w, want, q, outside)
+            elif not want_outside:
+                assert abs(q - want) <= 1, (n, w, q, want)
 
 
 @pytest.mark.parametrize("width, count, extra, name", [
     (1, 2, {}, "width"), (40, 0, {}, "count"), (40, "2", {}, "count"),
-    (40, 2, {"denominator_width": 0}, "denominator_width"),
+    (40, 2, {"denominator_range": (0, 5)}, "denominator_range"),
+    (40, 2, {"denominator_range": (9, 5)}, "denominator_range"),
+    (40, 2, {"denominator_range": "wide"}, "denominator_range"),
+    (40, 2, {"precision": QUOTIENT_BITS + 1}, "precision"),
     (40, 2, {"quotient_bits": COORD_FRACTION_BITS}, "quotient_bits")])
 def test_coordinate_divider_refuses_bad_parameters(width, count, extra, name):
     with pytest.raises(ParameterError, match=name):
-        CoordinateDivider(width, count, **extra)
+        CoordinateDivider(width, count, **{"denominator_range": (1, 100), **extra})

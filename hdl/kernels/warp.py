@@ -1,6 +1,7 @@
 """Perspective warp with bilinear interpolation, as ``cv2.warpPerspective`` computes it
 (docs/kernels.md): the image projection of the AutoRace lane-following chain."""
 
+import math
 from fractions import Fraction
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed
@@ -36,16 +37,27 @@ def _fixed(value, what):
 
 
 class CoordinateDivider(wiring.Component):
-    """``floor(2**16 n / w)`` for each of ``count`` numerators over one ``w > 0``, pipelined,
-    one set of divisions per cycle: long division of ``|n| 2**16`` by ``w``, one quotient bit
-    per stage, the sign after. ``outside[i]`` when the magnitude of quotient ``i`` reaches
-    ``2**quotient_bits``. A :class:`PerspectiveWarp` has one per pixel lane (its ``div<p>``),
-    for the lane's x and y over their common denominator: the denominator's pipeline
-    registers serve both.
+    """``2**16 n / w`` for each of ``count`` numerators over one denominator ``w``, as a
+    reciprocal and a product each, pipelined: one set of divisions per cycle. A
+    :class:`PerspectiveWarp` has one per pixel lane (its ``div<p>``), for the lane's x and y
+    over their common denominator.
 
-    A stage subtracts ``w`` from the partial remainder (below ``w``) with the dividend's next
-    bit shifted in, so each stage is as wide as ``w`` plus one bit, whatever the numerators'
-    width: the numerators' high bits only decide ``outside``, in the first stage.
+    The denominator's range ``lo <= w <= hi`` is known when the divider is built (the warp's
+    denominator is a linear function of the destination pixel), so it is scaled by a
+    constant power of two, ``w' = floor(w / 2**s)`` with ``2**(T-1) <= lo' `` (``T`` the
+    precision), and the numerators with it, ``n' = floor(n / 2**s)``; for ``s < 0`` both are
+    shifted left, exactly. ``R = floor(2**K / w')`` with ``K = b + T - 1`` (``b`` the bits of
+    ``hi'``) comes from a non-restoring division, one quotient bit per stage, ``b + 1``
+    stages of an adder as wide as ``w'``; then each quotient is ``floor(n' R / 2**(K - 16))``.
+
+    The result differs from ``floor(2**16 n / w)`` by at most 1 (a unit of ``2**-16``):
+    truncating ``w``, ``n`` and ``R`` to ``T`` significant bits moves a quotient below
+    ``2**quotient_bits`` by less than ``2**(quotient_bits + 2 - T)`` units, a quarter for the
+    default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
+    ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of the exact one's limit, either
+    answer); a numerator so large that no denominator of the range brings it inside is
+    outside before the product (``|n'| >= 2**(quotient_bits - 15 + b)``), so the multipliers
+    are as wide as the quotients need, whatever the numerators' width.
 
     Parameters
     ----------
@@ -53,17 +65,21 @@ class CoordinateDivider(wiring.Component):
         Bits of each ``n`` (signed).
     count : int
         Numerators sharing the denominator.
-    denominator_width : int or None
-        Bits of ``w`` (unsigned); ``width`` if None.
+    denominator_range : (int, int)
+        The smallest and largest ``w`` the divider is given (``0 < lo <= hi``); a ``w``
+        outside the range gives quotients of no meaning.
     quotient_bits : int
         Bits of a quotient's magnitude, 17 or more (16 of them below the point).
+    precision : int or None
+        ``T``, the significant bits kept of ``w``, ``n`` and ``R``: ``quotient_bits + 4`` if
+        None; ``quotient_bits + 2`` at least.
 
     Members
     -------
     n : In(signed(width)).array(count)
         Numerators, taken with ``w`` while ``valid``.
-    w : In(denominator_width)
-        The denominator, positive.
+    w : In(hi.bit_length())
+        The denominator.
     valid : In(1)
     q : Out(signed(quotient_bits + 1)).array(count)
         Quotients, :attr:`latency` cycles after their inputs.
@@ -72,66 +88,118 @@ class CoordinateDivider(wiring.Component):
         ``valid``, delayed with the quotients.
     """
 
-    def __init__(self, width, count=2, *, denominator_width=None, quotient_bits=QUOTIENT_BITS):
+    #: bits of ``R`` per partial product (a multiplier block's unsigned input)
+    CHUNK_BITS = 17
+
+    def __init__(self, width, count=2, *, denominator_range, quotient_bits=QUOTIENT_BITS,
+                 precision=None):
         check_int("width", width, 2, 1 << 12)
         check_int("count", count, 1, 16)
-        if denominator_width is None:
-            denominator_width = width
-        check_int("denominator_width", denominator_width, 1, 1 << 12)
         check_int("quotient_bits", quotient_bits, COORD_FRACTION_BITS + 1, 64)
+        if precision is None:
+            precision = quotient_bits + 4
+        check_int("precision", precision, quotient_bits + 2, 128)
+        try:
+            lo, hi = (int(v) for v in denominator_range)
+        except (TypeError, ValueError):
+            raise ParameterError("denominator_range", denominator_range,
+                                 "two integers (lo, hi)") from None
+        if not 0 < lo <= hi:
+            raise ParameterError("denominator_range", denominator_range, "0 < lo <= hi")
         self._width = width
         self._count = count
-        self._den_width = denominator_width
         self._q = quotient_bits
-        super().__init__({"n": In(signed(width)).array(count), "w": In(denominator_width),
+        self._t = precision
+        self._lo, self._hi = lo, hi
+        #: the scale: w' = w / 2**shift (a left shift when negative)
+        self.shift = lo.bit_length() - precision
+        #: bits of the largest scaled denominator
+        self.scaled_bits = self._scaled(hi).bit_length()
+        super().__init__({"n": In(signed(width)).array(count), "w": In(hi.bit_length()),
                           "valid": In(1), "q": Out(signed(quotient_bits + 1)).array(count),
                           "outside": Out(1).array(count), "q_valid": Out(1)})
 
-    #: cycles from a set of inputs to its quotients
-    latency = property(lambda self: self._q + 1)
+    def _scaled(self, v):
+        return v >> self.shift if self.shift >= 0 else v << -self.shift
+
+    @property
+    def reciprocal_exponent(self):
+        """``K``: the reciprocal is ``floor(2**K / w')``."""
+        return self.scaled_bits + self._t - 1
+
+    @property
+    def numerator_limit(self):
+        """``|n'|`` at or above ``2**numerator_limit`` is outside for any ``w`` of the range."""
+        return self._q - COORD_FRACTION_BITS + 1 + self.scaled_bits
+
+    #: cycles from a set of inputs to its quotients: the scaled inputs, ``b + 1`` division
+    #: stages, the partial products, their sum
+    latency = property(lambda self: self.scaled_bits + 4)
 
     def elaborate(self, platform):
         m = Module()
-        Q, F, D = self._q, COORD_FRACTION_BITS, self._den_width
-        # the dividend |n| 2**16: its bits from Q up are the first partial remainder, the
-        # bits below Q enter one per stage (the lowest F are 0)
-        fed = Q - F
-        den, v = Signal(D), Signal()
-        m.d.sync += [den.eq(self.w), v.eq(self.valid)]
-        lanes = []
+        Q, F, T = self._q, COORD_FRACTION_BITS, self._t
+        b = self.scaled_bits
+        K = self.reciprocal_exponent
+        L = self.numerator_limit
+        steps = b + 1
+
+        # scaled inputs; a numerator beyond the limit is outside and multiplies as 0
+        den, v = Signal(b, name="den"), Signal(name="v0")
+        m.d.sync += [den.eq(self._scaled(self.w)), v.eq(self.valid)]
+        nums, far = [], []
         for i in range(self._count):
-            neg = self.n[i] < 0
-            mag = Signal(self._width, name=f"mag{i}")
-            m.d.comb += mag.eq(Mux(neg, -self.n[i], self.n[i]))
-            rem, low, quo = (Signal(D, name=f"rem{i}"), Signal(fed, name=f"low{i}"),
-                             Signal(Q, name=f"quo{i}"))
-            sign, out = Signal(name=f"sign{i}"), Signal(name=f"out{i}")
-            # below w unless outside (then nothing downstream uses the quotient)
-            m.d.sync += [rem.eq(mag >> fed), low.eq(mag), sign.eq(neg),
-                         out.eq((mag >> fed) >= self.w)]
-            lanes.append((rem, low, quo, sign, out))
-        for k in reversed(range(Q)):
-            den_n, v_n = Signal(D), Signal()
-            m.d.sync += [den_n.eq(den), v_n.eq(v)]
-            stepped = []
-            for i, (rem, low, quo, sign, out) in enumerate(lanes):
-                bit = low[k - F] if k >= F else Const(0, 1)
-                trial = Cat(bit, rem)
-                ge = trial >= den
-                rem_n, quo_n = Signal(D), Signal(Q)
-                # the dividend bits still to enter (none below F: those are 0)
-                low_n = Signal(k - F) if k > F else Const(0, 1)
-                sign_n, out_n = Signal(), Signal()
-                m.d.sync += [rem_n.eq(Mux(ge, trial - den, trial)),
-                             quo_n.eq(quo | (ge << k)), sign_n.eq(sign), out_n.eq(out)]
-                if k > F:
-                    m.d.sync += low_n.eq(low)
-                stepped.append((rem_n, low_n, quo_n, sign_n, out_n))
-            den, v, lanes = den_n, v_n, stepped
-        for i, (rem, _, quo, sign, out) in enumerate(lanes):
-            m.d.comb += [self.q[i].eq(Mux(sign, -quo - (rem != 0), quo)),
-                         self.outside[i].eq(out)]
-        m.d.comb += self.q_valid.eq(v)
+            scaled = self._scaled(self.n[i])
+            high = scaled >> L
+            beyond = (high != 0) & (high != -1)
+            num, out = Signal(signed(L + 1), name=f"num{i}"), Signal(name=f"far{i}")
+            m.d.sync += [num.eq(Mux(beyond, 0, scaled)), out.eq(beyond)]
+            nums.append(num)
+            far.append(out)
+
+        # R = floor(2**K / w'), non-restoring: the remainder r starts at 2**(T-2) (< w'),
+        # each stage doubles it and subtracts w' (r >= 0, quotient bit 1) or adds it (0); the
+        # quotient is the bits with the final remainder's "not negative" appended, taken
+        # modulo 2**steps
+        rem = Const(1 << (T - 2), signed(b + 1))
+        quo = Const(0, 0)
+        for k in range(steps):
+            neg = rem[-1]
+            # 2r + w' or 2r - w' = 2r + ~w' + 1, modulo 2**(b+1) (the result fits): one
+            # adder, the carry entering as the doubled remainder's low bit
+            wide = Cat(den, Const(0, 1))
+            total = Cat(~neg, rem)[:b + 1] + Mux(neg, wide, ~wide)
+            rem_n = Signal(signed(b + 1), name=f"rem{k + 1}")
+            quo_n = Signal(k + 1, name=f"quo{k + 1}")
+            den_n, v_n = Signal(b, name=f"den{k + 1}"), Signal(name=f"v{k + 1}")
+            m.d.sync += [rem_n.eq(total[:b + 1]), quo_n.eq(Cat(~neg, quo)),
+                         den_n.eq(den), v_n.eq(v)]
+            nums_n = [Signal(signed(L + 1), name=f"num{i}_{k + 1}") for i in range(self._count)]
+            far_n = [Signal(name=f"far{i}_{k + 1}") for i in range(self._count)]
+            m.d.sync += [a.eq(b_) for a, b_ in zip(nums_n + far_n, nums + far)]
+            rem, quo, den, v, nums, far = rem_n, quo_n, den_n, v_n, nums_n, far_n
+        recip = Cat(~rem[-1], quo[:steps - 1])
+
+        # n' R as partial products of CHUNK_BITS of R each, then their sum
+        C = self.CHUNK_BITS
+        chunks = [recip[k:k + C] for k in range(0, steps, C)]
+        v_p, v_s = Signal(name="v_p"), Signal(name="v_s")
+        m.d.sync += [v_p.eq(v), v_s.eq(v_p)]
+        for i in range(self._count):
+            parts = []
+            for j, chunk in enumerate(chunks):
+                part = Signal(signed(L + 1 + len(chunk) + 1), name=f"part{i}_{j}")
+                m.d.sync += part.eq(nums[i] * chunk)
+                parts.append((part, j * C))
+            far_p, far_s = Signal(name=f"far{i}_p"), Signal(name=f"far{i}_s")
+            total = sum(part.as_signed() << shift for part, shift in parts)
+            full = Signal(signed(L + 2 + steps), name=f"prod{i}")
+            m.d.sync += [far_p.eq(far[i]), far_s.eq(far_p), full.eq(total)]
+            quotient = full >> (K - F)
+            m.d.comb += [self.q[i].eq(quotient),
+                         self.outside[i].eq(far_s | (quotient >= (1 << Q))
+                                            | (quotient < -(1 << Q)))]
+        m.d.comb += self.q_valid.eq(v_s)
         return m
 
 
@@ -139,12 +207,14 @@ class PerspectiveWarp(wiring.Component):
     """``cv2.warpPerspective(src, H, (dst_width, dst_height))`` on ``bgr8`` frames: bilinear
     interpolation, border constant 0.
 
-    A source frame is stored whole (four banks by row and column parity, so one read per bank
-    gives a pixel's 2x2 neighbourhood), then the destination frame streams out, ``P`` pixels
-    per beat. Each destination pixel's source position is ``((m0 x + m1 y + m2) / (m6 x + m7
-    y + m8), (m3 x + m4 y + m5) / (...))``, computed exactly with the inverse matrix's entries
-    as multiples of ``2**-64`` and truncated to ``2**-16`` pixel (a pipelined divider per
-    lane, for x and y over their common denominator). The value is the bilinear mix of the
+    A source frame is stored (four banks by row and column parity, so one read per bank
+    gives a pixel's 2x2 neighbourhood; only the :attr:`stored_window` the map can read), then
+    the destination frame streams out, ``P`` pixels per beat. Each destination pixel's source
+    position is ``((m0 x + m1 y + m2) / (m6 x + m7 y + m8), (m3 x + m4 y + m5) / (...))``,
+    the sums exact with the inverse matrix's entries as multiples of ``2**-64``, the
+    quotients in units of ``2**-16`` pixel, equal to the exact quotient's floor or one unit
+    off (a :class:`CoordinateDivider` per lane: one reciprocal of the denominator and a
+    product for x and for y). The value is the bilinear mix of the
     four neighbours with the fractions' products as weights (they sum to ``2**32``), rounded
     to nearest; neighbours outside the source count as 0.
 
@@ -236,10 +306,11 @@ class PerspectiveWarp(wiring.Component):
         return max(abs(v) for vs in self._register_values() for v in vs).bit_length() + 1
 
     @property
-    def _denominator_width(self):
+    def _denominator_range(self):
         # the denominator where a pixel is issued (positive there: checked at the corners)
         dw, dh = self._dst
-        return max(self._linear(2, x, y) for x in (0, dw - 1) for y in (0, dh - 1)).bit_length()
+        values = [self._linear(2, x, y) for x in (0, dw - 1) for y in (0, dh - 1)]
+        return min(values), max(values)
 
     @property
     def _quotient_bits(self):
@@ -247,6 +318,34 @@ class PerspectiveWarp(wiring.Component):
         # 2**k >= the source's size (a coordinate x has x and x + 1 as neighbours)
         sw, sh = self._src
         return max((sw - 1).bit_length(), (sh - 1).bit_length(), 1) + COORD_FRACTION_BITS
+
+    @property
+    def stored_window(self):
+        """``(x0, y0, width, height)``: the part of the source frame the store keeps, every
+        pixel the map can read. The map takes the destination rectangle to a convex
+        quadrilateral (its denominator has one sign there), so the source positions lie
+        between its corners' extremes; a pixel's neighbours reach one further, and a computed
+        position may lie one pixel off (its last bit), so the window reaches one more each
+        way, clipped to the frame. ``x0`` is a multiple of the store's word (2 pixels, P at
+        2 pixels per beat and more), ``y0`` is even, and the sizes keep the banks whole."""
+        sw, sh = self._src
+        dw, dh = self._dst
+        align = 2 * max(self._p // 2, 1)
+        xs, ys = [], []
+        for x, y in ((0, 0), (dw - 1, 0), (0, dh - 1), (dw - 1, dh - 1)):
+            w = self._linear(2, x, y)
+            xs.append(Fraction(self._linear(0, x, y), w))
+            ys.append(Fraction(self._linear(1, x, y), w))
+
+        def span(values, size, step):
+            low = min(max(math.floor(min(values)) - 1, 0), size - 1)
+            high = min(max(math.floor(max(values)) + 2, low), size - 1)
+            low -= low % step
+            high += step - 1 - high % step
+            return low, high + 1 - low
+
+        (x0, kw), (y0, kh) = span(xs, sw, align), span(ys, sh, 2)
+        return x0, y0, kw, kh
 
     #: the names of the :class:`CoordinateDivider` submodules, ``div<p>`` (a regular
     #: expression over a hierarchical module name)
@@ -257,7 +356,7 @@ class PerspectiveWarp(wiring.Component):
         :attr:`coordinate_divider_count` times (one per pixel lane, for x and y): resource
         estimates synthesise it once."""
         return CoordinateDivider(self._divider_width, 2,
-                                 denominator_width=self._denominator_width,
+                                 denominator_range=self._denominator_range,
                                  quotient_bits=self._quotient_bits)
 
     coordinate_divider_count = property(lambda self: self._p)
@@ -273,11 +372,13 @@ class PerspectiveWarp(wiring.Component):
                      self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long),
                      self.err_size.eq(guard.err_size)]
 
-        # the frame store: bank (row & 1, col & 1) holds pixel (r, c) at (r >> 1) * sw/2 +
-        # (c >> 1); a beat of P pixels writes P/2 (or 1) pixels into each bank it touches
+        # the frame store keeps the window the map reads (stored_window): bank (row & 1,
+        # col & 1) holds pixel (r, c) at ((r - y0) >> 1) * w/2 + ((c - x0) >> 1); a beat of P
+        # pixels writes P/2 (or 1) pixels into each bank it touches
         per_word = max(P // 2, 1)
-        words_per_row = sw // 2 // per_word
-        depth = (sh // 2) * words_per_row
+        x0, y0, kw, kh = self.stored_window
+        words_per_row = kw // 2 // per_word
+        depth = (kh // 2) * words_per_row
         # each bank is copied once per pair of pixel lanes (every lane reads its own 2x2
         # neighbourhood in the same cycle); the even lane's read shares its copy's port with
         # the write port (stores and reads never overlap), so a copy fits one true-dual-port
@@ -295,7 +396,8 @@ class PerspectiveWarp(wiring.Component):
         storing = Signal(init=1)
         take = guard.o.tvalid & guard.o.tready
         m.d.comb += guard.o.tready.eq(storing)
-        word_addr = (row >> 1) * words_per_row + (col >> 1) // per_word
+        word_addr = ((row - y0) >> 1) * words_per_row + ((col - x0) >> 1) // per_word
+        kept = (row >= y0) & (row < y0 + kh) & (col >= x0) & (col < x0 + kw)
         for r in range(2):
             for c in range(2):
                 if P == 1:
@@ -307,7 +409,7 @@ class PerspectiveWarp(wiring.Component):
                 for k in range(copies):
                     wp = banks[r][c][k].write_port()
                     m.d.comb += [wp.addr.eq(shared_addr[r][c][k]), wp.data.eq(data),
-                                 wp.en.eq(take & hit)]
+                                 wp.en.eq(take & hit & kept)]
         with m.If(take):
             with m.If(col + P == sw):
                 m.d.sync += [col.eq(0), row.eq(row + 1)]
@@ -411,15 +513,16 @@ class PerspectiveWarp(wiring.Component):
             for r in range(2):
                 for c in range(2):
                     port = banks[r][c][p // 2].read_port()
-                    addr = (ny[r] >> 1) * words_per_row + (nx[c] >> 1)[:16] // per_word
+                    addr = (((ny[r] - y0) >> 1) * words_per_row
+                            + ((nx[c] - x0) >> 1)[:16] // per_word)
                     if p % 2 == 0:
                         shared = shared_addr[r][c][p // 2]
                         m.d.comb += [shared.eq(Mux(storing, word_addr, addr)),
                                      port.addr.eq(shared)]
                     else:
                         m.d.comb += port.addr.eq(addr)
-                    inside = delayed(~away_n & (ny[r] >= 0) & (ny[r] < sh) & (nx[c] >= 0)
-                                   & (nx[c] < sw), f"in{p}_{r}{c}")
+                    inside = delayed(~away_n & (ny[r] >= y0) & (ny[r] < y0 + kh)
+                                     & (nx[c] >= x0) & (nx[c] < x0 + kw), f"in{p}_{r}{c}")
                     sel = (delayed((nx[c] >> 1)[:16] % per_word, f"sel{p}_{r}{c}")
                            if per_word > 1 else None)
                     # W
