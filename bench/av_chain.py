@@ -181,18 +181,28 @@ def _add(rows, label):
     return {"part": label, **{k: sum(r[k] for r in rows) for k in keys}}
 
 
-def _node_resources(config, name, log):
-    """The estimate of node ``name`` at ``config``'s size: the projection without its
-    coordinate dividers plus one divider's estimate per instance (the ``P`` identical
-    dividers, each mapped on its own by Yosys, are most of the time of the whole
+def project_part():
+    """The part of the example project (its build.cfg's ``TargetPart``) and its Yosys family."""
+    from gen.config import load_project
+    from gen.export.resources import xilinx_family
+    part = load_project(PROJECT).part
+    return part, xilinx_family(part)
+
+
+def _node_resources(config, name, log, family):
+    """The estimate of node ``name`` at ``config``'s size for ``family``: the projection
+    without its coordinate dividers plus one divider's estimate per instance (the ``P``
+    identical dividers, each mapped on its own by Yosys, are most of the time of the whole
     projection)."""
     node = chain_node(config, name, events=True)
-    stem = f"av-{name}-p{config.pixels_per_beat}"
+    stem = f"av-{name}-p{config.pixels_per_beat}-{family}"
     if name != "projection":
-        return component_resources(node, f"av_{name}", stem)
-    rest = component_resources(node, f"av_{name}", stem, blackbox=node.DIVIDER_SUBMODULES)
+        return component_resources(node, f"av_{name}", stem, family=family)
+    rest = component_resources(node, f"av_{name}", stem, blackbox=node.DIVIDER_SUBMODULES,
+                               family=family)
     divider = component_resources(node.coordinate_divider(), "av_projection_divider",
-                                  "av-projection-divider")
+                                  f"av-projection-divider-p{config.pixels_per_beat}-{family}",
+                                  family=family)
     count = node.coordinate_divider_count
     log(f"    projection: {rest['LUT']} LUT without its {count} coordinate dividers, "
         f"{divider['LUT']} LUT each")
@@ -201,48 +211,64 @@ def _node_resources(config, name, log):
 
 def measure_resources(log=print):
     """Yosys estimates of the whole hardware chain (the fpgaDDS variant's seven nodes and six
-    topic fabrics, at the camera's 640x480) at 4 and 1 px/clk, beside fpgaDDS Table II."""
+    topic fabrics, at the camera's 640x480) at 4 and 1 px/clk for the example project's part
+    (UltraRAM included), beside fpgaDDS Table II."""
+    from gen.export.resources import FAMILY_NAMES
+    part, family = project_part()
     rows = []
     for p in (4, 1):
         config = scaled_config(1.0, p)
-        log(f"  yosys estimates of the chain's nodes and topics at {p} px/clk "
-            "(minutes per node the first time)...")
+        log(f"  yosys estimates of the chain's nodes and topics at {p} px/clk for {part} "
+            f"({FAMILY_NAMES[family]}; minutes per node the first time)...")
         parts = []
         for name in NODES:
-            parts.append({"part": name, **_node_resources(config, name, log)})
+            parts.append({"part": name, **_node_resources(config, name, log, family)})
             log(f"    {name}: {parts[-1]['LUT']} LUT, {parts[-1]['FF']} FF, "
-                f"{parts[-1]['BRAM18_equiv'] / 2:g} BRAM36 eq., {parts[-1]['DSP']} DSP")
-        topics = [component_resources(t, f"av_topic_{k}", f"av-topic-{k}-p{p}")
+                f"{parts[-1]['BRAM36']} BRAM36, {parts[-1]['BRAM18']} BRAM18, "
+                f"{parts[-1]['URAM']} URAM, {parts[-1]['DSP']} DSP")
+        topics = [component_resources(t, f"av_topic_{k}", f"av-topic-{k}-p{p}-{family}",
+                                      family=family)
                   for k, t in chain_topics(config).items()]
         parts.append(_add(topics, "topic fabrics A-F"))
         total = _add(parts, "whole chain")
-        rows += [dict(r, ppc=p) for r in parts + [total]]
+        rows += [dict(r, ppc=p, part_name=part, family=family) for r in parts + [total]]
     return rows
 
 
 def resource_lines(resources):
-    """The Markdown of the chain's resources beside fpgaDDS Table II."""
+    """The Markdown of the chain's resources beside fpgaDDS Table II and the device."""
     if not resources:
         return []
+    from gen.export.resources import FAMILY_NAMES
+    family = resources[0].get("family", "xc7")
+    part = resources[0].get("part_name", "the XCZU7EV")
     lines = resource_table([dict(r, label=f"{r['part']} ({r['ppc']})") for r in resources],
-                           "label", "part (px/clk)",
-                           detail=", 640x480 camera, 1000x600 bird's-eye view")
-    paper = PAPER_MEMORY
+                           "label", "part (px/clk)", family=family,
+                           detail=f" for {part}, {FAMILY_NAMES[family]}; 640x480 camera, "
+                                  "1000x600 bird's-eye view")
+    paper, dev = PAPER_MEMORY, XCZU7EV
+
+    def share(value, total):
+        return f"{value:,g} ({100 * value / total:.0f} %)"
+
     lines += ["", "The whole chain beside fpgaDDS Table II (its chain on the ZCU104's XCZU7EV) "
-              "and the device:", "",
-              "| chain | LUT | % of XCZU7EV | BRAM36 eq. | DSP |", "|---|---|---|---|---|",
-              f"| fpgaDDS paper (Vivado) | {PAPER_LUT:,} | "
-              f"{100 * PAPER_LUT / XCZU7EV['LUT']:.0f} % | {paper['BRAM36']:g} + "
-              f"{paper['URAM']} URAM | {paper['DSP']} |"]
+              "and the device (share of the device in parentheses; a chain fits with 20 % to "
+              "spare at 80 % or less of each):", "",
+              "| chain | LUT | BRAM36 eq. | UltraRAM | DSP |", "|---|---|---|---|---|",
+              f"| fpgaDDS paper (Vivado) | {share(PAPER_LUT, dev['LUT'])} | "
+              f"{share(paper['BRAM36'], dev['BRAM36'])} | {share(paper['URAM'], dev['URAM'])} "
+              f"| {share(paper['DSP'], dev['DSP'])} |"]
     for r in resources:
         if r["part"] == "whole chain":
-            lines.append(f"| rosgate, {r['ppc']} px/clk (Yosys) | {r['LUT']:,} | "
-                         f"{100 * r['LUT'] / XCZU7EV['LUT']:.0f} % | "
-                         f"{r['BRAM18_equiv'] / 2:g} | {r['DSP']} |")
-    lines += ["", f"The XCZU7EV has {XCZU7EV['BRAM36']} BRAM36 and {XCZU7EV['URAM']} UltraRAMs "
-              "(288 Kb each; Yosys' xc7 flow maps no UltraRAM, so every store counts as "
-              "BRAM36 here). The projection's coordinate dividers are estimated once and "
-              "counted per instance (one per px/clk, for a pixel's x and y)."]
+            bram36 = r["BRAM36"] + r["BRAM18"] / 2
+            lines.append(f"| rosgate, {r['ppc']} px/clk (Yosys) | {share(r['LUT'], dev['LUT'])} "
+                         f"| {share(bram36, dev['BRAM36'])} | "
+                         f"{share(r.get('URAM', 0), dev['URAM'])} | "
+                         f"{share(r['DSP'], dev['DSP'])} |")
+    lines += ["", f"The XCZU7EV: {dev['LUT']:,} LUTs, {dev['BRAM36']} BRAM36, {dev['URAM']} "
+              f"UltraRAMs (288 Kb each), {dev['DSP']:,} DSPs. BRAM36 eq. counts a BRAM18 as "
+              "half. The projection's coordinate dividers are estimated once and counted per "
+              "instance (one per px/clk, for a pixel's x and y)."]
     return lines
 
 

@@ -15,26 +15,34 @@ RESOURCE_COLUMNS = (("LUT", "LUT"), ("INV", "INV"), ("FF", "FF"), ("LUTRAM", "LU
                     ("BRAM18 eq.", "BRAM18_equiv"), ("DSP", "DSP"), ("CARRY4", "CARRY4"))
 
 
-def component_resources(component, top, file_stem, *, blackbox=None):
+def component_resources(component, top, file_stem, *, blackbox=None, family="xc7"):
     """Export ``component`` as Verilog module ``top`` (to ``sim_build/bench-resources/
-    <file_stem>.v``, rewritten only when it changed) and return its yosys estimate without
-    the per-cell list (``blackbox``: :func:`~gen.export.resources.estimate_resources`)."""
+    <file_stem>.v``, rewritten only when it changed) and return its yosys estimate for
+    ``family`` without the per-cell list (``blackbox``, ``family``:
+    :func:`~gen.export.resources.estimate_resources`)."""
     text, _ = export_verilog(component, top)
     vfile = SIM_BUILD / "bench-resources" / f"{file_stem}.v"
     write_if_changed(vfile, text)
-    return {k: v for k, v in estimate_resources(vfile, top, blackbox=blackbox).items()
-            if k != "cells"}
+    return {k: v for k, v in estimate_resources(vfile, top, blackbox=blackbox,
+                                                family=family).items() if k != "cells"}
 
 
-def resource_table(rows, label, title, *, detail="", extra=()):
-    """Markdown lines of a resource section: a heading naming the yosys flow and how LUTs are
-    counted (``detail`` adds to it), then one row per estimate in ``rows``, labelled by
-    ``row[label]`` under the column ``title``; ``extra`` is (heading, key) of further
-    columns."""
-    from gen.export.resources import YOSYS_COMMAND
-    columns = RESOURCE_COLUMNS + tuple(extra)
-    lines = ["", f"## Resources (Debian Yosys `{YOSYS_COMMAND}`{detail}; LUT = LUT1..LUT6 as in "
-             "docs/network.md, INV cells apart: see gen/export/resources.py)", "",
+#: Columns of a resource table for UltraScale+ (``xcup``): block RAM and UltraRAM apart, the
+#: carry chains are CARRY8 cells
+ULTRASCALE_PLUS_COLUMNS = (("LUT", "LUT"), ("INV", "INV"), ("FF", "FF"), ("LUTRAM", "LUTRAM"),
+                           ("BRAM36", "BRAM36"), ("BRAM18", "BRAM18"), ("URAM", "URAM"),
+                           ("DSP", "DSP"), ("CARRY8", "CARRY4"))
+
+
+def resource_table(rows, label, title, *, detail="", extra=(), family="xc7"):
+    """Markdown lines of a resource section: a heading naming the yosys flow for ``family``
+    and how LUTs are counted (``detail`` adds to it), then one row per estimate in ``rows``,
+    labelled by ``row[label]`` under the column ``title``; ``extra`` is (heading, key) of
+    further columns."""
+    from gen.export.resources import yosys_command
+    columns = (ULTRASCALE_PLUS_COLUMNS if family == "xcup" else RESOURCE_COLUMNS) + tuple(extra)
+    lines = ["", f"## Resources (Debian Yosys `{yosys_command(family)}`{detail}; LUT = LUT1..LUT6 "
+             "as in docs/network.md, INV cells apart: see gen/export/resources.py)", "",
              "| " + " | ".join([title] + [c for c, _ in columns]) + " |",
              "|" + "---|" * (len(columns) + 1)]
     for r in rows:

@@ -218,7 +218,7 @@ def test_coordinate_divider_shares_its_denominator(width, denominator_range, quo
     (40, 2, {"denominator_range": (0, 5)}, "denominator_range"),
     (40, 2, {"denominator_range": (9, 5)}, "denominator_range"),
     (40, 2, {"denominator_range": "wide"}, "denominator_range"),
-    (40, 2, {"precision": QUOTIENT_BITS + 1}, "precision"),
+    (40, 2, {"precision": QUOTIENT_BITS + 2}, "precision"),
     (40, 2, {"quotient_bits": COORD_FRACTION_BITS}, "quotient_bits")])
 def test_coordinate_divider_refuses_bad_parameters(width, count, extra, name):
     with pytest.raises(ParameterError, match=name):

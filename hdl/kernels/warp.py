@@ -52,8 +52,8 @@ class CoordinateDivider(wiring.Component):
 
     The result differs from ``floor(2**16 n / w)`` by at most 1 (a unit of ``2**-16``):
     truncating ``w``, ``n`` and ``R`` to ``T`` significant bits moves a quotient below
-    ``2**quotient_bits`` by less than ``2**(quotient_bits + 2 - T)`` units, a quarter for the
-    default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
+    ``2**quotient_bits`` by less than ``2**(quotient_bits + 2 - T) + 2**(17 - T)`` units,
+    about a quarter for the default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
     ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of the exact one's limit, either
     answer); a numerator so large that no denominator of the range brings it inside is
     outside before the product (``|n'| >= 2**(quotient_bits - 15 + b)``), so the multipliers
@@ -72,7 +72,7 @@ class CoordinateDivider(wiring.Component):
         Bits of a quotient's magnitude, 17 or more (16 of them below the point).
     precision : int or None
         ``T``, the significant bits kept of ``w``, ``n`` and ``R``: ``quotient_bits + 4`` if
-        None; ``quotient_bits + 2`` at least.
+        None; ``quotient_bits + 3`` at least.
 
     Members
     -------
@@ -98,7 +98,7 @@ class CoordinateDivider(wiring.Component):
         check_int("quotient_bits", quotient_bits, COORD_FRACTION_BITS + 1, 64)
         if precision is None:
             precision = quotient_bits + 4
-        check_int("precision", precision, quotient_bits + 2, 128)
+        check_int("precision", precision, quotient_bits + 3, 128)
         try:
             lo, hi = (int(v) for v in denominator_range)
         except (TypeError, ValueError):
