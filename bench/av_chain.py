@@ -17,7 +17,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 from bench.av_chain_bench import HARNESS
-from bench.report import RESOURCE_COLUMNS, component_resources, resource_table, write_report
+from bench.report import component_resources, resource_table, write_report
 from gen.av_chain import NODES, chain_node, chain_topics, scaled_config, scaled_params
 from host.project_sim import run_project_sim
 from tb.harness import ROOT, SIM_BUILD, run_bench
@@ -177,7 +177,7 @@ def measure_reconros(results, log=print, ppcs=(4, 1)):
 
 def _add(rows, label):
     """The sum of the estimates ``rows`` as one row labelled ``label``."""
-    keys = [k for _, k in RESOURCE_COLUMNS]
+    keys = [k for k, v in rows[0].items() if isinstance(v, (int, float)) and k != "ppc"]
     return {"part": label, **{k: sum(r[k] for r in rows) for k in keys}}
 
 

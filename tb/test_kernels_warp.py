@@ -142,20 +142,22 @@ def divide_model(n, w, quotient_bits=QUOTIENT_BITS):
     return q, not -(1 << quotient_bits) <= q < 1 << quotient_bits
 
 
-@pytest.mark.parametrize("width, denominator_range, quotient_bits", [
-    (40, (1, (1 << 24) - 1), QUOTIENT_BITS),      # a wide range, scaled up (w < 2**T)
-    (76, (15 << 60, 77 << 60), 26),               # the chain's: scaled down by 2**34
-    (48, (1 << 29, 1 << 29), 21),                 # one denominator, a power of two
-    (36, (3, 5000), 17)])
-def test_coordinate_divider_shares_its_denominator(width, denominator_range, quotient_bits):
+@pytest.mark.parametrize("width, denominator_range, quotient_bits, per_stage", [
+    (40, (1, (1 << 24) - 1), QUOTIENT_BITS, 1),   # a wide range, scaled up (w < 2**T)
+    (76, (15 << 60, 77 << 60), 26, 1),            # the chain's: scaled down by 2**34
+    (76, (15 << 60, 77 << 60), 26, 2),
+    (48, (1 << 29, 1 << 29), 21, 1),              # one denominator, a power of two
+    (36, (3, 5000), 17, 3)])
+def test_coordinate_divider_shares_its_denominator(width, denominator_range, quotient_bits,
+                                                   per_stage):
     """Pairs of numerators over one denominator, a new set every cycle: each quotient within
     1 of exact integer division (floor, negative numerators included), ``outside`` where the
     exact quotient does not fit (within 1 of the limit, either answer), each ``latency``
-    cycles after its inputs; numerators far beyond the limit, the range's ends, exact
+    cycles after its inputs (one to three reciprocal bits per stage); numerators far beyond the limit, the range's ends, exact
     quotients."""
     lo, hi = denominator_range
     dut = CoordinateDivider(width, 2, denominator_range=denominator_range,
-                            quotient_bits=quotient_bits)
+                            quotient_bits=quotient_bits, bits_per_stage=per_stage)
     limit = 1 << (quotient_bits - COORD_FRACTION_BITS)
     top = (1 << (width - 1)) - 1
     rng = np.random.default_rng(11 + quotient_bits)
@@ -219,6 +221,8 @@ def test_coordinate_divider_shares_its_denominator(width, denominator_range, quo
     (40, 2, {"denominator_range": (9, 5)}, "denominator_range"),
     (40, 2, {"denominator_range": "wide"}, "denominator_range"),
     (40, 2, {"precision": QUOTIENT_BITS + 2}, "precision"),
+    (40, 2, {"bits_per_stage": 0}, "bits_per_stage"),
+    (40, 2, {"bits_per_stage": 5}, "bits_per_stage"),
     (40, 2, {"quotient_bits": COORD_FRACTION_BITS}, "quotient_bits")])
 def test_coordinate_divider_refuses_bad_parameters(width, count, extra, name):
     with pytest.raises(ParameterError, match=name):

@@ -53,7 +53,8 @@ class CoordinateDivider(wiring.Component):
     The result differs from ``floor(2**16 n / w)`` by at most 1 (a unit of ``2**-16``):
     truncating ``w``, ``n`` and ``R`` to ``T`` significant bits moves a quotient below
     ``2**quotient_bits`` by less than ``2**(quotient_bits + 2 - T) + 2**(17 - T)`` units,
-    about a quarter for the default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
+    and leaving out ``n'``'s low :attr:`numerator_drop` bits by less than a sixteenth more:
+    about a third in all for the default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
     ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of the exact one's limit, either
     answer); a numerator so large that no denominator of the range brings it inside is
     outside before the product (``|n'| >= 2**(quotient_bits - 15 + b)``), so the multipliers
@@ -73,6 +74,8 @@ class CoordinateDivider(wiring.Component):
     precision : int or None
         ``T``, the significant bits kept of ``w``, ``n`` and ``R``: ``quotient_bits + 4`` if
         None; ``quotient_bits + 3`` at least.
+    bits_per_stage : int
+        Reciprocal bits per register stage, 1 to 4: fewer cycles, longer paths.
 
     Members
     -------
@@ -92,7 +95,7 @@ class CoordinateDivider(wiring.Component):
     CHUNK_BITS = 17
 
     def __init__(self, width, count=2, *, denominator_range, quotient_bits=QUOTIENT_BITS,
-                 precision=None):
+                 precision=None, bits_per_stage=1):
         check_int("width", width, 2, 1 << 12)
         check_int("count", count, 1, 16)
         check_int("quotient_bits", quotient_bits, COORD_FRACTION_BITS + 1, 64)
@@ -110,6 +113,7 @@ class CoordinateDivider(wiring.Component):
         self._count = count
         self._q = quotient_bits
         self._t = precision
+        self._per_stage = check_int("bits_per_stage", bits_per_stage, 1, 4)
         self._lo, self._hi = lo, hi
         #: the scale: w' = w / 2**shift (a left shift when negative)
         self.shift = lo.bit_length() - precision
@@ -128,13 +132,22 @@ class CoordinateDivider(wiring.Component):
         return self.scaled_bits + self._t - 1
 
     @property
+    def numerator_drop(self):
+        """Low bits of ``n'`` left out of the products (``T - 21``, at least 0): they move a
+        quotient by less than ``2**(u + 17 - T)`` units, a sixteenth."""
+        return max(0, self._t - 21)
+
+    @property
     def numerator_limit(self):
         """``|n'|`` at or above ``2**numerator_limit`` is outside for any ``w`` of the range."""
         return self._q - COORD_FRACTION_BITS + 1 + self.scaled_bits
 
-    #: cycles from a set of inputs to its quotients: the scaled inputs, ``b + 1`` division
-    #: stages, the partial products, their sum
-    latency = property(lambda self: self.scaled_bits + 4)
+    @property
+    def latency(self):
+        """Cycles from a set of inputs to its quotients: the scaled inputs, the division's
+        ``b + 1`` quotient bits at ``bits_per_stage`` per register stage, the partial products,
+        their sum."""
+        return 3 - (-(self.scaled_bits + 1) // self._per_stage)
 
     def elaborate(self, platform):
         m = Module()
@@ -142,6 +155,9 @@ class CoordinateDivider(wiring.Component):
         b = self.scaled_bits
         K = self.reciprocal_exponent
         L = self.numerator_limit
+        # the numerators' low bits below what the quotients need (numerator_drop)
+        u = self.numerator_drop
+        NW = L + 1 - u
         steps = b + 1
 
         # scaled inputs; a numerator beyond the limit is outside and multiplies as 0
@@ -152,8 +168,8 @@ class CoordinateDivider(wiring.Component):
             scaled = self._scaled(self.n[i])
             high = scaled >> L
             beyond = (high != 0) & (high != -1)
-            num, out = Signal(signed(L + 1), name=f"num{i}"), Signal(name=f"far{i}")
-            m.d.sync += [num.eq(Mux(beyond, 0, scaled)), out.eq(beyond)]
+            num, out = Signal(signed(NW), name=f"num{i}"), Signal(name=f"far{i}")
+            m.d.sync += [num.eq(Mux(beyond, 0, scaled >> u)), out.eq(beyond)]
             nums.append(num)
             far.append(out)
 
@@ -163,19 +179,26 @@ class CoordinateDivider(wiring.Component):
         # modulo 2**steps
         rem = Const(1 << (T - 2), signed(b + 1))
         quo = Const(0, 0)
+        stage = 0
         for k in range(steps):
             neg = rem[-1]
             # 2r + w' or 2r - w' = 2r + ~w' + 1, modulo 2**(b+1) (the result fits): one
             # adder, the carry entering as the doubled remainder's low bit
             wide = Cat(den, Const(0, 1))
-            total = Cat(~neg, rem)[:b + 1] + Mux(neg, wide, ~wide)
-            rem_n = Signal(signed(b + 1), name=f"rem{k + 1}")
-            quo_n = Signal(k + 1, name=f"quo{k + 1}")
-            den_n, v_n = Signal(b, name=f"den{k + 1}"), Signal(name=f"v{k + 1}")
-            m.d.sync += [rem_n.eq(total[:b + 1]), quo_n.eq(Cat(~neg, quo)),
-                         den_n.eq(den), v_n.eq(v)]
-            nums_n = [Signal(signed(L + 1), name=f"num{i}_{k + 1}") for i in range(self._count)]
-            far_n = [Signal(name=f"far{i}_{k + 1}") for i in range(self._count)]
+            rem = (Cat(~neg, rem)[:b + 1] + Mux(neg, wide, ~wide))[:b + 1].as_signed()
+            quo = Cat(~neg, quo)
+            if (k + 1) % self._per_stage and k != steps - 1:
+                continue
+            stage += 1
+            rem_n = Signal(signed(b + 1), name=f"rem{stage}")
+            quo_n = Signal(k + 1, name=f"quo{stage}")
+            # the delay lines have no reset (Xilinx maps them to shift-register LUTs)
+            den_n = Signal(b, name=f"den{stage}", reset_less=True)
+            v_n = Signal(name=f"v{stage}")
+            nums_n = [Signal(signed(NW), name=f"num{i}_{stage}", reset_less=True)
+                      for i in range(self._count)]
+            far_n = [Signal(name=f"far{i}_{stage}", reset_less=True) for i in range(self._count)]
+            m.d.sync += [rem_n.eq(rem), quo_n.eq(quo), den_n.eq(den), v_n.eq(v)]
             m.d.sync += [a.eq(b_) for a, b_ in zip(nums_n + far_n, nums + far)]
             rem, quo, den, v, nums, far = rem_n, quo_n, den_n, v_n, nums_n, far_n
         recip = Cat(~rem[-1], quo[:steps - 1])
@@ -188,14 +211,14 @@ class CoordinateDivider(wiring.Component):
         for i in range(self._count):
             parts = []
             for j, chunk in enumerate(chunks):
-                part = Signal(signed(L + 1 + len(chunk) + 1), name=f"part{i}_{j}")
+                part = Signal(signed(NW + len(chunk) + 1), name=f"part{i}_{j}")
                 m.d.sync += part.eq(nums[i] * chunk)
                 parts.append((part, j * C))
             far_p, far_s = Signal(name=f"far{i}_p"), Signal(name=f"far{i}_s")
             total = sum(part.as_signed() << shift for part, shift in parts)
-            full = Signal(signed(L + 2 + steps), name=f"prod{i}")
+            full = Signal(signed(NW + 1 + steps), name=f"prod{i}")
             m.d.sync += [far_p.eq(far[i]), far_s.eq(far_p), full.eq(total)]
-            quotient = full >> (K - F)
+            quotient = full >> (K - F - u)
             m.d.comb += [self.q[i].eq(quotient),
                          self.outside[i].eq(far_s | (quotient >= (1 << Q))
                                             | (quotient < -(1 << Q)))]
@@ -357,7 +380,7 @@ class PerspectiveWarp(wiring.Component):
         estimates synthesise it once."""
         return CoordinateDivider(self._divider_width, 2,
                                  denominator_range=self._denominator_range,
-                                 quotient_bits=self._quotient_bits)
+                                 quotient_bits=self._quotient_bits, bits_per_stage=2)
 
     coordinate_divider_count = property(lambda self: self._p)
 
@@ -384,7 +407,10 @@ class PerspectiveWarp(wiring.Component):
         # the write port (stores and reads never overlap), so a copy fits one true-dual-port
         # block RAM and the store takes P/2 copies instead of P
         copies = max(P // 2, 1)
-        banks = [[[Memory(shape=24 * per_word, depth=depth, init=[]) for _ in range(copies)]
+        # block RAM by name: Yosys' UltraScale+ mapping (0.23) takes a one-port bank (1 px/clk)
+        # for distributed RAM, which it then fails to map
+        banks = [[[Memory(shape=24 * per_word, depth=depth, init=[],
+                          attrs={"ram_style": "block"}) for _ in range(copies)]
                   for _ in range(2)] for _ in range(2)]
         shared_addr = [[[Signal(range(depth), name=f"addr{r}{c}_{k}") for k in range(copies)]
                         for c in range(2)] for r in range(2)]
