@@ -153,8 +153,8 @@ def test_coordinate_divider_shares_its_denominator(width, denominator_range, quo
     """Pairs of numerators over one denominator, a new set every cycle: each quotient within
     1 of exact integer division (floor, negative numerators included), ``outside`` where the
     exact quotient does not fit (within 1 of the limit, either answer), each ``latency``
-    cycles after its inputs (one to three reciprocal bits per stage); numerators far beyond the limit, the range's ends, exact
-    quotients."""
+    cycles after its inputs (one to three reciprocal bits per stage); numerators far beyond
+    the limit, the range's ends, exact quotients."""
     lo, hi = denominator_range
     dut = CoordinateDivider(width, 2, denominator_range=denominator_range,
                             quotient_bits=quotient_bits, bits_per_stage=per_stage)

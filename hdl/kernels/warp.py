@@ -44,19 +44,20 @@ class CoordinateDivider(wiring.Component):
 
     The denominator's range ``lo <= w <= hi`` is known when the divider is built (the warp's
     denominator is a linear function of the destination pixel), so it is scaled by a
-    constant power of two, ``w' = floor(w / 2**s)`` with ``2**(T-1) <= lo' `` (``T`` the
+    constant power of two, ``w' = floor(w / 2**s)`` with ``2**(T-1) <= lo'`` (``T`` the
     precision), and the numerators with it, ``n' = floor(n / 2**s)``; for ``s < 0`` both are
     shifted left, exactly. ``R = floor(2**K / w')`` with ``K = b + T - 1`` (``b`` the bits of
-    ``hi'``) comes from a non-restoring division, one quotient bit per stage, ``b + 1``
-    stages of an adder as wide as ``w'``; then each quotient is ``floor(n' R / 2**(K - 16))``.
+    ``hi'``) comes from a non-restoring division, ``b + 1`` steps of an adder as wide as
+    ``w'`` (``bits_per_stage`` of them per register stage); then each quotient is
+    ``floor(n' R / 2**(K - 16))``.
 
     The result differs from ``floor(2**16 n / w)`` by at most 1 (a unit of ``2**-16``):
     truncating ``w``, ``n`` and ``R`` to ``T`` significant bits moves a quotient below
     ``2**quotient_bits`` by less than ``2**(quotient_bits + 2 - T) + 2**(17 - T)`` units,
     and leaving out ``n'``'s low :attr:`numerator_drop` bits by less than a sixteenth more:
-    about a third in all for the default ``T = quotient_bits + 4``. ``outside[i]`` when quotient ``i`` lies outside
-    ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of the exact one's limit, either
-    answer); a numerator so large that no denominator of the range brings it inside is
+    about a third in all for the default ``T = quotient_bits + 4``. ``outside[i]`` when
+    quotient ``i`` lies outside ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of
+    the exact one's limit, either answer); a numerator so large that no denominator of the range brings it inside is
     outside before the product (``|n'| >= 2**(quotient_bits - 15 + b)``), so the multipliers
     are as wide as the quotients need, whatever the numerators' width.
 
