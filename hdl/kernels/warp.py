@@ -57,9 +57,10 @@ class CoordinateDivider(wiring.Component):
     and leaving out ``n'``'s low :attr:`numerator_drop` bits by less than a sixteenth more:
     about a third in all for the default ``T = quotient_bits + 4``. ``outside[i]`` when
     quotient ``i`` lies outside ``[-2**quotient_bits, 2**quotient_bits)`` (within a unit of
-    the exact one's limit, either answer); a numerator so large that no denominator of the range brings it inside is
-    outside before the product (``|n'| >= 2**(quotient_bits - 15 + b)``), so the multipliers
-    are as wide as the quotients need, whatever the numerators' width.
+    the exact one's limit, either answer); a numerator so large that no denominator of the
+    range brings it inside is outside before the product (``|n'| >= 2**(quotient_bits - 15 +
+    b)``), so the multipliers are as wide as the quotients need, whatever the numerators'
+    width.
 
     Parameters
     ----------
