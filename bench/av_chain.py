@@ -240,8 +240,7 @@ def resource_lines(resources):
     if not resources:
         return []
     from gen.export.resources import FAMILY_NAMES
-    family = resources[0].get("family", "xc7")
-    part = resources[0].get("part_name", "the XCZU7EV")
+    family, part = resources[0]["family"], resources[0]["part_name"]
     lines = resource_table([dict(r, label=f"{r['part']} ({r['ppc']})") for r in resources],
                            "label", "part (px/clk)", family=family,
                            detail=f" for {part}, {FAMILY_NAMES[family]}; 640x480 camera, "
@@ -260,7 +259,7 @@ def resource_lines(resources):
               f"| {share(paper['DSP'], dev['DSP'])} |"]
     for r in resources:
         if r["part"] == "whole chain":
-            bram36 = r["BRAM36"] + r["BRAM18"] / 2
+            bram36 = r["BRAM18_equiv"] / 2
             lines.append(f"| rosgate, {r['ppc']} px/clk (Yosys) | {share(r['LUT'], dev['LUT'])} "
                          f"| {share(bram36, dev['BRAM36'])} | "
                          f"{share(r.get('URAM', 0), dev['URAM'])} | "

@@ -111,12 +111,10 @@ class CoordinateDivider(wiring.Component):
                                  "two integers (lo, hi)") from None
         if not 0 < lo <= hi:
             raise ParameterError("denominator_range", denominator_range, "0 < lo <= hi")
-        self._width = width
         self._count = count
         self._q = quotient_bits
         self._t = precision
         self._per_stage = check_int("bits_per_stage", bits_per_stage, 1, 4)
-        self._lo, self._hi = lo, hi
         #: the scale: w' = w / 2**shift (a left shift when negative)
         self.shift = lo.bit_length() - precision
         #: bits of the largest scaled denominator
@@ -290,22 +288,18 @@ class PerspectiveWarp(wiring.Component):
             raise ParameterError("matrix", matrix, "3 rows of 3 numbers")
         self._m = [_fixed(v, f"matrix[{i // 3}][{i % 3}]")
                    for i, v in enumerate(x for r in rows for x in r)]
-        corners = ((0, 0), (dst_width - 1, 0), (0, dst_height - 1),
-                   (dst_width - 1, dst_height - 1))
-        m6, m7, m8 = self._m[6:]
-        if all(m6 * x + m7 * y + m8 < 0 for x, y in corners):
+        self._dst = (dst_width, dst_height)
+        if all(self._linear(2, x, y) < 0 for x, y in self._corners):
             # the same map scaled by -1: the denominator becomes positive
             self._m = [-v for v in self._m]
-        m6, m7, m8 = self._m[6:]
-        for x, y in corners:
-            if m6 * x + m7 * y + m8 <= 0:
+        for x, y in self._corners:
+            if self._linear(2, x, y) <= 0:
                 raise ParameterError("matrix", matrix,
                                      f"a map whose denominator is positive over the "
                                      f"destination (at ({x}, {y}) it is not: the homography "
                                      f"maps that pixel to infinity or behind the camera)")
         self._p = pixels_per_beat
         self._src = (src_width, src_height)
-        self._dst = (dst_width, dst_height)
         sig = image_stream_signature(3, pixels_per_beat)
         super().__init__({"i": In(sig), "o": Out(sig), "err_short": Out(1),
                           "err_long": Out(1), "err_size": Out(1), "outside": Out(32)})
@@ -331,10 +325,16 @@ class PerspectiveWarp(wiring.Component):
         return max(abs(v) for vs in self._register_values() for v in vs).bit_length() + 1
 
     @property
+    def _corners(self):
+        """The destination's corner pixels: a linear function of the pixel, and the source
+        position (the map keeps the rectangle convex), has its extremes there."""
+        dw, dh = self._dst
+        return ((0, 0), (dw - 1, 0), (0, dh - 1), (dw - 1, dh - 1))
+
+    @property
     def _denominator_range(self):
         # the denominator where a pixel is issued (positive there: checked at the corners)
-        dw, dh = self._dst
-        values = [self._linear(2, x, y) for x in (0, dw - 1) for y in (0, dh - 1)]
+        values = [self._linear(2, x, y) for x, y in self._corners]
         return min(values), max(values)
 
     @property
@@ -354,10 +354,9 @@ class PerspectiveWarp(wiring.Component):
         way, clipped to the frame. ``x0`` is a multiple of the store's word (2 pixels, P at
         2 pixels per beat and more), ``y0`` is even, and the sizes keep the banks whole."""
         sw, sh = self._src
-        dw, dh = self._dst
         align = 2 * max(self._p // 2, 1)
         xs, ys = [], []
-        for x, y in ((0, 0), (dw - 1, 0), (0, dh - 1), (dw - 1, dh - 1)):
+        for x, y in self._corners:
             w = self._linear(2, x, y)
             xs.append(Fraction(self._linear(0, x, y), w))
             ys.append(Fraction(self._linear(1, x, y), w))
