@@ -42,14 +42,17 @@ NODE_CONFIG = dict(endpoints=["subscriber", "publisher"], loopback=[[0, 1]], ip=
 PEER_MAC = "02:00:00:00:00:01"
 
 
-async def read_counter_bank(clock, index, value, names):
+async def read_counter_bank(clock, index, value, names, *, registered=False):
     """Counters read through an :class:`~hdl.net.counters.EventCounters` index/value port,
     once every event so far has reached them (a bank shows an event within ``len(names) + 1``
-    cycles)."""
-    await ClockCycles(clock, len(names) + 2)
+    cycles, one more in block RAM). ``registered``: the value follows the index a clock
+    later (a bank in block RAM)."""
+    await ClockCycles(clock, len(names) + 3)
     values = {}
     for k, name in enumerate(names):
         index.value = k
+        if registered:
+            await ClockCycles(clock, 1)
         await Timer(1, "ns")
         values[name] = int(value.value)
     return values

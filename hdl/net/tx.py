@@ -6,7 +6,7 @@ from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from ..params import check_int
+from ..params import ParameterError, check_int
 from ..stream import AXIStreamSignature
 from .checksum import ones_complement_add
 from .frames import (
@@ -112,6 +112,10 @@ class FrameBuilder(wiring.Component):
     ttl : int
         The IPv4 time to live of every frame (64; a FinEmbP node sends 1: its frames stay in
         the layer-2 domain).
+    kinds : iterable of FrameKind
+        The kinds of frame the builder makes (all four unless given): the header tables and
+        checksum words of the others are left out. A request of another kind is taken and
+        ended (``ready``, then ``done`` in the next cycle) without a frame.
 
     Members
     -------
@@ -127,10 +131,17 @@ class FrameBuilder(wiring.Component):
         ports picks the port by it).
     """
 
-    def __init__(self, ports, *, lanes=1, ttl=IP_TTL):
+    def __init__(self, ports, *, lanes=1, ttl=IP_TTL, kinds=tuple(FrameKind)):
         self._ports = check_int("ports", ports, 1, 64)
         self._lanes = check_int("lanes", lanes, 1, 2)
         self._ttl = check_int("ttl", ttl, 1, 255)
+        try:
+            kinds = tuple(kinds)
+        except TypeError:
+            kinds = (kinds,)
+        if not kinds or not all(isinstance(k, FrameKind) for k in kinds):
+            raise ParameterError("kinds", kinds, "one or more FrameKind members")
+        self._kinds = frozenset(kinds)
         members = {f"req_{k}": In(TxRequestSignature(lanes)) for k in range(ports)}
         members.update({"local_mac": In(48), "local_ip": In(32),
                         "m_axis": Out(AXIStreamSignature(8 * lanes, keep=lanes > 1)),
@@ -138,6 +149,7 @@ class FrameBuilder(wiring.Component):
         super().__init__(members)
 
     lanes = property(lambda self: self._lanes)
+    kinds = property(lambda self: self._kinds)
 
     def elaborate(self, platform):
         m = Module()
@@ -150,9 +162,10 @@ class FrameBuilder(wiring.Component):
         busy = Signal()
         ip_id = Signal(16)
 
-        is_arp = r.kind == FrameKind.ARP
-        is_udp = r.kind == FrameKind.UDP
-        is_tcp = r.kind == FrameKind.TCP
+        def is_kind(kind):
+            return r.kind == kind if kind in self._kinds else Const(0)
+        is_arp, is_udp, is_tcp = (is_kind(k) for k in (FrameKind.ARP, FrameKind.UDP,
+                                                        FrameKind.TCP))
         l4_header = Mux(is_tcp, Mux(r.mss, 24, 20), Mux(is_udp, 8, 0))
         l4_len = Signal(16)
         header = Signal(11)
@@ -183,7 +196,8 @@ class FrameBuilder(wiring.Component):
             [Mux(r.mss, w, 0) for w in mss_words]
         l4_words = ([src[16:], src[:16], dst[16:], dst[:16], proto, l4_len,   # pseudo-header
                      r.src_port, r.dst_port, r.payload_sum, Mux(is_udp, l4_len, 0)] +
-                    [Mux(is_tcp, w, 0) for w in tcp_words])
+                    ([Mux(is_tcp, w, 0) for w in tcp_words]
+                     if FrameKind.TCP in self._kinds else []))
         step = Signal(range(len(l4_words) + 1))
         ip_sum = _serial_sum(m, "ip_sum", ip_words, step)
         l4_sum = _serial_sum(m, "l4_sum", l4_words, step)
@@ -238,10 +252,11 @@ class FrameBuilder(wiring.Component):
         # request/reply); beyond the header the bytes are payload
         shift = L.bit_length() - 1
         beat = idx[shift:shift + 6]
-        layouts = ((FrameKind.ICMP, frame(0, FrameKind.ICMP)),
-                   (FrameKind.UDP, frame(0, FrameKind.UDP)),
-                   (FrameKind.TCP, frame(1, FrameKind.TCP)))
-        arp_layouts = (frame(0, FrameKind.ARP), frame(1, FrameKind.ARP))
+        layouts = tuple((kind, frame(kind == FrameKind.TCP, kind))
+                        for kind in (FrameKind.ICMP, FrameKind.UDP, FrameKind.TCP)
+                        if kind in self._kinds)
+        arp_layouts = ((frame(0, FrameKind.ARP), frame(1, FrameKind.ARP))
+                       if FrameKind.ARP in self._kinds else ())
         hdr = []
         for k in range(L):
             sources = []                    # distinct byte sources, in order of first use
@@ -270,7 +285,7 @@ class FrameBuilder(wiring.Component):
                         with m.Case(q | (variant << 6)):
                             m.d.comb += arp_code.eq(source(layout[q * L + k]))
             assert len(sources) <= 64, len(sources)
-            code = Mux(is_arp, arp_code, ip_code)
+            code = Mux(is_arp, arp_code, ip_code) if arp_layouts else ip_code
             byte = Signal(8, name=f"hdr_byte{k}")
             with m.Switch(code):
                 for q, value in enumerate(sources):
@@ -288,8 +303,11 @@ class FrameBuilder(wiring.Component):
             m.d.comb += q.rd_addr.eq(rd_addr)
 
         in_header = idx < header        # header lengths are even: both lanes agree
+        # a request of a kind the builder does not make: taken, then ended without a frame
+        partial = self._kinds != frozenset(FrameKind)
+        skip = Signal() if partial else Const(0)
         m.d.comb += [
-            self.m_axis.tvalid.eq(busy),
+            self.m_axis.tvalid.eq(busy & ~skip if partial else busy),
             self.m_axis.tdata.eq(Mux(in_header, Cat(*hdr), rd_data)),
             self.m_axis.tlast.eq(idx + L >= total),
         ]
@@ -310,13 +328,24 @@ class FrameBuilder(wiring.Component):
                         for cand in reversed(order[start]):
                             with m.If(reqs[cand].valid):
                                 m.d.comb += [chosen.eq(cand), found.eq(1)]
+            request = Array(q.request.as_value() for q in reqs)[chosen]
+            if partial:
+                chosen_kind = Signal(FrameKind)
+                m.d.comb += chosen_kind.eq(Array(q.request.kind for q in reqs)[chosen])
             with m.If(found):
                 m.d.sync += [busy.eq(1), grant.eq(chosen), idx.eq(0), step.eq(0),
-                             ip_sum.eq(0), l4_sum.eq(0),
-                             r.eq(Array(q.request.as_value() for q in reqs)[chosen])]
+                             ip_sum.eq(0), l4_sum.eq(0), r.eq(request)]
+                if partial:
+                    m.d.sync += skip.eq(~Cat(*(chosen_kind == k for k in self._kinds)).any())
                 for cand in range(n):
                     with m.If(chosen == cand):
                         m.d.comb += reqs[cand].ready.eq(1)
+        if partial:
+            with m.Elif(skip):
+                m.d.sync += [busy.eq(0), skip.eq(0)]
+                for cand in range(n):
+                    with m.If(grant == cand):
+                        m.d.comb += reqs[cand].done.eq(1)
         with m.Elif(accept):
             m.d.sync += idx.eq(idx + L)
             with m.If(self.m_axis.tlast):
