@@ -73,10 +73,11 @@ class PidController(wiring.Component):
         total = Signal(signed(32))
 
         # restoring dividers for the two limits (31-bit dividends, 31 steps, MSB first); after
-        # reset the gains are 0 and the limits those of gains 0
+        # reset the gains are 0 and the limits those of gains 0. A remainder stays below its
+        # divisor (at most 2**15), so it needs 16 bits, its doubling 17
         num_e, num_s = Signal(31), Signal(31)
         den_e, den_s = Signal(16), Signal(16)
-        rem_e, rem_s = Signal(32), Signal(32)
+        rem_e, rem_s = Signal(16), Signal(16)
         q_e = Signal(31, init=PID_MAX_INT)
         q_s = Signal(31, init=PID_MAX_I_TERM)
         bit = Signal(range(31))
@@ -89,8 +90,8 @@ class PidController(wiring.Component):
                          rem_e.eq(0), rem_s.eq(0), bit.eq(30), dividing.eq(1),
                          total.eq(0), last_pv.eq(0)]
         with m.Elif(dividing):
-            re = Cat(num_e[30], rem_e[:31])
-            rs = Cat(num_s[30], rem_s[:31])
+            re = Cat(num_e[30], rem_e)
+            rs = Cat(num_s[30], rem_s)
             ge, gs = re >= den_e, rs >= den_s
             m.d.sync += [rem_e.eq(Mux(ge, re - den_e, re)), rem_s.eq(Mux(gs, rs - den_s, rs)),
                          num_e.eq(num_e << 1), num_s.eq(num_s << 1),
