@@ -6,7 +6,7 @@ from amaranth.lib import wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
 
-from hdl.net.checksum import ones_complement_add, ones_complement_fold, word_sum_tree
+from hdl.net.checksum import ones_complement_add
 from hdl.net.frames import ip_to_int, mac_to_int
 from hdl.net.mac import DEFAULT_CLOCK_HZ
 from hdl.net.responders import ParsedFrameSignature
@@ -371,56 +371,67 @@ class FinembClient(wiring.Component):
                          (r_flags | r_state.shift_left(STATE_SHIFT))[:16], r_cycle,
                          Cat(r_len, Const(0, 5)), r_seq)
         fixed = Cat(header_out, r_body)          # header + fixed body
-        fixed_bytes = Array(fixed.word_select(k, 8) for k in range(HEADER + 20))
-
-        def words(value, nbytes):
-            """Big-endian 16-bit words of little-endian bytes (an odd last byte padded)."""
-            return [Cat(value.word_select(k + 1, 8) if k + 1 < nbytes else Const(0, 8),
-                        value.word_select(k, 8)) for k in range(0, nbytes, 2)]
+        # the fixed part, ``L`` bytes a word, through one registered selection: read by the
+        # builder (``rd`` is a multiple of ``L``) and, before that, summed a word per cycle
+        fixed_words = Array(fixed.word_select(k, 8 * L) for k in range((HEADER + 20) // L))
         is_isend = r_type == MsgType.ISEND_RES
         is_iodesc = r_type == MsgType.IODESC_RES
         fixed_len = Mux(is_isend, HEADER, Mux(is_iodesc, HEADER + 4, HEADER + r_len))
-        # the fixed part's sum in two registered steps (an adder tree, then the end-around
-        # folds): ready when a response reaches REQUEST, three cycles after it started
-        header_wide, body_wide = Signal(20), Signal(20)
-        header_sum = Signal(16)
-        body_sum = Signal(16)
+        # the fixed part's one's complement sum: a response's bytes past its fixed part are
+        # zero (``reply`` zero-extends the body), so the sum may stop at any word after it
+        sum_k = Signal(range((HEADER + 20) // L + 2))      # words selected for the sum
+        summing = Signal()
+        fixed_sum = Signal(16)
         chunk_sum = Signal(16)
-        m.d.sync += [header_wide.eq(word_sum_tree(words(header_out, HEADER))),
-                     body_wide.eq(Mux(is_isend, 0, word_sum_tree(words(r_body, 20)))),
-                     header_sum.eq(ones_complement_fold(header_wide)),
-                     body_sum.eq(ones_complement_fold(body_wide))]
         payload_sum = Signal(16)
         m.d.comb += payload_sum.eq(ones_complement_add(
-            ones_complement_add(header_sum, body_sum),
-            Mux(is_isend, self.page_in_sum, Mux(is_iodesc, chunk_sum, 0))))
+            fixed_sum, Mux(is_isend, self.page_in_sum, Mux(is_iodesc, chunk_sum, 0))))
 
         # the builder reads ``L`` bytes from ``rd`` (a multiple of ``L``): each lane its own
         # source, as the fixed part may end inside a beat
         rd = tx.rd_addr
         m.d.comb += self.page_in_raddr.eq(rd - HEADER)
+        fixed_word = Signal(8 * L)
+        shift = L.bit_length() - 1
+        m.d.sync += fixed_word.eq(fixed_words[Mux(summing, sum_k, rd[shift:6])])
         lanes_out = []
         for q in range(L):
             sel_fixed = Signal(name=f"sel_fixed{q}")
-            fixed_byte = Signal(8, name=f"fixed_byte{q}")
-            m.d.sync += [sel_fixed.eq(rd + q < fixed_len), fixed_byte.eq(fixed_bytes[(rd + q)[:6]])]
+            m.d.sync += sel_fixed.eq(rd + q < fixed_len)
             m.d.comb += rom_rds[q].addr.eq(io_off + rd + q - (HEADER + 4))
-            lanes_out.append(Mux(sel_fixed, fixed_byte,
+            lanes_out.append(Mux(sel_fixed, fixed_word.word_select(q, 8),
                                  Mux(is_isend, self.page_in_rdata.word_select(q, 8),
                                      rom_rds[q].data)))
         m.d.comb += tx.rd_data.eq(Cat(*lanes_out))
+        # the selected word comes a cycle later: big-endian, a lone byte even or odd
+        summed = Signal()
+        sum_odd = Signal()
+        if L == 2:
+            sum_word = Cat(fixed_word[8:], fixed_word[:8])
+        else:
+            sum_word = Mux(sum_odd, Cat(fixed_word, Const(0, 8)), Cat(Const(0, 8), fixed_word))
+        m.d.sync += summed.eq(summing)
+        with m.If(summed):
+            m.d.sync += [fixed_sum.eq(ones_complement_add(fixed_sum, sum_word)),
+                         sum_odd.eq(~sum_odd)]
+        with m.If(summing):
+            m.d.sync += sum_k.eq(sum_k + 1)
+            with m.If((sum_k + 1) * L >= fixed_len):
+                m.d.sync += summing.eq(0)
+        sum_ready = ~summing & ~summed
         m.d.comb += [req.kind.eq(FrameKind.UDP), req.eth_dst.eq(r_eth), req.ip_dst.eq(r_ip),
                      req.src_port.eq(FINEMB_PORT), req.dst_port.eq(r_port),
                      req.length.eq(HEADER + r_len), req.payload_sum.eq(payload_sum)]
 
         wait = Signal(range(self._deadline + 2))
-        sum_k = Signal(11)
-        sum_odd = Signal()
+        byte_k = Signal(11)
+        byte_odd = Signal()
         with m.FSM() as fsm:
             with m.State("IDLE"):
                 with m.If(started):
-                    m.d.sync += [wait.eq(self._deadline), chunk_sum.eq(0), sum_k.eq(0),
-                                 sum_odd.eq(0)]
+                    m.d.sync += [wait.eq(self._deadline), chunk_sum.eq(0), byte_k.eq(0),
+                                 byte_odd.eq(0), summing.eq(1), sum_k.eq(0), sum_odd.eq(0),
+                                 fixed_sum.eq(0)]
                     m.next = "DISPATCH"
             with m.State("DISPATCH"):
                 with m.If(is_isend):
@@ -446,17 +457,18 @@ class FinembClient(wiring.Component):
             with m.State("SUM"):
                 # the descriptor chunk's sum, one byte per cycle (its first byte is an even
                 # payload byte)
-                m.d.comb += rom_rd.addr.eq(io_off + sum_k)
-                m.d.sync += sum_k.eq(sum_k + 1)
-                with m.If(sum_k != 0):
-                    word = Mux(sum_odd, Cat(rom_rd.data, Const(0, 8)),
+                m.d.comb += rom_rd.addr.eq(io_off + byte_k)
+                m.d.sync += byte_k.eq(byte_k + 1)
+                with m.If(byte_k != 0):
+                    word = Mux(byte_odd, Cat(rom_rd.data, Const(0, 8)),
                                Cat(Const(0, 8), rom_rd.data))
                     m.d.sync += [chunk_sum.eq(ones_complement_add(chunk_sum, word)),
-                                 sum_odd.eq(~sum_odd)]
-                with m.If(sum_k == io_len):
+                                 byte_odd.eq(~byte_odd)]
+                with m.If(byte_k == io_len):
                     m.next = "SETTLE"
             with m.State("SETTLE"):
-                m.next = "REQUEST"
+                with m.If(sum_ready):
+                    m.next = "REQUEST"
             with m.State("REQUEST"):
                 m.d.comb += tx.valid.eq(1)
                 with m.If(tx.ready):
