@@ -95,7 +95,8 @@ class NodeTB:
 
     async def counters(self):
         return await read_counter_bank(self.dut.aclk, self.dut.counter_index,
-                                       self.dut.counter_value, NODE_COUNTERS)
+                                       self.dut.counter_value, NODE_COUNTERS,
+                                       registered=True)
 
     @property
     def state(self):

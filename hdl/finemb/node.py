@@ -33,6 +33,14 @@ _GMII_EVENTS = ("rx_frames0", "rx_frames1", "rx_bad0", "rx_bad1", "forwarded0", 
                 "forward_dropped0", "forward_dropped1", "consume_dropped")
 #: bytes the node's protocol side moves per cycle of its core clock
 LANES = 2
+#: idle core cycles after each frame into the parser, so that two of its verdicts, and of
+#: the answers they start, are at least this many cycles and a beat apart
+PARSER_GAP = 16
+#: the counters whose events can come every cycle: the GMII side's (a pulse synchroniser
+#: passes one per core cycle) and the cycle watchdog's (it can fire a few cycles after each
+#: ISEND_REQ when the master sets a tiny cycle period); every other counter counts a
+#: verdict of the parser or a frame built, at most one per PARSER_GAP + 1 cycles
+_EVERY_CYCLE = _GMII_EVENTS + ("missed_cycles",)
 #: the node's clock ports and the frequencies its timers and benches assume: the core clock
 #: (``sync``) and the GMII clock of both ports, asynchronous to each other
 NODE_CLOCKS_HZ = {"aclk": CLOCK_HZ, "gmii_clk": GMII_HZ}
@@ -98,7 +106,8 @@ class FinembNode(wiring.Component):
         Pulse: a start of cycle arrived.
     counter_index : In(range(len(NODE_COUNTERS)))
     counter_value : Out(32)
-        A counter of :data:`NODE_COUNTERS`, in the same cycle (wrapping, cleared by reset).
+        The counter of :data:`NODE_COUNTERS` that ``counter_index`` named in the cycle
+        before (wrapping, cleared by reset; the counters are in block RAM).
     """
 
     def __init__(self, descriptor, *, mac="02:00:00:00:46:01", serial=0, app_deadline=256,
@@ -131,7 +140,9 @@ class FinembNode(wiring.Component):
         mac = Const(self._mac, 48)
         group_mac = Const(mac_to_int(GROUP_MAC), 48)
         ports = [self.port0, self.port1]
-        m.submodules.counters = counters = EventCounters(NODE_COUNTERS)
+        m.submodules.counters = counters = EventCounters(
+            NODE_COUNTERS, block_ram=True,
+            spacing={name: PARSER_GAP + 1 for name in NODE_COUNTERS if name not in _EVERY_CYCLE})
         m.d.comb += [counters.rd_addr[0].eq(self.counter_index),
                      self.counter_value.eq(counters.rd_data[0])]
         ev = counters.events
@@ -206,7 +217,7 @@ class FinembNode(wiring.Component):
             m.submodules[f"consume{k}_bridge"] = bridge = FrameStreamBridge(gmii_domain="gmii")
             wiring.connect(m, consume[k].m_axis, bridge.s_axis)
             wiring.connect(m, bridge.m_axis, arb.s_axis[k])
-        m.submodules.to_parser = to_parser = FrameToRxBeats(lanes=LANES, gap=16)
+        m.submodules.to_parser = to_parser = FrameToRxBeats(lanes=LANES, gap=PARSER_GAP)
         wiring.connect(m, arb.m_axis, to_parser.s_axis)
         m.submodules.parser = parser = FrameParser(
             lanes=LANES, groups=[(mac_to_int(GROUP_MAC), ip_to_int(GROUP_IP))],
@@ -254,7 +265,9 @@ class FinembNode(wiring.Component):
         wiring.connect(m, wiring.flipped(self.app), pages.app)
 
         # ---- answers: one builder, each frame out of its request's port
-        m.submodules.builder = builder = FrameBuilder(3, lanes=LANES, ttl=IP_TTL_FINEMB)
+        m.submodules.builder = builder = FrameBuilder(
+            3, lanes=LANES, ttl=IP_TTL_FINEMB, kinds=(FrameKind.ARP, FrameKind.ICMP,
+                                                       FrameKind.UDP))
         wiring.connect(m, arp.tx, builder.req_0)
         wiring.connect(m, icmp.tx, builder.req_1)
         wiring.connect(m, client.tx, builder.req_2)
