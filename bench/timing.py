@@ -338,6 +338,9 @@ def _results(rows, parts=None, boards=None):
     ratio = engine_beside_liteeth(rows, parts.get("engine"))
     if ratio:
         results["engine_beside_liteeth"] = ratio
+    node = finemb_node_beside_liteeth(rows, parts.get("finemb_node"))
+    if node:
+        results["finemb_node_beside_liteeth"] = node
     for core in PARTS:
         if parts.get(core):
             results[f"{core}_parts"] = parts[core]
@@ -401,6 +404,83 @@ FINEMB_NODE_PARTS = {
     "core.app": "the application (the PID controller and its page mapping)",
     "core.app.pid": "  PidController",
 }
+
+
+#: what each of the node's parts must hold for the node's features: the table's argument
+FINEMB_NODE_NEEDS = {
+    "core.node.rx0": "preamble and SFD, an 8-bit CRC-32 (32 XOR trees over the byte and the "
+                     "state), frame length, runt and RX_ER status",
+    "core.node.rx1": "the same for the second port of the line",
+    "core.node.tx0": "preamble, padding to 60 bytes, CRC-32 and FCS, TX_ER on underrun; the "
+                     "forwarded frames' raw path",
+    "core.node.tx1": "the same for the second port",
+    "core.node.tx0_bridge": "an asynchronous 16-beat FIFO (Gray-coded pointers)",
+    "core.node.tx1_bridge": "the same",
+    "core.node.forward0": "a 2 KiB frame FIFO that keeps or rewinds a frame on the address "
+                          "decision, cut-through and store-and-forward, a status FIFO",
+    "core.node.forward1": "the same, the other direction: a line forwards both ways",
+    "core.node.consume0": "the same for this node's frames, so neither port loses one while "
+                          "the other's is parsed",
+    "core.node.consume1": "the same",
+    "core.node.consume0_bridge": "an asynchronous FIFO pairing bytes into beats",
+    "core.node.consume1_bridge": "the same",
+    "core.node.consume_arbiter": "two ports into one parser, a frame at a time",
+    "core.node.to_parser": "registered beats with their index, the gap after each frame",
+    "core.node.parser": "ARP, IPv4, ICMP, UDP and TCP header checks and both checksums at two "
+                        "bytes a cycle, the group and limited-broadcast addresses, the drop "
+                        "reasons",
+    "core.node.builder": "ARP, ICMP and UDP headers at two bytes a cycle (TCP left out), the "
+                         "IPv4 and UDP checksums summed a word a cycle, three requesters",
+    "core.node.arp": "the request's addresses",
+    "core.node.icmp": "a 2 KiB echo buffer, the RFC 1624 checksum update",
+    "core.node.client": "the FinEmbP state machine: a request's 32 header and body bytes, "
+                        "seven request kinds, the response's 36 fixed bytes, its addresses "
+                        "and its checksum summed a word a cycle, the IO descriptor ROM and "
+                        "its chunk's sum, the cycle watchdog",
+    "core.node.pages": "two pages each way, flipped whole, the input page's sum",
+    "core.node.counters": "34 wrapping 32-bit counters in block RAM, an accumulator each "
+                          "(2 bits where events are 17 cycles apart, 6 where they can come "
+                          "every cycle)",
+    "core.app": "the page mapping (10 bytes read, 6 written, the gains' reload) and the PID "
+                "controller below",
+    "core.node": "per port the forwarding decision (this node's MAC, broadcast, the group), "
+                 "the counters' event mapping, each answer's port",
+    "core.app.pid": "AVR221 with every quirk, one update a clock: two 31-step dividers for "
+                    "the limits, the saturations, three products on MULT18s",
+}
+
+#: the node's parts that LiteEth's UDP core has no counterpart of: the line's second port,
+#: the forwarding and consuming queues and their crossings, FinEmbP and the application
+FINEMB_BEYOND_LITEETH = ("core.node.rx1", "core.node.tx1", "core.node.tx1_bridge",
+                         "core.node.forward0", "core.node.forward1", "core.node.consume0",
+                         "core.node.consume1", "core.node.consume0_bridge",
+                         "core.node.consume1_bridge", "core.node.consume_arbiter",
+                         "core.node.to_parser", "core.node.client", "core.node.pages",
+                         "core.app")
+#: the FinEmbP node's goal in LUT4+carry on this flow (issue 69)
+FINEMB_NODE_GOAL = 6000
+
+
+def finemb_node_beside_liteeth(rows, parts):
+    """The node's placed LUT4+carry split by its parts' shares into what LiteEth's UDP core
+    does and what it has no counterpart of (:data:`FINEMB_BEYOND_LITEETH`), or None."""
+    by_core = {r["core"]: r for r in rows if "error" not in r}
+    if not parts or "finemb_node" not in by_core or "liteeth_udp8" not in by_core:
+        return None
+    by_part = {p["part"]: p for p in parts}
+    if "" not in by_part or not all(k in by_part for k in FINEMB_BEYOND_LITEETH):
+        return None
+    total = by_part[""]["lut4"]
+    beyond = sum(by_part[k]["lut4"] for k in FINEMB_BEYOND_LITEETH)
+    placed = by_core["finemb_node"]["lut4"]
+    beyond_placed = round(placed * beyond / total)
+    out = {"node_lut4": placed, "parts_lut4": total, "beyond_parts_lut4": beyond,
+           "beyond_placed": beyond_placed, "stack_placed": placed - beyond_placed,
+           "liteeth_udp8_lut4": by_core["liteeth_udp8"]["lut4"], "goal": FINEMB_NODE_GOAL,
+           "floor": by_core["liteeth_udp8"]["lut4"] + beyond_placed}
+    if "liteeth_udp32" in by_core:
+        out["liteeth_udp32_lut4"] = by_core["liteeth_udp32"]["lut4"]
+    return out
 
 
 def core_parts(row, labels, own, log=print):
@@ -573,11 +653,33 @@ def markdown(results):
     for core, (_, _, title, intro) in PARTS.items():
         if not results.get(f"{core}_parts"):
             continue
+        needs = FINEMB_NODE_NEEDS if core == "finemb_node" else {}
         lines += ["", f"## {title}", "", intro, "",
-                  "| part | LUT4+carry | FF | DP16KD | distributed RAM |", "|---|---|---|---|---|"]
+                  "| part | LUT4+carry | FF | DP16KD | distributed RAM |"
+                  + (" what it holds |" if needs else ""),
+                  "|---|---|---|---|---|" + ("---|" if needs else "")]
         for p in results[f"{core}_parts"]:
             lines.append(f"| {p['label']} | {p['lut4']} | {p['ff']} | {p['bram']} | "
-                         f"{p['dpram']} |")
+                         f"{p['dpram']} |" + (f" {needs.get(p['part'], '')} |" if needs else ""))
+        node = results.get("finemb_node_beside_liteeth") if needs else None
+        if node:
+            lines += ["", f"The goal, <= {node['goal']} LUT4+carry placed: the parts LiteEth's "
+                      f"UDP core has no counterpart of (the second port's MAC and bridge, the "
+                      f"four frame queues and two crossings into the core clock, the arbiter, "
+                      f"the FinEmbP client, the page buffer and the application) are "
+                      f"{node['beyond_parts_lut4']} of the parts' {node['parts_lut4']} "
+                      f"LUT4+carry, {node['beyond_placed']} of the node's "
+                      f"{node['node_lut4']} placed by the same share; the rest, one port's "
+                      f"MAC, parser, builder, ARP, ICMP, counters and the node's own logic, "
+                      f"{node['stack_placed']}, beside LiteEth's UDP core with its MAC: "
+                      f"{node['liteeth_udp8_lut4']} (8-bit)"
+                      + (f", {node['liteeth_udp32_lut4']} (32-bit, protocol logic at 62.5 MHz "
+                         f"as here)" if "liteeth_udp32_lut4" in node else "")
+                      + f". With LiteEth's 8-bit core in place of that rest the node would be "
+                      f"{node['floor']}; within {node['goal']} it would need the parts "
+                      f"without a counterpart cut to {node['goal'] - node['liteeth_udp8_lut4']}"
+                      f" ({1 - (node['goal'] - node['liteeth_udp8_lut4']) / node['beyond_placed']:.0%}"
+                      f" less), though each holds only what the column above says."]
     return "\n".join(lines) + "\n"
 
 
