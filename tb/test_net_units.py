@@ -263,6 +263,28 @@ def test_event_counters_read_while_clearing(block_ram):
     assert checked > 2 * (cycles - lag - 2) - 1
 
 
+@pytest.mark.parametrize("block_ram", [False, True])
+def test_one_event_counter_counts_every_cycle(block_ram):
+    """A bank of one counter (the service visits it every cycle, and in block RAM reads the
+    word written the cycle before) counts events in every cycle exactly."""
+    dut = EventCounters(("only",), width=16, block_ram=block_ram)
+    rng = random.Random(1)
+    events = [rng.random() < 0.7 for _ in range(500)]
+    seen = []
+
+    async def bench(ctx):
+        ctx.set(dut.rd_addr[0], 0)
+        for k, event in enumerate(events):
+            ctx.set(dut.events.only, event)
+            await ctx.tick()
+            seen.append((k, ctx.get(dut.rd_data[0])))
+
+    simulate(dut, bench)
+    lag = 2 + 2 * block_ram       # the accumulator, the write (and the write-back, the read)
+    for k, got in seen[lag:]:
+        assert got == sum(events[:k + 2 - lag]), (k, got)
+
+
 def test_event_counters_reject_bad_parameters():
     with pytest.raises(ParameterError, match="amounts"):
         EventCounters(("a", "b"), amounts={"c": 4})
