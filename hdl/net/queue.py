@@ -1,7 +1,7 @@
 """Queues of received frames: keep or drop a frame on a decision made from its first bytes,
 read it out while it still arrives (cut-through) or later (store-and-forward)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal
+from amaranth.hdl import Cat, Const, DomainRenamer, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.fifo import AsyncFIFO, SyncFIFO
 from amaranth.lib.memory import Memory
@@ -243,6 +243,10 @@ class FrameStreamBridge(wiring.Component):
     asynchronous FIFO; on ``sync`` they leave as a :func:`FrameStreamSignature` of 2 lanes
     (the last beat of a frame of odd length with ``tkeep`` 0b01), the status on the last.
     A reader on a core clock of half the GMII clock takes a byte-wide writer's rate.
+    ``s_axis.tready`` comes from a flip-flop (a ready-only register slice, no latency while
+    the FIFO has room): the FIFO's fullness, a comparison of its pointers, stays out of the
+    writer's paths (a :class:`FrameQueue` takes its frame status on the handshake of the
+    last byte).
 
     Parameters
     ----------
@@ -267,7 +271,10 @@ class FrameStreamBridge(wiring.Component):
         sig = FrameStreamSignature(2)
         m.submodules.fifo = fifo = AsyncFIFO(width=sig.payload_width, depth=BRIDGE_DEPTH,
                                              w_domain=self._domain, r_domain="sync")
-        s = self.s_axis
+        in_slice = RegisterSlice(FrameStreamSignature(1), ready_only=True)
+        m.submodules.in_slice = in_slice = DomainRenamer(self._domain)(in_slice)
+        wiring.connect(m, wiring.flipped(self.s_axis), in_slice.s_axis)
+        s = in_slice.m_axis
         low = Signal(8)
         have_low = Signal()
         beat = sig.flip().create()
