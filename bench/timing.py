@@ -663,6 +663,7 @@ def markdown(results):
                          f"{p['dpram']} |" + (f" {needs.get(p['part'], '')} |" if needs else ""))
         node = results.get("finemb_node_beside_liteeth") if needs else None
         if node:
+            room = node["goal"] - node["liteeth_udp8_lut4"]
             lines += ["", f"The goal, <= {node['goal']} LUT4+carry placed: the parts LiteEth's "
                       f"UDP core has no counterpart of (the second port's MAC and bridge, the "
                       f"four frame queues and two crossings into the core clock, the arbiter, "
@@ -677,8 +678,7 @@ def markdown(results):
                          f"as here)" if "liteeth_udp32_lut4" in node else "")
                       + f". With LiteEth's 8-bit core in place of that rest the node would be "
                       f"{node['floor']}; within {node['goal']} it would need the parts "
-                      f"without a counterpart cut to {node['goal'] - node['liteeth_udp8_lut4']}"
-                      f" ({1 - (node['goal'] - node['liteeth_udp8_lut4']) / node['beyond_placed']:.0%}"
+                      f"without a counterpart cut to {room} ({1 - room / node['beyond_placed']:.0%}"
                       f" less), though each holds only what the column above says."]
     return "\n".join(lines) + "\n"
 

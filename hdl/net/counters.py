@@ -34,9 +34,9 @@ class EventCounters(wiring.Component):
     block_ram : bool
         Keep the counters in a RAM with registered reads (block RAM): ``rd_data`` then
         shows the counter ``rd_addr`` named in the cycle before, and a counter shows an
-        event or a clear at most ``len(names) + 1`` cycles late. Otherwise (the default) the RAM is read
-        without a register (distributed RAM) and ``rd_data`` follows ``rd_addr`` in the same
-        cycle.
+        event or a clear at most ``len(names) + 1`` cycles late. Otherwise (the default) the
+        RAM is read without a register (distributed RAM) and ``rd_data`` follows ``rd_addr``
+        in the same cycle.
     spacing : int or dict of str to int
         Fewest cycles between two events of one counter (1: every cycle), which sizes the
         accumulators: one number for every counter, or a number per counter (1 for a counter
