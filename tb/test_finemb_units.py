@@ -8,7 +8,6 @@ import random
 import struct
 
 import pytest
-from scapy.utils import checksum as scapy_checksum
 
 from gen.finemb import IoDescriptionError, load_io_description, parse_io_description
 from hdl.finemb import IoDescriptor, PageBuffer
@@ -18,6 +17,7 @@ from hdl.finemb.protocol import (
 from hdl.net.queue import FrameQueue, FrameToRxBeats
 from hdl.params import ParameterError
 
+from .models.inet import ones_sum
 from .harness import ROOT
 from .streamsim import StreamSink, beats_to_messages, simulate
 
@@ -132,11 +132,6 @@ def test_io_description_file_missing(tmp_path):
 
 
 # ---- the page buffer
-
-def ones_sum(data):
-    """The one's complement sum of ``data`` as big-endian words (RFC 1071, not inverted)."""
-    return (~scapy_checksum(bytes(data))) & 0xFFFF
-
 
 class PageSides:
     """Both sides of a page buffer, stepped one cycle at a time in one process so that every

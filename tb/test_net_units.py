@@ -18,10 +18,12 @@ from scapy.utils import checksum as scapy_checksum
 
 from hdl.net import Crc32, FrameBuilder, FrameParser, GmiiRx, InternetChecksum, NetStack
 from hdl.net.counters import EventCounters
+from hdl.net.frames import ip_to_int, mac_to_int
 from hdl.net.mac import RxBeatBridge, RxBeatSignature
 from hdl.net.tcp.banks import ByteBanks
 from hdl.params import ParameterError
 
+from .models.inet import ones_sum
 from .streamsim import simulate
 
 
@@ -487,11 +489,6 @@ def test_frame_parser_matches_scapy(lanes):
     assert malformed_seen == 5
 
 
-def _ones_sum(data):
-    """RFC 1071 one's complement sum (not complemented) of ``data``."""
-    return 0xFFFF ^ scapy_checksum(data) if data else 0
-
-
 @pytest.mark.parametrize("lanes", [1, 2])
 def test_frame_builder_of_some_kinds_matches_scapy(lanes):
     """A builder made for ARP and UDP only (``kinds``): its UDP frames (random payloads of
@@ -506,8 +503,6 @@ def test_frame_builder_of_some_kinds_matches_scapy(lanes):
     rng = random.Random(lanes)
     dut = FrameBuilder(2, lanes=lanes, ttl=1, kinds=(FrameKind.ARP, FrameKind.UDP))
     mac, ip = "02:00:00:00:46:01", "10.0.0.7"
-    mac_int, ip_int = int(mac.replace(":", ""), 16), int.from_bytes(bytes(map(int, ip.split("."))),
-                                                                    "big")
     # per requester: (kind, fields, payload) in order; port 1 mixes in the unsupported kinds
     plan = {0: [], 1: []}
     for k in range(12):
@@ -544,7 +539,7 @@ def test_frame_builder_of_some_kinds_matches_scapy(lanes):
                 ctx.set(r.src_port, 4000 + k)
                 ctx.set(r.dst_port, 5000 + port)
                 ctx.set(r.length, len(payload))
-                ctx.set(r.payload_sum, _ones_sum(payload))
+                ctx.set(r.payload_sum, ones_sum(payload))
                 ctx.set(r.payload_addr, 0)
                 ctx.set(req.valid, 1)
                 await ctx.tick().until(req.ready)
@@ -573,8 +568,8 @@ def test_frame_builder_of_some_kinds_matches_scapy(lanes):
                     current = bytearray()
 
     async def addresses(ctx):
-        ctx.set(dut.local_mac, mac_int)
-        ctx.set(dut.local_ip, ip_int)
+        ctx.set(dut.local_mac, mac_to_int(mac))
+        ctx.set(dut.local_ip, ip_to_int(ip))
         await ctx.tick()
 
     async def finish(ctx):
