@@ -405,15 +405,16 @@ class FinembClient(wiring.Component):
         m.d.comb += tx.rd_data.eq(Cat(*lanes_out))
         # the selected word comes a cycle later: big-endian, a lone byte even or odd
         summed = Signal()
-        sum_odd = Signal()
+        sum_odd = Signal()        # (one lane: the byte's half of its word)
         if L == 2:
             sum_word = Cat(fixed_word[8:], fixed_word[:8])
         else:
             sum_word = Mux(sum_odd, Cat(fixed_word, Const(0, 8)), Cat(Const(0, 8), fixed_word))
         m.d.sync += summed.eq(summing)
         with m.If(summed):
-            m.d.sync += [fixed_sum.eq(ones_complement_add(fixed_sum, sum_word)),
-                         sum_odd.eq(~sum_odd)]
+            m.d.sync += fixed_sum.eq(ones_complement_add(fixed_sum, sum_word))
+            if L == 1:
+                m.d.sync += sum_odd.eq(~sum_odd)
         with m.If(summing):
             m.d.sync += sum_k.eq(sum_k + 1)
             with m.If((sum_k + 1) * L >= fixed_len):

@@ -63,29 +63,26 @@ class EventCounters(wiring.Component):
         if not self._names or len(set(self._names)) != len(self._names):
             raise ParameterError("names", names, "distinct counter names")
         self._width = check_int("width", width, 1, 64)
-        amounts = dict(amounts or {})
-        for name in amounts:
-            if name not in self._names:
-                raise ParameterError("amounts", name, f"one of the counters {self._names}")
-        self._amounts = {name: check_int(f"amounts[{name!r}]", amounts.get(name, 1), 1, width)
-                         for name in self._names}
+        self._amounts = self._per_counter("amounts", amounts or {}, 1, width)
         self._readers = check_int("readers", readers, 1, 3)
         n = len(self._names)
-        if isinstance(spacing, dict):
-            for name in spacing:
-                if name not in self._names:
-                    raise ParameterError("spacing", name, f"one of the counters {self._names}")
-            self._spacing = {name: check_int(f"spacing[{name!r}]", spacing.get(name, 1), 1)
-                             for name in self._names}
-        else:
-            spacing = check_int("spacing", spacing, 1)
-            self._spacing = dict.fromkeys(self._names, spacing)
+        if not isinstance(spacing, dict):
+            spacing = dict.fromkeys(self._names, check_int("spacing", spacing, 1))
+        self._spacing = self._per_counter("spacing", spacing, 1)
         super().__init__({
             "events": In(data.StructLayout(self._amounts)),
             "rd_addr": In(data.ArrayLayout(range(n), self._readers)),
             "rd_data": Out(data.ArrayLayout(self._width, self._readers)),
             "clear": In(1),
         })
+
+    def _per_counter(self, param, values, minimum, maximum=None):
+        """``values`` (a dict by counter name) for every counter, 1 where it names none."""
+        for name in values:
+            if name not in self._names:
+                raise ParameterError(param, name, f"one of the counters {self._names}")
+        return {name: check_int(f"{param}[{name!r}]", values.get(name, 1), minimum, maximum)
+                for name in self._names}
 
     def elaborate(self, platform):
         m = Module()
