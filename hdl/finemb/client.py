@@ -373,13 +373,13 @@ class FinembClient(wiring.Component):
         fixed = Cat(header_out, r_body)          # header + fixed body
         # the fixed part, ``L`` bytes a word, through one registered selection: read by the
         # builder (``rd`` is a multiple of ``L``) and, before that, summed a word per cycle
-        fixed_words = Array(fixed.word_select(k, 8 * L) for k in range((HEADER + 20) // L))
+        fixed_words = Array(fixed.word_select(k, 8 * L) for k in range(len(fixed) // (8 * L)))
         is_isend = r_type == MsgType.ISEND_RES
         is_iodesc = r_type == MsgType.IODESC_RES
         fixed_len = Mux(is_isend, HEADER, Mux(is_iodesc, HEADER + 4, HEADER + r_len))
         # the fixed part's one's complement sum: a response's bytes past its fixed part are
         # zero (``reply`` zero-extends the body), so the sum may stop at any word after it
-        sum_k = Signal(range((HEADER + 20) // L + 2))      # words selected for the sum
+        sum_k = Signal(range(len(fixed_words) + 2))        # words selected for the sum
         summing = Signal()
         fixed_sum = Signal(16)
         chunk_sum = Signal(16)
