@@ -16,10 +16,10 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-__all__ = ["DEVICE", "MARGIN", "PNR_MINUTES_DEFAULT", "PNR_MINUTES_ENV", "SEEDS", "TimingError",
-           "find_tool", "run_tool",
-           "place_and_route", "pnr_timeout_s", "readable_cell", "lut4_carry", "synthesise",
-           "synthesise_parts", "time_verilog", "unplaced_reason"]
+__all__ = ["BRACKETED_NAME_ASSERTION", "DEVICE", "MARGIN", "PNR_MINUTES_DEFAULT",
+           "PNR_MINUTES_ENV", "SEEDS", "TimingError", "find_tool", "run_tool",
+           "netlist_cells", "place_and_route", "pnr_timeout_s", "readable_cell", "lut4_carry",
+           "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
 NEXTPNR_DEVICE = ("--um5g-85k", "--package", "CABGA381", "--speed", "8")
@@ -37,7 +37,7 @@ def pnr_timeout_s(environ=os.environ):
     :data:`PNR_MINUTES_DEFAULT` minutes, or the minutes in ``ROSGATE_PNR_MINUTES`` (for a
     machine slower than the one the limit was set on; the limit used is in each row)."""
     text = environ.get(PNR_MINUTES_ENV)
-    if text is None or text == "":
+    if not text:
         return PNR_MINUTES_DEFAULT * 60
     try:
         minutes = float(text)
@@ -123,11 +123,16 @@ def synthesise(verilog, top, folder):
             if renamed or BRACKETED_NAME_ASSERTION not in str(error):
                 raise
             log.replace(folder / "yosys-bracketed.log")
+    return netlist, netlist_cells(netlist)
+
+
+def netlist_cells(netlist):
+    """``{cell type: count}`` over every module of Yosys' JSON ``netlist``."""
     cells = {}
-    for module in json.loads(netlist.read_text())["modules"].values():
+    for module in json.loads(Path(netlist).read_text())["modules"].values():
         for cell in module["cells"].values():
             cells[cell["type"]] = cells.get(cell["type"], 0) + 1
-    return netlist, cells
+    return cells
 
 
 #: Yosys' ECP5 cells as the reports count them: (key, cells each); a CCU2C carry cell is two

