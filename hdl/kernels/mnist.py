@@ -375,7 +375,7 @@ class MnistCnn(wiring.Component):
     map, whose nine positions are the nine taps): conv2 takes 49 x 4 beats, each conv3 pass
     9 x 8, the FC layer 16. A beat waits until the rows it reads are written, so conv2
     follows conv1 down the image and conv3 starts right after conv2; only the FC layer waits
-    for all of conv3. A digit takes about 440 cycles from its first beat to its result at 4
+    for all of conv3. A digit takes 447 cycles from its first beat to its result at 4
     pixels a beat.
 
     conv1's map is a memory of one word per pixel (all eight channels), read through nine
