@@ -22,6 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+# the weights' bits and the activations' range are the hardware's (hdl.kernels.mnist)
+from hdl.kernels.mnist import ACT_MAX, WEIGHT_BITS
+
 __all__ = ["WEIGHTS", "LAYERS", "WEIGHT_BITS", "ACT_MAX", "load_mnist", "split", "load_weights",
            "infer", "infer_batch", "accuracy", "shape_of"]
 
@@ -30,10 +33,6 @@ WEIGHTS = Path(__file__).resolve().parents[1] / "examples" / "mnist" / "cnn_int4
 #: (name, kind, in channels, out channels, stride, padding, 2x2 max-pool after)
 LAYERS = (("conv1", "conv", 1, 8, 1, 1, True), ("conv2", "conv", 8, 16, 2, 1, False),
           ("conv3", "conv", 16, 32, 2, 0, False), ("fc", "fc", 288, 10, 1, 0, False))
-#: the weights are signed integers of this many bits
-WEIGHT_BITS = 4
-#: hidden activations are clipped to 0..ACT_MAX (7 bits)
-ACT_MAX = 127
 TRAIN_PER_DIGIT = 400
 
 

@@ -12,6 +12,7 @@ import random
 
 import pytest
 
+from gen import mnist
 from hdl.kernels import MnistCnn, MnistMacArray
 from hdl.kernels.mnist import csd_digits
 from hdl.params import ParameterError
@@ -147,8 +148,7 @@ def cnn_weights(rng):
     """A well-formed weight set of the network's shapes."""
     import numpy as np
     gen = np.random.default_rng(rng.randrange(1 << 30))
-    shapes = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
-              "fc": (10, 288)}
+    shapes = {name: mnist.shape_of(name) for name, *_ in mnist.LAYERS}
     return {name: (gen.integers(-8, 8, shape).astype(np.int8),
                    gen.integers(-1000, 1000, shape[0]).astype(np.int32),
                    gen.integers(0, 8, shape[0])) for name, shape in shapes.items()}

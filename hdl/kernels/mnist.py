@@ -19,7 +19,9 @@ MNIST_RESULT = data.StructLayout({"digit": 8, "reserved": 8,
 #: the network (gen.mnist.LAYERS): weight shapes
 _SHAPES = {"conv1": (8, 1, 3, 3), "conv2": (16, 8, 3, 3), "conv3": (32, 16, 3, 3),
            "fc": (10, 288)}
-WEIGHT_MIN, WEIGHT_MAX = -8, 7
+#: the weights are signed integers of this many bits; activations lie in 0..ACT_MAX
+WEIGHT_BITS = 4
+WEIGHT_MIN, WEIGHT_MAX = -2 ** (WEIGHT_BITS - 1), 2 ** (WEIGHT_BITS - 1) - 1
 ACT_MAX = 127
 #: the array: 16 output lanes, 18 taps (two input channels' 3x3 windows) per beat
 LANES = 16
