@@ -94,9 +94,9 @@ RESOURCE_SPECS = {"equalize_p1": (dict(kind="equalize", max_width=128, max_heigh
 
 #: kernels too large for the timing device (bench/timing.py), or that it does not route in
 #: the flow's time, and the smaller configurations placed instead, largest first:
-#: (parameter, value). The MNIST CNN at 1 pixel per clock keeps its multiplier array; its
-#: narrower image memory copies are what let the router finish
-TIMING_FALLBACKS = {"ik": (("lanes", 8),), "mnist": (("pixels_per_beat", 1),)}
+#: (parameter, value). The MNIST CNN has none: at 1 pixel per clock it gathers four pixels
+#: into the same first layer and multiplier array, so it is no smaller to place
+TIMING_FALLBACKS = {"ik": (("lanes", 8),)}
 
 
 def measure_resources(log=print):

@@ -6,7 +6,7 @@ at 4 pixels a beat (5 us at 100 MHz), 1,100 at 1 pixel a beat.
 
 Icarus runs the first 4 held-out images, Verilator all 1000 (the first 2 under random idle
 and backpressure); a short and a long image raise their error pulses. At 1 pixel a beat
-(the timing bench's fallback) Icarus runs in make test, Verilator in make test-full."""
+Icarus runs in make test, Verilator in make test-full."""
 
 import os
 
