@@ -16,9 +16,9 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-__all__ = ["BRACKETED_NAME_ASSERTION", "DEVICE", "MARGIN", "PNR_MINUTES_DEFAULT",
-           "PNR_MINUTES_ENV", "SEEDS", "TimingError", "find_tool", "run_tool",
-           "netlist_cells", "place_and_route", "pnr_timeout_s", "readable_cell", "lut4_carry",
+__all__ = ["BRACKETED_NAME_ASSERTION", "DEVICE", "MARGIN", "PNR_MINUTES_DEFAULT", "PNR_JOBS_ENV",
+           "PNR_MINUTES_ENV", "SEEDS", "TimingError", "find_tool", "run_tool", "netlist_cells",
+           "place_and_route", "pnr_jobs", "pnr_timeout_s", "readable_cell", "lut4_carry",
            "synthesise", "synthesise_parts", "time_verilog", "unplaced_reason"]
 
 DEVICE = "LFE5UM5G-85F-8 CABGA381"
@@ -30,6 +30,8 @@ SEEDS = (1, 2, 3)
 PNR_MINUTES_DEFAULT = 20
 #: the environment variable that gives a slower machine more minutes a seed
 PNR_MINUTES_ENV = "ROSGATE_PNR_MINUTES"
+#: the environment variable that sets how many seeds are placed at once
+PNR_JOBS_ENV = "ROSGATE_PNR_JOBS"
 
 
 def pnr_timeout_s(environ=os.environ):
@@ -48,6 +50,19 @@ def pnr_timeout_s(environ=os.environ):
         raise ValueError(f"{PNR_MINUTES_ENV}={text!r} (environment): a limit a seed has to "
                          f"be more than 0 and less than {24 * 60} minutes")
     return minutes * 60
+
+
+def pnr_jobs(seeds, environ=os.environ):
+    """How many of ``seeds`` are placed at once: one per processor, or the number in
+    ``ROSGATE_PNR_JOBS`` (all three seeds at once on two processors end sooner than two and
+    then one)."""
+    text = environ.get(PNR_JOBS_ENV)
+    if not text:
+        return min(len(seeds), os.cpu_count() or 1)
+    if not text.isdigit() or not 0 < int(text) <= 64:
+        raise ValueError(f"{PNR_JOBS_ENV}={text!r} (environment): the seeds placed at once "
+                         f"have to be a whole number from 1 to 64")
+    return min(len(seeds), int(text))
 
 
 #: a place-and-route run that takes longer is given up (a congested core)
@@ -259,7 +274,7 @@ def time_verilog(verilog, top, clocks, folder, *, seeds=SEEDS, jobs=None, log=pr
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     netlist, cells = synthesise(verilog, top, folder)
-    jobs = jobs or min(len(seeds), os.cpu_count() or 1)
+    jobs = jobs or pnr_jobs(seeds)
     failed = threading.Event()
     minutes = {}
 

@@ -13,10 +13,11 @@ from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
 from gen.export.verilog import export_verilog, without_bracketed_names
-from host.timing import (BRACKETED_NAME_ASSERTION, MARGIN, PNR_MINUTES_DEFAULT,
+from host.timing import (BRACKETED_NAME_ASSERTION, MARGIN, PNR_JOBS_ENV, PNR_MINUTES_DEFAULT,
                          PNR_MINUTES_ENV, PNR_TIMEOUT_S, TimingError, find_tool, lut4_carry,
-                         netlist_cells, pnr_timeout_s, readable_cell, run_tool, synthesise,
-                         synthesis_failure, synthesise_parts, time_verilog, unplaced_reason)
+                         netlist_cells, pnr_jobs, pnr_timeout_s, readable_cell, run_tool,
+                         synthesise, synthesis_failure, synthesise_parts, time_verilog,
+                         unplaced_reason)
 
 
 class AdderChain(wiring.Component):
@@ -218,6 +219,18 @@ def test_the_limit_a_seed_is_the_flows_unless_the_environment_names_another():
     for bad in ("ninety", "0", "-5", "1440", "nan"):
         with pytest.raises(ValueError, match=f"{PNR_MINUTES_ENV}={bad!r}"):
             pnr_timeout_s({PNR_MINUTES_ENV: bad})
+
+
+def test_the_seeds_placed_at_once_are_one_per_processor_unless_the_environment_says(
+        monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    assert pnr_jobs((1, 2, 3), {}) == 2
+    assert pnr_jobs((1,), {}) == 1
+    assert pnr_jobs((1, 2, 3), {PNR_JOBS_ENV: "3"}) == 3
+    assert pnr_jobs((1, 2, 3), {PNR_JOBS_ENV: "8"}) == 3
+    for bad in ("three", "0", "-1", "1.5", "65"):
+        with pytest.raises(ValueError, match=f"{PNR_JOBS_ENV}={bad!r}"):
+            pnr_jobs((1, 2, 3), {PNR_JOBS_ENV: bad})
 
 
 def test_bracketed_names_are_renamed_once_and_uniquely():
