@@ -98,6 +98,11 @@ RESOURCE_SPECS = {"equalize_p1": (dict(kind="equalize", max_width=128, max_heigh
 #: into the same first layer and multiplier array, so it is no smaller to place
 TIMING_FALLBACKS = {"ik": (("lanes", 8),)}
 
+#: parameters a kernel is placed with on the timing bench's ECP5 only: the MNIST CNN's
+#: multipliers as MULT18X18D with their own registers (Yosys does not move registers into
+#: them; Vivado does into its DSP48, so the exported kernel keeps inferred ones)
+TIMING_PARAMS = {"mnist": {"multipliers": "ecp5"}}
+
 
 def measure_resources(log=print):
     rows = []

@@ -72,6 +72,7 @@ def catalog():
     for name, (spec, label, *_) in {**kernels.IMAGE, **kernels.CONTROL,
                                     **kernels.MNIST}.items():
         spec, label = kernels.RESOURCE_SPECS.get(name, (spec, label))
+        spec = {**spec, **kernels.TIMING_PARAMS.get(name, {})}
         fallbacks = [(f"{label}, {k} {v}", _kernel({**spec, k: v}))
                      for k, v in kernels.TIMING_FALLBACKS.get(name, ())]
         add(f"kernel_{name}", label, _kernel(spec), f"kernel_{name}", kernels.CLOCK_MHZ,

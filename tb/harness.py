@@ -26,7 +26,9 @@ from pathlib import Path
 
 import pytest
 
+from gen.export.verilog import write_if_changed
 from gen.tops import build_top
+from host.board_sim import PRIMITIVES
 from host.simulator import (
     DEFAULT_CXX_OPT,
     QUICK_CXX_OPT,
@@ -161,7 +163,8 @@ def rerun_hint(seed):
 
 
 def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, build=None,
-              extra_env=None, quiet=False, run_name=None, optimise=False, harness=None):
+              extra_env=None, quiet=False, run_name=None, optimise=False, harness=None,
+              ecp5_models=False):
     """Export, build and run the cocotb tests of ``module`` against ``top`` in
     ``sim_build/<top>-<config_id>-<sim>/``; raise on failure, naming each failed test's seed
     and the command that repeats the pytest item with it.
@@ -172,7 +175,9 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     apart from the module's other cases in the same build. ``seed`` (default: ``SEED`` in the
     environment, else a new one) seeds cocotb. ``harness(params)``, if given, returns the
     Verilator harness of :func:`host.simulator.run_top` (compiled models around the top) for
-    the configuration.
+    the configuration. ``ecp5_models`` runs a top that instantiates ECP5 primitives (such as
+    the MNIST CNN with ``multipliers="ecp5"``) with their cycle-level models
+    (:data:`host.board_sim.PRIMITIVES`) in the same Verilog file.
 
     A Verilator model is compiled without optimisation (``OPT_FAST=-O0``): cocotb's Python
     side sets the pace of a test's simulation, so the C++ build is most of a bench's time
@@ -192,11 +197,18 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
         "ROSGATE_ROOT": str(ROOT),
         **(extra_env or {}),
     }
+    exported = None
+    if ecp5_models:
+        build_dir = build_dir.with_name(build_dir.name + "-ecp5")
+        vfile = export_bench_top(top, params, build_dir, build=build, icarus=sim == "icarus")
+        exported = build_dir / f"{top}_with_ecp5_models.v"
+        write_if_changed(exported, PRIMITIVES.read_text() + vfile.read_text())
     try:
         return run_top(module, top, _maker(top, params, build), sim, build_dir, params=params,
-                       testcase=testcase, seed=seed, extra_env=env,
+                       testcase=testcase, seed=seed, extra_env=env, exported=exported,
                        log_file=build_dir / f"sim-{short}.log" if quiet else None,
-                       run_name=run_name, lint=build is None, cxx_opt=cxx_opt,
+                       run_name=run_name, lint=build is None and not ecp5_models,
+                       cxx_opt=cxx_opt,
                        waves=_waves(), verilog_key=verilog_key(top, params, build),
                        harness=harness(params) if harness else None)
     except SimulationFailed as exc:

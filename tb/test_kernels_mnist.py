@@ -12,8 +12,9 @@ import os
 
 import cocotb
 import numpy as np
+import pytest
 
-from tb.harness import cocotb_bench
+from tb.harness import cocotb_bench, run_bench
 
 from .kernels_mnist_tb import LATENCY_BUDGET, TARGET_ACCURACY, MnistTB, check, held_out
 
@@ -23,6 +24,16 @@ CONFIGS = {"mnist": dict(kernels={"cnn": dict(kind="mnist", pixels_per_beat=4)})
 # Icarus (4 images) runs in make test; all 1000 images on Verilator in make test-full
 test_kernels = cocotb_bench("kernels", CONFIGS, long=[("mnist", "verilator"),
                                                       ("mnist_p1", "verilator")])
+
+
+@pytest.mark.parametrize("sim", ["icarus", pytest.param("verilator", marks=pytest.mark.full)])
+def test_ecp5_multipliers_bit_exact(sim):
+    """The CNN as the timing bench places it (its multipliers ECP5 MULT18X18D with their own
+    registers) with the primitives' cycle-level models: the same results and latency."""
+    params = {"kernels": {"cnn": dict(kind="mnist", pixels_per_beat=4,
+                                      multipliers="ecp5")}}
+    run_bench(__name__, "kernels", "mnist", params, sim, ecp5_models=True,
+              testcase=["held_out_images_bit_exact"])
 
 SIM = os.environ.get("ROSGATE_SIM", "")
 

@@ -6,17 +6,29 @@ beat's tag; beats with idle cycles between them, accumulations of one and of man
 extreme operands (activation 255, weights -8 and 7, in every combination of a multiplier's
 two lanes, where the low lane's product is negative and the high lane needs its borrow
 back). Also the canonical signed digits behind conv1's constant products, and MnistCnn's
-refusals of malformed weights."""
+refusals of malformed weights.
+
+The array with ECP5 multipliers (``multipliers="ecp5"``, MULT18X18D instances with their own
+registers, as the timing bench places it) runs on Icarus and Verilator with the cycle-level
+MULT18X18D model of host/compiled/ecp5_primitives.v, against the same contract, cycle for
+cycle: every result comes LATENCY cycles after its last beat."""
 
 import random
 
+import cocotb
 import pytest
+from cocotb.triggers import ReadOnly, RisingEdge
 
 from gen import mnist
+from gen.export.verilog import write_if_changed
 from hdl.kernels import MnistCnn, MnistMacArray
 from hdl.kernels.mnist import csd_digits
 from hdl.params import ParameterError
+from host.board_sim import PRIMITIVES
+from host.simulator import QUICK_CXX_OPT, export_top, run_top, start_clock, top_params
 
+from .harness import ROOT, SIM_BUILD
+from .streams import reset_aresetn
 from .streamsim import simulate
 
 
@@ -125,8 +137,79 @@ def test_latency_is_as_documented():
     assert times == {"out": dut.LATENCY, "sum": 3}
 
 
+ECP5_ARRAY = dict(lanes=4, taps=18, tag_width=8)
+
+
+def _words(values, bits):
+    return sum((v & ((1 << bits) - 1)) << (bits * n) for n, v in enumerate(values))
+
+
+def _signed(word, bits):
+    return word - (1 << bits) if word >> (bits - 1) else word
+
+
+@cocotb.test()
+async def ecp5_array_matches_the_contract(dut):
+    """Random accumulations (random idle cycles, extreme operands), each result equal to the
+    contract and out LATENCY cycles after its last beat."""
+    p = top_params()
+    lanes, taps, latency = p["lanes"], p["taps"], p["latency"]
+    rng = random.Random(random.getrandbits(32))        # cocotb seeds random
+    accumulations = random_accumulations(rng, lanes, taps, 40, 12)
+    start_clock(dut.aclk, 10)
+    dut.valid.value = 0
+    await reset_aresetn(dut)
+    seen, cycle, last_at = [], 0, []
+
+    async def watch():
+        nonlocal cycle
+        while True:
+            await RisingEdge(dut.aclk)
+            await ReadOnly()
+            cycle += 1
+            if dut.out_valid.value:
+                sums = int(dut.sums.value)
+                seen.append((cycle, int(dut.out_tag.value),
+                             [_signed((sums >> (32 * o)) & 0xFFFFFFFF, 32)
+                              for o in range(lanes)]))
+
+    cocotb.start_soon(watch())
+    for tag, beats in accumulations:
+        for n, (act, weights) in enumerate(beats):
+            while rng.random() < 0.3:
+                dut.valid.value = 0
+                await RisingEdge(dut.aclk)
+            dut.valid.value = 1
+            dut.first.value = int(n == 0)
+            dut.last.value = int(n == len(beats) - 1)
+            dut.tag.value = tag
+            dut.act.value = _words(act, 8)
+            dut.weights.value = _words(weights, 4)
+            await RisingEdge(dut.aclk)
+            if n == len(beats) - 1:
+                last_at.append(cycle)
+    dut.valid.value = 0
+    for _ in range(latency + 4):
+        await RisingEdge(dut.aclk)
+    assert [(tag, sums) for _, tag, sums in seen] == expected(accumulations)
+    assert [at for at, _, _ in seen] == [at + latency for at in last_at]
+
+
+@pytest.mark.parametrize("sim", ["icarus", "verilator"])
+def test_ecp5_multipliers_match_the_contract(sim):
+    """MnistMacArray(multipliers="ecp5") with the MULT18X18D model: the contract, on time."""
+    build = SIM_BUILD / f"mnist_mac_ecp5-{sim}"
+    array = MnistMacArray(**ECP5_ARRAY, multipliers="ecp5")
+    vfile = export_top(array, "mnist_mac", build, icarus=sim == "icarus")
+    combined = build / "mnist_mac_with_ecp5_models.v"
+    write_if_changed(combined, PRIMITIVES.read_text() + vfile.read_text())
+    params = {**ECP5_ARRAY, "latency": array.LATENCY}
+    run_top(__name__, "mnist_mac", None, sim, build, params=params, exported=combined,
+            lint=False, cxx_opt=QUICK_CXX_OPT, extra_env={"PYTHONPATH": str(ROOT)})
+
+
 @pytest.mark.parametrize("param,value", [("lanes", 0), ("lanes", 3), ("taps", -1),
-                                         ("tag_width", "8")])
+                                         ("tag_width", "8"), ("multipliers", "ice40")])
 def test_bad_parameters_are_named(param, value):
     with pytest.raises(ParameterError, match=param):
         MnistMacArray(**{param: value})

@@ -1,7 +1,7 @@
 """Integer MNIST CNN: conv1 computed while the image streams in, conv2, conv3 and the FC layer
 on one array of packed multipliers (docs/kernels.md)."""
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Cat, ClockSignal, Const, Instance, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.memory import Memory
 from amaranth.lib.wiring import In, Out
@@ -28,6 +28,10 @@ LANES = 16
 TAPS = 18
 #: the packed multiplier's second product starts at this bit
 PACK_SHIFT = 12
+#: how the array's multipliers are made: inferred (``None``; Vivado moves the registers
+#: around them into its DSP48 slices) or ECP5 MULT18X18D instances with their own input and
+#: output registers (``"ecp5"``; Yosys leaves those registers in the fabric)
+MULTIPLIERS = (None, "ecp5")
 SIDE = 28
 #: words of four pixels per image row
 ROW_WORDS = SIDE // 4
@@ -130,14 +134,22 @@ class MnistMacArray(wiring.Component):
         last beat was presented; the next cycle they may change.
     sums : Out(ArrayLayout(signed(32), lanes))
     out_tag : Out(tag_width)
+
+    Parameters
+    ----------
+    multipliers : None or str
+        ``None``: multipliers inferred from ``*`` between registers (any tool);
+        ``"ecp5"``: each an ECP5 ``MULT18X18D`` whose input and output registers take the
+        place of those registers, cycle for cycle the same array (see :data:`MULTIPLIERS`).
     """
 
-    def __init__(self, lanes=LANES, taps=TAPS, *, tag_width=1):
+    def __init__(self, lanes=LANES, taps=TAPS, *, tag_width=1, multipliers=None):
         self.lanes = check_int("lanes", lanes, 2)
         if lanes % 2:
             raise ParameterError("lanes", lanes, "even (two lanes share a multiplier)")
         self.taps = check_int("taps", taps, 1)
         self.tag_width = check_int("tag_width", tag_width, 1)
+        self.multipliers = check_choice("multipliers", multipliers, MULTIPLIERS)
         super().__init__({
             "valid": In(1), "first": In(1), "last": In(1), "tag": In(tag_width),
             "act": In(data.ArrayLayout(unsigned(8), taps)),
@@ -166,17 +178,22 @@ class MnistMacArray(wiring.Component):
                       "ctrl")
         valid, first, last, tag = ctrl[0], ctrl[1], ctrl[2], ctrl[3:]
 
-        act = [Signal(8, name=f"act{t}", reset_less=True) for t in range(taps)]
-        m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
+        if self.multipliers is None:
+            act = [Signal(8, name=f"act{t}", reset_less=True) for t in range(taps)]
+            m.d.sync += [a.eq(self.act[t]) for t, a in enumerate(act)]
         for j in range(lanes // 2):
             low_terms, high_terms, borrows = [], [], []
             for t in range(taps):
-                packed = Signal(signed(18), name=f"w{j}_{t}", reset_less=True)
-                product = Signal(signed(26), name=f"p{j}_{t}", reset_less=True)
-                m.d.sync += [
-                    packed.eq(self.weights[2 * j * taps + t] +
-                              (self.weights[(2 * j + 1) * taps + t] << PACK_SHIFT)),
-                    product.eq(packed * act[t])]
+                packed = (self.weights[2 * j * taps + t] +
+                          (self.weights[(2 * j + 1) * taps + t] << PACK_SHIFT))
+                if self.multipliers is None:
+                    weights = Signal(signed(18), name=f"w{j}_{t}", reset_less=True)
+                    product = Signal(signed(26), name=f"p{j}_{t}", reset_less=True)
+                    m.d.sync += [weights.eq(packed), product.eq(weights * act[t])]
+                else:
+                    product = Signal(signed(26), name=f"p{j}_{t}")
+                    m.submodules[f"mult{j}_{t}"] = _ecp5_mult18x18d(packed, self.act[t],
+                                                                    product)
                 low_terms.append(product[:PACK_SHIFT].as_signed())
                 high_terms.append(product[PACK_SHIFT:].as_signed())
                 borrows.append(product[PACK_SHIFT - 1])
@@ -195,6 +212,25 @@ class MnistMacArray(wiring.Component):
                     m.d.sync += acc.eq(Mux(first, 0, acc) + total)
         m.d.sync += [self.out_valid.eq(valid & last), self.out_tag.eq(tag)]
         return m
+
+
+def _ecp5_mult18x18d(a, b, p):
+    """An ECP5 ``MULT18X18D`` with its A and B inputs and its output registered: ``p`` is
+    the product of signed ``a`` and unsigned ``b`` given two clock cycles before (in the
+    ``sync`` domain; no reset, no clock enable)."""
+    a = a.as_signed()
+    product = Signal(36)
+    ports = {f"i_A{n}": a[min(n, len(a) - 1)] for n in range(18)}
+    ports.update({f"i_B{n}": b[n] if n < len(b) else 0 for n in range(18)})
+    ports.update({f"o_P{n}": product[n] for n in range(36)})
+    registered = {f"p_REG_{stage}_CLK": "CLK0" for stage in ("INPUTA", "INPUTB", "OUTPUT")}
+    instance = Instance("MULT18X18D", **registered, p_GSR="DISABLED",
+                        i_SIGNEDA=1, i_SIGNEDB=0, i_SOURCEA=0, i_SOURCEB=0,
+                        i_CLK0=ClockSignal(), i_CE0=1, i_RST0=0, **ports)
+    m = Module()
+    m.submodules.dsp = instance
+    m.d.comb += p.eq(product[:len(p)])
+    return m
 
 
 class MnistConv1(wiring.Component):
@@ -393,6 +429,9 @@ class MnistCnn(wiring.Component):
         channel: :func:`gen.mnist.load_weights`.
     pixels_per_beat : int
         1 or 4.
+    multipliers : None or str
+        How the array's multipliers are made: :class:`MnistMacArray`'s parameter (``"ecp5"``
+        for Yosys and nextpnr on ECP5; the same results, cycle for cycle).
 
     Members
     -------
@@ -406,8 +445,9 @@ class MnistCnn(wiring.Component):
         One-cycle pulses (:class:`~hdl.kernels.image.FrameGuard`).
     """
 
-    def __init__(self, weights, *, pixels_per_beat=4):
+    def __init__(self, weights, *, pixels_per_beat=4, multipliers=None):
         check_choice("pixels_per_beat", pixels_per_beat, (1, 4))
+        self._multipliers = check_choice("multipliers", multipliers, MULTIPLIERS)
         for name, shape in _SHAPES.items():
             if name not in weights or tuple(weights[name][0].shape) != shape:
                 raise ParameterError(f"weights[{name!r}]", None if name not in weights
@@ -515,7 +555,8 @@ class MnistCnn(wiring.Component):
                      attrs={"ram_style": "block"})
         m.submodules.weights = rom
         tag_layout = data.StructLayout({"pass_": 2, "pos": 6, "end": 1, "row_end": 1})
-        m.submodules.mac = mac = MnistMacArray(tag_width=tag_layout.size)
+        m.submodules.mac = mac = MnistMacArray(tag_width=tag_layout.size,
+                                               multipliers=self._multipliers)
         map2_rows = Signal(range(8))
         map3_done = Signal()
 
