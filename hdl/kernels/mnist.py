@@ -643,16 +643,20 @@ class MnistCnn(wiring.Component):
                                 m.d.comb += pair.eq(Cat(map3[t][2 * n], map3[t][2 * n + 1]))
             m.d.sync += [act3[t].eq(Mux(inside2[t], pair[:7], 0)),
                          act3[9 + t].eq(Mux(inside2[t], pair[7:], 0))]
+        # the ROM is read a stage early and its word registered: the block RAM's output
+        # reaches the multipliers' input registers through a register and the packing adders
         w_rd = rom.read_port()
-        wbase = _table(m, pass2, [p["wbase"] for p in passes], range(rom.depth), "wbase")
-        m.d.comb += w_rd.addr.eq(wbase + k2)
+        wbase = _table(m, pass1, [p["wbase"] for p in passes], range(rom.depth), "wbase")
+        weights3 = Signal(rom.shape, reset_less=True)
+        m.d.comb += w_rd.addr.eq(wbase + k1)
+        m.d.sync += weights3.eq(w_rd.data)
         v3 = Signal()
         beat3 = Signal(4, reset_less=True)
         tag3 = Signal(tag_layout)
         m.d.sync += [v3.eq(v2 & ~clear), beat3.eq(beat2),
                      tag3.eq(Cat(pass2, pos2, beat2[2], beat2[3]))]
         m.d.comb += [mac.valid.eq(v3), mac.first.eq(beat3[0]), mac.last.eq(beat3[1]),
-                     mac.tag.eq(tag3), mac.weights.eq(w_rd.data),
+                     mac.tag.eq(tag3), mac.weights.eq(weights3),
                      *[mac.act[t].eq(a) for t, a in enumerate(act3)]]
 
         # R0: the sums and the pass's biases; R1: added; R2: shifted and clipped (ReLU to
