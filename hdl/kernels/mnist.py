@@ -419,7 +419,8 @@ class MnistCnn(wiring.Component):
     conv1's map is a memory of one word per pixel (all eight channels), read through nine
     ports (the window); conv2's map two memories (channels 0-7 and 8-15) of two channels a
     word; conv3's 3x3x32 map and the scores are registers. The weights come from a ROM of
-    one word (16 x 18 4-bit weights) per pass and beat of a position.
+    one word (16 x 18 4-bit weights) per pass and beat of a position, read a stage ahead and
+    registered.
 
     Parameters
     ----------
