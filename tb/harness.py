@@ -28,7 +28,6 @@ import pytest
 
 from gen.export.verilog import write_if_changed
 from gen.tops import build_top
-from host.board_sim import PRIMITIVES
 from host.simulator import (
     DEFAULT_CXX_OPT,
     QUICK_CXX_OPT,
@@ -199,6 +198,7 @@ def run_bench(module, top, config_id, params, sim, *, testcase=None, seed=None, 
     }
     exported = None
     if ecp5_models:
+        from host.board_sim import PRIMITIVES
         build_dir = build_dir.with_name(build_dir.name + "-ecp5")
         vfile = export_bench_top(top, params, build_dir, build=build, icarus=sim == "icarus")
         exported = build_dir / f"{top}_with_ecp5_models.v"
