@@ -240,7 +240,8 @@ def cnn_weights(rng):
 @pytest.mark.parametrize("case,match", [
     ("missing", "weights\\['conv3'\\]"), ("shape", "weights\\['fc'\\]"),
     ("range", "weights\\['conv2'\\].*-9"), ("shifts", "biases and shifts"),
-    ("negative shift", "shift 3"), ("pixels", "pixels_per_beat")])
+    ("negative shift", "shift 3"), ("pixels", "pixels_per_beat"),
+    ("multipliers", "multipliers.*xilinx")])
 def test_bad_cnn_parameters_are_named(case, match):
     import numpy as np
     weights = cnn_weights(random.Random(1))
@@ -255,6 +256,8 @@ def test_bad_cnn_parameters_are_named(case, match):
         weights["conv1"] = weights["conv1"][:2] + (weights["conv1"][2][:7],)
     elif case == "negative shift":
         weights["conv3"][2][3] = -1
+    elif case == "multipliers":
+        kwargs["multipliers"] = "xilinx"
     else:
         kwargs["pixels_per_beat"] = 2
     with pytest.raises(ParameterError, match=match):

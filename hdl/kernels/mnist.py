@@ -218,9 +218,8 @@ def _ecp5_mult18x18d(a, b, p):
     """An ECP5 ``MULT18X18D`` with its A and B inputs and its output registered: ``p`` is
     the product of signed ``a`` and unsigned ``b`` given two clock cycles before (in the
     ``sync`` domain; no reset, no clock enable)."""
-    a = a.as_signed()
     product = Signal(36)
-    ports = {f"i_A{n}": a[min(n, len(a) - 1)] for n in range(18)}
+    ports = {f"i_A{n}": a[min(n, len(a) - 1)] for n in range(18)}      # sign-extended
     ports.update({f"i_B{n}": b[n] if n < len(b) else 0 for n in range(18)})
     ports.update({f"o_P{n}": product[n] for n in range(36)})
     registered = {f"p_REG_{stage}_CLK": "CLK0" for stage in ("INPUTA", "INPUTB", "OUTPUT")}
